@@ -1,0 +1,251 @@
+//! `worldgen`: generate, import and check maps (map format v1).
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Instant;
+use worldgen::Map;
+use worldgen::generate::GenerateParams;
+use worldgen::progress::{Progress, StepTime};
+
+/// Map tools for the terrain streaming engine.
+///
+/// A map is a folder: `map.toml` (manifest: format "tvs-map" version 1, world size, origin, seed,
+/// layer files), `heights.exr` (f32 metres), `ground.png` (indexed ground types), one
+/// `density_<species>.png` per vegetation species, `trees.csv`, `decals.toml` and
+/// `buildings.csv`. All outputs are deterministic: the same inputs give the same bytes.
+#[derive(Parser)]
+#[command(name = "worldgen", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+    /// Hide progress bars (they are hidden automatically when stderr is not a terminal).
+    #[arg(long, global = true)]
+    quiet: bool,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Generate a procedural map: fBm + ridged noise, hydraulic and thermal erosion, ground
+    /// types from slope/height/moisture, species densities, large trees, roads between towns
+    /// (least-cost paths over slope) and footpaths. Prints the time of every step.
+    Generate {
+        /// Random seed; the same seed and size always give the same bytes.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// World side in metres (square map); a multiple of twice the spacing.
+        #[arg(long, default_value_t = 8192.0)]
+        size: f64,
+        /// Height sample spacing in metres.
+        #[arg(long, default_value_t = 4.0)]
+        spacing: f64,
+        /// Output map folder (replaced atomically if it exists).
+        #[arg(long, default_value = "maps/default")]
+        out: PathBuf,
+        /// Map name written to the manifest (defaults to the folder name).
+        #[arg(long)]
+        name: Option<String>,
+        /// Worker threads for the parallel steps (0 = all cores). Does not change the output.
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+    },
+    /// Import real elevation data: SRTM .hgt (1201² or 3601², void = -32768), 8/16-bit
+    /// grayscale PNG (with --spacing-m and --vertical-scale-m) or single-channel EXR (with
+    /// --spacing-m; NaN = void). Voids are filled from neighbours and counted; ground types,
+    /// densities and trees are derived from slope and height.
+    ImportDem {
+        /// The elevation file.
+        file: PathBuf,
+        /// Output map folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Distance between source samples in metres (PNG and EXR; derived for .hgt).
+        #[arg(long)]
+        spacing_m: Option<f64>,
+        /// Metres per PNG unit (e.g. 0.1 for the Puget Sound height field).
+        #[arg(long, default_value_t = 1.0)]
+        vertical_scale_m: f64,
+        /// Latitude of the south edge of a .hgt tile whose name does not carry it.
+        #[arg(long)]
+        latitude_deg: Option<f64>,
+        /// Height of the water surface in metres (sea level for SRTM).
+        #[arg(long, default_value_t = 0.0)]
+        water_level_m: f64,
+        /// Snow from this height up, in metres.
+        #[arg(long, default_value_t = 1800.0)]
+        snow_line_m: f64,
+        /// Map name (defaults to the file name).
+        #[arg(long)]
+        name: Option<String>,
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+    },
+    /// Validate a map folder and print a summary; exit code 0 when valid, 1 with the error.
+    Check {
+        /// The map folder.
+        dir: PathBuf,
+    },
+}
+
+/// indicatif bars for the library's long steps.
+struct Bars {
+    bar: Mutex<Option<ProgressBar>>,
+    hidden: bool,
+}
+
+impl Progress for Bars {
+    fn begin(&self, step: &str, total: u64) {
+        if self.hidden {
+            return;
+        }
+        let bar = ProgressBar::new(total);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{msg:28} [{bar:36}] {percent:>3}% {elapsed_precise} ETA {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        bar.set_message(step.to_string());
+        if let Ok(mut slot) = self.bar.lock() {
+            *slot = Some(bar);
+        }
+    }
+    fn advance(&self, n: u64) {
+        if let Ok(slot) = self.bar.lock()
+            && let Some(b) = slot.as_ref()
+        {
+            b.inc(n);
+        }
+    }
+    fn end(&self) {
+        if let Ok(mut slot) = self.bar.lock()
+            && let Some(b) = slot.take()
+        {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn print_times(times: &[StepTime], total_s: f64) {
+    println!("| step | time (s) |\n|---|---:|");
+    for t in times {
+        println!("| {} | {:.3} |", t.step, t.duration_s);
+    }
+    println!("| **total** | **{total_s:.3}** |");
+}
+
+fn write_map(map: &Map, out: &PathBuf, times: &mut Vec<StepTime>) -> Result<()> {
+    worldgen::progress::timed(times, "write map files", || map.write(out))
+        .with_context(|| format!("writing map to {}", out.display()))
+}
+
+fn main() -> Result<()> {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    let cli = Cli::parse();
+    let bars = Bars {
+        bar: Mutex::new(None),
+        hidden: cli.quiet,
+    };
+    match cli.command {
+        Command::Generate {
+            seed,
+            size,
+            spacing,
+            out,
+            name,
+            threads,
+        } => {
+            let t0 = Instant::now();
+            let name = name.unwrap_or_else(|| {
+                out.file_name()
+                    .map_or("map".into(), |n| n.to_string_lossy().into_owned())
+            });
+            let params = GenerateParams {
+                name,
+                seed,
+                size_m: size,
+                spacing_m: spacing,
+                threads,
+            };
+            let mut times = Vec::new();
+            let map = worldgen::generate::generate(&params, &bars, &mut times)?;
+            write_map(&map, &out, &mut times)?;
+            println!(
+                "generated {} ({} m, seed {seed}, {} threads)",
+                out.display(),
+                size,
+                worldgen::par::thread_count(threads)
+            );
+            print_times(&times, t0.elapsed().as_secs_f64());
+            println!("{}", map.summary());
+        }
+        Command::ImportDem {
+            file,
+            out,
+            spacing_m,
+            vertical_scale_m,
+            latitude_deg,
+            water_level_m,
+            snow_line_m,
+            name,
+            threads,
+        } => {
+            let t0 = Instant::now();
+            let name = name.unwrap_or_else(|| {
+                file.file_stem()
+                    .map_or("dem".into(), |n| n.to_string_lossy().into_owned())
+            });
+            let params = worldgen::dem::ImportParams {
+                path: file.clone(),
+                name,
+                spacing_m,
+                vertical_scale_m,
+                latitude_deg,
+                water_level_m,
+                snow_line_m,
+                threads,
+            };
+            let mut times = Vec::new();
+            let (map, report) = worldgen::dem::import(&params, &mut times)?;
+            write_map(&map, &out, &mut times)?;
+            println!(
+                "imported {} -> {}: source {}x{} samples at {:.2} x {:.2} m, {} voids filled, resampled to {:.3} m spacing",
+                file.display(),
+                out.display(),
+                report.source_samples[0],
+                report.source_samples[1],
+                report.source_spacing_m[0],
+                report.source_spacing_m[1],
+                report.voids_filled,
+                report.spacing_m
+            );
+            print_times(&times, t0.elapsed().as_secs_f64());
+            println!("{}", map.summary());
+        }
+        Command::Check { dir } => {
+            if !dir.join("map.toml").exists() && !dir.is_dir() {
+                bail!("{}: no such map folder", dir.display());
+            }
+            match Map::load(&dir) {
+                Ok(map) => {
+                    println!(
+                        "{}: valid map \"{}\" (format {} v{})",
+                        dir.display(),
+                        map.manifest.name,
+                        map.manifest.format,
+                        map.manifest.version
+                    );
+                    println!("{}", map.summary());
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    std::process::exit(1);
+                }
+            }
+        }
+    }
+    Ok(())
+}

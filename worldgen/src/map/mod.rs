@@ -1,0 +1,453 @@
+//! Map format v1: a folder with a `map.toml` manifest and layer files.
+//!
+//! ```text
+//! map.toml          manifest: format = "tvs-map", version = 1, world size, origin, seed, layers
+//! heights.exr       OpenEXR, one f32 channel "Y", metres above sea level
+//! ground.png        8-bit indexed PNG; the palette index is a ground type from the legend
+//! density_*.png     one 8-bit grayscale PNG per vegetation species; 0..255 = 0..max density
+//! trees.csv         "tvs-trees 1" then species,x_m,y_m,height_m,crown_radius_m rows
+//! decals.toml       format = "tvs-decals", version = 1, [[decal]] polylines and areas
+//! buildings.csv     "tvs-buildings 1" then mesh,x_m,y_m,z_m,yaw_deg,scale rows (may be empty)
+//! ```
+//!
+//! Every raster layer covers the whole world: `(width - 1) * spacing_m == size_m` in both axes,
+//! sample (i, j) at `origin_m + (i, j) * spacing_m`, files stored north-up. [`Map::load`] checks
+//! every field and every sample before it returns; nothing is allocated from a size that has not
+//! been checked against [`limits`].
+
+mod layers;
+mod lists;
+mod manifest;
+
+pub use lists::{Building, Decal, DecalKind, Tree};
+pub use manifest::validate as validate_manifest;
+pub use manifest::{
+    FORMAT_NAME, FORMAT_VERSION, FileSpec, GridSpec, GroundSpec, GroundType, Manifest, SpeciesSpec,
+};
+
+use crate::Grid;
+use crate::sample::{self, GridPlacement};
+use std::path::{Path, PathBuf};
+
+/// Documented limits, checked before any allocation.
+pub mod limits {
+    /// Largest raster side in samples (16385 = 16384 cells + 1).
+    pub const MAX_GRID_SIDE: u32 = 16_385;
+    /// Largest world side in metres (1000 km).
+    pub const MAX_WORLD_SIZE_M: f64 = 1.0e6;
+    /// Largest distance of the map origin from (0, 0), metres.
+    pub const MAX_ORIGIN_M: f64 = 1.0e8;
+    /// Smallest sample spacing, metres.
+    pub const MIN_SPACING_M: f64 = 0.01;
+    /// Largest vegetation density, items per square metre.
+    pub const MAX_DENSITY_PER_M2: f64 = 100.0;
+    /// Most ground types in a legend (indices are u8).
+    pub const MAX_GROUND_TYPES: usize = 256;
+    /// Most vegetation species layers.
+    pub const MAX_SPECIES: usize = 64;
+    /// Most rows in a tree, building or decal list.
+    pub const MAX_LIST_ITEMS: usize = 10_000_000;
+    /// Largest magnitude of a height sample, metres.
+    pub const MAX_ABS_HEIGHT_M: f32 = 100_000.0;
+}
+
+/// Why a map could not be loaded or written. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum MapError {
+    #[error("{path}: cannot {action}: {source}")]
+    Io {
+        path: PathBuf,
+        action: &'static str,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a valid manifest: {message}")]
+    ManifestSyntax { path: PathBuf, message: String },
+    #[error("{path}: field `format` is {found:?}, expected {expected:?}; is this a map folder?")]
+    WrongFormat {
+        path: PathBuf,
+        found: String,
+        expected: &'static str,
+    },
+    #[error(
+        "{path}: field `version` is {found}, this build reads version {supported}; upgrade the engine or regenerate the map"
+    )]
+    UnknownVersion {
+        path: PathBuf,
+        found: i64,
+        supported: u32,
+    },
+    #[error("{path}: field `{field}`: {problem}")]
+    InvalidField {
+        path: PathBuf,
+        field: String,
+        problem: String,
+    },
+    #[error(
+        "{path}: field `{field}`: {width}x{height} samples exceeds the limit of {max}x{max}; use a coarser spacing"
+    )]
+    TooLarge {
+        path: PathBuf,
+        field: String,
+        width: u64,
+        height: u64,
+        max: u32,
+    },
+    #[error(
+        "{path}: layer `{field}` is {found_w}x{found_h} samples but the manifest says {expected_w}x{expected_h}"
+    )]
+    LayerSize {
+        path: PathBuf,
+        field: String,
+        found_w: u64,
+        found_h: u64,
+        expected_w: u64,
+        expected_h: u64,
+    },
+    #[error("{path}: layer `{field}` is not a valid {kind} file: {message}")]
+    BadLayerFile {
+        path: PathBuf,
+        field: String,
+        kind: &'static str,
+        message: String,
+    },
+    #[error(
+        "{path}: height sample at column {x}, row {y} (from the south) is {value}: heights must be finite and within ±{max} m"
+    )]
+    BadHeight {
+        path: PathBuf,
+        x: usize,
+        y: usize,
+        value: f32,
+        max: f32,
+    },
+    #[error(
+        "{path}: ground sample at column {x}, row {y} (from the south) is type {value}, but the legend has only {legend_len} types"
+    )]
+    GroundTypeOutOfRange {
+        path: PathBuf,
+        x: usize,
+        y: usize,
+        value: u8,
+        legend_len: usize,
+    },
+    #[error("{path}: line {line}: {problem}")]
+    ListLine {
+        path: PathBuf,
+        line: usize,
+        problem: String,
+    },
+}
+
+impl MapError {
+    pub(crate) fn io(path: &Path, action: &'static str, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.to_path_buf(),
+            action,
+            source,
+        }
+    }
+
+    pub(crate) fn field(path: &Path, field: impl Into<String>, problem: impl Into<String>) -> Self {
+        Self::InvalidField {
+            path: path.to_path_buf(),
+            field: field.into(),
+            problem: problem.into(),
+        }
+    }
+}
+
+/// One vegetation species: its manifest entry and density samples (0..255 = 0..max density).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DensityLayer {
+    pub spec: SpeciesSpec,
+    pub density: Grid<u8>,
+}
+
+impl DensityLayer {
+    /// Density in items per square metre at a world position (bilinear, clamped at the border).
+    pub fn density_per_m2(&self, origin_m: [f64; 2], x_m: f64, y_m: f64) -> f64 {
+        let at = GridPlacement {
+            origin_m,
+            spacing_m: self.spec.spacing_m,
+        };
+        let gx = ((x_m - origin_m[0]) / at.spacing_m).clamp(0.0, (self.density.width() - 1) as f64);
+        let gy =
+            ((y_m - origin_m[1]) / at.spacing_m).clamp(0.0, (self.density.height() - 1) as f64);
+        let (x0, y0) = (gx.floor(), gy.floor());
+        let (fx, fy) = (gx - x0, gy - y0);
+        let s =
+            |dx: i64, dy: i64| f64::from(self.density.get_clamped(x0 as i64 + dx, y0 as i64 + dy));
+        let a = s(0, 0) + fx * (s(1, 0) - s(0, 0));
+        let b = s(0, 1) + fx * (s(1, 1) - s(0, 1));
+        (a + fy * (b - a)) / 255.0 * self.spec.max_density_per_m2
+    }
+}
+
+/// A whole, validated map in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Map {
+    pub manifest: Manifest,
+    /// Heights in metres, `manifest.heights.width` x `manifest.heights.height`.
+    pub heights: Grid<f32>,
+    /// Ground type index per sample, always < `manifest.ground.legend.len()`.
+    pub ground: Grid<u8>,
+    /// One layer per `manifest.vegetation` entry, in the same order.
+    pub densities: Vec<DensityLayer>,
+    pub trees: Vec<Tree>,
+    pub decals: Vec<Decal>,
+    pub buildings: Vec<Building>,
+}
+
+/// Summary numbers for `worldgen check` and logs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapSummary {
+    pub size_m: [f64; 2],
+    pub heights_samples: [usize; 2],
+    pub height_min_m: f32,
+    pub height_max_m: f32,
+    pub ground_type_counts: Vec<(String, usize)>,
+    pub species: Vec<(String, f64)>,
+    pub trees: usize,
+    pub decals_by_kind: Vec<(String, usize)>,
+    pub buildings: usize,
+}
+
+impl Map {
+    /// Loads and validates the map in folder `dir`. Either the whole map is returned or an error
+    /// that names the file and the field.
+    pub fn load(dir: &Path) -> Result<Self, MapError> {
+        let manifest_path = dir.join("map.toml");
+        let manifest = manifest::read(&manifest_path)?;
+        let heights = layers::read_heights(dir, &manifest)?;
+        let ground = layers::read_ground(dir, &manifest)?;
+        let mut densities = Vec::with_capacity(manifest.vegetation.len());
+        for (i, spec) in manifest.vegetation.iter().enumerate() {
+            let density = layers::read_gray8(dir, &format!("vegetation[{i}].file"), spec.grid())?;
+            densities.push(DensityLayer {
+                spec: spec.clone(),
+                density,
+            });
+        }
+        let trees = lists::read_trees(&dir.join(&manifest.trees.file), &manifest)?;
+        let decals = lists::read_decals(&dir.join(&manifest.decals.file), &manifest)?;
+        let buildings = lists::read_buildings(&dir.join(&manifest.buildings.file), &manifest)?;
+        Ok(Self {
+            manifest,
+            heights,
+            ground,
+            densities,
+            trees,
+            decals,
+            buildings,
+        })
+    }
+
+    /// Writes the map into folder `dir`. Files are first written into a sibling folder and moved
+    /// into place only when all are complete, so an interrupted write never leaves a half map.
+    pub fn write(&self, dir: &Path) -> Result<(), MapError> {
+        self.validate_in_memory(dir)?;
+        let parent = dir
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        std::fs::create_dir_all(parent).map_err(|e| MapError::io(parent, "create folder", e))?;
+        let name = dir
+            .file_name()
+            .map_or_else(|| "map".into(), |n| n.to_string_lossy().into_owned());
+        let staging = parent.join(format!(".{name}.partial"));
+        if staging.exists() {
+            std::fs::remove_dir_all(&staging)
+                .map_err(|e| MapError::io(&staging, "remove stale folder", e))?;
+        }
+        std::fs::create_dir_all(&staging)
+            .map_err(|e| MapError::io(&staging, "create folder", e))?;
+        manifest::write(&staging.join("map.toml"), &self.manifest)?;
+        layers::write_heights(&staging.join(&self.manifest.heights.file), &self.heights)?;
+        layers::write_ground(
+            &staging.join(&self.manifest.ground.file),
+            &self.ground,
+            &self.manifest.ground,
+        )?;
+        for layer in &self.densities {
+            layers::write_gray8(&staging.join(&layer.spec.file), &layer.density)?;
+        }
+        lists::write_trees(
+            &staging.join(&self.manifest.trees.file),
+            &self.trees,
+            &self.manifest,
+        )?;
+        lists::write_decals(&staging.join(&self.manifest.decals.file), &self.decals)?;
+        lists::write_buildings(
+            &staging.join(&self.manifest.buildings.file),
+            &self.buildings,
+        )?;
+        if dir.exists() {
+            std::fs::remove_dir_all(dir).map_err(|e| MapError::io(dir, "replace folder", e))?;
+        }
+        std::fs::rename(&staging, dir)
+            .map_err(|e| MapError::io(dir, "move finished map into place", e))
+    }
+
+    /// Checks that in-memory layers agree with the manifest (used before writing).
+    fn validate_in_memory(&self, dir: &Path) -> Result<(), MapError> {
+        let path = dir.join("map.toml");
+        manifest::validate(&path, &self.manifest)?;
+        let check = |field: &str, spec: &GridSpec, w: usize, h: usize| {
+            if (w as u64, h as u64) == (u64::from(spec.width), u64::from(spec.height)) {
+                Ok(())
+            } else {
+                Err(MapError::LayerSize {
+                    path: path.clone(),
+                    field: field.into(),
+                    found_w: w as u64,
+                    found_h: h as u64,
+                    expected_w: spec.width.into(),
+                    expected_h: spec.height.into(),
+                })
+            }
+        };
+        check(
+            "heights",
+            &self.manifest.heights,
+            self.heights.width(),
+            self.heights.height(),
+        )?;
+        check(
+            "ground",
+            &self.manifest.ground.grid(),
+            self.ground.width(),
+            self.ground.height(),
+        )?;
+        if self.densities.len() != self.manifest.vegetation.len() {
+            return Err(MapError::field(
+                &path,
+                "vegetation",
+                "one density layer per species entry is required",
+            ));
+        }
+        for (i, d) in self.densities.iter().enumerate() {
+            check(
+                &format!("vegetation[{i}]"),
+                &d.spec.grid(),
+                d.density.width(),
+                d.density.height(),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Where the height grid lies in the world.
+    pub fn height_placement(&self) -> GridPlacement {
+        GridPlacement {
+            origin_m: self.manifest.origin_m,
+            spacing_m: self.manifest.heights.spacing_m,
+        }
+    }
+
+    /// Height (m) at a world position, bilinear, clamped at the border.
+    pub fn height_bilinear_m(&self, x_m: f64, y_m: f64) -> f64 {
+        sample::bilinear(&self.heights, self.height_placement(), x_m, y_m)
+    }
+
+    /// Height (m) at a world position, C1 bicubic (Catmull-Rom), clamped at the border.
+    pub fn height_bicubic_m(&self, x_m: f64, y_m: f64) -> f64 {
+        sample::bicubic(&self.heights, self.height_placement(), x_m, y_m)
+    }
+
+    /// Ground type index of the nearest ground sample.
+    pub fn ground_type_at(&self, x_m: f64, y_m: f64) -> u8 {
+        let g = &self.manifest.ground;
+        let gx = ((x_m - self.manifest.origin_m[0]) / g.spacing_m).round() as i64;
+        let gy = ((y_m - self.manifest.origin_m[1]) / g.spacing_m).round() as i64;
+        self.ground.get_clamped(gx, gy)
+    }
+
+    /// Summary numbers (sizes, height range, counts).
+    pub fn summary(&self) -> MapSummary {
+        let (lo, hi) = self.heights.min_max();
+        let mut counts = vec![0usize; self.manifest.ground.legend.len()];
+        for &g in self.ground.data() {
+            counts[g as usize] += 1;
+        }
+        let cell_m2 = self.manifest.size_m[0] * self.manifest.size_m[1];
+        let species = self
+            .densities
+            .iter()
+            .map(|d| {
+                let mean = d.density.data().iter().map(|&v| f64::from(v)).sum::<f64>()
+                    / d.density.data().len().max(1) as f64;
+                (
+                    d.spec.species.clone(),
+                    mean / 255.0 * d.spec.max_density_per_m2 * cell_m2,
+                )
+            })
+            .collect();
+        let mut decals_by_kind: Vec<(String, usize)> = Vec::new();
+        for d in &self.decals {
+            let k = d.kind.name().to_string();
+            match decals_by_kind.iter_mut().find(|(n, _)| *n == k) {
+                Some(e) => e.1 += 1,
+                None => decals_by_kind.push((k, 1)),
+            }
+        }
+        MapSummary {
+            size_m: self.manifest.size_m,
+            heights_samples: [self.heights.width(), self.heights.height()],
+            height_min_m: lo,
+            height_max_m: hi,
+            ground_type_counts: self
+                .manifest
+                .ground
+                .legend
+                .iter()
+                .zip(counts)
+                .map(|(t, c)| (t.name.clone(), c))
+                .collect(),
+            species,
+            trees: self.trees.len(),
+            decals_by_kind,
+            buildings: self.buildings.len(),
+        }
+    }
+}
+
+impl std::fmt::Display for MapSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "size:        {} m x {} m",
+            self.size_m[0], self.size_m[1]
+        )?;
+        writeln!(
+            f,
+            "heights:     {} x {} samples",
+            self.heights_samples[0], self.heights_samples[1]
+        )?;
+        writeln!(
+            f,
+            "height:      {:.2} m .. {:.2} m",
+            self.height_min_m, self.height_max_m
+        )?;
+        let total: usize = self
+            .ground_type_counts
+            .iter()
+            .map(|c| c.1)
+            .sum::<usize>()
+            .max(1);
+        for (name, c) in &self.ground_type_counts {
+            writeln!(
+                f,
+                "ground {name:<13} {:6.2} %",
+                100.0 * *c as f64 / total as f64
+            )?;
+        }
+        for (name, n) in &self.species {
+            writeln!(f, "species {name:<12} ~{n:.0} items")?;
+        }
+        writeln!(f, "large trees: {}", self.trees)?;
+        for (k, n) in &self.decals_by_kind {
+            writeln!(f, "decals {k:<13} {n}")?;
+        }
+        write!(f, "buildings:   {}", self.buildings)
+    }
+}
