@@ -255,7 +255,7 @@ pub fn large_trees(
             let alt = height_at(wx, wy) / snow_line_m.max(1.0);
             let r = noise::unit3(seed ^ 0x59EC, cx, cy);
             let species: u16 = if alt > 0.6 {
-                if r < 0.6 { 0 } else { 1 }
+                u16::from(r >= 0.6)
             } else if r < 0.3 {
                 1
             } else if r < 0.6 {

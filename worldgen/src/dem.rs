@@ -404,7 +404,8 @@ pub fn import(
             threads,
             |y, row| {
                 for (x, v) in row.iter_mut().enumerate() {
-                    *v = sample::bicubic(&src.grid, unit, x as f64 * fx, y as f64 * fy) as f32;
+                    *v = sample::bicubic_limited(&src.grid, unit, x as f64 * fx, y as f64 * fy)
+                        as f32;
                 }
             },
             &|_| {},

@@ -159,9 +159,9 @@ pub fn thermal(
     threads: usize,
     progress: &dyn Progress,
 ) {
+    const RATE: f32 = 0.2;
     let (w, h) = (heights.width(), heights.height());
     let talus = (talus_slope * spacing_m) as f32;
-    const RATE: f32 = 0.2;
     progress.begin("thermal erosion", iterations as u64);
     for _ in 0..iterations {
         let old = heights.clone();

@@ -138,7 +138,7 @@ pub fn generate(
         erosion::hydraulic(&mut heights, seed, &params, progress)
     });
     timed(times, "thermal erosion", || {
-        erosion::thermal(&mut heights, spacing, 0.9, 8, threads, progress)
+        erosion::thermal(&mut heights, spacing, 0.9, 8, threads, progress);
     });
     let (slope, moisture) = timed(times, "slope and moisture", || {
         let s = classify::slope(&heights, spacing, threads);

@@ -3,6 +3,8 @@
 //! order: every value here is a pure function of (seed, integer lattice point) with no tables
 //! built at start-up and no trigonometry whose last bit could differ between platforms.
 
+use std::f64::consts::FRAC_1_SQRT_2;
+
 /// Mixes a seed and two integers into 64 well-distributed bits (SplitMix64 finaliser steps).
 #[inline]
 pub fn hash3(seed: u64, a: i64, b: i64) -> u64 {
@@ -32,23 +34,25 @@ pub fn unit3(seed: u64, a: i64, b: i64) -> f64 {
     unit(hash3(seed, a, b))
 }
 
-/// 16 unit gradient directions, evenly spaced (cos, sin of k * 22.5 degrees).
-const GRADIENTS: [(f64, f64); 16] = [
+/// 16 unit directions, evenly spaced (cos, sin of k * 22.5 degrees), as literals so no
+/// platform trigonometry is involved. Used as noise gradients and wherever a hashed direction
+/// is needed.
+pub const DIRECTIONS_16: [(f64, f64); 16] = [
     (1.0, 0.0),
     (0.923_879_532_511_286_7, 0.382_683_432_365_089_8),
-    (0.707_106_781_186_547_6, 0.707_106_781_186_547_6),
+    (FRAC_1_SQRT_2, FRAC_1_SQRT_2),
     (0.382_683_432_365_089_8, 0.923_879_532_511_286_7),
     (0.0, 1.0),
     (-0.382_683_432_365_089_8, 0.923_879_532_511_286_7),
-    (-0.707_106_781_186_547_6, 0.707_106_781_186_547_6),
+    (-FRAC_1_SQRT_2, FRAC_1_SQRT_2),
     (-0.923_879_532_511_286_7, 0.382_683_432_365_089_8),
     (-1.0, 0.0),
     (-0.923_879_532_511_286_7, -0.382_683_432_365_089_8),
-    (-0.707_106_781_186_547_6, -0.707_106_781_186_547_6),
+    (-FRAC_1_SQRT_2, -FRAC_1_SQRT_2),
     (-0.382_683_432_365_089_8, -0.923_879_532_511_286_7),
     (0.0, -1.0),
     (0.382_683_432_365_089_8, -0.923_879_532_511_286_7),
-    (0.707_106_781_186_547_6, -0.707_106_781_186_547_6),
+    (FRAC_1_SQRT_2, -FRAC_1_SQRT_2),
     (0.923_879_532_511_286_7, -0.382_683_432_365_089_8),
 ];
 
@@ -64,7 +68,7 @@ pub fn gradient(seed: u64, x: f64, y: f64) -> f64 {
     let (ix, iy) = (x0 as i64, y0 as i64);
     let (fx, fy) = (x - x0, y - y0);
     let dot = |cx: i64, cy: i64, dx: f64, dy: f64| {
-        let g = GRADIENTS[(hash3(seed, cx, cy) >> 60) as usize];
+        let g = DIRECTIONS_16[(hash3(seed, cx, cy) >> 60) as usize];
         g.0 * dx + g.1 * dy
     };
     let n00 = dot(ix, iy, fx, fy);

@@ -275,7 +275,7 @@ pub fn plan(inp: &RoadInputs<'_>) -> RoadNetwork {
                 * (0.08 + 0.1 * noise::unit(h.rotate_left(17))))
             .max(g.cell_m * 3.0);
             // Direction from a 16-way table: no trig, so the bytes are the same everywhere.
-            let dir = DIRS16[(angle_turns * 16.0) as usize % 16];
+            let dir = noise::DIRECTIONS_16[(angle_turns * 16.0) as usize % 16];
             let p = g.world(town);
             let goal = g.index([p[0] + dir.0 * dist_m, p[1] + dir.1 * dist_m]);
             if goal == town || g.water[goal] {
@@ -298,25 +298,6 @@ pub fn plan(inp: &RoadInputs<'_>) -> RoadNetwork {
         decals,
     }
 }
-
-const DIRS16: [(f64, f64); 16] = [
-    (1.0, 0.0),
-    (0.9239, 0.3827),
-    (0.7071, 0.7071),
-    (0.3827, 0.9239),
-    (0.0, 1.0),
-    (-0.3827, 0.9239),
-    (-0.7071, 0.7071),
-    (-0.9239, 0.3827),
-    (-1.0, 0.0),
-    (-0.9239, -0.3827),
-    (-0.7071, -0.7071),
-    (-0.3827, -0.9239),
-    (0.0, -1.0),
-    (0.3827, -0.9239),
-    (0.7071, -0.7071),
-    (0.9239, -0.3827),
-];
 
 /// Distance from point p to segment ab (2-D).
 pub fn point_segment_distance_m(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {

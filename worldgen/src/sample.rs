@@ -72,6 +72,19 @@ pub fn bicubic(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     sum
 }
 
+/// Bicubic interpolation limited to the range of the four nearest samples: no overshoot, so a
+/// flat area (sea at 0 m) stays exactly flat next to a steep coast. C1 where the limiter is
+/// inactive; used for resampling imported elevation data.
+pub fn bicubic_limited(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
+    let (gx, gy) = at.grid_coords(grid.width(), grid.height(), x_m, y_m);
+    let (ix, iy) = (gx.floor() as i64, gy.floor() as i64);
+    let corners = [(0, 0), (1, 0), (0, 1), (1, 1)]
+        .map(|(dx, dy)| f64::from(grid.get_clamped(ix + dx, iy + dy)));
+    let lo = corners.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    bicubic(grid, at, x_m, y_m).clamp(lo, hi)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,6 +141,30 @@ mod tests {
         let far = bicubic(&g, at, at.origin_m[0] + 1e5, at.origin_m[1] + 1e5);
         assert!((far - f64::from(2 * 4 + 3 * 3)).abs() < 1e-9);
         assert!(bilinear(&g, at, f64::NAN, f64::NAN).is_finite());
+    }
+
+    #[test]
+    fn limited_bicubic_keeps_flat_sea_flat_next_to_a_cliff() {
+        let mut g = Grid::new(8, 3, 0.0f32);
+        for y in 0..3 {
+            for x in 4..8 {
+                g.set(x, y, 100.0);
+            }
+        }
+        let at = GridPlacement {
+            origin_m: [0.0, 0.0],
+            spacing_m: 1.0,
+        };
+        // Plain Catmull-Rom dips below the sea next to the cliff; the limited one does not.
+        assert!(bicubic(&g, at, 2.5, 1.0) < 0.0);
+        for i in 0..=30 {
+            let x = f64::from(i) * 0.1;
+            assert_eq!(
+                bicubic_limited(&g, at, x, 1.0),
+                0.0,
+                "sea not flat at x={x}"
+            );
+        }
     }
 
     #[test]

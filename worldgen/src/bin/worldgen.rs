@@ -129,22 +129,40 @@ impl Progress for Bars {
     }
 }
 
-fn print_times(times: &[StepTime], total_s: f64) {
-    println!("| step | time (s) |\n|---|---:|");
-    for t in times {
-        println!("| {} | {:.3} |", t.step, t.duration_s);
-    }
-    println!("| **total** | **{total_s:.3}** |");
+/// Prints to stdout, ignoring a closed pipe (`worldgen ... | head` must not panic).
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
 }
 
-fn write_map(map: &Map, out: &PathBuf, times: &mut Vec<StepTime>) -> Result<()> {
+fn print_times(times: &[StepTime], total_s: f64) {
+    say!("| step | time (s) |\n|---|---:|");
+    for t in times {
+        say!("| {} | {:.3} |", t.step, t.duration_s);
+    }
+    say!("| **total** | **{total_s:.3}** |");
+}
+
+fn write_map(map: &Map, out: &std::path::Path, times: &mut Vec<StepTime>) -> Result<()> {
     worldgen::progress::timed(times, "write map files", || map.write(out))
         .with_context(|| format!("writing map to {}", out.display()))
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
     let bars = Bars {
         bar: Mutex::new(None),
         hidden: cli.quiet,
@@ -173,14 +191,14 @@ fn main() -> Result<()> {
             let mut times = Vec::new();
             let map = worldgen::generate::generate(&params, &bars, &mut times)?;
             write_map(&map, &out, &mut times)?;
-            println!(
+            say!(
                 "generated {} ({} m, seed {seed}, {} threads)",
                 out.display(),
                 size,
                 worldgen::par::thread_count(threads)
             );
             print_times(&times, t0.elapsed().as_secs_f64());
-            println!("{}", map.summary());
+            say!("{}", map.summary());
         }
         Command::ImportDem {
             file,
@@ -211,7 +229,7 @@ fn main() -> Result<()> {
             let mut times = Vec::new();
             let (map, report) = worldgen::dem::import(&params, &mut times)?;
             write_map(&map, &out, &mut times)?;
-            println!(
+            say!(
                 "imported {} -> {}: source {}x{} samples at {:.2} x {:.2} m, {} voids filled, resampled to {:.3} m spacing",
                 file.display(),
                 out.display(),
@@ -223,7 +241,7 @@ fn main() -> Result<()> {
                 report.spacing_m
             );
             print_times(&times, t0.elapsed().as_secs_f64());
-            println!("{}", map.summary());
+            say!("{}", map.summary());
         }
         Command::Check { dir } => {
             if !dir.join("map.toml").exists() && !dir.is_dir() {
@@ -231,19 +249,16 @@ fn main() -> Result<()> {
             }
             match Map::load(&dir) {
                 Ok(map) => {
-                    println!(
+                    say!(
                         "{}: valid map \"{}\" (format {} v{})",
                         dir.display(),
                         map.manifest.name,
                         map.manifest.format,
                         map.manifest.version
                     );
-                    println!("{}", map.summary());
+                    say!("{}", map.summary());
                 }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    std::process::exit(1);
-                }
+                Err(e) => bail!(e),
             }
         }
     }

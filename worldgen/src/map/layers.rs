@@ -18,7 +18,12 @@ fn layer_size_error(path: &Path, field: &str, found: (u64, u64), spec: &GridSpec
     }
 }
 
-fn bad_file(path: &Path, field: &str, kind: &'static str, message: impl ToString) -> MapError {
+fn bad_file(
+    path: &Path,
+    field: &str,
+    kind: &'static str,
+    message: impl std::fmt::Display,
+) -> MapError {
     MapError::BadLayerFile {
         path: path.to_path_buf(),
         field: field.to_string(),
@@ -192,9 +197,9 @@ fn decode_8bit(
 }
 
 /// Reads an 8-bit grayscale layer (vegetation density).
-pub fn read_gray8(dir: &Path, field: &str, spec: GridSpec) -> Result<Grid<u8>, MapError> {
+pub fn read_gray8(dir: &Path, field: &str, spec: &GridSpec) -> Result<Grid<u8>, MapError> {
     let path = dir.join(&spec.file);
-    let reader = open_png(&path, field, &spec)?;
+    let reader = open_png(&path, field, spec)?;
     let buf = decode_8bit(reader, &path, field, png::ColorType::Grayscale)?;
     Grid::from_north_up(spec.width as usize, spec.height as usize, &buf).ok_or_else(|| {
         bad_file(

@@ -222,7 +222,7 @@ impl Map {
         let ground = layers::read_ground(dir, &manifest)?;
         let mut densities = Vec::with_capacity(manifest.vegetation.len());
         for (i, spec) in manifest.vegetation.iter().enumerate() {
-            let density = layers::read_gray8(dir, &format!("vegetation[{i}].file"), spec.grid())?;
+            let density = layers::read_gray8(dir, &format!("vegetation[{i}].file"), &spec.grid())?;
             densities.push(DensityLayer {
                 spec: spec.clone(),
                 density,

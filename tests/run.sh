@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# The one test command: installs missing Debian packages, then fmt, clippy, all tests and smoke
+# runs of the binaries. Used as is by CI (.ci/run) with CI=true.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+# --- system packages (lavapipe for GPU tests, Xvfb + X libraries for the viewer smoke run) ---
+packages=(mesa-vulkan-drivers libvulkan1 xvfb libx11-6 libx11-xcb1 libxcb1 libxcursor1 libxi6
+          libxkbcommon-x11-0 xdotool pkg-config)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  step "installing Debian packages: ${missing[*]}"
+  sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# --- Rust components ---
+if ! cargo fmt --version >/dev/null 2>&1 || ! cargo clippy --version >/dev/null 2>&1; then
+  step "installing rustfmt and clippy"
+  rustup component add rustfmt clippy
+fi
+
+step "cargo fmt --check"
+cargo fmt --all -- --check
+
+step "cargo clippy (all targets, warnings are errors)"
+cargo clippy --workspace --all-targets --locked -- -D warnings
+
+step "cargo test"
+cargo test --workspace --locked 2>&1 | tee target/test-output.log
+# Fail loudly if the runner executed nothing (e.g. everything filtered out).
+grep -q "test result: ok" target/test-output.log
+
+# --- smoke runs: the binaries cargo test already built (dev profile, deps optimised) ---
+step "smoke: worldgen generate / check / import-dem"
+smoke=target/smoke
+rm -rf "$smoke" && mkdir -p "$smoke"
+./target/debug/worldgen generate --seed 11 --size 1024 --out "$smoke/gen" --quiet
+./target/debug/worldgen check "$smoke/gen" >/dev/null
+./target/debug/worldgen check maps/tiny >/dev/null
+if ./target/debug/worldgen check "$smoke/does-not-exist" 2>/dev/null; then
+  echo "worldgen check accepted a missing map" >&2; exit 1
+fi
+if [ -f ../shared/data/dem/N57E011.hgt ]; then
+  ./target/debug/worldgen import-dem ../shared/data/dem/N57E011.hgt --out "$smoke/n57" --quiet >/dev/null
+  ./target/debug/worldgen check "$smoke/n57" >/dev/null
+elif [ -n "${CI:-}" ]; then
+  echo "../shared/data is missing in CI" >&2; exit 1
+fi
+
+step "all checks passed"

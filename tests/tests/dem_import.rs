@@ -1,0 +1,128 @@
+//! Real elevation data through `worldgen::dem` into a map that loads: the SRTM tile near
+//! Gothenburg (85% flat sea at 0 m, a hard case downstream) and the Puget Sound PNG.
+
+use tests::shared_data;
+use worldgen::Map;
+use worldgen::classify;
+use worldgen::dem::{ImportParams, import};
+
+fn params(path: std::path::PathBuf) -> ImportParams {
+    ImportParams {
+        path,
+        name: "dem".into(),
+        spacing_m: None,
+        vertical_scale_m: 1.0,
+        latitude_deg: None,
+        water_level_m: 0.0,
+        snow_line_m: 1800.0,
+        threads: 0,
+    }
+}
+
+#[test]
+fn srtm_tile_imports_and_loads_with_flat_sea() {
+    let Some(path) = shared_data("dem/N57E011.hgt") else {
+        return;
+    };
+    let (map, report) = import(&params(path), &mut Vec::new()).expect("import");
+    assert_eq!(report.source_samples, [1201, 1201]);
+    assert_eq!(report.voids_filled, 0);
+    // 3 arc-seconds: ~92.6 m north-south, ~49.8 m east-west at 57.5 N; resampled to the finer.
+    assert!(
+        (report.source_spacing_m[1] - 92.61).abs() < 0.01,
+        "{report:?}"
+    );
+    assert!((report.spacing_m - 49.76).abs() < 0.05, "{report:?}");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("n57");
+    map.write(&dir).unwrap();
+    let loaded = Map::load(&dir).expect("imported map must load");
+    assert_eq!(loaded, map);
+    let s = loaded.summary();
+    assert!(
+        (-10.0..=-5.0).contains(&s.height_min_m) && (160.0..=165.0).contains(&s.height_max_m),
+        "{s}"
+    );
+    // The sea stays exactly flat (no interpolation ripples), and is classified as water.
+    let zeros = loaded.heights.data().iter().filter(|&&h| h == 0.0).count();
+    let frac = zeros as f64 / loaded.heights.data().len() as f64;
+    assert!(frac > 0.80, "only {frac:.3} of samples are exactly 0 m");
+    let water = loaded
+        .ground
+        .data()
+        .iter()
+        .filter(|&&g| g == classify::WATER)
+        .count() as f64;
+    assert!(water / loaded.ground.data().len() as f64 > 0.80);
+    // No vegetation in the sea.
+    for d in &loaded.densities {
+        let (w, h) = (d.density.width(), d.density.height());
+        let stride = (loaded.heights.width() - 1) / (w - 1);
+        for y in 0..h {
+            for x in 0..w {
+                if loaded.ground.get(x * stride, y * stride) == classify::WATER {
+                    assert_eq!(
+                        d.density.get(x, y),
+                        0,
+                        "{} grows in the sea",
+                        d.spec.species
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn void_samples_are_filled_and_counted() {
+    let Some(path) = shared_data("dem/N57E011.hgt") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    // Punch a 10x10 void block into the tile (rows 600.., columns 700..).
+    for r in 600..610 {
+        for c in 700..710 {
+            let i = (r * 1201 + c) * 2;
+            bytes[i..i + 2].copy_from_slice(&i16::MIN.to_be_bytes());
+        }
+    }
+    let p = tmp.path().join("N57E011.hgt");
+    std::fs::write(&p, &bytes).unwrap();
+    let (map, report) = import(&params(p.clone()), &mut Vec::new()).unwrap();
+    assert_eq!(report.voids_filled, 100);
+    let (lo, hi) = map.heights.min_max();
+    assert!(
+        lo > -10.0 && hi < 170.0,
+        "filled values out of the data range: {lo}..{hi}"
+    );
+    // All voids is an error that names the file.
+    let void_tile: Vec<u8> = std::iter::repeat_n(i16::MIN.to_be_bytes(), 1201 * 1201)
+        .flatten()
+        .collect();
+    std::fs::write(&p, void_tile).unwrap();
+    let err = import(&params(p.clone()), &mut Vec::new())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("N57E011.hgt") && err.contains("void"), "{err}");
+    // A file of the wrong length is refused with the expected sizes.
+    std::fs::write(&p, [0u8; 1000]).unwrap();
+    let err = import(&params(p), &mut Vec::new()).unwrap_err().to_string();
+    assert!(err.contains("2884802"), "{err}");
+}
+
+#[test]
+fn puget_sound_png_imports_with_vertical_scale() {
+    let Some(path) = shared_data("dem/ps_height_1k.png") else {
+        return;
+    };
+    let mut p = params(path.clone());
+    let err = import(&p, &mut Vec::new()).unwrap_err().to_string();
+    assert!(err.contains("--spacing-m"), "{err}");
+    p.spacing_m = Some(160.0);
+    p.vertical_scale_m = 0.1;
+    let (map, _) = import(&p, &mut Vec::new()).expect("import");
+    assert_eq!(map.manifest.size_m, [163_840.0, 163_840.0]);
+    let (lo, hi) = map.heights.min_max();
+    assert!(lo == 0.0 && (4379.0..=4380.0).contains(&hi), "{lo}..{hi}");
+}
