@@ -55,4 +55,7 @@ elif [ -n "${CI:-}" ]; then
   echo "../shared/data is missing in CI" >&2; exit 1
 fi
 
+passed=$(grep -oE "test result: ok\. [0-9]+ passed" target/test-output.log | awk '{s+=$4} END {print s+0}')
+failed=$(grep -oE "[0-9]+ failed" target/test-output.log | awk '{s+=$1} END {print s+0}')
 step "all checks passed"
+echo "tests: ${passed} passed, ${failed} failed"

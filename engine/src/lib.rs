@@ -1,1 +1,23 @@
-//! placeholder
+//! `engine`: the runtime of the terrain streaming engine.
+//!
+//! The CPU side (this crate's `world`, `quadtree`, `bounds`, `select`, `tiles`, `mesh` modules)
+//! never touches the GPU: it turns a map and a camera into plain data (node keys, bounds,
+//! vertex/index arrays) that a renderer uploads.
+//!
+//! Main design choices:
+//! - **One finest surface.** [`world::World::height_m`] is the finest terrain the engine can
+//!   produce: bicubic map heights plus procedural detail whose amplitude follows the ground type.
+//!   Every mesh samples it; every error is measured against it.
+//! - **Conservative errors.** A node's error is measured on a lattice 4x finer than its mesh,
+//!   plus a proven bound for what can happen between lattice points (Lipschitz constants of the
+//!   surface and of the mesh). See [`bounds`].
+//! - **One error metric.** `px = err_m * K / dist_m`, `K = viewport_px / (2 tan(fovy / 2))`.
+//! - **Crack-free by skirts of proven depth.** See [`mesh`].
+//! - World positions are f64; vertices are f32 relative to their node's origin.
+
+pub mod bounds;
+pub mod mesh;
+pub mod quadtree;
+pub mod select;
+pub mod tiles;
+pub mod world;

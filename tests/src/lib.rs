@@ -88,3 +88,130 @@ pub fn hash_dir(dir: &Path) -> u64 {
     }
     h
 }
+
+/// Terrain test helpers: worlds with hard surfaces, dense error measurement, ray casting.
+pub mod terrain {
+    use engine::bounds::BoundsCache;
+    use engine::mesh::{self, NodeMesh};
+    use engine::quadtree::{NodeKey, QuadTree};
+    use engine::tiles::TileCache;
+    use engine::world::World;
+    use glam::DVec3;
+    use worldgen::Map;
+
+    /// The committed tiny map as a world.
+    pub fn tiny_world() -> World {
+        World::new(Map::load(&super::tiny_map_dir()).expect("tiny map loads"))
+    }
+
+    /// The tiny map with hard cases burned into its heights: a 100 m vertical cliff (between
+    /// two neighbouring samples) across the map, single-sample spikes of +50 m and -30 m, and a
+    /// perfectly flat 0 m sea (water ground, so no detail) in the south-east quarter. Heights
+    /// and ground share the 4 m spacing in the tiny map.
+    pub fn cliff_world() -> World {
+        let mut map = Map::load(&super::tiny_map_dir()).expect("tiny map loads");
+        let (w, h) = (map.heights.width(), map.heights.height());
+        for y in 0..h {
+            for x in 0..w {
+                let mut z = map.heights.get(x, y);
+                if x >= w / 2 && y < h / 2 {
+                    z = 0.0;
+                    map.ground.set(x, y, worldgen::classify::WATER);
+                } else if x >= 40 {
+                    z += 100.0;
+                }
+                map.heights.set(x, y, z);
+            }
+        }
+        map.heights.set(20, 90, map.heights.get(20, 90) + 50.0);
+        map.heights.set(100, 100, map.heights.get(100, 100) - 30.0);
+        World::new(map)
+    }
+
+    /// A world with its origin moved by (dx, dy) metres.
+    pub fn shifted(world: &World, dx: f64, dy: f64) -> World {
+        let mut map = world.map.clone();
+        map.manifest.origin_m = [map.manifest.origin_m[0] + dx, map.manifest.origin_m[1] + dy];
+        World::new(map)
+    }
+
+    pub fn tree_of(world: &World) -> QuadTree {
+        QuadTree::new(world.origin_m(), world.size_m())
+    }
+
+    /// Builds a node mesh the way the engine does (tiles for small nodes).
+    pub fn build_mesh(
+        world: &World,
+        tree: &QuadTree,
+        cache: &mut BoundsCache,
+        tiles: &mut TileCache,
+        key: NodeKey,
+    ) -> NodeMesh {
+        let tile_key = mesh::source_tile(world, tree, key);
+        let tile = tile_key.map(|k| tiles.acquire(world, k));
+        let m = mesh::build(world, tree, cache, key, tile.as_deref());
+        if let Some(k) = tile_key {
+            tiles.release(k);
+        }
+        m
+    }
+
+    /// The true largest |mesh - surface| of a node, measured on a dense lattice of spacing
+    /// s/10 (10 points per mesh quad, not aligned with the engine's 4-per-quad check lattice),
+    /// plus the largest distance of the surface outside the node's height range.
+    pub fn measure_true_error(world: &World, tree: &QuadTree, m: &NodeMesh) -> (f64, f64) {
+        let r = tree.rect(m.key);
+        let n = engine::quadtree::NODE_QUADS as usize * 10;
+        let step = (r.max[0] - r.min[0]) / n as f64;
+        let (mut err, mut outside) = (0.0f64, 0.0f64);
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (r.min[0] + i as f64 * step, r.min[1] + j as f64 * step);
+                let f = world.height_m(x, y);
+                err = err.max((m.height_at(tree, x, y) - f).abs());
+                outside = outside.max(m.bounds.z_min_m - f).max(f - m.bounds.z_max_m);
+            }
+        }
+        (err, outside)
+    }
+
+    /// Ray / triangle intersection distance (two-sided, Moller-Trumbore), in f64.
+    pub fn ray_triangle(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64> {
+        let e1 = b - a;
+        let e2 = c - a;
+        let p = d.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let t0 = o - a;
+        let u = t0.dot(p) * inv;
+        if !(-1e-9..=1.0 + 1e-9).contains(&u) {
+            return None;
+        }
+        let q = t0.cross(e1);
+        let v = d.dot(q) * inv;
+        if v < -1e-9 || u + v > 1.0 + 1e-9 {
+            return None;
+        }
+        let t = e2.dot(q) * inv;
+        (t > 0.0).then_some(t)
+    }
+
+    /// Nearest hit of a ray with a node mesh (surface and skirts), world space.
+    pub fn ray_mesh(o: DVec3, d: DVec3, m: &NodeMesh) -> Option<f64> {
+        let org = DVec3::new(m.origin_m[0], m.origin_m[1], 0.0);
+        let v = |i: u32| {
+            let p = m.positions[i as usize];
+            org + DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+        };
+        let mut best: Option<f64> = None;
+        for t in m.indices.chunks_exact(3) {
+            if let Some(h) = ray_triangle(o, d, v(t[0]), v(t[1]), v(t[2])) {
+                best = Some(best.map_or(h, |b: f64| b.min(h)));
+            }
+        }
+        best
+    }
+}

@@ -1,0 +1,220 @@
+//! Per-node bounds: a height range (AABB) and a conservative geometric error.
+//!
+//! A node's mesh `M` is the linear interpolation (diagonals from (i, j) to (i+1, j+1)) of the
+//! finest surface `F` at its `(NODE_QUADS + 1)^2` vertices. The error `max |M - F|` over the
+//! node is bounded as follows. Evaluate `F` on a check lattice [`CHECK_SUBDIV`] times finer than
+//! the mesh (spacing `c`), triangulated with the same diagonal direction, so every check
+//! triangle lies inside one mesh triangle and `M` is linear on it. For `p` in a check triangle
+//! with corners `v_i` and barycentric weights `l_i`:
+//! `M(p) - F(p) = sum l_i (M - F)(v_i) + (Lin F - F)(p)`, and
+//! `|Lin F(p) - F(p)| <= L_F * sum l_i |p - v_i| <= L_F * sqrt(sum l_i |p - v_i|^2) <= L_F c / sqrt(2)`
+//! (the last sum is largest at the circumcentre of the right triangle, radius `c / sqrt(2)`),
+//! or, where a part of `F` is C1 with a bounded piecewise-continuous Hessian over the cell, by
+//! Taylor's theorem with integral remainder `|Lin F(p) - F(p)| <= (M2 / 2) sum l_i |p - v_i|^2
+//! <= M2 c^2 / 4`, or for the detail part `H` (|H| <= A) simply `2 A`; see [`between_bound`].
+//! The slope, curvature and amplitude bounds are local to the check cell
+//! ([`World::region_bounds`]): a cliff only widens the bound next to it. So
+//! `error <= max over check cells of (max |M - F| at its corners + between(cell))`; the height
+//! range is widened per cell by the same term. The error is measured, then made an upper bound by proof; nothing is guessed.
+//!
+//! Not guaranteed: monotonicity (a child's bound may exceed its parent's on steep detail).
+//! Selection does not need it: each selected node is tested against its own bound.
+
+use crate::quadtree::{NODE_QUADS, NodeKey, QuadTree};
+use crate::world::World;
+use rustc_hash::FxHashMap;
+
+/// Check-lattice points per mesh quad side.
+pub const CHECK_SUBDIV: u32 = 4;
+
+/// Height range and error bound of one node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeBounds {
+    pub z_min_m: f64,
+    pub z_max_m: f64,
+    /// Upper bound of the vertical distance between the node mesh and the finest surface.
+    pub error_m: f64,
+}
+
+/// Linear interpolation of vertex heights `v` ((n+1)^2, row-major) at fractional grid position
+/// (gx, gy), using the triangulation with diagonals from (i, j) to (i+1, j+1).
+pub fn interpolate_grid(v: &[f32], n: usize, gx: f64, gy: f64) -> f64 {
+    let i = (gx.floor() as usize).min(n - 1);
+    let j = (gy.floor() as usize).min(n - 1);
+    let (fx, fy) = (gx - i as f64, gy - j as f64);
+    let w = n + 1;
+    let h00 = f64::from(v[j * w + i]);
+    let h10 = f64::from(v[j * w + i + 1]);
+    let h01 = f64::from(v[(j + 1) * w + i]);
+    let h11 = f64::from(v[(j + 1) * w + i + 1]);
+    if fx >= fy {
+        // Lower-right triangle (00, 10, 11).
+        h00 + fx * (h10 - h00) + fy * (h11 - h10)
+    } else {
+        // Upper-left triangle (00, 11, 01).
+        h00 + fy * (h01 - h00) + fx * (h11 - h01)
+    }
+}
+
+/// Steepest triangle slope (m per m) of a vertex grid with spacing `s`.
+pub fn max_triangle_slope(v: &[f32], n: usize, s: f64) -> f64 {
+    let w = n + 1;
+    let mut m = 0.0f64;
+    for j in 0..n {
+        for i in 0..n {
+            let h00 = f64::from(v[j * w + i]);
+            let h10 = f64::from(v[j * w + i + 1]);
+            let h01 = f64::from(v[(j + 1) * w + i]);
+            let h11 = f64::from(v[(j + 1) * w + i + 1]);
+            let lower = (h10 - h00).hypot(h11 - h10);
+            let upper = (h11 - h01).hypot(h01 - h00);
+            m = m.max(lower.max(upper) / s);
+        }
+    }
+    m
+}
+
+/// Heights of the finest surface at a node's mesh vertices, row-major from the south-west,
+/// `(NODE_QUADS + 1)^2` values relative to nothing (absolute metres, f32).
+pub fn vertex_heights(world: &World, tree: &QuadTree, key: NodeKey) -> Vec<f32> {
+    let r = tree.rect(key);
+    let s = tree.spacing_m(key.level);
+    let n = NODE_QUADS as usize;
+    let mut v = Vec::with_capacity((n + 1) * (n + 1));
+    for j in 0..=n {
+        for i in 0..=n {
+            v.push(world.height_m(r.min[0] + i as f64 * s, r.min[1] + j as f64 * s) as f32);
+        }
+    }
+    v
+}
+
+/// A bound of `|Lin F(p) - F(p)|` inside a right check triangle with legs `c`, where `F = G + H`
+/// (map surface + detail) and `|Lin F - F| <= |Lin G - G| + |Lin H - H|`. Each part takes the
+/// smallest of its valid bounds: first order `slope c / sqrt(2)`, second order
+/// `curvature c^2 / 4`, and for the detail also zero order `2 max |H|`.
+pub fn between_bound(b: &crate::world::RegionBounds, c: f64) -> f64 {
+    let reach = c * std::f64::consts::FRAC_1_SQRT_2;
+    let second = |m2: Option<f64>| m2.map_or(f64::INFINITY, |m| m * c * c * 0.25);
+    let g = (b.slope_g * reach).min(second(b.curvature_g));
+    let h = (b.slope_h * reach)
+        .min(second(b.curvature_h))
+        .min(2.0 * b.amplitude_max_m);
+    g + h
+}
+
+/// Measures the bounds of one node (see the module docs). About 17k surface evaluations.
+pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
+    let r = tree.rect(key);
+    let n = NODE_QUADS as usize;
+    let sub = CHECK_SUBDIV as usize;
+    let s = tree.spacing_m(key.level);
+    let c = s / f64::from(CHECK_SUBDIV);
+    let m = n * sub;
+    // F on the check lattice; mesh vertices are every `sub`-th lattice point.
+    let mut lattice = Vec::with_capacity((m + 1) * (m + 1));
+    for j in 0..=m {
+        for i in 0..=m {
+            lattice.push(world.height_m(r.min[0] + i as f64 * c, r.min[1] + j as f64 * c));
+        }
+    }
+    let mut verts = Vec::with_capacity((n + 1) * (n + 1));
+    for j in 0..=n {
+        for i in 0..=n {
+            verts.push(lattice[(j * sub) * (m + 1) + i * sub] as f32);
+        }
+    }
+    // Per check cell: the largest |M - F| at its corners plus the local between-points bound.
+    let err_at = |i: usize, j: usize| {
+        let f = lattice[j * (m + 1) + i];
+        (interpolate_grid(&verts, n, i as f64 / sub as f64, j as f64 / sub as f64) - f).abs()
+    };
+    let mut e_lattice = vec![0.0f64; (m + 1) * (m + 1)];
+    for j in 0..=m {
+        for i in 0..=m {
+            e_lattice[j * (m + 1) + i] = err_at(i, j);
+        }
+    }
+    let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    for j in 0..m {
+        for i in 0..m {
+            let cell = crate::world::Rect {
+                min: [r.min[0] + i as f64 * c, r.min[1] + j as f64 * c],
+                max: [r.min[0] + (i + 1) as f64 * c, r.min[1] + (j + 1) as f64 * c],
+            };
+            let between = between_bound(&world.region_bounds(cell), c);
+            let corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)];
+            let mut e = 0.0f64;
+            for (ci, cj) in corners {
+                let f = lattice[cj * (m + 1) + ci];
+                lo = lo.min(f - between);
+                hi = hi.max(f + between);
+                e = e.max(e_lattice[cj * (m + 1) + ci]);
+            }
+            error = error.max(e + between);
+        }
+    }
+    // f32 vertex rounding: relative 2^-24 of the height magnitude, twice for safety.
+    let rounding = 2.0 * hi.abs().max(lo.abs()) * f64::from(f32::EPSILON);
+    NodeBounds {
+        z_min_m: lo,
+        z_max_m: hi,
+        error_m: error + rounding,
+    }
+}
+
+/// Lazily computed bounds per node, shared by selection and mesh generation.
+#[derive(Debug, Default)]
+pub struct BoundsCache {
+    map: FxHashMap<NodeKey, NodeBounds>,
+    /// How many nodes were measured (cache misses).
+    pub computed: u64,
+}
+
+impl BoundsCache {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The node's bounds, measured on first use.
+    pub fn get(&mut self, world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
+        if let Some(b) = self.map.get(&key) {
+            return *b;
+        }
+        let b = compute(world, tree, key);
+        self.computed += 1;
+        self.map.insert(key, b);
+        b
+    }
+
+    /// The bounds if already measured.
+    pub fn peek(&self, key: NodeKey) -> Option<NodeBounds> {
+        self.map.get(&key).copied()
+    }
+
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolation_reproduces_vertices_and_is_linear_on_triangles() {
+        // A plane z = 2x + 3y is reproduced everywhere.
+        let n = 4;
+        let v: Vec<f32> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| (2 * i + 3 * j) as f32))
+            .collect();
+        for &(gx, gy) in &[(0.0, 0.0), (1.5, 2.25), (3.9, 0.1), (4.0, 4.0), (2.0, 3.0)] {
+            assert!((interpolate_grid(&v, n, gx, gy) - (2.0 * gx + 3.0 * gy)).abs() < 1e-9);
+        }
+        assert!((max_triangle_slope(&v, n, 1.0) - 13f64.sqrt()).abs() < 1e-9);
+    }
+}

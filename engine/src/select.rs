@@ -1,0 +1,227 @@
+//! Per-frame node selection: split a node while its projected error exceeds the pixel
+//! threshold; cull by the view frustum against node AABBs.
+//!
+//! `px = error_m * K / dist_m` with `K = viewport_height_px / (2 tan(fovy / 2))` and `dist_m`
+//! the distance from the camera to the nearest point of the node's AABB (so the projected error
+//! of every point of the node is at most `px`).
+
+use crate::bounds::{BoundsCache, NodeBounds};
+use crate::quadtree::{NodeKey, QuadTree};
+use crate::world::World;
+use glam::DVec3;
+
+/// A perspective camera in f64 world space (z up).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub position_m: DVec3,
+    /// Unit view direction.
+    pub forward: DVec3,
+    /// Unit up direction, orthogonal to `forward`.
+    pub up: DVec3,
+    pub fovy_rad: f64,
+    pub viewport_px: [u32; 2],
+    pub near_m: f64,
+}
+
+impl Camera {
+    /// A camera at `position_m` looking at `target_m`, world z up.
+    pub fn look_at(
+        position_m: DVec3,
+        target_m: DVec3,
+        fovy_rad: f64,
+        viewport_px: [u32; 2],
+    ) -> Self {
+        let forward = (target_m - position_m).normalize_or(DVec3::Y);
+        let side = forward.cross(DVec3::Z);
+        let side = if side.length_squared() < 1e-12 {
+            DVec3::X
+        } else {
+            side.normalize()
+        };
+        let up = side.cross(forward).normalize();
+        Self {
+            position_m,
+            forward,
+            up,
+            fovy_rad,
+            viewport_px,
+            near_m: 0.1,
+        }
+    }
+
+    pub fn right(&self) -> DVec3 {
+        self.forward.cross(self.up)
+    }
+
+    pub fn aspect(&self) -> f64 {
+        f64::from(self.viewport_px[0]) / f64::from(self.viewport_px[1].max(1))
+    }
+
+    /// Pixels per (metre / metre of distance): `viewport_height / (2 tan(fovy / 2))`.
+    pub fn k_px(&self) -> f64 {
+        f64::from(self.viewport_px[1]) / (2.0 * (self.fovy_rad * 0.5).tan())
+    }
+
+    /// The frustum planes (inward unit normals through the camera, plus the near plane).
+    pub fn frustum(&self) -> Frustum {
+        let (f, r, u) = (self.forward, self.right(), self.up);
+        let ty = (self.fovy_rad * 0.5).tan();
+        let tx = ty * self.aspect();
+        Frustum {
+            apex_m: self.position_m,
+            normals: [
+                (f * tx + r).normalize(),
+                (f * tx - r).normalize(),
+                (f * ty + u).normalize(),
+                (f * ty - u).normalize(),
+                f,
+            ],
+            near_m: self.near_m,
+        }
+    }
+}
+
+/// Four side planes through the apex and a near plane; the far plane is at infinity.
+#[derive(Debug, Clone, Copy)]
+pub struct Frustum {
+    pub apex_m: DVec3,
+    pub normals: [DVec3; 5],
+    pub near_m: f64,
+}
+
+impl Frustum {
+    /// False only when the box is certainly outside.
+    pub fn intersects_aabb(&self, min: DVec3, max: DVec3) -> bool {
+        let (lo, hi) = (min - self.apex_m, max - self.apex_m);
+        for (i, n) in self.normals.iter().enumerate() {
+            // The box corner furthest along n.
+            let p = DVec3::new(
+                if n.x >= 0.0 { hi.x } else { lo.x },
+                if n.y >= 0.0 { hi.y } else { lo.y },
+                if n.z >= 0.0 { hi.z } else { lo.z },
+            );
+            let offset = if i == 4 { self.near_m } else { 0.0 };
+            if n.dot(p) < offset {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// Distance from `p` to the nearest point of the box (0 inside).
+pub fn distance_to_aabb(p: DVec3, min: DVec3, max: DVec3) -> f64 {
+    (p.clamp(min, max) - p).length()
+}
+
+/// The world-space box of a node.
+pub fn node_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> (DVec3, DVec3) {
+    let r = tree.rect(key);
+    (
+        DVec3::new(r.min[0], r.min[1], b.z_min_m),
+        DVec3::new(r.max[0], r.max[1], b.z_max_m),
+    )
+}
+
+/// One selected node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Selected {
+    pub key: NodeKey,
+    pub bounds: NodeBounds,
+    pub dist_m: f64,
+    /// Projected error bound in pixels at `dist_m`.
+    pub error_px: f64,
+}
+
+/// The result of one selection.
+#[derive(Debug, Clone, Default)]
+pub struct Selection {
+    pub nodes: Vec<Selected>,
+    pub visited: u32,
+    pub culled: u32,
+    /// Selected nodes at the finest level whose error bound still exceeds the threshold (the
+    /// engine has no finer data there; reported, never hidden).
+    pub over_tau_at_finest: u32,
+}
+
+/// Selection settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SelectParams {
+    /// The user's detail level: largest projected error in pixels.
+    pub tau_px: f64,
+    /// Finest level to descend to (the tree's `max_level` normally; lower for debugging).
+    pub max_level: u8,
+    /// Frustum culling on (off: select everywhere, e.g. for shadow or debug).
+    pub cull: bool,
+}
+
+/// Selects the nodes to draw for `cam`.
+pub fn select(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    cam: &Camera,
+    p: SelectParams,
+) -> Selection {
+    let mut out = Selection::default();
+    let frustum = cam.frustum();
+    let k = cam.k_px();
+    let mut stack = vec![NodeKey::ROOT];
+    while let Some(key) = stack.pop() {
+        if !tree.overlaps_map(key) {
+            continue;
+        }
+        out.visited += 1;
+        let b = cache.get(world, tree, key);
+        let (min, max) = node_aabb(tree, key, &b);
+        if p.cull && !frustum.intersects_aabb(min, max) {
+            out.culled += 1;
+            continue;
+        }
+        let dist = distance_to_aabb(cam.position_m, min, max);
+        let error_px = if dist > 0.0 {
+            b.error_m * k / dist
+        } else {
+            f64::INFINITY
+        };
+        if error_px > p.tau_px && key.level < p.max_level.min(tree.max_level) {
+            // Children pushed in reverse so the output is in SW, SE, NW, NE order.
+            for c in key.children().into_iter().rev() {
+                stack.push(c);
+            }
+        } else {
+            out.over_tau_at_finest += u32::from(error_px > p.tau_px);
+            out.nodes.push(Selected {
+                key,
+                bounds: b,
+                dist_m: dist,
+                error_px,
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frustum_keeps_boxes_in_front_and_drops_boxes_behind() {
+        let cam = Camera::look_at(DVec3::ZERO, DVec3::new(0.0, 100.0, 0.0), 1.0, [640, 480]);
+        let f = cam.frustum();
+        assert!(f.intersects_aabb(DVec3::new(-1.0, 50.0, -1.0), DVec3::new(1.0, 52.0, 1.0)));
+        assert!(!f.intersects_aabb(DVec3::new(-1.0, -52.0, -1.0), DVec3::new(1.0, -50.0, 1.0)));
+        assert!(!f.intersects_aabb(DVec3::new(200.0, 50.0, -1.0), DVec3::new(201.0, 52.0, 1.0)));
+        // A box around the camera always intersects.
+        assert!(f.intersects_aabb(DVec3::splat(-1.0), DVec3::splat(1.0)));
+        assert!((cam.k_px() - 480.0 / (2.0 * 0.5f64.tan())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn aabb_distance_is_zero_inside_and_euclidean_outside() {
+        let (lo, hi) = (DVec3::ZERO, DVec3::ONE);
+        assert_eq!(distance_to_aabb(DVec3::splat(0.5), lo, hi), 0.0);
+        assert!((distance_to_aabb(DVec3::new(4.0, 5.0, 0.5), lo, hi) - 5.0).abs() < 1e-12);
+    }
+}
