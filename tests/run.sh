@@ -8,7 +8,7 @@ step() { printf '\n==> %s\n' "$*"; }
 
 # --- system packages (lavapipe for GPU tests, Xvfb + X libraries for the viewer smoke run) ---
 packages=(mesa-vulkan-drivers libvulkan1 xvfb libx11-6 libx11-xcb1 libxcb1 libxcursor1 libxi6
-          libxkbcommon-x11-0 xdotool pkg-config)
+          libxkbcommon-x11-0 xdotool pkg-config fonts-dejavu-core)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -38,7 +38,10 @@ cargo test --workspace --locked 2>&1 | tee target/test-output.log
 # Fail loudly if the runner executed nothing (e.g. everything filtered out).
 grep -q "test result: ok" target/test-output.log
 
-# --- smoke runs: the binaries cargo test already built (dev profile, deps optimised) ---
+# --- smoke runs: the binaries in the dev profile (deps already built by the tests) ---
+step "cargo build --bins"
+cargo build --workspace --bins --locked
+
 step "smoke: worldgen generate / check / import-dem"
 smoke=target/smoke
 rm -rf "$smoke" && mkdir -p "$smoke"
@@ -53,6 +56,15 @@ if [ -f ../shared/data/dem/N57E011.hgt ]; then
   ./target/debug/worldgen check "$smoke/n57" >/dev/null
 elif [ -n "${CI:-}" ]; then
   echo "../shared/data is missing in CI" >&2; exit 1
+fi
+
+step "smoke: nodebench --quick on the tiny map"
+./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" > "$smoke/nodebench.md"
+grep -q '"section": "selection"' "$smoke/nodebench.json"
+grep -q '"machine"' "$smoke/nodebench.json"
+test -s "$smoke/speed_vs_error.png"
+if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
+  echo "nodebench accepted an unknown section" >&2; exit 1
 fi
 
 passed=$(grep -oE "test result: ok\. [0-9]+ passed" target/test-output.log | awk '{s+=$4} END {print s+0}')

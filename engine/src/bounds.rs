@@ -135,6 +135,15 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
             e_lattice[j * (m + 1) + i] = err_at(i, j);
         }
     }
+    // Fast path: when check cells tile the height and ground cells exactly (aligned, at most
+    // one cell in size) and the node is inside the map, each check cell's bounds are its map
+    // cells' values, read directly.
+    let (hs, gs) = world.cell_spacings_m();
+    let o = world.origin_m();
+    let size = world.size_m();
+    let divides = |big: f64| c <= big && ((big / c) - (big / c).round()).abs() < 1e-9;
+    let inside = r.max[0] <= o[0] + size[0] + 1e-9 && r.max[1] <= o[1] + size[1] + 1e-9;
+    let direct = divides(hs) && divides(gs) && inside;
     let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
     for j in 0..m {
         for i in 0..m {
@@ -142,7 +151,22 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
                 min: [r.min[0] + i as f64 * c, r.min[1] + j as f64 * c],
                 max: [r.min[0] + (i + 1) as f64 * c, r.min[1] + (j + 1) as f64 * c],
             };
-            let between = between_bound(&world.region_bounds(cell), c);
+            let region = if direct {
+                // The cell's centre picks the map cells that contain it.
+                let (cx, cy) = (
+                    (cell.min[0] + cell.max[0]) * 0.5 - o[0],
+                    (cell.min[1] + cell.max[1]) * 0.5 - o[1],
+                );
+                world.cell_region_bounds(
+                    (cx / hs) as usize,
+                    (cy / hs) as usize,
+                    (cx / gs) as usize,
+                    (cy / gs) as usize,
+                )
+            } else {
+                world.region_bounds(cell)
+            };
+            let between = between_bound(&region, c);
             let corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)];
             let mut e = 0.0f64;
             for (ci, cj) in corners {
@@ -185,6 +209,11 @@ impl BoundsCache {
         self.computed += 1;
         self.map.insert(key, b);
         b
+    }
+
+    /// Stores bounds measured elsewhere (they are a pure function of the key).
+    pub fn insert(&mut self, key: NodeKey, b: NodeBounds) {
+        self.map.insert(key, b);
     }
 
     /// The bounds if already measured.

@@ -16,8 +16,11 @@
 //! - World positions are f64; vertices are f32 relative to their node's origin.
 
 pub mod bounds;
+pub mod measure;
 pub mod mesh;
 pub mod quadtree;
 pub mod select;
+pub mod stream;
 pub mod tiles;
+pub mod tin;
 pub mod world;

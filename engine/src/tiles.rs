@@ -114,6 +114,14 @@ impl TileCache {
         t
     }
 
+    /// Takes a reference to the tile if it is resident.
+    pub fn try_acquire(&mut self, key: TileKey) -> Option<Arc<Tile>> {
+        self.tiles.get_mut(&key).map(|(t, rc)| {
+            *rc += 1;
+            Arc::clone(t)
+        })
+    }
+
     /// Inserts a tile generated elsewhere (e.g. on a worker) with one reference, or adds a
     /// reference to the resident copy.
     pub fn insert_acquired(&mut self, tile: Arc<Tile>) -> Arc<Tile> {

@@ -194,6 +194,29 @@ impl World {
         }
     }
 
+    /// Cell spacing (m) of the height and ground grids.
+    pub fn cell_spacings_m(&self) -> (f64, f64) {
+        (
+            self.map.manifest.heights.spacing_m,
+            self.map.manifest.ground.spacing_m,
+        )
+    }
+
+    /// [`Self::region_bounds`] for a region known to lie inside height cell `(hx, hy)` and ground
+    /// cell `(gx, gy)` and inside the map: direct lookups, no pyramid.
+    pub fn cell_region_bounds(&self, hx: usize, hy: usize, gx: usize, gy: usize) -> RegionBounds {
+        let l0 = |p: &MaxPyramid, x: usize, y: usize| {
+            f64::from(p.levels[0].get(x.min(p.width() - 1), y.min(p.height() - 1)))
+        };
+        RegionBounds {
+            slope_g: l0(&self.slope_g, hx, hy),
+            slope_h: l0(&self.slope_detail, gx, gy),
+            curvature_g: Some(l0(&self.curv_g, hx, hy)),
+            curvature_h: Some(l0(&self.curv_detail, gx, gy)),
+            amplitude_max_m: l0(&self.amp_max, gx, gy),
+        }
+    }
+
     /// Max of a per-cell field over the cells a rectangle touches.
     fn cells_max(&self, rect: Rect, spacing: f64, p: &MaxPyramid) -> f32 {
         let o = self.origin_m();

@@ -156,23 +156,11 @@ pub mod terrain {
         m
     }
 
-    /// The true largest |mesh - surface| of a node, measured on a dense lattice of spacing
-    /// s/10 (10 points per mesh quad, not aligned with the engine's 4-per-quad check lattice),
-    /// plus the largest distance of the surface outside the node's height range.
+    /// The true largest |mesh - surface| of a node, measured on a dense lattice of 10 points
+    /// per mesh quad (not aligned with the engine's 4-per-quad check lattice), plus the largest
+    /// distance of the surface outside the node's height range.
     pub fn measure_true_error(world: &World, tree: &QuadTree, m: &NodeMesh) -> (f64, f64) {
-        let r = tree.rect(m.key);
-        let n = engine::quadtree::NODE_QUADS as usize * 10;
-        let step = (r.max[0] - r.min[0]) / n as f64;
-        let (mut err, mut outside) = (0.0f64, 0.0f64);
-        for j in 0..=n {
-            for i in 0..=n {
-                let (x, y) = (r.min[0] + i as f64 * step, r.min[1] + j as f64 * step);
-                let f = world.height_m(x, y);
-                err = err.max((m.height_at(tree, x, y) - f).abs());
-                outside = outside.max(m.bounds.z_min_m - f).max(f - m.bounds.z_max_m);
-            }
-        }
-        (err, outside)
+        engine::measure::true_node_error(world, tree, m, 10)
     }
 
     /// Ray / triangle intersection distance (two-sided, Moller-Trumbore), in f64.

@@ -564,3 +564,82 @@ fn tiles_are_shared_and_freed_when_unused() {
         assert_eq!(a.heights_m[j * n + i], want);
     }
 }
+
+#[test]
+fn imported_srtm_sea_is_exact_and_the_coast_is_watertight() {
+    let Some(path) = tests::shared_data("dem/N57E011.hgt") else {
+        return;
+    };
+    let params = worldgen::dem::ImportParams {
+        path,
+        name: "n57".into(),
+        spacing_m: None,
+        vertical_scale_m: 1.0,
+        latitude_deg: None,
+        water_level_m: 0.0,
+        snow_line_m: 1800.0,
+        threads: 0,
+    };
+    let (map, _) = worldgen::dem::import(&params, &mut Vec::new()).expect("import");
+    let world = World::new(map);
+    let tree = tree_of(&world);
+    let mut cache = BoundsCache::new();
+    let mut tiles = TileCache::new();
+    // A node far out in the open sea (west edge of the tile) has no error at all.
+    let sea = tree.key_at(7, 2000.0, 60_000.0).unwrap();
+    let b = cache.get(&world, &tree, sea);
+    assert!(
+        b.error_m == 0.0 && b.z_min_m == 0.0 && b.z_max_m == 0.0,
+        "{b:?}"
+    );
+    // Looking along the coast from 60 m up: honest and watertight. Find a coast point first.
+    let (mut cx, cy) = (1000.0, 60_000.0);
+    while world.height_m(cx, cy) <= 0.0 && cx < 55_000.0 {
+        cx += 100.0;
+    }
+    assert!(cx < 55_000.0, "no coast found");
+    let eye = DVec3::new(cx - 400.0, cy - 300.0, 60.0);
+    let cam = Camera::look_at(eye, DVec3::new(cx, cy, 0.0), 60f64.to_radians(), [40, 30]);
+    let sel = select(
+        &world,
+        &tree,
+        &mut cache,
+        &cam,
+        SelectParams {
+            tau_px: 1.0,
+            max_level: tree.max_level,
+            cull: true,
+        },
+    );
+    let levels: std::collections::BTreeSet<u8> = sel.nodes.iter().map(|s| s.key.level).collect();
+    assert!(
+        levels.len() >= 3,
+        "expected mixed levels along the coast, got {levels:?}"
+    );
+    let meshes: Map<NodeKey, NodeMesh> = sel
+        .nodes
+        .iter()
+        .map(|s| {
+            (
+                s.key,
+                build_mesh(&world, &tree, &mut cache, &mut tiles, s.key),
+            )
+        })
+        .collect();
+    for s in &sel.nodes {
+        let (true_err, outside) = measure_true_error(&world, &tree, &meshes[&s.key]);
+        assert!(
+            true_err <= s.bounds.error_m && outside <= 0.0,
+            "{:?}: {true_err} > {}",
+            s.key,
+            s.bounds.error_m
+        );
+    }
+    let (below, holes) = count_holes(&world, &tree, &meshes, &cam);
+    assert_eq!(
+        holes, 0,
+        "{holes} of {below} rays fell through at the coast"
+    );
+    let (gaps, seam) = seam_holes(&tree, &meshes, &cam);
+    assert_eq!(seam, 0, "{seam} of {gaps} seam gaps open at the coast");
+}

@@ -35,6 +35,21 @@ pub fn bilinear(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 
     let (x0, y0) = (gx.floor(), gy.floor());
     let (fx, fy) = (gx - x0, gy - y0);
     let (ix, iy) = (x0 as i64, y0 as i64);
+    let (w, h) = (grid.width() as i64, grid.height() as i64);
+    if ix + 1 < w && iy + 1 < h {
+        // Interior (grid_coords already clamped below at 0): no index clamping needed.
+        let i = (iy * w + ix) as usize;
+        let d = grid.data();
+        let (s00, s10, s01, s11) = (
+            f64::from(d[i]),
+            f64::from(d[i + 1]),
+            f64::from(d[i + w as usize]),
+            f64::from(d[i + w as usize + 1]),
+        );
+        let a = s00 + fx * (s10 - s00);
+        let b = s01 + fx * (s11 - s01);
+        return a + fy * (b - a);
+    }
     let s = |dx: i64, dy: i64| f64::from(grid.get_clamped(ix + dx, iy + dy));
     let a = s(0, 0) + fx * (s(1, 0) - s(0, 0));
     let b = s(0, 1) + fx * (s(1, 1) - s(0, 1));
@@ -61,6 +76,21 @@ pub fn bicubic(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     let (x0, y0) = (gx.floor(), gy.floor());
     let (wx, wy) = (catmull_rom_weights(gx - x0), catmull_rom_weights(gy - y0));
     let (ix, iy) = (x0 as i64, y0 as i64);
+    let (w, h) = (grid.width() as i64, grid.height() as i64);
+    if ix >= 1 && iy >= 1 && ix + 2 < w && iy + 2 < h {
+        // Interior: the 4x4 stencil needs no clamping.
+        let data = grid.data();
+        let mut sum = 0.0;
+        for (j, wyj) in wy.iter().enumerate() {
+            let row = &data[((iy - 1 + j as i64) * w + ix - 1) as usize..][..4];
+            sum += wyj
+                * (wx[0] * f64::from(row[0])
+                    + wx[1] * f64::from(row[1])
+                    + wx[2] * f64::from(row[2])
+                    + wx[3] * f64::from(row[3]));
+        }
+        return sum;
+    }
     let mut sum = 0.0;
     for (j, wyj) in wy.iter().enumerate() {
         let mut row = 0.0;

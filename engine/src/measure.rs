@@ -1,0 +1,158 @@
+//! Measuring what the user sees: the true error of node meshes against the densely sampled
+//! finest surface, the on-screen pixel error of a whole view, and a CDLOD-style distance-based
+//! selection to compare against. Used by tests and by `nodebench`.
+
+use crate::bounds::BoundsCache;
+use crate::mesh::NodeMesh;
+use crate::quadtree::{NODE_QUADS, NodeKey, QuadTree};
+use crate::select::{Camera, Selected, Selection, distance_to_aabb, node_aabb};
+use crate::world::World;
+use glam::DVec3;
+
+/// The true largest |mesh - surface| of a node on a lattice of `per_quad` points per mesh quad
+/// (offset by half a step so it does not coincide with vertices or the check lattice), and the
+/// largest distance of the surface outside the node's height range (<= 0 when inside).
+pub fn true_node_error(world: &World, tree: &QuadTree, m: &NodeMesh, per_quad: u32) -> (f64, f64) {
+    let r = tree.rect(m.key);
+    let n = (NODE_QUADS * per_quad) as usize;
+    let step = (r.max[0] - r.min[0]) / n as f64;
+    let (mut err, mut outside) = (0.0f64, f64::NEG_INFINITY);
+    for j in 0..=n {
+        for i in 0..=n {
+            // Border samples stay on the border; inner ones are offset by half a step.
+            let off = |k: usize| if k == 0 || k == n { 0.0 } else { 0.5 };
+            let (x, y) = (
+                r.min[0] + (i as f64 + off(i)).min(n as f64) * step,
+                r.min[1] + (j as f64 + off(j)).min(n as f64) * step,
+            );
+            let f = world.height_m(x, y);
+            err = err.max((m.height_at(tree, x, y) - f).abs());
+            outside = outside.max(m.bounds.z_min_m - f).max(f - m.bounds.z_max_m);
+        }
+    }
+    (err, outside)
+}
+
+/// On-screen error of a view: for points on a lattice of `per_side` x `per_side` in every drawn
+/// node that lie in front of the camera, `|mesh - surface| * K / distance`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ViewError {
+    pub max_px: f64,
+    pub mean_px: f64,
+    pub samples: u64,
+}
+
+pub fn view_error(
+    world: &World,
+    tree: &QuadTree,
+    meshes: &[NodeMesh],
+    cam: &Camera,
+    per_side: u32,
+) -> ViewError {
+    let k = cam.k_px();
+    let frustum = cam.frustum();
+    let (mut max_px, mut sum, mut samples) = (0.0f64, 0.0f64, 0u64);
+    for m in meshes {
+        let r = tree.rect(m.key);
+        let step = (r.max[0] - r.min[0]) / f64::from(per_side);
+        for j in 0..per_side {
+            for i in 0..per_side {
+                let (x, y) = (
+                    r.min[0] + (f64::from(i) + 0.5) * step,
+                    r.min[1] + (f64::from(j) + 0.5) * step,
+                );
+                let f = world.height_m(x, y);
+                let p = DVec3::new(x, y, f);
+                // Only points inside the view frustum count (a point is a degenerate box).
+                if !frustum.intersects_aabb(p, p) {
+                    continue;
+                }
+                let px = (m.height_at(tree, x, y) - f).abs() * k
+                    / (p - cam.position_m).length().max(1e-9);
+                max_px = max_px.max(px);
+                sum += px;
+                samples += 1;
+            }
+        }
+    }
+    ViewError {
+        max_px,
+        mean_px: if samples > 0 {
+            sum / samples as f64
+        } else {
+            0.0
+        },
+        samples,
+    }
+}
+
+/// A CDLOD-style selection: split a node while the camera is closer than
+/// `ratio * node size` to its box (one distance ratio for every level, no error metric), with
+/// the same frustum culling. This is the baseline "uniform distance selection".
+pub fn select_by_distance(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    cam: &Camera,
+    ratio: f64,
+) -> Selection {
+    let mut out = Selection::default();
+    let frustum = cam.frustum();
+    let k = cam.k_px();
+    let mut stack = vec![NodeKey::ROOT];
+    while let Some(key) = stack.pop() {
+        if !tree.overlaps_map(key) {
+            continue;
+        }
+        out.visited += 1;
+        let b = cache.get(world, tree, key);
+        let (min, max) = node_aabb(tree, key, &b);
+        if !frustum.intersects_aabb(min, max) {
+            out.culled += 1;
+            continue;
+        }
+        let dist = distance_to_aabb(cam.position_m, min, max);
+        if dist < ratio * tree.node_size_m(key.level) && key.level < tree.max_level {
+            for c in key.children().into_iter().rev() {
+                stack.push(c);
+            }
+        } else {
+            let error_px = if dist > 0.0 {
+                b.error_m * k / dist
+            } else {
+                f64::INFINITY
+            };
+            out.nodes.push(Selected {
+                key,
+                bounds: b,
+                dist_m: dist,
+                error_px,
+            });
+        }
+    }
+    out
+}
+
+/// A reproducible flight over a map: a low pass along a valley-height line, then a climb to a
+/// high overview, looking ahead and down. `frames` cameras.
+pub fn default_flight(world: &World, frames: usize, viewport_px: [u32; 2]) -> Vec<Camera> {
+    let o = world.origin_m();
+    let s = world.size_m();
+    let frames = frames.max(2);
+    (0..frames)
+        .map(|f| {
+            let t = f as f64 / (frames - 1) as f64;
+            let x = o[0] + s[0] * (0.15 + 0.6 * t);
+            let y = o[1] + s[1] * (0.25 + 0.45 * t + 0.05 * (t * 9.0).sin());
+            let ground = world.height_m(x, y);
+            // Low (25 m) for the first half, then climbing to 40% of the map size.
+            let climb = ((t - 0.5) / 0.5).clamp(0.0, 1.0);
+            let above = 25.0 + climb * climb * 0.4 * s[0].max(s[1]);
+            let pos = DVec3::new(x, y, ground + above);
+            let ahead = DVec3::new(s[0] * 0.6, s[1] * 0.45, 0.0).normalize();
+            let pitch = -(0.12 + 0.5 * climb);
+            let dir = DVec3::new(ahead.x * pitch.cos(), ahead.y * pitch.cos(), pitch.sin());
+            Camera::look_at(pos, pos + dir, 60f64.to_radians(), viewport_px)
+        })
+        .collect()
+}
