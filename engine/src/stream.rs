@@ -245,7 +245,14 @@ pub struct StreamSettings {
     pub gpu_budget_bytes: usize,
     /// Cross-fade duration.
     pub fade_s: f64,
+    /// The user's detail level: largest projected error (px) to show.
     pub tau_px: f64,
+    /// Nodes are split for display when their error passes `split_factor * tau`, so a fade
+    /// finishes before the error reaches tau.
+    pub split_factor: f64,
+    /// Nodes down to `prefetch_factor * tau` are prepared ahead (lower priority, not shown
+    /// until needed), so they are ready when the camera gets there.
+    pub prefetch_factor: f64,
 }
 
 impl Default for StreamSettings {
@@ -253,12 +260,16 @@ impl Default for StreamSettings {
         let cores = std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get);
         Self {
             workers: (cores - 1).max(1),
-            max_in_flight: 2 * (cores - 1).max(1) + 2,
+            // A shallow hand-off: jobs handed to workers run in FIFO order, so a deep backlog
+            // would make urgent display jobs wait behind prefetch.
+            max_in_flight: (cores - 1).max(1) + 1,
             cache_budget_bytes: 512 << 20,
             gpu_budget_s: 0.004,
             gpu_budget_bytes: 32 << 20,
-            fade_s: 0.25,
+            fade_s: 0.2,
             tau_px: 2.0,
+            split_factor: 0.6,
+            prefetch_factor: 0.5,
         }
     }
 }
@@ -299,6 +310,8 @@ struct Request {
     generation: u64,
     state: RequestState,
     requested_at: Instant,
+    /// 0: needed for display; 1: prefetch.
+    class: usize,
 }
 
 /// A prepared node.
@@ -350,11 +363,16 @@ pub struct Streamer {
     from_workers: Receiver<JobResult>,
     workers: Vec<std::thread::JoinHandle<()>>,
     requests: FxHashMap<NodeKey, Request>,
-    /// Pending (queued) requests per level.
-    buckets: Vec<Vec<NodeKey>>,
+    /// Pending (queued) requests per priority class (display, prefetch) and level.
+    buckets: [Vec<Vec<NodeKey>>; 2],
     next_generation: u64,
     resident: FxHashMap<NodeKey, Resident>,
     wanted: FxHashSet<NodeKey>,
+    /// Nodes needed for display (wanted, ancestors, children of ancestors) and for prefetch.
+    needed: FxHashSet<NodeKey>,
+    /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
+    to_split: FxHashSet<NodeKey>,
+    prefetch: FxHashSet<NodeKey>,
     /// Split state per node: 0 = the node is drawn, 1 = its children are; in between, fading.
     split: FxHashMap<NodeKey, f32>,
     frame: u64,
@@ -439,10 +457,13 @@ impl Streamer {
             from_workers,
             workers,
             requests: FxHashMap::default(),
-            buckets: vec![Vec::new(); levels],
+            buckets: [vec![Vec::new(); levels], vec![Vec::new(); levels]],
             next_generation: 1,
             resident: FxHashMap::default(),
             wanted: FxHashSet::default(),
+            needed: FxHashSet::default(),
+            to_split: FxHashSet::default(),
+            prefetch: FxHashSet::default(),
             split: FxHashMap::default(),
             frame: 0,
             camera: None,
@@ -470,8 +491,9 @@ impl Streamer {
         self.requests.len()
     }
 
-    /// The wanted set for a camera, using only bounds already known (see the module docs).
-    pub fn select_wanted(&self, cam: &Camera) -> FxHashSet<NodeKey> {
+    /// The wanted set for a camera at threshold `tau_px`, using only bounds already known (see
+    /// the module docs).
+    pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
         let tree = &self.shared.tree;
         let frustum = cam.frustum();
         let k = cam.k_px();
@@ -495,11 +517,46 @@ impl Streamer {
             } else {
                 f64::INFINITY
             };
-            if px > self.settings.tau_px && key.level < tree.max_level {
+            if px > tau_px && key.level < tree.max_level {
                 stack.extend(key.children());
             } else {
                 out.insert(key);
             }
+        }
+        out
+    }
+
+    /// Every ancestor of the nodes in `wanted`.
+    fn ancestors_of(wanted: &FxHashSet<NodeKey>) -> FxHashSet<NodeKey> {
+        let mut ancestors = FxHashSet::default();
+        for &k in wanted {
+            let mut a = k.parent();
+            while let Some(n) = a {
+                if !ancestors.insert(n) {
+                    break;
+                }
+                a = n.parent();
+            }
+        }
+        ancestors
+    }
+
+    /// The nodes needed to show `wanted` given its `ancestors`: the wanted nodes, the ancestors,
+    /// and every child of an ancestor (a node is only replaced by all four children, so the
+    /// drawn set always covers the whole map, culled parts included).
+    fn needed_for(
+        &self,
+        wanted: &FxHashSet<NodeKey>,
+        ancestors: &FxHashSet<NodeKey>,
+    ) -> FxHashSet<NodeKey> {
+        let mut out: FxHashSet<NodeKey> = wanted.clone();
+        for &a in ancestors {
+            out.insert(a);
+            out.extend(
+                a.children()
+                    .into_iter()
+                    .filter(|c| self.shared.tree.overlaps_map(*c)),
+            );
         }
         out
     }
@@ -510,42 +567,59 @@ impl Streamer {
         self.frame += 1;
         self.camera = Some(*cam);
         self.collect_results();
-        self.wanted = self.select_wanted(cam);
+        let tau = self.settings.tau_px;
+        self.wanted = self.select_wanted(cam, tau * self.settings.split_factor);
         // Everything on the path from the root to a wanted node is needed too (ancestors are
         // what is shown until the wanted nodes are ready).
-        let mut needed: FxHashSet<NodeKey> = FxHashSet::default();
-        for &k in &self.wanted {
-            let mut a = Some(k);
-            while let Some(n) = a {
-                if !needed.insert(n) {
-                    break;
-                }
-                a = n.parent();
-            }
-        }
-        // Cancel requests no longer needed.
+        self.to_split = Self::ancestors_of(&self.wanted);
+        self.needed = self.needed_for(&self.wanted, &self.to_split);
+        let prefetch_wanted = self.select_wanted(cam, tau * self.settings.prefetch_factor);
+        let prefetch_ancestors = Self::ancestors_of(&prefetch_wanted);
+        self.prefetch = self.needed_for(&prefetch_wanted, &prefetch_ancestors);
+        self.prefetch.retain(|k| !self.needed.contains(k));
+        // Cancel requests no longer needed or prefetched.
         let stale: Vec<NodeKey> = self
             .requests
             .keys()
-            .filter(|k| !needed.contains(k))
+            .filter(|k| !self.needed.contains(k) && !self.prefetch.contains(k))
             .copied()
             .collect();
         for k in stale {
             self.cancel(k);
         }
-        // Request missing wanted nodes, and missing ancestors (a cold start needs the root).
-        let mut missing: Vec<NodeKey> = needed
-            .iter()
-            .filter(|k| !self.resident.contains_key(k) && !self.requests.contains_key(k))
-            .copied()
-            .collect();
-        missing.sort_unstable();
-        for k in missing {
-            self.request(k);
+        // Request what is missing: display first, then prefetch; promote prefetch requests that
+        // became needed for display.
+        for class in 0..2 {
+            let set = if class == 0 {
+                &self.needed
+            } else {
+                &self.prefetch
+            };
+            let mut missing: Vec<NodeKey> = set
+                .iter()
+                .filter(|k| !self.resident.contains_key(k))
+                .copied()
+                .collect();
+            missing.sort_unstable();
+            for k in missing {
+                match self.requests.get_mut(&k) {
+                    None => self.request(k, class),
+                    Some(r) if r.class > class => {
+                        r.class = class;
+                        if matches!(r.state, RequestState::Queued) {
+                            let level = usize::from(k.level);
+                            self.buckets[1][level].retain(|&q| q != k);
+                            self.buckets[class][level].push(k);
+                        }
+                    }
+                    Some(_) => {}
+                }
+            }
         }
-        for k in needed.iter().chain(&self.wanted) {
+        let frame = self.frame;
+        for k in self.needed.iter().chain(&self.prefetch) {
             if let Some(r) = self.resident.get_mut(k) {
-                r.last_used_frame = self.frame;
+                r.last_used_frame = frame;
             }
         }
         self.dispatch();
@@ -554,18 +628,20 @@ impl Streamer {
         self.refresh_stats();
     }
 
-    fn request(&mut self, key: NodeKey) {
+    fn request(&mut self, key: NodeKey, class: usize) {
         let generation = self.next_generation;
         self.next_generation += 1;
+        let state = RequestState::Queued;
         self.requests.insert(
             key,
             Request {
                 generation,
-                state: RequestState::Queued,
+                state,
                 requested_at: Instant::now(),
+                class,
             },
         );
-        self.buckets[usize::from(key.level)].push(key);
+        self.buckets[class][usize::from(key.level)].push(key);
         self.stats.requested += 1;
     }
 
@@ -575,7 +651,7 @@ impl Streamer {
         };
         match req.state {
             RequestState::Queued => {
-                self.buckets[usize::from(key.level)].retain(|&k| k != key);
+                self.buckets[req.class][usize::from(key.level)].retain(|&k| k != key);
                 self.stats.cancelled_queued += 1;
             }
             RequestState::Running { cancel } => {
@@ -599,9 +675,10 @@ impl Streamer {
         let mut free = self.settings.max_in_flight.saturating_sub(running);
         let cam_pos = self.camera.map(|c| c.position_m);
         let tree = self.shared.tree;
-        for level in 0..self.buckets.len() {
-            while free > 0 && !self.buckets[level].is_empty() {
-                let bucket = &mut self.buckets[level];
+        let levels = self.buckets[0].len();
+        for (class, level) in (0..2).flat_map(|c| (0..levels).map(move |l| (c, l))) {
+            while free > 0 && !self.buckets[class][level].is_empty() {
+                let bucket = &mut self.buckets[class][level];
                 let idx = match cam_pos {
                     Some(p) => {
                         let dist = |k: &NodeKey| {
@@ -755,34 +832,14 @@ impl Streamer {
         ran
     }
 
-    /// True when `key` may be replaced by its children: every needed child is ready.
-    fn children_ready(&self, key: NodeKey, needed: &FxHashSet<NodeKey>) -> bool {
-        key.level < self.shared.tree.max_level
-            && key.children().iter().all(|c| {
-                !self.shared.tree.overlaps_map(*c)
-                    || !needed.contains(c)
-                    || self.resident.contains_key(c)
-            })
-    }
-
     fn needed_set(&self) -> FxHashSet<NodeKey> {
-        let mut needed = FxHashSet::default();
-        for &k in &self.wanted {
-            let mut a = Some(k);
-            while let Some(n) = a {
-                if !needed.insert(n) {
-                    break;
-                }
-                a = n.parent();
-            }
-        }
-        needed
+        self.needed.clone()
     }
 
     /// Moves every node's split state towards its target: split when it is an ancestor of
-    /// wanted nodes and its needed children are ready, merged otherwise.
+    /// wanted nodes and all its children are ready, merged otherwise (a node merges only once
+    /// its children have merged).
     fn advance_fades(&mut self, dt_s: f64) {
-        let needed = self.needed_set();
         let step = if self.settings.fade_s > 0.0 {
             (dt_s / self.settings.fade_s) as f32
         } else {
@@ -795,9 +852,7 @@ impl Streamer {
                 continue;
             }
             seen.insert(key);
-            let wants_split = needed.contains(&key)
-                && !self.wanted.contains(&key)
-                && self.children_ready(key, &needed);
+            let wants_split = self.to_split.contains(&key) && self.children_drawable(key);
             let s = self.split.get(&key).copied().unwrap_or(0.0);
             // A node may only merge back once its children are no longer split themselves.
             let children_merged = key
@@ -809,10 +864,11 @@ impl Streamer {
             } else {
                 0.0
             };
+            // Step towards the target (and stay there once reached).
             let ns = if target > s {
-                (s + step).min(1.0)
+                (s + step).min(target)
             } else {
-                (s - step).max(0.0)
+                (s - step).max(target)
             };
             // Children must be resident to show them at all.
             let ns = if ns > 0.0 && !self.children_drawable(key) {
@@ -875,9 +931,10 @@ impl Streamer {
         out
     }
 
-    /// Resident nodes that must stay: needed, drawn, or in a fade.
+    /// Resident nodes that must stay: needed, prefetched, drawn, or in a fade.
     fn pinned(&self) -> FxHashSet<NodeKey> {
         let mut p = self.needed_set();
+        p.extend(self.prefetch.iter().copied());
         p.extend(self.draw_list().iter().map(|d| d.key));
         p.extend(self.split.keys().copied());
         p
@@ -946,8 +1003,9 @@ impl Streamer {
         v
     }
 
-    /// Waits (up to `timeout_s`) until no job is queued, running or waiting for the GPU,
-    /// running GPU phases as they arrive. Keeps the current wanted set. Returns false on timeout.
+    /// Waits (up to `timeout_s`) until no job is queued, running or waiting for the GPU, every
+    /// needed node is resident and no fade is in progress, running GPU phases as they arrive.
+    /// Returns false on timeout.
     pub fn settle(&mut self, cam: &Camera, timeout_s: f64) -> bool {
         let t0 = Instant::now();
         loop {
@@ -955,15 +1013,10 @@ impl Streamer {
             self.run_gpu_phases();
             if self.requests.is_empty()
                 && self.cancelled_outstanding() == 0
-                && self.wanted.iter().all(|k| self.resident.contains_key(k))
+                && self.needed.iter().all(|k| self.resident.contains_key(k))
+                && self.split.values().all(|&v| v >= 1.0)
             {
-                // Finish the fades too.
-                for _ in 0..=((self.settings.fade_s * 60.0).ceil() as usize) {
-                    self.update(cam, 1.0 / 60.0);
-                }
-                if self.requests.is_empty() {
-                    return true;
-                }
+                return true;
             }
             if t0.elapsed().as_secs_f64() > timeout_s {
                 return false;
@@ -978,6 +1031,16 @@ impl Streamer {
         self.stats.cancelled_running
             - self.stats.cancels_acknowledged
             - self.stats.late_results_discarded
+    }
+
+    /// Current split (fade) state of a node: 0 drawn itself, 1 replaced by its children.
+    pub fn split_state(&self, key: NodeKey) -> f32 {
+        self.split.get(&key).copied().unwrap_or(0.0)
+    }
+
+    /// Nodes needed for display (wanted, ancestors, and children of split ancestors).
+    pub fn needed(&self) -> &FxHashSet<NodeKey> {
+        &self.needed
     }
 
     /// Tiles currently held (by running jobs).

@@ -705,26 +705,34 @@ fn section_streaming(
             s.update(cam, dt);
             s.run_gpu_phases();
             frame_times.push(t.elapsed().as_secs_f64());
-            // Pop debt: a drawn node in view whose projected error exceeds tau.
+            // Pop debt: a drawn node standing in for nodes that the ideal selection at tau wants
+            // (so it is visible and too coarse). Its excess is its error projected at the
+            // distance of the visible nodes it stands in for, minus tau.
             let k = cam.k_px();
-            let frustum = cam.frustum();
             let tree = *s.tree();
+            let drawn: std::collections::HashSet<NodeKey> =
+                s.draw_list().iter().map(|d| d.key).collect();
             let mut excess = 0.0f64;
-            for d in s.draw_list() {
-                let Some(bounds) = s.shared.bounds.peek(d.key) else {
-                    continue;
-                };
-                let (min, max) = engine::select::node_aabb(&tree, d.key, &bounds);
-                if d.key.level == tree.max_level || !frustum.intersects_aabb(min, max) {
+            for want in s.select_wanted(cam, tau) {
+                if drawn.contains(&want) {
                     continue;
                 }
-                let dist = engine::select::distance_to_aabb(cam.position_m, min, max);
-                let px = if dist > 0.0 {
-                    bounds.error_m * k / dist
-                } else {
-                    f64::INFINITY
+                let Some(wb) = s.shared.bounds.peek(want) else {
+                    continue;
                 };
-                excess = excess.max(px - tau);
+                let (wmin, wmax) = engine::select::node_aabb(&tree, want, &wb);
+                let dist =
+                    engine::select::distance_to_aabb(cam.position_m, wmin, wmax).max(cam.near_m);
+                let mut a = want.parent();
+                while let Some(n) = a {
+                    if drawn.contains(&n) {
+                        if let Some(nb) = s.shared.bounds.peek(n) {
+                            excess = excess.max(nb.error_m * k / dist - tau);
+                        }
+                        break;
+                    }
+                    a = n.parent();
+                }
             }
             if excess > 0.0 {
                 debt_frames += 1;
