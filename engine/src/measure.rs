@@ -4,8 +4,8 @@
 
 use crate::bounds::BoundsCache;
 use crate::mesh::NodeMesh;
-use crate::quadtree::{NODE_QUADS, NodeKey, QuadTree};
-use crate::select::{Camera, Selected, Selection, distance_to_aabb, node_aabb};
+use crate::quadtree::{NODE_QUADS, QuadTree};
+use crate::select::{Camera, Selection, traverse};
 use crate::world::World;
 use glam::DVec3;
 
@@ -96,41 +96,13 @@ pub fn select_by_distance(
     cam: &Camera,
     ratio: f64,
 ) -> Selection {
-    let mut out = Selection::default();
-    let frustum = cam.frustum();
-    let k = cam.k_px();
-    let mut stack = vec![NodeKey::ROOT];
-    while let Some(key) = stack.pop() {
-        if !tree.overlaps_map(key) {
-            continue;
-        }
-        out.visited += 1;
-        let b = cache.get(world, tree, key);
-        let (min, max) = node_aabb(tree, key, &b);
-        if !frustum.intersects_aabb(min, max) {
-            out.culled += 1;
-            continue;
-        }
-        let dist = distance_to_aabb(cam.position_m, min, max);
-        if dist < ratio * tree.node_size_m(key.level) && key.level < tree.max_level {
-            for c in key.children().into_iter().rev() {
-                stack.push(c);
-            }
-        } else {
-            let error_px = if dist > 0.0 {
-                b.error_m * k / dist
-            } else {
-                f64::INFINITY
-            };
-            out.nodes.push(Selected {
-                key,
-                bounds: b,
-                dist_m: dist,
-                error_px,
-            });
-        }
-    }
-    out
+    traverse(
+        tree,
+        cam,
+        true,
+        |key| cache.get(world, tree, key),
+        |key, _, dist, _| dist < ratio * tree.node_size_m(key.level),
+    )
 }
 
 /// A reproducible flight over a map: a low pass along a valley-height line, then a climb to a

@@ -166,6 +166,23 @@ pub fn skirt_bottoms(
     out
 }
 
+/// Builds the mesh of `key`, taking its source tile (if any) from `tiles` for the duration.
+pub fn build_with_tiles(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    tiles: &mut crate::tiles::TileCache,
+    key: NodeKey,
+) -> NodeMesh {
+    let tile_key = source_tile(world, tree, key);
+    let tile = tile_key.map(|k| tiles.acquire(world, k));
+    let m = build(world, tree, cache, key, tile.as_deref());
+    if let Some(k) = tile_key {
+        tiles.release(k);
+    }
+    m
+}
+
 /// Builds the mesh of `key`. `tile` must be [`source_tile`]'s tile when that is `Some`.
 pub fn build(
     world: &World,

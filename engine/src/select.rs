@@ -155,13 +155,15 @@ pub struct SelectParams {
     pub cull: bool,
 }
 
-/// Selects the nodes to draw for `cam`.
-pub fn select(
-    world: &World,
+/// The traversal every selection shares: depth-first from the root, skipping nodes outside the
+/// map, culling by the frustum (when `cull`), and descending while `split(key, bounds, dist_m,
+/// error_px)` says so (never below the finest level). `bounds` gives each visited node's bounds.
+pub fn traverse(
     tree: &QuadTree,
-    cache: &mut BoundsCache,
     cam: &Camera,
-    p: SelectParams,
+    cull: bool,
+    mut bounds: impl FnMut(NodeKey) -> NodeBounds,
+    mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
 ) -> Selection {
     let mut out = Selection::default();
     let frustum = cam.frustum();
@@ -172,9 +174,9 @@ pub fn select(
             continue;
         }
         out.visited += 1;
-        let b = cache.get(world, tree, key);
+        let b = bounds(key);
         let (min, max) = node_aabb(tree, key, &b);
-        if p.cull && !frustum.intersects_aabb(min, max) {
+        if cull && !frustum.intersects_aabb(min, max) {
             out.culled += 1;
             continue;
         }
@@ -184,13 +186,10 @@ pub fn select(
         } else {
             f64::INFINITY
         };
-        if error_px > p.tau_px && key.level < p.max_level.min(tree.max_level) {
+        if key.level < tree.max_level && split(key, &b, dist, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order.
-            for c in key.children().into_iter().rev() {
-                stack.push(c);
-            }
+            stack.extend(key.children().into_iter().rev());
         } else {
-            out.over_tau_at_finest += u32::from(error_px > p.tau_px);
             out.nodes.push(Selected {
                 key,
                 bounds: b,
@@ -199,6 +198,25 @@ pub fn select(
             });
         }
     }
+    out
+}
+
+/// Selects the nodes to draw for `cam`: split while the projected error exceeds `tau_px`.
+pub fn select(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    cam: &Camera,
+    p: SelectParams,
+) -> Selection {
+    let mut out = traverse(
+        tree,
+        cam,
+        p.cull,
+        |key| cache.get(world, tree, key),
+        |key, _, _, px| px > p.tau_px && key.level < p.max_level,
+    );
+    out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     out
 }
 

@@ -147,13 +147,7 @@ pub mod terrain {
         tiles: &mut TileCache,
         key: NodeKey,
     ) -> NodeMesh {
-        let tile_key = mesh::source_tile(world, tree, key);
-        let tile = tile_key.map(|k| tiles.acquire(world, k));
-        let m = mesh::build(world, tree, cache, key, tile.as_deref());
-        if let Some(k) = tile_key {
-            tiles.release(k);
-        }
-        m
+        mesh::build_with_tiles(world, tree, cache, tiles, key)
     }
 
     /// The true largest |mesh - surface| of a node, measured on a dense lattice of 10 points

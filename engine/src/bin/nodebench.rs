@@ -203,13 +203,7 @@ fn build_node(
     tiles: &mut TileCache,
     key: NodeKey,
 ) -> NodeMesh {
-    let tk = mesh::source_tile(world, tree, key);
-    let tile = tk.map(|k| tiles.acquire(world, k));
-    let m = mesh::build(world, tree, cache, key, tile.as_deref());
-    if let Some(k) = tk {
-        tiles.release(k);
-    }
-    m
+    mesh::build_with_tiles(world, tree, cache, tiles, key)
 }
 
 fn section_terrain(
@@ -457,42 +451,25 @@ fn select_tin(
     tau: f64,
     target: f64,
 ) -> Selection {
-    let mut out = Selection::default();
-    let frustum = cam.frustum();
+    // Both closures need the caches, one after the other; the TIN is built only for nodes that
+    // survive culling.
+    let ctx = std::cell::RefCell::new(ctx);
     let k = cam.k_px();
-    let mut stack = vec![NodeKey::ROOT];
-    while let Some(key) = stack.pop() {
-        if !tree.overlaps_map(key) {
-            continue;
-        }
-        let b = ctx.0.get(world, tree, key);
-        let (min, max) = engine::select::node_aabb(tree, key, &b);
-        if !frustum.intersects_aabb(min, max) {
-            continue;
-        }
-        let (cache, tiles, meshes) = ctx;
-        let err = meshes
-            .tin(world, tree, cache, tiles, key, target)
-            .bounds
-            .error_m;
-        let dist = engine::select::distance_to_aabb(cam.position_m, min, max);
-        let px = if dist > 0.0 {
-            err * k / dist
-        } else {
-            f64::INFINITY
-        };
-        if px > tau && key.level < tree.max_level {
-            stack.extend(key.children().into_iter().rev());
-        } else {
-            out.nodes.push(engine::select::Selected {
-                key,
-                bounds: b,
-                dist_m: dist,
-                error_px: px,
-            });
-        }
-    }
-    out
+    engine::select::traverse(
+        tree,
+        cam,
+        true,
+        |key| ctx.borrow_mut().0.get(world, tree, key),
+        |key, _, dist, _| {
+            let mut c = ctx.borrow_mut();
+            let (cache, tiles, meshes) = &mut **c;
+            let err = meshes
+                .tin(world, tree, cache, tiles, key, target)
+                .bounds
+                .error_m;
+            dist <= 0.0 || err * k / dist > tau
+        },
+    )
 }
 
 struct CurvePoint {
