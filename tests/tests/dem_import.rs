@@ -126,3 +126,45 @@ fn puget_sound_png_imports_with_vertical_scale() {
     let (lo, hi) = map.heights.min_max();
     assert!(lo == 0.0 && (4379.0..=4380.0).contains(&hi), "{lo}..{hi}");
 }
+
+#[test]
+fn single_channel_exr_imports_with_nan_voids() {
+    // The committed tiny map's heights as an EXR (written by the map writer), with a NaN void.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut map = worldgen::Map::load(&tests::tiny_map_dir()).unwrap();
+    let original = map.heights.clone();
+    map.heights.set(60, 70, f32::NAN);
+    // Write only the height layer, through a scratch map folder.
+    let scratch = tmp.path().join("scratch");
+    map.write(&scratch).unwrap();
+    let exr = tmp.path().join("heights.exr");
+    std::fs::copy(scratch.join("heights.exr"), &exr).unwrap();
+    let mut p = params(exr.clone());
+    let err = import(&p, &mut Vec::new()).unwrap_err().to_string();
+    assert!(err.contains("--spacing-m"), "{err}");
+    p.spacing_m = Some(4.0);
+    let (imported, report) = import(&p, &mut Vec::new()).expect("import");
+    assert_eq!(report.voids_filled, 1);
+    assert_eq!(imported.manifest.size_m, [512.0, 512.0]);
+    // Every sample but the void is exact; the void is filled from its neighbours.
+    for (i, (&a, &b)) in imported
+        .heights
+        .data()
+        .iter()
+        .zip(original.data())
+        .enumerate()
+    {
+        if i == 70 * 129 + 60 {
+            assert!((a - b).abs() < 5.0, "filled void {a} far from {b}");
+        } else {
+            assert_eq!(a, b, "sample {i}");
+        }
+    }
+    // A file that is not an EXR names itself.
+    std::fs::write(&exr, b"not an exr").unwrap();
+    let err = import(&p, &mut Vec::new()).unwrap_err().to_string();
+    assert!(
+        err.contains("heights.exr") && err.contains("OpenEXR"),
+        "{err}"
+    );
+}
