@@ -373,6 +373,8 @@ pub struct Streamer {
     /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
     to_split: FxHashSet<NodeKey>,
     prefetch: FxHashSet<NodeKey>,
+    /// This frame's draw list, computed once after the fades advance.
+    drawn: Vec<DrawNode>,
     /// Split state per node: 0 = the node is drawn, 1 = its children are; in between, fading.
     split: FxHashMap<NodeKey, f32>,
     frame: u64,
@@ -465,6 +467,7 @@ impl Streamer {
             to_split: FxHashSet::default(),
             prefetch: FxHashSet::default(),
             split: FxHashMap::default(),
+            drawn: Vec::new(),
             frame: 0,
             camera: None,
             stats: StreamStats::default(),
@@ -624,6 +627,7 @@ impl Streamer {
         }
         self.dispatch();
         self.advance_fades(dt_s);
+        self.drawn = self.compute_draw_list();
         self.evict();
         self.refresh_stats();
     }
@@ -828,6 +832,11 @@ impl Streamer {
                 }
             }
         }
+        // Finished nodes change the draw list only when the root first becomes ready (splits
+        // wait for fades, which advance in `update`).
+        if self.drawn.is_empty() && self.resident.contains_key(&NodeKey::ROOT) {
+            self.drawn = self.compute_draw_list();
+        }
         self.refresh_stats();
         ran
     }
@@ -896,7 +905,13 @@ impl Streamer {
 
     /// The nodes to draw and their dither intervals. Nothing is missing: the root (once ready)
     /// covers everything not covered by ready descendants.
-    pub fn draw_list(&self) -> Vec<DrawNode> {
+    pub fn draw_list(&self) -> &[DrawNode] {
+        &self.drawn
+    }
+
+    /// Walks the resident tree from the root, giving children the lower part of their parent's
+    /// dither interval in proportion to its split state.
+    fn compute_draw_list(&self) -> Vec<DrawNode> {
         let mut out = Vec::new();
         if !self.resident.contains_key(&NodeKey::ROOT) {
             return out;
@@ -935,7 +950,7 @@ impl Streamer {
     fn pinned(&self) -> FxHashSet<NodeKey> {
         let mut p = self.needed_set();
         p.extend(self.prefetch.iter().copied());
-        p.extend(self.draw_list().iter().map(|d| d.key));
+        p.extend(self.drawn.iter().map(|d| d.key));
         p.extend(self.split.keys().copied());
         p
     }
@@ -988,7 +1003,7 @@ impl Streamer {
             .map(|(_, r)| r.work.bytes())
             .sum();
         self.stats.wanted = self.wanted.len();
-        self.stats.drawn = self.draw_list().len();
+        self.stats.drawn = self.drawn.len();
     }
 
     /// Takes the request-to-ready latencies recorded since the last call.

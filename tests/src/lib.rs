@@ -91,10 +91,8 @@ pub fn hash_dir(dir: &Path) -> u64 {
 
 /// Terrain test helpers: worlds with hard surfaces, dense error measurement, ray casting.
 pub mod terrain {
-    use engine::bounds::BoundsCache;
-    use engine::mesh::{self, NodeMesh};
-    use engine::quadtree::{NodeKey, QuadTree};
-    use engine::tiles::TileCache;
+    use engine::mesh::NodeMesh;
+    use engine::quadtree::QuadTree;
     use engine::world::World;
     use glam::DVec3;
     use worldgen::Map;
@@ -140,15 +138,7 @@ pub mod terrain {
     }
 
     /// Builds a node mesh the way the engine does (tiles for small nodes).
-    pub fn build_mesh(
-        world: &World,
-        tree: &QuadTree,
-        cache: &mut BoundsCache,
-        tiles: &mut TileCache,
-        key: NodeKey,
-    ) -> NodeMesh {
-        mesh::build_with_tiles(world, tree, cache, tiles, key)
-    }
+    pub use engine::mesh::build_with_tiles as build_mesh;
 
     /// The true largest |mesh - surface| of a node, measured on a dense lattice of 10 points
     /// per mesh quad (not aligned with the engine's 4-per-quad check lattice), plus the largest

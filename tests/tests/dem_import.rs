@@ -7,16 +7,7 @@ use worldgen::classify;
 use worldgen::dem::{ImportParams, import};
 
 fn params(path: std::path::PathBuf) -> ImportParams {
-    ImportParams {
-        path,
-        name: "dem".into(),
-        spacing_m: None,
-        vertical_scale_m: 1.0,
-        latitude_deg: None,
-        water_level_m: 0.0,
-        snow_line_m: 1800.0,
-        threads: 0,
-    }
+    ImportParams::new(path)
 }
 
 #[test]

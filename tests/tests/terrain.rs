@@ -570,16 +570,7 @@ fn imported_srtm_sea_is_exact_and_the_coast_is_watertight() {
     let Some(path) = tests::shared_data("dem/N57E011.hgt") else {
         return;
     };
-    let params = worldgen::dem::ImportParams {
-        path,
-        name: "n57".into(),
-        spacing_m: None,
-        vertical_scale_m: 1.0,
-        latitude_deg: None,
-        water_level_m: 0.0,
-        snow_line_m: 1800.0,
-        threads: 0,
-    };
+    let params = worldgen::dem::ImportParams::new(path);
     let (map, _) = worldgen::dem::import(&params, &mut Vec::new()).expect("import");
     let world = World::new(map);
     let tree = tree_of(&world);

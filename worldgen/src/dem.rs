@@ -29,6 +29,26 @@ pub struct ImportParams {
     pub threads: usize,
 }
 
+impl ImportParams {
+    /// Defaults for `path`: spacing from the file (`.hgt`) or required (`--spacing-m`), 1 m per
+    /// PNG unit, sea level at 0 m, snow from 1800 m, all cores.
+    pub fn new(path: PathBuf) -> Self {
+        let name = path
+            .file_stem()
+            .map_or_else(|| "dem".into(), |n| n.to_string_lossy().into_owned());
+        Self {
+            path,
+            name,
+            spacing_m: None,
+            vertical_scale_m: 1.0,
+            latitude_deg: None,
+            water_level_m: 0.0,
+            snow_line_m: 1800.0,
+            threads: 0,
+        }
+    }
+}
+
 /// What the import found.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImportReport {

@@ -196,16 +196,6 @@ fn flight_nodes(world: &World, tree: &QuadTree, cams: &[Camera], limit: usize) -
     keys.into_iter().step_by(step).take(limit).collect()
 }
 
-fn build_node(
-    world: &World,
-    tree: &QuadTree,
-    cache: &mut BoundsCache,
-    tiles: &mut TileCache,
-    key: NodeKey,
-) -> NodeMesh {
-    mesh::build_with_tiles(world, tree, cache, tiles, key)
-}
-
 fn section_terrain(
     world: &World,
     tree: &QuadTree,
@@ -235,12 +225,12 @@ fn section_terrain(
     }
     // Mesh time with bounds (own and neighbours') already known, as in the engine's jobs.
     for &k in &keys {
-        build_node(world, tree, &mut cache, &mut tiles, k);
+        mesh::build_with_tiles(world, tree, &mut cache, &mut tiles, k);
     }
     let mut meshes = Vec::new();
     for &k in &keys {
         let t0 = Instant::now();
-        let m = build_node(world, tree, &mut cache, &mut tiles, k);
+        let m = mesh::build_with_tiles(world, tree, &mut cache, &mut tiles, k);
         t_mesh.push(t0.elapsed().as_secs_f64());
         meshes.push(m);
         b.inc(1);
@@ -281,7 +271,7 @@ fn section_terrain(
             let mut c = BoundsCache::new();
             let mut t = TileCache::new();
             let k = keys[i % keys.len()];
-            std::hint::black_box(build_node(world, tree, &mut c, &mut t, k));
+            std::hint::black_box(mesh::build_with_tiles(world, tree, &mut c, &mut t, k));
         });
         r.add(
             "terrain",
@@ -391,7 +381,7 @@ impl MeshCache {
     ) -> &NodeMesh {
         self.grid
             .entry(key)
-            .or_insert_with(|| build_node(world, tree, cache, tiles, key))
+            .or_insert_with(|| mesh::build_with_tiles(world, tree, cache, tiles, key))
     }
 
     fn tin(
