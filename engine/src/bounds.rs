@@ -56,24 +56,6 @@ pub fn interpolate_grid(v: &[f32], n: usize, gx: f64, gy: f64) -> f64 {
     }
 }
 
-/// Steepest triangle slope (m per m) of a vertex grid with spacing `s`.
-pub fn max_triangle_slope(v: &[f32], n: usize, s: f64) -> f64 {
-    let w = n + 1;
-    let mut m = 0.0f64;
-    for j in 0..n {
-        for i in 0..n {
-            let h00 = f64::from(v[j * w + i]);
-            let h10 = f64::from(v[j * w + i + 1]);
-            let h01 = f64::from(v[(j + 1) * w + i]);
-            let h11 = f64::from(v[(j + 1) * w + i + 1]);
-            let lower = (h10 - h00).hypot(h11 - h10);
-            let upper = (h11 - h01).hypot(h01 - h00);
-            m = m.max(lower.max(upper) / s);
-        }
-    }
-    m
-}
-
 /// Heights of the finest surface at a node's mesh vertices, row-major from the south-west,
 /// `(NODE_QUADS + 1)^2` values relative to nothing (absolute metres, f32).
 pub fn vertex_heights(world: &World, tree: &QuadTree, key: NodeKey) -> Vec<f32> {
@@ -244,6 +226,5 @@ mod tests {
         for &(gx, gy) in &[(0.0, 0.0), (1.5, 2.25), (3.9, 0.1), (4.0, 4.0), (2.0, 3.0)] {
             assert!((interpolate_grid(&v, n, gx, gy) - (2.0 * gx + 3.0 * gy)).abs() < 1e-9);
         }
-        assert!((max_triangle_slope(&v, n, 1.0) - 13f64.sqrt()).abs() < 1e-9);
     }
 }

@@ -143,11 +143,11 @@ fn sample_grid(
     (h, g)
 }
 
-/// The depth each side's skirt must reach (see the module docs).
+/// The depth each side's skirt must reach (see the module docs); `bounds` gives any node's
+/// bounds (a cache, or a shared store).
 pub fn skirt_bottoms(
-    world: &World,
     tree: &QuadTree,
-    cache: &mut BoundsCache,
+    bounds: &mut dyn FnMut(NodeKey) -> NodeBounds,
     key: NodeKey,
     b: &NodeBounds,
 ) -> [f64; 4] {
@@ -158,7 +158,7 @@ pub fn skirt_bottoms(
             if let Some(n) = tree.neighbour_across(key, *side, level)
                 && tree.overlaps_map(n)
             {
-                worst = worst.max(cache.get(world, tree, n).error_m);
+                worst = worst.max(bounds(n).error_m);
             }
         }
         out[k] = b.z_min_m - worst;
@@ -176,23 +176,30 @@ pub fn build_with_tiles(
 ) -> NodeMesh {
     let tile_key = source_tile(world, tree, key);
     let tile = tile_key.map(|k| tiles.acquire(world, k));
-    let m = build(world, tree, cache, key, tile.as_deref());
+    let m = build(
+        world,
+        tree,
+        &mut |k| cache.get(world, tree, k),
+        key,
+        tile.as_deref(),
+    );
     if let Some(k) = tile_key {
         tiles.release(k);
     }
     m
 }
 
-/// Builds the mesh of `key`. `tile` must be [`source_tile`]'s tile when that is `Some`.
+/// Builds the mesh of `key`. `tile` must be [`source_tile`]'s tile when that is `Some`;
+/// `bounds` gives node bounds (this node's and its coarser neighbours', for skirt depths).
 pub fn build(
     world: &World,
     tree: &QuadTree,
-    cache: &mut BoundsCache,
+    bounds: &mut dyn FnMut(NodeKey) -> NodeBounds,
     key: NodeKey,
     tile: Option<&Tile>,
 ) -> NodeMesh {
-    let bounds = cache.get(world, tree, key);
-    let skirt_bottom_m = skirt_bottoms(world, tree, cache, key, &bounds);
+    let own = bounds(key);
+    let skirt_bottom_m = skirt_bottoms(tree, bounds, key, &own);
     let r = tree.rect(key);
     let s = tree.spacing_m(key.level);
     let (h, g) = sample_grid(world, tree, key, tile);
@@ -267,7 +274,7 @@ pub fn build(
         ground,
         indices,
         surface_index_count,
-        bounds,
+        bounds: own,
         skirt_bottom_m,
     }
 }

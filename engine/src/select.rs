@@ -139,6 +139,9 @@ pub struct Selection {
     pub nodes: Vec<Selected>,
     pub visited: u32,
     pub culled: u32,
+    /// Nodes reached whose bounds are not known yet (only when the bounds source may not know
+    /// them, as during streaming): kept as they are, not culled or descended into.
+    pub unknown_bounds: Vec<NodeKey>,
     /// Selected nodes at the finest level whose error bound still exceeds the threshold (the
     /// engine has no finer data there; reported, never hidden).
     pub over_tau_at_finest: u32,
@@ -157,12 +160,13 @@ pub struct SelectParams {
 
 /// The traversal every selection shares: depth-first from the root, skipping nodes outside the
 /// map, culling by the frustum (when `cull`), and descending while `split(key, bounds, dist_m,
-/// error_px)` says so (never below the finest level). `bounds` gives each visited node's bounds.
-pub fn traverse(
+/// error_px)` says so (never below the finest level). `bounds` gives each visited node's
+/// bounds; a node whose bounds are unknown (`None`) goes to `unknown_bounds`.
+pub fn traverse<B: Into<Option<NodeBounds>>>(
     tree: &QuadTree,
     cam: &Camera,
     cull: bool,
-    mut bounds: impl FnMut(NodeKey) -> NodeBounds,
+    mut bounds: impl FnMut(NodeKey) -> B,
     mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
 ) -> Selection {
     let mut out = Selection::default();
@@ -174,7 +178,10 @@ pub fn traverse(
             continue;
         }
         out.visited += 1;
-        let b = bounds(key);
+        let Some(b) = bounds(key).into() else {
+            out.unknown_bounds.push(key);
+            continue;
+        };
         let (min, max) = node_aabb(tree, key, &b);
         if cull && !frustum.intersects_aabb(min, max) {
             out.culled += 1;

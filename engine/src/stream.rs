@@ -27,7 +27,7 @@
 use crate::bounds::{self, NodeBounds};
 use crate::mesh::{self, NodeMesh};
 use crate::quadtree::{NodeKey, QuadTree};
-use crate::select::{Camera, distance_to_aabb, node_aabb};
+use crate::select::Camera;
 use crate::tiles::{Tile, TileCache, TileKey};
 use crate::world::World;
 use crossbeam_channel::{Receiver, Sender};
@@ -157,28 +157,14 @@ fn phase_terrain_mesh(s: &Shared, w: &mut NodeWork) {
     let key = w.key();
     let tile = w.tiles.first().map(|(_, t)| Arc::clone(t));
     // Skirt depths need the bounds of coarser neighbours: measured (and stored) on demand.
-    let mut local = bounds::BoundsCache::new();
-    for level in 0..key.level {
-        for side in crate::quadtree::Side::ALL {
-            if let Some(n) = s.tree.neighbour_across(key, side, level)
-                && s.tree.overlaps_map(n)
-            {
-                local.insert(n, s.bounds.get(&s.world, &s.tree, n));
-            }
-        }
-    }
-    local.insert(
-        key,
-        w.bounds
-            .unwrap_or_else(|| s.bounds.get(&s.world, &s.tree, key)),
-    );
-    w.terrain = Some(mesh::build(
+    let mesh = mesh::build(
         &s.world,
         &s.tree,
-        &mut local,
+        &mut |k| s.bounds.get(&s.world, &s.tree, k),
         key,
         tile.as_deref(),
-    ));
+    );
+    w.terrain = Some(mesh);
 }
 
 fn phase_release_tiles(s: &Shared, w: &mut NodeWork) {
@@ -497,36 +483,18 @@ impl Streamer {
     /// The wanted set for a camera at threshold `tau_px`, using only bounds already known (see
     /// the module docs).
     pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
-        let tree = &self.shared.tree;
-        let frustum = cam.frustum();
-        let k = cam.k_px();
-        let mut out = FxHashSet::default();
-        let mut stack = vec![NodeKey::ROOT];
-        while let Some(key) = stack.pop() {
-            if !tree.overlaps_map(key) {
-                continue;
-            }
-            let Some(b) = self.shared.bounds.peek(key) else {
-                out.insert(key);
-                continue;
-            };
-            let (min, max) = node_aabb(tree, key, &b);
-            if !frustum.intersects_aabb(min, max) {
-                continue;
-            }
-            let dist = distance_to_aabb(cam.position_m, min, max);
-            let px = if dist > 0.0 {
-                b.error_m * k / dist
-            } else {
-                f64::INFINITY
-            };
-            if px > tau_px && key.level < tree.max_level {
-                stack.extend(key.children());
-            } else {
-                out.insert(key);
-            }
-        }
-        out
+        let sel = crate::select::traverse(
+            &self.shared.tree,
+            cam,
+            true,
+            |key| self.shared.bounds.peek(key),
+            |_, _, _, px| px > tau_px,
+        );
+        sel.nodes
+            .iter()
+            .map(|n| n.key)
+            .chain(sel.unknown_bounds)
+            .collect()
     }
 
     /// Every ancestor of the nodes in `wanted`.
@@ -841,10 +809,6 @@ impl Streamer {
         ran
     }
 
-    fn needed_set(&self) -> FxHashSet<NodeKey> {
-        self.needed.clone()
-    }
-
     /// Moves every node's split state towards its target: split when it is an ancestor of
     /// wanted nodes and all its children are ready, merged otherwise (a node merges only once
     /// its children have merged).
@@ -948,7 +912,7 @@ impl Streamer {
 
     /// Resident nodes that must stay: needed, prefetched, drawn, or in a fade.
     fn pinned(&self) -> FxHashSet<NodeKey> {
-        let mut p = self.needed_set();
+        let mut p = self.needed.clone();
         p.extend(self.prefetch.iter().copied());
         p.extend(self.drawn.iter().map(|d| d.key));
         p.extend(self.split.keys().copied());

@@ -232,154 +232,117 @@ impl World {
             to(rect.max[1] + e, o[1], p.height()),
         )
     }
-
-    /// A proven upper bound of |grad height_m| over `rect` (m per m), from the per-cell slope
-    /// bounds of the cells the rectangle touches.
-    pub fn lipschitz_bound(&self, rect: Rect) -> f64 {
-        f64::from(self.cells_max(rect, self.map.manifest.heights.spacing_m, &self.slope_g))
-            + f64::from(self.cells_max(
-                rect,
-                self.map.manifest.ground.spacing_m,
-                &self.slope_detail,
-            ))
-    }
 }
 
-/// Per height cell (between samples x..x+1, y..y+1): a bound of |grad G| over the cell. The
-/// Catmull-Rom patch of a cell reads samples x-1..x+2, y-1..y+2.
-fn bicubic_cell_slopes(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let (w, hh) = ((h.width() - 1).max(1), (h.height() - 1).max(1));
-    let mut out = worldgen::Grid::new(w, hh, 0.0f32);
-    for y in 0..hh {
+/// A grid with one value per cell of `src` (between samples x..x+1, y..y+1), rounded up so
+/// the f32 value stays an upper bound of the f64 one.
+fn per_cell(src: &worldgen::Grid<f32>, value: impl Fn(usize, usize) -> f64) -> worldgen::Grid<f32> {
+    let (w, h) = ((src.width() - 1).max(1), (src.height() - 1).max(1));
+    let mut out = worldgen::Grid::new(w, h, 0.0f32);
+    for y in 0..h {
         for x in 0..w {
-            let (x0, x1) = (x.saturating_sub(1), (x + 2).min(h.width() - 1));
-            let (y0, y1) = (y.saturating_sub(1), (y + 2).min(h.height() - 1));
-            let (dx, dy) = max_neighbour_differences(h, x0, x1, y0, y1);
-            // Round up so the f32 value stays an upper bound.
-            out.set(
-                x,
-                y,
-                (BICUBIC_SLOPE_FACTOR * dx.hypot(dy) / spacing_m * (1.0 + 1e-6)) as f32,
-            );
+            out.set(x, y, (value(x, y) * (1.0 + 1e-6)) as f32);
         }
     }
     out
+}
+
+/// The four corner samples of cell (x, y), clamped at the far border.
+fn cell_corners(a: &worldgen::Grid<f32>, x: usize, y: usize) -> [f64; 4] {
+    let (x1, y1) = ((x + 1).min(a.width() - 1), (y + 1).min(a.height() - 1));
+    [a.get(x, y), a.get(x1, y), a.get(x, y1), a.get(x1, y1)].map(f64::from)
+}
+
+/// Bound of |grad| of the bilinear interpolation of a cell's corners `c` (x-neighbours 0-1 and
+/// 2-3, y-neighbours 0-2 and 1-3).
+fn bilinear_gradient_bound(c: &[f64; 4], spacing_m: f64) -> f64 {
+    let gx = (c[1] - c[0]).abs().max((c[3] - c[2]).abs());
+    let gy = (c[2] - c[0]).abs().max((c[3] - c[1]).abs());
+    gx.hypot(gy) / spacing_m
+}
+
+/// Bound of |grad D| for the detail noise (|D| <= 1).
+fn detail_gradient_bound() -> f64 {
+    DETAIL_OCTAVES
+        .iter()
+        .map(|&(wl, w)| w * GRADIENT_NOISE_LIPSCHITZ / wl)
+        .sum()
+}
+
+/// Per height cell: a bound of |grad G| over the cell. The Catmull-Rom patch of a cell reads
+/// samples x-1..x+2, y-1..y+2.
+fn bicubic_cell_slopes(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
+    per_cell(h, |x, y| {
+        let (x0, x1) = (x.saturating_sub(1), (x + 2).min(h.width() - 1));
+        let (y0, y1) = (y.saturating_sub(1), (y + 2).min(h.height() - 1));
+        let (dx, dy) = max_neighbour_differences(h, x0, x1, y0, y1);
+        BICUBIC_SLOPE_FACTOR * dx.hypot(dy) / spacing_m
+    })
 }
 
 /// Per height cell: a bound of the Frobenius norm of the Hessian of G over the cell.
 fn bicubic_cell_curvatures(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let (w, hh) = ((h.width() - 1).max(1), (h.height() - 1).max(1));
-    let mut out = worldgen::Grid::new(w, hh, 0.0f32);
     let s2 = spacing_m * spacing_m;
-    for y in 0..hh {
-        for x in 0..w {
-            let (mut dxx, mut dyy, mut dxy) = (0.0f64, 0.0f64, 0.0f64);
-            for j in -1..=2i64 {
-                for i in -1..=2i64 {
-                    let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
-                    if (0..=1).contains(&i) {
-                        dxx = dxx.max((p(i - 1, j) - 2.0 * p(i, j) + p(i + 1, j)).abs());
-                    }
-                    if (0..=1).contains(&j) {
-                        dyy = dyy.max((p(i, j - 1) - 2.0 * p(i, j) + p(i, j + 1)).abs());
-                    }
-                    if i < 2 && j < 2 {
-                        dxy =
-                            dxy.max((p(i + 1, j + 1) - p(i + 1, j) - p(i, j + 1) + p(i, j)).abs());
-                    }
+    per_cell(h, |x, y| {
+        let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
+        let (mut dxx, mut dyy, mut dxy) = (0.0f64, 0.0f64, 0.0f64);
+        for j in -1..=2i64 {
+            for i in -1..=2i64 {
+                if (0..=1).contains(&i) {
+                    dxx = dxx.max((p(i - 1, j) - 2.0 * p(i, j) + p(i + 1, j)).abs());
+                }
+                if (0..=1).contains(&j) {
+                    dyy = dyy.max((p(i, j - 1) - 2.0 * p(i, j) + p(i, j + 1)).abs());
+                }
+                if i < 2 && j < 2 {
+                    dxy = dxy.max((p(i + 1, j + 1) - p(i + 1, j) - p(i, j + 1) + p(i, j)).abs());
                 }
             }
-            let gxx = BICUBIC_CURVATURE_FACTOR * dxx / s2;
-            let gyy = BICUBIC_CURVATURE_FACTOR * dyy / s2;
-            let gxy = BICUBIC_TWIST_FACTOR * dxy / s2;
-            out.set(
-                x,
-                y,
-                ((gxx * gxx + 2.0 * gxy * gxy + gyy * gyy).sqrt() * (1.0 + 1e-6)) as f32,
-            );
         }
-    }
-    out
+        let gxx = BICUBIC_CURVATURE_FACTOR * dxx / s2;
+        let gyy = BICUBIC_CURVATURE_FACTOR * dyy / s2;
+        let gxy = BICUBIC_TWIST_FACTOR * dxy / s2;
+        (gxx * gxx + 2.0 * gxy * gxy + gyy * gyy).sqrt()
+    })
 }
 
 /// Per ground cell: a bound of the Hessian norm of A D inside the cell:
 /// `A_max |H(D)| + 2 |grad A| |grad D| + |A_xy|` (A is bilinear, so A_xx = A_yy = 0).
 fn detail_cell_curvatures(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let grad_d: f64 = DETAIL_OCTAVES
-        .iter()
-        .map(|&(wl, w)| w * GRADIENT_NOISE_LIPSCHITZ / wl)
-        .sum();
+    let grad_d = detail_gradient_bound();
     let hess_d: f64 = DETAIL_OCTAVES
         .iter()
         .map(|&(wl, w)| w * GRADIENT_NOISE_HESSIAN / (wl * wl))
         .sum();
-    let (w, h) = ((a.width() - 1).max(1), (a.height() - 1).max(1));
-    let mut out = worldgen::Grid::new(w, h, 0.0f32);
-    for y in 0..h {
-        for x in 0..w {
-            let (x1, y1) = ((x + 1).min(a.width() - 1), (y + 1).min(a.height() - 1));
-            let c = [a.get(x, y), a.get(x1, y), a.get(x, y1), a.get(x1, y1)].map(f64::from);
-            let a_max = c.iter().copied().fold(0.0, f64::max);
-            let (dx, dy) = max_neighbour_differences(a, x, x1, y, y1);
-            let grad_a = dx.hypot(dy) / spacing_m;
-            let a_xy = (c[3] - c[2] - c[1] + c[0]).abs() / (spacing_m * spacing_m);
-            out.set(
-                x,
-                y,
-                ((a_max * hess_d + 2.0 * grad_a * grad_d + a_xy) * (1.0 + 1e-6)) as f32,
-            );
-        }
-    }
-    out
+    per_cell(a, |x, y| {
+        let c = cell_corners(a, x, y);
+        let a_max = c.iter().copied().fold(0.0, f64::max);
+        let grad_a = bilinear_gradient_bound(&c, spacing_m);
+        let a_xy = (c[3] - c[2] - c[1] + c[0]).abs() / (spacing_m * spacing_m);
+        a_max * hess_d + 2.0 * grad_a * grad_d + a_xy
+    })
 }
 
 /// Per cell: the largest of its four corner samples.
 fn cell_corner_max(a: &worldgen::Grid<f32>) -> worldgen::Grid<f32> {
-    let (w, h) = ((a.width() - 1).max(1), (a.height() - 1).max(1));
-    let mut out = worldgen::Grid::new(w, h, 0.0f32);
-    for y in 0..h {
-        for x in 0..w {
-            let (x1, y1) = ((x + 1).min(a.width() - 1), (y + 1).min(a.height() - 1));
-            out.set(
-                x,
-                y,
-                a.get(x, y)
-                    .max(a.get(x1, y))
-                    .max(a.get(x, y1))
-                    .max(a.get(x1, y1)),
-            );
-        }
-    }
-    out
+    per_cell(a, |x, y| {
+        cell_corners(a, x, y)
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    })
 }
 
 /// Per ground cell: a bound of |grad (A D)| <= A_max |grad D| + |grad A| (|D| <= 1), with A
 /// bilinear between the cell's corners.
 fn detail_cell_slopes(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let grad_d: f64 = DETAIL_OCTAVES
-        .iter()
-        .map(|&(wl, w)| w * GRADIENT_NOISE_LIPSCHITZ / wl)
-        .sum();
-    let (w, h) = ((a.width() - 1).max(1), (a.height() - 1).max(1));
-    let mut out = worldgen::Grid::new(w, h, 0.0f32);
-    for y in 0..h {
-        for x in 0..w {
-            let (x1, y1) = ((x + 1).min(a.width() - 1), (y + 1).min(a.height() - 1));
-            let a_max = f64::from(
-                a.get(x, y)
-                    .max(a.get(x1, y))
-                    .max(a.get(x, y1))
-                    .max(a.get(x1, y1)),
-            );
-            let (dx, dy) = max_neighbour_differences(a, x, x1, y, y1);
-            out.set(
-                x,
-                y,
-                ((a_max * grad_d + dx.hypot(dy) / spacing_m) * (1.0 + 1e-6)) as f32,
-            );
-        }
-    }
-    out
+    let grad_d = detail_gradient_bound();
+    per_cell(a, |x, y| {
+        let c = cell_corners(a, x, y);
+        let a_max = c.iter().copied().fold(0.0, f64::max);
+        let grad_a = bilinear_gradient_bound(&c, spacing_m);
+        a_max * grad_d + grad_a
+    })
 }
 
 /// A max-mipmap over a grid: level k holds the max over 2^k x 2^k blocks.

@@ -163,26 +163,6 @@ pub struct DensityLayer {
     pub density: Grid<u8>,
 }
 
-impl DensityLayer {
-    /// Density in items per square metre at a world position (bilinear, clamped at the border).
-    pub fn density_per_m2(&self, origin_m: [f64; 2], x_m: f64, y_m: f64) -> f64 {
-        let at = GridPlacement {
-            origin_m,
-            spacing_m: self.spec.spacing_m,
-        };
-        let gx = ((x_m - origin_m[0]) / at.spacing_m).clamp(0.0, (self.density.width() - 1) as f64);
-        let gy =
-            ((y_m - origin_m[1]) / at.spacing_m).clamp(0.0, (self.density.height() - 1) as f64);
-        let (x0, y0) = (gx.floor(), gy.floor());
-        let (fx, fy) = (gx - x0, gy - y0);
-        let s =
-            |dx: i64, dy: i64| f64::from(self.density.get_clamped(x0 as i64 + dx, y0 as i64 + dy));
-        let a = s(0, 0) + fx * (s(1, 0) - s(0, 0));
-        let b = s(0, 1) + fx * (s(1, 1) - s(0, 1));
-        (a + fy * (b - a)) / 255.0 * self.spec.max_density_per_m2
-    }
-}
-
 /// A whole, validated map in memory.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Map {
