@@ -71,18 +71,19 @@ pub fn vertex_heights(world: &World, tree: &QuadTree, key: NodeKey) -> Vec<f32> 
     v
 }
 
-/// A bound of `|Lin F(p) - F(p)|` inside a right check triangle with legs `c`, where `F = G + H`
-/// (map surface + detail) and `|Lin F - F| <= |Lin G - G| + |Lin H - H|`. Each part takes the
+/// A bound of `|Lin F(p) - F(p)|` inside a right check triangle with legs `c`, where `F = G + H + E`
+/// (map surface + detail + decal shaping E) and the parts' bounds add. Each part takes the
 /// smallest of its valid bounds: first order `slope c / sqrt(2)`, second order
 /// `curvature c^2 / 4`, and for the detail also zero order `2 max |H|`.
 pub fn between_bound(b: &crate::world::RegionBounds, c: f64) -> f64 {
     let reach = c * std::f64::consts::FRAC_1_SQRT_2;
     let second = |m2: Option<f64>| m2.map_or(f64::INFINITY, |m| m * c * c * 0.25);
     let g = (b.slope_g * reach).min(second(b.curvature_g));
+    let e = (b.decal.slope * reach).min(second(Some(b.decal.curvature)));
     let h = (b.slope_h * reach)
         .min(second(b.curvature_h))
         .min(2.0 * b.amplitude_max_m);
-    g + h
+    g + h + e
 }
 
 /// Measures the bounds of one node (see the module docs). About 17k surface evaluations.
@@ -124,8 +125,9 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     let o = world.origin_m();
     let size = world.size_m();
     let divides = |big: f64| c <= big && ((big / c) - (big / c).round()).abs() < 1e-9;
+    let block_m = crate::decals::DECAL_BLOCK_M;
     let inside = r.max[0] <= o[0] + size[0] + 1e-9 && r.max[1] <= o[1] + size[1] + 1e-9;
-    let direct = divides(hs) && divides(gs) && inside;
+    let direct = divides(hs) && divides(gs) && divides(block_m) && inside;
     let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
     for j in 0..m {
         for i in 0..m {
@@ -134,17 +136,7 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
                 max: [r.min[0] + (i + 1) as f64 * c, r.min[1] + (j + 1) as f64 * c],
             };
             let region = if direct {
-                // The cell's centre picks the map cells that contain it.
-                let (cx, cy) = (
-                    (cell.min[0] + cell.max[0]) * 0.5 - o[0],
-                    (cell.min[1] + cell.max[1]) * 0.5 - o[1],
-                );
-                world.cell_region_bounds(
-                    (cx / hs) as usize,
-                    (cy / hs) as usize,
-                    (cx / gs) as usize,
-                    (cy / gs) as usize,
-                )
+                world.cell_region_bounds(cell)
             } else {
                 world.region_bounds(cell)
             };

@@ -16,6 +16,7 @@
 //! - World positions are f64; vertices are f32 relative to their node's origin.
 
 pub mod bounds;
+pub mod decals;
 pub mod measure;
 pub mod mesh;
 pub mod quadtree;

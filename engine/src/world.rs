@@ -1,11 +1,14 @@
 //! Map access in f64 world coordinates and the finest terrain surface.
 //!
-//! `height_m(x, y) = G(x, y) + A(x, y) * D(x, y)` where `G` is the map's C1 bicubic height, `A`
-//! the detail amplitude of the ground types (bilinear between ground samples, so it is
-//! continuous) and `D` three octaves of gradient noise with wavelengths 8, 4 and 2 m (|D| <= 1).
+//! `height_m(x, y) = G(x, y) + A(x, y) * D(x, y) + E(x, y)` where `G` is the map's C1 bicubic
+//! height, `A` the detail amplitude of the ground types (bilinear between ground samples, so it
+//! is continuous; zero on and next to roads and paths), `D` three octaves of gradient noise with
+//! wavelengths 8, 4 and 2 m (|D| <= 1) and `E` the decal shaping (flattened roads, raised rock
+//! patches; see [`crate::decals`]).
 //! Detail is evaluated in map-local coordinates, so the same map placed at another origin gives
 //! the same surface.
 
+use crate::decals::{DecalBounds, DecalField};
 use worldgen::Map;
 use worldgen::noise;
 
@@ -52,6 +55,8 @@ pub struct World {
     curv_detail: MaxPyramid,
     /// Largest detail amplitude at the corners of each ground cell.
     amp_max: MaxPyramid,
+    /// Decal shaping E.
+    pub decals: DecalField,
 }
 
 /// How far the finest surface can stray from its linear interpolation over a small region,
@@ -68,6 +73,8 @@ pub struct RegionBounds {
     pub curvature_h: Option<f64>,
     /// Largest detail amplitude, so |H| <= this.
     pub amplitude_max_m: f64,
+    /// Bounds of the decal shaping E (C1 everywhere, so both always hold).
+    pub decal: DecalBounds,
 }
 
 /// A rectangle in world metres.
@@ -86,7 +93,11 @@ impl World {
             .iter()
             .map(|t| t.detail_amplitude_m)
             .collect();
-        let amplitude_m = map.ground.map(|g| legend[g as usize]);
+        let decals = DecalField::new(&map.decals, map.manifest.origin_m, |x, y| {
+            map.height_bicubic_m(x, y)
+        });
+        let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
+        suppress_detail_on_roads(&mut amplitude_m, &map, &decals);
         let detail_seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0) ^ 0xDE7A_11ED;
         let slope_g = MaxPyramid::new(bicubic_cell_slopes(
             &map.heights,
@@ -114,6 +125,7 @@ impl World {
             curv_g,
             curv_detail,
             amp_max,
+            decals,
         }
     }
 
@@ -159,7 +171,7 @@ impl World {
         } else {
             0.0
         };
-        self.map.height_bicubic_m(x_m, y_m) + d
+        self.map.height_bicubic_m(x_m, y_m) + d + self.decals.offset_m(x_m, y_m)
     }
 
     /// Ground type index at a world position (nearest ground sample).
@@ -191,6 +203,7 @@ impl World {
             curvature_h: (inside && in_one_ground_cell)
                 .then(|| f64::from(self.cells_max(rect, gs, &self.curv_detail))),
             amplitude_max_m: f64::from(self.cells_max(rect, gs, &self.amp_max)),
+            decal: self.decals.region_bounds(rect.min, rect.max),
         }
     }
 
@@ -202,9 +215,18 @@ impl World {
         )
     }
 
-    /// [`Self::region_bounds`] for a region known to lie inside height cell `(hx, hy)` and ground
-    /// cell `(gx, gy)` and inside the map: direct lookups, no pyramid.
-    pub fn cell_region_bounds(&self, hx: usize, hy: usize, gx: usize, gy: usize) -> RegionBounds {
+    /// [`Self::region_bounds`] for a rectangle known to lie inside one height cell, one ground
+    /// cell and one decal block, and inside the map: direct lookups.
+    pub fn cell_region_bounds(&self, rect: Rect) -> RegionBounds {
+        let o = self.origin_m();
+        let (hs, gs) = self.cell_spacings_m();
+        // The centre picks the cells that contain the rectangle.
+        let (cx, cy) = (
+            (rect.min[0] + rect.max[0]) * 0.5 - o[0],
+            (rect.min[1] + rect.max[1]) * 0.5 - o[1],
+        );
+        let (hx, hy) = ((cx / hs) as usize, (cy / hs) as usize);
+        let (gx, gy) = ((cx / gs) as usize, (cy / gs) as usize);
         let l0 = |p: &MaxPyramid, x: usize, y: usize| {
             f64::from(p.levels[0].get(x.min(p.width() - 1), y.min(p.height() - 1)))
         };
@@ -214,6 +236,7 @@ impl World {
             curvature_g: Some(l0(&self.curv_g, hx, hy)),
             curvature_h: Some(l0(&self.curv_detail, gx, gy)),
             amplitude_max_m: l0(&self.amp_max, gx, gy),
+            decal: self.decals.region_bounds(rect.min, rect.max),
         }
     }
 
@@ -231,6 +254,43 @@ impl World {
             to(rect.min[1] - e, o[1], p.height()),
             to(rect.max[1] + e, o[1], p.height()),
         )
+    }
+}
+
+/// Scales the detail amplitude down to zero at ground samples near roads and paths, so the
+/// flattened surface stays flat: a ground sample within one ground-cell diagonal of a road
+/// lattice sample of weight `w` keeps at most `1 - w` of its amplitude. Then A (bilinear) is zero
+/// everywhere on a road's core and falloff.
+fn suppress_detail_on_roads(amplitude_m: &mut worldgen::Grid<f32>, map: &Map, decals: &DecalField) {
+    let gs = map.manifest.ground.spacing_m;
+    let o = map.manifest.origin_m;
+    let reach = gs * std::f64::consts::SQRT_2;
+    let (w, h) = (amplitude_m.width() as i64, amplitude_m.height() as i64);
+    let mut keep = worldgen::Grid::new(amplitude_m.width(), amplitude_m.height(), 1.0f32);
+    for (p, weight) in decals.road_samples() {
+        let (gx, gy) = ((p[0] - o[0]) / gs, (p[1] - o[1]) / gs);
+        let (x0, x1) = (
+            (gx - reach / gs).floor() as i64,
+            (gx + reach / gs).ceil() as i64,
+        );
+        let (y0, y1) = (
+            (gy - reach / gs).floor() as i64,
+            (gy + reach / gs).ceil() as i64,
+        );
+        for y in y0.max(0)..=y1.min(h - 1) {
+            for x in x0.max(0)..=x1.min(w - 1) {
+                let d = (x as f64 - gx).hypot(y as f64 - gy) * gs;
+                if d <= reach {
+                    let k = keep.get(x as usize, y as usize).min((1.0 - weight) as f32);
+                    keep.set(x as usize, y as usize, k);
+                }
+            }
+        }
+    }
+    for y in 0..amplitude_m.height() {
+        for x in 0..amplitude_m.width() {
+            amplitude_m.set(x, y, amplitude_m.get(x, y) * keep.get(x, y));
+        }
     }
 }
 
@@ -269,40 +329,60 @@ fn detail_gradient_bound() -> f64 {
         .sum()
 }
 
-/// Per height cell: a bound of |grad G| over the cell. The Catmull-Rom patch of a cell reads
-/// samples x-1..x+2, y-1..y+2.
+/// A bound of |grad| of the Catmull-Rom patch of one cell whose 4 x 4 stencil is `p(-1..=2,
+/// -1..=2)` (sample offsets from the cell's south-west sample).
+pub(crate) fn catmull_rom_cell_slope(p: &impl Fn(i64, i64) -> f64, spacing_m: f64) -> f64 {
+    let (mut dx, mut dy) = (0.0f64, 0.0f64);
+    for j in -1..=2i64 {
+        for i in -1..=2i64 {
+            if i < 2 {
+                dx = dx.max((p(i + 1, j) - p(i, j)).abs());
+            }
+            if j < 2 {
+                dy = dy.max((p(i, j + 1) - p(i, j)).abs());
+            }
+        }
+    }
+    BICUBIC_SLOPE_FACTOR * dx.hypot(dy) / spacing_m
+}
+
+/// A bound of the Frobenius norm of the Hessian of the Catmull-Rom patch of one cell (stencil
+/// as in [`catmull_rom_cell_slope`]).
+pub(crate) fn catmull_rom_cell_curvature(p: &impl Fn(i64, i64) -> f64, spacing_m: f64) -> f64 {
+    let s2 = spacing_m * spacing_m;
+    let (mut dxx, mut dyy, mut dxy) = (0.0f64, 0.0f64, 0.0f64);
+    for j in -1..=2i64 {
+        for i in -1..=2i64 {
+            if (0..=1).contains(&i) {
+                dxx = dxx.max((p(i - 1, j) - 2.0 * p(i, j) + p(i + 1, j)).abs());
+            }
+            if (0..=1).contains(&j) {
+                dyy = dyy.max((p(i, j - 1) - 2.0 * p(i, j) + p(i, j + 1)).abs());
+            }
+            if i < 2 && j < 2 {
+                dxy = dxy.max((p(i + 1, j + 1) - p(i + 1, j) - p(i, j + 1) + p(i, j)).abs());
+            }
+        }
+    }
+    let gxx = BICUBIC_CURVATURE_FACTOR * dxx / s2;
+    let gyy = BICUBIC_CURVATURE_FACTOR * dyy / s2;
+    let gxy = BICUBIC_TWIST_FACTOR * dxy / s2;
+    (gxx * gxx + 2.0 * gxy * gxy + gyy * gyy).sqrt()
+}
+
+/// Per height cell: a bound of |grad G| over the cell (clamped at the map border like G).
 fn bicubic_cell_slopes(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
     per_cell(h, |x, y| {
-        let (x0, x1) = (x.saturating_sub(1), (x + 2).min(h.width() - 1));
-        let (y0, y1) = (y.saturating_sub(1), (y + 2).min(h.height() - 1));
-        let (dx, dy) = max_neighbour_differences(h, x0, x1, y0, y1);
-        BICUBIC_SLOPE_FACTOR * dx.hypot(dy) / spacing_m
+        let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
+        catmull_rom_cell_slope(&p, spacing_m)
     })
 }
 
 /// Per height cell: a bound of the Frobenius norm of the Hessian of G over the cell.
 fn bicubic_cell_curvatures(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let s2 = spacing_m * spacing_m;
     per_cell(h, |x, y| {
         let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
-        let (mut dxx, mut dyy, mut dxy) = (0.0f64, 0.0f64, 0.0f64);
-        for j in -1..=2i64 {
-            for i in -1..=2i64 {
-                if (0..=1).contains(&i) {
-                    dxx = dxx.max((p(i - 1, j) - 2.0 * p(i, j) + p(i + 1, j)).abs());
-                }
-                if (0..=1).contains(&j) {
-                    dyy = dyy.max((p(i, j - 1) - 2.0 * p(i, j) + p(i, j + 1)).abs());
-                }
-                if i < 2 && j < 2 {
-                    dxy = dxy.max((p(i + 1, j + 1) - p(i + 1, j) - p(i, j + 1) + p(i, j)).abs());
-                }
-            }
-        }
-        let gxx = BICUBIC_CURVATURE_FACTOR * dxx / s2;
-        let gyy = BICUBIC_CURVATURE_FACTOR * dyy / s2;
-        let gxy = BICUBIC_TWIST_FACTOR * dxy / s2;
-        (gxx * gxx + 2.0 * gxy * gxy + gyy * gyy).sqrt()
+        catmull_rom_cell_curvature(&p, spacing_m)
     })
 }
 
@@ -400,29 +480,6 @@ impl MaxPyramid {
     }
 }
 
-/// Largest |difference| between x-neighbouring and between y-neighbouring samples in the box.
-fn max_neighbour_differences(
-    g: &worldgen::Grid<f32>,
-    x0: usize,
-    x1: usize,
-    y0: usize,
-    y1: usize,
-) -> (f64, f64) {
-    let (mut mx, mut my) = (0.0f32, 0.0f32);
-    for y in y0..=y1 {
-        for x in x0..=x1 {
-            let v = g.get(x, y);
-            if x < x1 {
-                mx = mx.max((g.get(x + 1, y) - v).abs());
-            }
-            if y < y1 {
-                my = my.max((g.get(x, y + 1) - v).abs());
-            }
-        }
-    }
-    (f64::from(mx), f64::from(my))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -494,8 +551,9 @@ mod tests {
     }
 
     #[test]
-    fn catmull_rom_slope_factor_bounds_random_grids() {
-        // Random grids: the bicubic slope never exceeds factor * max difference / spacing.
+    fn catmull_rom_cell_bounds_hold_on_random_grids() {
+        // Random grids: finite-difference slope and curvature inside a cell never exceed the
+        // cell's bounds.
         for seed in 0..20u64 {
             let mut g = worldgen::Grid::new(6, 6, 0.0f32);
             for y in 0..6 {
@@ -507,19 +565,22 @@ mod tests {
                 origin_m: [0.0, 0.0],
                 spacing_m: 1.0,
             };
-            let (dx, dy) = max_neighbour_differences(&g, 0, 5, 0, 5);
-            let e = 1e-6;
+            let f = |x: f64, y: f64| worldgen::sample::bicubic(&g, at, x, y);
             for i in 0..400 {
                 let x = 1.0 + 3.0 * noise::unit3(seed, i, 1);
                 let y = 1.0 + 3.0 * noise::unit3(seed, i, 2);
-                let gx = (worldgen::sample::bicubic(&g, at, x + e, y)
-                    - worldgen::sample::bicubic(&g, at, x - e, y))
-                    / (2.0 * e);
-                let gy = (worldgen::sample::bicubic(&g, at, x, y + e)
-                    - worldgen::sample::bicubic(&g, at, x, y - e))
-                    / (2.0 * e);
-                assert!(gx.abs() <= BICUBIC_SLOPE_FACTOR * dx + 1e-6);
-                assert!(gy.abs() <= BICUBIC_SLOPE_FACTOR * dy + 1e-6);
+                let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+                let p = |a: i64, b: i64| f64::from(g.get_clamped(cx + a, cy + b));
+                let e = 1e-6;
+                let gx = (f(x + e, y) - f(x - e, y)) / (2.0 * e);
+                let gy = (f(x, y + e) - f(x, y - e)) / (2.0 * e);
+                assert!(gx.hypot(gy) <= catmull_rom_cell_slope(&p, 1.0) + 1e-6);
+                let (h, f0) = (1e-3, f(x, y));
+                if (x - x.round()).abs() > 2.0 * h && (y - y.round()).abs() > 2.0 * h {
+                    let fxx = (f(x + h, y) - 2.0 * f0 + f(x - h, y)) / (h * h);
+                    let fyy = (f(x, y + h) - 2.0 * f0 + f(x, y - h)) / (h * h);
+                    assert!(fxx.hypot(fyy) <= catmull_rom_cell_curvature(&p, 1.0) + 1e-3);
+                }
             }
         }
     }

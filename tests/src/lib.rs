@@ -130,6 +130,12 @@ pub mod terrain {
     pub fn shifted(world: &World, dx: f64, dy: f64) -> World {
         let mut map = world.map.clone();
         map.manifest.origin_m = [map.manifest.origin_m[0] + dx, map.manifest.origin_m[1] + dy];
+        for d in &mut map.decals {
+            for p in &mut d.points {
+                p[0] += dx;
+                p[1] += dy;
+            }
+        }
         World::new(map)
     }
 

@@ -2,6 +2,7 @@
 //! any level difference, cliffs / spikes / flat sea / borders, far from the origin, determinism.
 
 use engine::bounds::BoundsCache;
+use engine::decals::FLAT_MARGIN_M;
 use engine::mesh::NodeMesh;
 use engine::quadtree::{NodeKey, QuadTree};
 use engine::select::{Camera, SelectParams, select};
@@ -89,6 +90,11 @@ fn bounds_are_conservative_on_hard_surfaces() {
                 (0.0, 511.0),
             ] {
                 keys.extend(tree.key_at(level, world.origin_m()[0] + x, world.origin_m()[1] + y));
+            }
+            // On roads and paths (their shaping crosses the cliff in the cliff world).
+            for d in &world.map.decals {
+                let p = d.points[d.points.len() / 2];
+                keys.extend(tree.key_at(level, p[0], p[1]));
             }
         }
         keys.sort();
@@ -634,4 +640,77 @@ fn imported_srtm_sea_is_exact_and_the_coast_is_watertight() {
     );
     let (gaps, seam) = seam_holes(&tree, &meshes, &cam);
     assert_eq!(seam, 0, "{seam} of {gaps} seam gaps open at the coast");
+}
+
+/// Distance to a decal's centre line and the line's z at the closest point.
+fn closest_on_line(points: &[[f64; 3]], p: [f64; 2]) -> (f64, f64) {
+    let mut best = (f64::INFINITY, 0.0);
+    for s in points.windows(2) {
+        let (a, b) = (s[0], s[1]);
+        let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = abx * abx + aby * aby;
+        let t = if len2 > 0.0 {
+            (((p[0] - a[0]) * abx + (p[1] - a[1]) * aby) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (p[0] - a[0] - t * abx).hypot(p[1] - a[1] - t * aby);
+        if d < best.0 {
+            best = (d, a[2] + t * (b[2] - a[2]));
+        }
+    }
+    best
+}
+
+#[test]
+fn roads_and_paths_are_flattened_into_the_finest_surface() {
+    let world = tiny_world();
+    assert!(!world.map.decals.is_empty() && !world.decals.is_empty());
+    let (mut checked, mut worst, mut moved) = (0, 0.0f64, 0.0f64);
+    for (k, d) in world.map.decals.iter().enumerate() {
+        let half = f64::from(d.width_m) * 0.5;
+        for (i, s) in d.points.windows(2).enumerate() {
+            // Points scattered around the segment, up to the half width.
+            for q in 0..6i64 {
+                let t = unit3(91, i as i64 * 8 + q, k as i64);
+                let off = (unit3(92, i as i64 * 8 + q, k as i64) * 2.0 - 1.0) * half;
+                let (dx, dy) = (s[1][0] - s[0][0], s[1][1] - s[0][1]);
+                let len = dx.hypot(dy).max(1e-9);
+                let p = [
+                    s[0][0] + t * dx - dy / len * off,
+                    s[0][1] + t * dy + dx / len * off,
+                ];
+                let (dist, z) = closest_on_line(&d.points, p);
+                let target = z + f64::from(d.height_offset_m);
+                if dist <= half {
+                    // Where another decal is also at full weight the earlier one wins (roads
+                    // before paths at town junctions): skip those points.
+                    let shared = world.map.decals.iter().enumerate().any(|(j, o)| {
+                        j != k
+                            && closest_on_line(&o.points, p).0
+                                <= f64::from(o.width_m) * 0.5 + 2.0 * FLAT_MARGIN_M
+                    });
+                    if shared {
+                        continue;
+                    }
+                    let e = (world.height_m(p[0], p[1]) - target).abs();
+                    worst = worst.max(e);
+                    moved = moved.max((world.map.height_bicubic_m(p[0], p[1]) - target).abs());
+                    checked += 1;
+                }
+            }
+        }
+    }
+    println!(
+        "roads: {checked} points within the half width, max deviation {worst:.4} m, \
+         map surface off by up to {moved:.3} m"
+    );
+    assert!(checked > 1000);
+    // Not exactly 0: the stencil's samples have their own closest points (bends, ends) and the
+    // bicubic map surface is not reproduced exactly between lattice samples.
+    assert!(worst < 0.05, "road surface deviates by {worst} m");
+    assert!(
+        moved > 0.05,
+        "the decals should actually move the ground ({moved} m)"
+    );
 }

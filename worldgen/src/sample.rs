@@ -58,7 +58,7 @@ pub fn bilinear(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 
 
 /// Catmull-Rom weights for the four samples around a fractional position t in [0, 1).
 #[inline]
-fn catmull_rom_weights(t: f64) -> [f64; 4] {
+pub fn catmull_rom_weights(t: f64) -> [f64; 4] {
     let t2 = t * t;
     let t3 = t2 * t;
     [
