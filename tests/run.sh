@@ -33,14 +33,16 @@ cargo fmt --all -- --check
 step "cargo clippy (all targets, warnings are errors)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 
+# The viewer test (tests/tests/viewer_xvfb.rs) drives the flyover binary: build it first.
+step "cargo build --bins"
+cargo build --workspace --bins --locked
+
 step "cargo test"
 cargo test --workspace --locked 2>&1 | tee target/test-output.log
 # Fail loudly if the runner executed nothing (e.g. everything filtered out).
 grep -q "test result: ok" target/test-output.log
 
 # --- smoke runs: the binaries in the dev profile (deps already built by the tests) ---
-step "cargo build --bins"
-cargo build --workspace --bins --locked
 
 step "smoke: worldgen generate / check / import-dem"
 smoke=target/smoke
@@ -66,6 +68,19 @@ test -s "$smoke/speed_vs_error.png"
 if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
   echo "nodebench accepted an unknown section" >&2; exit 1
 fi
+
+step "smoke: flyover headless, and its fallback when there is no display"
+./target/debug/flyover --headless --map maps/tiny --frames 60 --every 30 --size 320x180 \
+  --duration-s 2 --out "$smoke/flyover" > "$smoke/flyover.md"
+test -s "$smoke/flyover/frame_00000.png" && test -s "$smoke/flyover/frame_00059.png"
+grep -q '"frames"' "$smoke/flyover/stats.json"
+env -u DISPLAY -u WAYLAND_DISPLAY ./target/debug/flyover --map maps/tiny --frames 3 --size 64x36 \
+  --out "$smoke/flyover-nodisplay" 2> "$smoke/flyover-nodisplay.log" >/dev/null
+grep -q "no display" "$smoke/flyover-nodisplay.log"
+if ./target/debug/flyover --headless --map "$smoke/does-not-exist" --frames 1 2> "$smoke/flyover-err.log"; then
+  echo "flyover accepted a missing map" >&2; exit 1
+fi
+grep -q "does-not-exist" "$smoke/flyover-err.log"
 
 passed=$(grep -oE "test result: ok\. [0-9]+ passed" target/test-output.log | awk '{s+=$4} END {print s+0}')
 failed=$(grep -oE "[0-9]+ failed" target/test-output.log | awk '{s+=$1} END {print s+0}')

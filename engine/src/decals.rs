@@ -53,6 +53,10 @@ pub struct DecalField {
     bounds: Vec<FxHashMap<u64, [f32; 2]>>,
     /// Largest road/path weight per sample (for suppressing procedural detail on roads).
     road_weight: FxHashMap<(i64, i64), f32>,
+    /// Coarse occupancy over the map: false where no stored block can reach (fast zero).
+    coarse: Vec<bool>,
+    coarse_dims: [usize; 2],
+    coarse_cell_m: f64,
 }
 
 /// Distance from `p` to segment `ab` and the segment parameter of the closest point.
@@ -170,6 +174,7 @@ impl DecalField {
     pub fn new(
         decals: &[Decal],
         origin_m: [f64; 2],
+        size_m: [f64; 2],
         ground_height_m: impl Fn(f64, f64) -> f64,
     ) -> Self {
         // Per sample: (weight, offset); the larger weight wins, the earlier decal on ties.
@@ -204,6 +209,9 @@ impl DecalField {
             blocks: FxHashMap::default(),
             bounds: Vec::new(),
             road_weight,
+            coarse: Vec::new(),
+            coarse_dims: [0, 0],
+            coarse_cell_m: 1.0,
         };
         for ((ix, iy), (_, offset)) in samples {
             if offset == 0.0 {
@@ -217,7 +225,43 @@ impl DecalField {
             block[(iy.rem_euclid(BLOCK) * BLOCK + ix.rem_euclid(BLOCK)) as usize] = offset as f32;
         }
         field.build_bounds();
+        field.build_coarse(size_m);
         field
+    }
+
+    /// Marks the coarse cells (at least 32 m, at most 1024 x 1024 over the map) that a stored
+    /// block's interpolation stencil can reach.
+    fn build_coarse(&mut self, size_m: [f64; 2]) {
+        let cell = 32f64.max(size_m[0].max(size_m[1]) / 1024.0);
+        let dims = [
+            (size_m[0] / cell).ceil() as usize + 1,
+            (size_m[1] / cell).ceil() as usize + 1,
+        ];
+        let mut coarse = vec![false; dims[0] * dims[1]];
+        let margin = 2.0 * DECAL_SPACING_M;
+        for &k in self.blocks.keys() {
+            let (bx, by) = (
+                i64::from((k >> 32) as u32 as i32),
+                i64::from(k as u32 as i32),
+            );
+            let cells = |b: i64, n: usize| {
+                let lo = ((b as f64 * DECAL_BLOCK_M - margin) / cell)
+                    .floor()
+                    .max(0.0) as usize;
+                let hi = (((b + 1) as f64 * DECAL_BLOCK_M + margin) / cell)
+                    .floor()
+                    .max(0.0) as usize;
+                lo.min(n - 1)..=hi.min(n - 1)
+            };
+            for cy in cells(by, dims[1]) {
+                for cx in cells(bx, dims[0]) {
+                    coarse[cy * dims[0] + cx] = true;
+                }
+            }
+        }
+        self.coarse = coarse;
+        self.coarse_dims = dims;
+        self.coarse_cell_m = cell;
     }
 
     pub fn is_empty(&self) -> bool {
@@ -242,6 +286,20 @@ impl DecalField {
     pub fn offset_m(&self, x_m: f64, y_m: f64) -> f64 {
         if self.blocks.is_empty() {
             return 0.0;
+        }
+        // Fast zero away from decals (positions outside the map take the full path).
+        let (cx, cy) = (
+            (x_m - self.origin_m[0]) / self.coarse_cell_m,
+            (y_m - self.origin_m[1]) / self.coarse_cell_m,
+        );
+        if cx >= 0.0 && cy >= 0.0 {
+            let (ix, iy) = (cx as usize, cy as usize);
+            if ix < self.coarse_dims[0]
+                && iy < self.coarse_dims[1]
+                && !self.coarse[iy * self.coarse_dims[0] + ix]
+            {
+                return 0.0;
+            }
         }
         let gx = (x_m - self.origin_m[0]) / DECAL_SPACING_M;
         let gy = (y_m - self.origin_m[1]) / DECAL_SPACING_M;
@@ -402,6 +460,7 @@ mod tests {
         let f = DecalField::new(
             &[road(vec![[10.0, 50.0, 20.0], [90.0, 50.0, 20.0]])],
             [0.0; 2],
+            [100.0; 2],
             ground,
         );
         for &(x, y) in &[(30.0, 50.0), (50.5, 51.7), (70.2, 48.1)] {
@@ -428,7 +487,7 @@ mod tests {
                 [20.0, 35.0, 0.0],
             ],
         };
-        let f = DecalField::new(&[patch], [0.0; 2], |_, _| 0.0);
+        let f = DecalField::new(&[patch], [0.0; 2], [100.0; 2], |_, _| 0.0);
         assert!((f.offset_m(30.0, 27.0) - 2.0).abs() < 1e-6);
         assert_eq!(f.offset_m(60.0, 27.0), 0.0);
         // Finite-difference slope and curvature never exceed the block bounds.

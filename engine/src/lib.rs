@@ -1,7 +1,7 @@
 //! `engine`: the runtime of the terrain streaming engine.
 //!
-//! The CPU side (this crate's `world`, `quadtree`, `bounds`, `select`, `tiles`, `mesh` modules)
-//! never touches the GPU: it turns a map and a camera into plain data (node keys, bounds,
+//! The CPU side (this crate's `world`, `decals`, `quadtree`, `bounds`, `select`, `tiles`, `mesh`,
+//! `tin`, `stream` modules) never touches the GPU: it turns a map and a camera into plain data (node keys, bounds,
 //! vertex/index arrays) that a renderer uploads.
 //!
 //! Main design choices:
@@ -15,11 +15,13 @@
 //! - **Crack-free by skirts of proven depth.** See [`mesh`].
 //! - World positions are f64; vertices are f32 relative to their node's origin.
 
+pub mod app;
 pub mod bounds;
 pub mod decals;
 pub mod measure;
 pub mod mesh;
 pub mod quadtree;
+pub mod render;
 pub mod select;
 pub mod stream;
 pub mod tiles;

@@ -116,6 +116,29 @@ pub struct NodeWork {
     pub terrain: Option<NodeMesh>,
     /// Set by the GPU upload phase: bytes that went to the GPU.
     pub uploaded_bytes: usize,
+    /// The node's GPU objects, set by the renderer's upload hook, dropped with the node.
+    pub gpu: GpuSlot,
+}
+
+/// GPU objects of one node, of a type only the renderer knows (this module stays free of wgpu).
+#[derive(Default)]
+pub struct GpuSlot(pub Option<Box<dyn std::any::Any + Send + Sync>>);
+
+impl std::fmt::Debug for GpuSlot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() {
+            "GpuSlot(set)"
+        } else {
+            "GpuSlot(empty)"
+        })
+    }
+}
+
+impl GpuSlot {
+    /// The stored object if it is a `T`.
+    pub fn get<T: 'static>(&self) -> Option<&T> {
+        self.0.as_ref().and_then(|b| b.downcast_ref::<T>())
+    }
 }
 
 impl NodeWork {
@@ -239,6 +262,8 @@ pub struct StreamSettings {
     /// Nodes down to `prefetch_factor * tau` are prepared ahead (lower priority, not shown
     /// until needed), so they are ready when the camera gets there.
     pub prefetch_factor: f64,
+    /// Debug: show every node at this level (no pixel-error test), like seed 003's MLFIX.
+    pub fixed_level: Option<u8>,
 }
 
 impl Default for StreamSettings {
@@ -256,6 +281,7 @@ impl Default for StreamSettings {
             tau_px: 2.0,
             split_factor: 0.6,
             prefetch_factor: 0.5,
+            fixed_level: None,
         }
     }
 }
@@ -488,7 +514,10 @@ impl Streamer {
             cam,
             true,
             |key| self.shared.bounds.peek(key),
-            |_, _, _, px| px > tau_px,
+            |key: NodeKey, _, _, px| match self.settings.fixed_level {
+                Some(level) => key.level < level,
+                None => px > tau_px,
+            },
         );
         sel.nodes
             .iter()
@@ -749,6 +778,12 @@ impl Streamer {
     /// Runs waiting GPU phases (coarsest, then oldest first) until the frame's time or byte
     /// budget is spent; at least one per call. Returns the number of phases run.
     pub fn run_gpu_phases(&mut self) -> usize {
+        self.run_gpu_phases_with(&mut |_, _| {})
+    }
+
+    /// [`Self::run_gpu_phases`] where each GPU phase also calls `upload` (the renderer creates
+    /// the node's buffers there and stores them in [`NodeWork::gpu`]).
+    pub fn run_gpu_phases_with(&mut self, upload: &mut dyn FnMut(&Shared, &mut NodeWork)) -> usize {
         let t0 = Instant::now();
         let mut bytes = 0usize;
         let mut order: Vec<(u8, u64, NodeKey)> = self
@@ -776,6 +811,7 @@ impl Streamer {
             let mut i = *next_phase;
             while i < self.phases.len() && self.phases[i].kind == PhaseKind::Gpu {
                 (self.phases[i].run)(&self.shared, &mut w);
+                upload(&self.shared, &mut w);
                 i += 1;
             }
             bytes += w.uploaded_bytes;

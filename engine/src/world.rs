@@ -93,9 +93,12 @@ impl World {
             .iter()
             .map(|t| t.detail_amplitude_m)
             .collect();
-        let decals = DecalField::new(&map.decals, map.manifest.origin_m, |x, y| {
-            map.height_bicubic_m(x, y)
-        });
+        let decals = DecalField::new(
+            &map.decals,
+            map.manifest.origin_m,
+            map.manifest.size_m,
+            |x, y| map.height_bicubic_m(x, y),
+        );
         let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
         suppress_detail_on_roads(&mut amplitude_m, &map, &decals);
         let detail_seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0) ^ 0xDE7A_11ED;

@@ -193,3 +193,81 @@ pub mod terrain {
         best
     }
 }
+
+/// GPU helpers: a headless device (lavapipe here and in CI) and a settled viewer.
+pub mod gpu {
+    use engine::app::{FrameStats, Viewer};
+    use engine::render::{COLOR_FORMAT, Gpu, Target};
+    use engine::select::Camera;
+    use engine::stream::StreamSettings;
+
+    /// A headless GPU device, or None with a printed reason outside CI. In CI a missing adapter
+    /// fails the test (the test script installs lavapipe).
+    pub fn device() -> Option<Gpu> {
+        match Gpu::new_headless() {
+            Ok(g) => Some(g),
+            Err(e) => {
+                assert!(
+                    !super::in_ci(),
+                    "CI must have a GPU adapter (lavapipe): {e}"
+                );
+                println!("skipping GPU test: {e}");
+                None
+            }
+        }
+    }
+
+    /// A viewer of the tiny map at threshold `tau_px`, one worker.
+    pub fn tiny_viewer(g: &Gpu, tau_px: f64) -> Viewer {
+        Viewer::new(
+            g,
+            COLOR_FORMAT,
+            super::terrain::tiny_world(),
+            StreamSettings {
+                workers: 1,
+                max_in_flight: 2,
+                tau_px,
+                ..StreamSettings::default()
+            },
+        )
+    }
+
+    /// Renders one frame into `target` and waits for the GPU.
+    pub fn frame(g: &Gpu, v: &mut Viewer, target: &Target, cam: &Camera, dt_s: f64) -> FrameStats {
+        let mut enc = g
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("test frame"),
+            });
+        let st = v.frame(
+            g,
+            &mut enc,
+            &target.color_view,
+            &target.depth_view,
+            cam,
+            dt_s,
+        );
+        g.queue.submit([enc.finish()]);
+        g.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("GPU finishes the frame");
+        st
+    }
+
+    /// Renders frames until every wanted node is shown and no job is left, then a few more so
+    /// fades end. Returns the last frame's statistics.
+    pub fn settle(g: &Gpu, v: &mut Viewer, target: &Target, cam: &Camera) -> FrameStats {
+        for _ in 0..20_000 {
+            let st = frame(g, v, target, cam, 0.05);
+            if v.streamer.in_flight() == 0 && st.pop_debt_nodes == 0 {
+                let mut last = st;
+                for _ in 0..10 {
+                    last = frame(g, v, target, cam, 0.1);
+                }
+                return last;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        panic!("the viewer did not settle");
+    }
+}

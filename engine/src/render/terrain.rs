@@ -1,0 +1,585 @@
+//! The terrain renderer: long-lived pipelines (terrain fill, terrain wireframe, sky, debug
+//! lines), per-node GPU buffers, per-frame uniforms.
+
+use super::gpu_data::{FrameUniforms, NODE_UNIFORM_STRIDE, NodeUniforms, TerrainVertex};
+use super::{DEPTH_FORMAT, Gpu};
+use crate::bounds::NodeBounds;
+use crate::mesh::NodeMesh;
+use crate::quadtree::{NodeKey, QuadTree};
+use crate::select::Camera;
+use glam::{DVec3, Vec3};
+use wgpu::util::DeviceExt;
+
+/// The terrain shader source, embedded (release builds use only this copy).
+pub const TERRAIN_WGSL: &str = include_str!("../../../shaders/terrain.wgsl");
+
+/// The shader text: in debug builds the file on disk when present (edit and rerun without a
+/// rebuild), else the embedded copy.
+fn shader_source() -> std::borrow::Cow<'static, str> {
+    #[cfg(debug_assertions)]
+    {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders/terrain.wgsl");
+        if let Ok(s) = std::fs::read_to_string(p) {
+            return s.into();
+        }
+    }
+    TERRAIN_WGSL.into()
+}
+
+/// One node's buffers on the GPU.
+pub struct TerrainNodeGpu {
+    pub key: NodeKey,
+    pub origin_m: [f64; 2],
+    pub bounds: NodeBounds,
+    /// World-space box of the node.
+    pub aabb_m: (DVec3, DVec3),
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    pub bytes: usize,
+}
+
+impl std::fmt::Debug for TerrainNodeGpu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TerrainNodeGpu({:?}, {} bytes)", self.key, self.bytes)
+    }
+}
+
+impl TerrainNodeGpu {
+    pub fn triangles(&self) -> u32 {
+        self.index_count / 3
+    }
+}
+
+/// Debug views and per-view switches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(
+    clippy::struct_excessive_bools,
+    reason = "independent on/off switches of the viewer's panel"
+)]
+pub struct ViewOptions {
+    pub wireframe: bool,
+    pub color_by_level: bool,
+    pub show_bounds: bool,
+    /// Draw the sky gradient (off: the clear colour shows wherever nothing was drawn).
+    pub sky: bool,
+    /// Clear colour (linear RGBA) behind everything.
+    pub clear: [f64; 4],
+    /// Distance fog: density per metre and largest amount (depth cueing, never hiding).
+    pub fog_per_m: f32,
+    pub fog_max: f32,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        Self {
+            wireframe: false,
+            color_by_level: false,
+            show_bounds: false,
+            sky: true,
+            clear: [0.0, 0.0, 0.0, 1.0],
+            fog_per_m: 1.0 / 12_000.0,
+            fog_max: 0.55,
+        }
+    }
+}
+
+/// One node to draw and its dither interval.
+#[derive(Debug, Clone, Copy)]
+pub struct Draw<'a> {
+    pub node: &'a TerrainNodeGpu,
+    pub dither_lo: f32,
+    pub dither_hi: f32,
+}
+
+/// What one frame drew.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DrawStats {
+    pub draw_calls: u32,
+    pub triangles: u64,
+    pub culled: u32,
+}
+
+pub struct TerrainRenderer {
+    fill: wgpu::RenderPipeline,
+    wire: Option<wgpu::RenderPipeline>,
+    sky: wgpu::RenderPipeline,
+    lines: wgpu::RenderPipeline,
+    frame_buffer: wgpu::Buffer,
+    frame_group: wgpu::BindGroup,
+    node_layout: wgpu::BindGroupLayout,
+    node_buffer: wgpu::Buffer,
+    node_group: wgpu::BindGroup,
+    node_capacity: u64,
+    line_buffer: wgpu::Buffer,
+    line_capacity: u64,
+}
+
+impl std::fmt::Debug for TerrainRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TerrainRenderer({} node slots)", self.node_capacity)
+    }
+}
+
+fn srgb_to_linear(c: u8) -> f32 {
+    let c = f32::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn node_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    buffer: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("terrain node uniforms"),
+        layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer,
+                offset: 0,
+                size: wgpu::BufferSize::new(std::mem::size_of::<NodeUniforms>() as u64),
+            }),
+        }],
+    })
+}
+
+impl TerrainRenderer {
+    /// Pipelines drawing into `color_format` (an sRGB format) for `legend_srgb` ground colours
+    /// (the map's legend, at most 256).
+    pub fn new(gpu: &Gpu, color_format: wgpu::TextureFormat, legend_srgb: &[[u8; 3]]) -> Self {
+        let device = &gpu.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("terrain.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shader_source()),
+        });
+        let uniform_entry =
+            |binding: u32, dynamic: bool, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: vis,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: dynamic,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+        let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("terrain frame layout"),
+            entries: &[uniform_entry(0, false, vf), uniform_entry(1, false, vf)],
+        });
+        let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("terrain node layout"),
+            entries: &[uniform_entry(0, true, vf)],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("terrain pipeline layout"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&node_layout)],
+            immediate_size: 0,
+        });
+        let frame_only = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("sky/lines pipeline layout"),
+            bind_group_layouts: &[Some(&frame_layout)],
+            immediate_size: 0,
+        });
+        let vertex_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<TerrainVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Uint32],
+        };
+        let depth = |write: bool, compare: wgpu::CompareFunction| wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(write),
+            depth_compare: Some(compare),
+            stencil: wgpu::StencilState::default(),
+            bias: wgpu::DepthBiasState::default(),
+        };
+        let target = [Some(wgpu::ColorTargetState {
+            format: color_format,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })];
+        let terrain_pipeline = |label: &str, mode: wgpu::PolygonMode| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    buffers: &[Some(vertex_layout.clone())],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    polygon_mode: mode,
+                    ..Default::default()
+                },
+                depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    targets: &target,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let fill = terrain_pipeline("terrain fill", wgpu::PolygonMode::Fill);
+        let wire = gpu
+            .wireframe
+            .then(|| terrain_pipeline("terrain wireframe", wgpu::PolygonMode::Line));
+        let simple = |label: &str,
+                      vs: &str,
+                      fs: &str,
+                      topology: wgpu::PrimitiveTopology,
+                      buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+                      depth_state: wgpu::DepthStencilState| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&frame_only),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(vs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    buffers,
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology,
+                    ..Default::default()
+                },
+                depth_stencil: Some(depth_state),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    targets: &target,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let sky = simple(
+            "sky",
+            "vs_sky",
+            "fs_sky",
+            wgpu::PrimitiveTopology::TriangleList,
+            &[],
+            depth(false, wgpu::CompareFunction::Always),
+        );
+        let line_layout = wgpu::VertexBufferLayout {
+            array_stride: 12,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+        };
+        let lines = simple(
+            "node bounds lines",
+            "vs_lines",
+            "fs_lines",
+            wgpu::PrimitiveTopology::LineList,
+            &[Some(line_layout)],
+            depth(false, wgpu::CompareFunction::GreaterEqual),
+        );
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain frame uniforms"),
+            size: std::mem::size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut colors = vec![[0.5f32, 0.5, 0.5, 1.0]; 256];
+        for (c, l) in colors.iter_mut().zip(legend_srgb) {
+            *c = [
+                srgb_to_linear(l[0]),
+                srgb_to_linear(l[1]),
+                srgb_to_linear(l[2]),
+                1.0,
+            ];
+        }
+        let colors_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ground colours"),
+            contents: bytemuck::cast_slice(&colors),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("terrain frame group"),
+            layout: &frame_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: frame_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: colors_buffer.as_entire_binding(),
+                },
+            ],
+        });
+        let node_capacity = 256;
+        let node_buffer = Self::node_buffer(device, node_capacity);
+        let node_group = node_group(device, &node_layout, &node_buffer);
+        let line_capacity = 1024;
+        let line_buffer = Self::line_buffer(device, line_capacity);
+        Self {
+            fill,
+            wire,
+            sky,
+            lines,
+            frame_buffer,
+            frame_group,
+            node_layout,
+            node_buffer,
+            node_group,
+            node_capacity,
+            line_buffer,
+            line_capacity,
+        }
+    }
+
+    fn node_buffer(device: &wgpu::Device, slots: u64) -> wgpu::Buffer {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain node uniforms"),
+            size: slots * NODE_UNIFORM_STRIDE,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    fn line_buffer(device: &wgpu::Device, vertices: u64) -> wgpu::Buffer {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("node bounds lines"),
+            size: vertices * 12,
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Uploads one node mesh (vertices relative to its south-west corner, z absolute).
+    pub fn upload(device: &wgpu::Device, tree: &QuadTree, mesh: &NodeMesh) -> TerrainNodeGpu {
+        let vertices: Vec<TerrainVertex> = mesh
+            .positions
+            .iter()
+            .zip(&mesh.normals)
+            .zip(&mesh.ground)
+            .map(|((p, n), g)| TerrainVertex {
+                position: *p,
+                normal: *n,
+                ground: u32::from(*g),
+            })
+            .collect();
+        let label = format!("node {}/{}/{}", mesh.key.level, mesh.key.ix, mesh.key.iy);
+        let vb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(&format!("{label} vertices")),
+            contents: bytemuck::cast_slice(&vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let ib = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(&format!("{label} indices")),
+            contents: bytemuck::cast_slice(&mesh.indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        let size = tree.node_size_m(mesh.key.level);
+        // The skirts reach below z_min; the box covers them.
+        let skirt_min = mesh
+            .skirt_bottom_m
+            .iter()
+            .copied()
+            .fold(mesh.bounds.z_min_m, f64::min);
+        TerrainNodeGpu {
+            key: mesh.key,
+            origin_m: mesh.origin_m,
+            bounds: mesh.bounds,
+            aabb_m: (
+                DVec3::new(mesh.origin_m[0], mesh.origin_m[1], skirt_min),
+                DVec3::new(
+                    mesh.origin_m[0] + size,
+                    mesh.origin_m[1] + size,
+                    mesh.bounds.z_max_m,
+                ),
+            ),
+            vertices: vb,
+            indices: ib,
+            index_count: mesh.indices.len() as u32,
+            bytes: vertices.len() * std::mem::size_of::<TerrainVertex>() + mesh.indices.len() * 4,
+        }
+    }
+
+    /// Frame uniforms for a camera: the view rotation and an infinite reversed-Z projection.
+    pub fn frame_uniforms(cam: &Camera, view: &ViewOptions) -> FrameUniforms {
+        let f = cam.forward.as_vec3();
+        let u = cam.up.as_vec3();
+        let view_m = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, f, u);
+        // WebGPU convention: NDC z in [0, 1], y up; reversed-Z with an infinite far plane.
+        let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(
+            cam.fovy_rad as f32,
+            cam.aspect() as f32,
+            cam.near_m as f32,
+        );
+        let clip_from_rel = proj * view_m;
+        let sun = Vec3::new(0.45, 0.3, 0.62).normalize();
+        FrameUniforms {
+            clip_from_rel: clip_from_rel.to_cols_array_2d(),
+            rel_from_clip: clip_from_rel.inverse().to_cols_array_2d(),
+            sun_dir: [sun.x, sun.y, sun.z, 0.0],
+            sun_color: [1.0, 0.93, 0.82, 0.0],
+            sky_zenith: [0.16, 0.32, 0.66, 1.0],
+            sky_horizon: [0.62, 0.72, 0.84, 1.0],
+            fog: [
+                view.fog_per_m,
+                view.fog_max,
+                if view.color_by_level { 1.0 } else { 0.0 },
+                0.0,
+            ],
+        }
+    }
+
+    /// Records the frame: sky, visible nodes (culled by their box), optional bounds lines.
+    pub fn render(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        cam: &Camera,
+        draws: &[Draw<'_>],
+        view: &ViewOptions,
+    ) -> DrawStats {
+        let frustum = cam.frustum();
+        let visible: Vec<&Draw<'_>> = draws
+            .iter()
+            .filter(|d| d.dither_hi > d.dither_lo)
+            .filter(|d| frustum.intersects_aabb(d.node.aabb_m.0, d.node.aabb_m.1))
+            .collect();
+        let mut stats = DrawStats {
+            culled: (draws.len() - visible.len()) as u32,
+            ..DrawStats::default()
+        };
+        gpu.queue.write_buffer(
+            &self.frame_buffer,
+            0,
+            bytemuck::bytes_of(&Self::frame_uniforms(cam, view)),
+        );
+        let needed = (visible.len() as u64).max(1);
+        if needed > self.node_capacity {
+            self.node_capacity = needed.next_power_of_two();
+            self.node_buffer = Self::node_buffer(&gpu.device, self.node_capacity);
+            self.node_group = node_group(&gpu.device, &self.node_layout, &self.node_buffer);
+        }
+        let c = cam.position_m;
+        let nodes: Vec<NodeUniforms> = visible
+            .iter()
+            .map(|d| {
+                let o = d.node.origin_m;
+                NodeUniforms {
+                    offset_lo: [
+                        (o[0] - c.x) as f32,
+                        (o[1] - c.y) as f32,
+                        (-c.z) as f32,
+                        d.dither_lo,
+                    ],
+                    hi_level: [d.dither_hi, f32::from(d.node.key.level), 0.0, 0.0],
+                    padding: [[0.0; 4]; 14],
+                }
+            })
+            .collect();
+        if !nodes.is_empty() {
+            gpu.queue
+                .write_buffer(&self.node_buffer, 0, bytemuck::cast_slice(&nodes));
+        }
+        let mut lines: Vec<[f32; 3]> = Vec::new();
+        if view.show_bounds {
+            for d in &visible {
+                let (lo, hi) = (d.node.aabb_m.0 - c, d.node.aabb_m.1 - c);
+                let corner = |i: usize| {
+                    [
+                        if i & 1 == 0 { lo.x } else { hi.x } as f32,
+                        if i & 2 == 0 { lo.y } else { hi.y } as f32,
+                        if i & 4 == 0 { lo.z } else { hi.z } as f32,
+                    ]
+                };
+                for (a, b) in [
+                    (0, 1),
+                    (2, 3),
+                    (4, 5),
+                    (6, 7),
+                    (0, 2),
+                    (1, 3),
+                    (4, 6),
+                    (5, 7),
+                    (0, 4),
+                    (1, 5),
+                    (2, 6),
+                    (3, 7),
+                ] {
+                    lines.push(corner(a));
+                    lines.push(corner(b));
+                }
+            }
+            if lines.len() as u64 > self.line_capacity {
+                self.line_capacity = (lines.len() as u64).next_power_of_two();
+                self.line_buffer = Self::line_buffer(&gpu.device, self.line_capacity);
+            }
+            if !lines.is_empty() {
+                gpu.queue
+                    .write_buffer(&self.line_buffer, 0, bytemuck::cast_slice(&lines));
+            }
+        }
+        let [r, g, b, a] = view.clear;
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("terrain pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &self.frame_group, &[]);
+        if view.sky {
+            pass.set_pipeline(&self.sky);
+            pass.draw(0..3, 0..1);
+        }
+        let pipeline = match (&self.wire, view.wireframe) {
+            (Some(w), true) => w,
+            _ => &self.fill,
+        };
+        pass.set_pipeline(pipeline);
+        for (i, d) in visible.iter().enumerate() {
+            let offset = (i as u64 * NODE_UNIFORM_STRIDE) as u32;
+            pass.set_bind_group(1, &self.node_group, &[offset]);
+            pass.set_vertex_buffer(0, d.node.vertices.slice(..));
+            pass.set_index_buffer(d.node.indices.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..d.node.index_count, 0, 0..1);
+            stats.draw_calls += 1;
+            stats.triangles += u64::from(d.node.triangles());
+        }
+        if view.show_bounds && !lines.is_empty() {
+            pass.set_pipeline(&self.lines);
+            pass.set_vertex_buffer(0, self.line_buffer.slice(..));
+            pass.draw(0..lines.len() as u32, 0..1);
+        }
+        stats
+    }
+}

@@ -1,0 +1,138 @@
+// Terrain nodes: camera-relative positions, reversed-Z, sun + sky ambient shading, ground-type
+// colours, distance fog for depth cueing, screen-door dither cross-fades between levels.
+// `Frame` and `Node` mirror `engine::render::gpu_data::{FrameUniforms, NodeUniforms}`.
+
+struct Frame {
+    // Clip space from camera-relative world space (world axes, camera at the origin).
+    clip_from_rel: mat4x4<f32>,
+    // Inverse of `clip_from_rel` (for sky directions).
+    rel_from_clip: mat4x4<f32>,
+    // xyz: unit direction towards the sun; w: unused.
+    sun_dir: vec4<f32>,
+    // rgb: sun colour (linear); w: unused.
+    sun_color: vec4<f32>,
+    sky_zenith: vec4<f32>,
+    sky_horizon: vec4<f32>,
+    // x: fog density per metre, y: largest fog amount, z: debug mode, w: unused.
+    fog: vec4<f32>,
+};
+
+struct Node {
+    // xyz: node origin minus camera (m); w: dither interval start.
+    offset_lo: vec4<f32>,
+    // x: dither interval end, y: quad-tree level, z: 1 for skirts-as-surface debug, w: unused.
+    hi_level: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<uniform> ground_colors: array<vec4<f32>, 256>;
+@group(1) @binding(0) var<uniform> node: Node;
+
+struct VertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) ground: u32,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    // Ground colour looked up per vertex and interpolated, so type borders blend.
+    @location(2) albedo: vec3<f32>,
+};
+
+@vertex
+fn vs_main(v: VertexIn) -> VertexOut {
+    var out: VertexOut;
+    let rel = v.position + node.offset_lo.xyz;
+    out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.rel = rel;
+    out.normal = v.normal;
+    out.albedo = ground_colors[min(v.ground, 255u)].rgb;
+    return out;
+}
+
+// 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
+fn bayer8(p: vec2<u32>) -> f32 {
+    var v = 0u;
+    var x = p.x;
+    var y = p.y;
+    for (var bit = 0u; bit < 3u; bit = bit + 1u) {
+        let bx = x & 1u;
+        let by = y & 1u;
+        v = (v << 2u) | ((bx ^ by) << 1u) | by;
+        x = x >> 1u;
+        y = y >> 1u;
+    }
+    // The lowest coordinate bits end up as the most significant digit (classic Bayer order).
+    return (f32(v) + 0.5) / 64.0;
+}
+
+fn level_color(level: f32) -> vec3<f32> {
+    let t = level * 0.61803;
+    return 0.5 + 0.45 * cos(6.28318 * (vec3<f32>(t) + vec3<f32>(0.0, 0.33, 0.67)));
+}
+
+fn sky_color(dir: vec3<f32>) -> vec3<f32> {
+    let up = clamp(dir.z, 0.0, 1.0);
+    return mix(frame.sky_horizon.rgb, frame.sky_zenith.rgb, pow(up, 0.6));
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    let t = bayer8(vec2<u32>(in.clip.xy));
+    if (t < node.offset_lo.w || t >= node.hi_level.x) {
+        discard;
+    }
+    let mode = u32(frame.fog.z + 0.5);
+    var albedo = in.albedo;
+    if (mode == 1u) {
+        albedo = level_color(node.hi_level.y);
+    }
+    let n = normalize(in.normal);
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
+    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
+    var color = albedo * (frame.sun_color.rgb * sun + ambient);
+    let dist = length(in.rel);
+    let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
+    color = mix(color, sky_color(normalize(in.rel)), fog);
+    return vec4<f32>(color, 1.0);
+}
+
+// Sky: one full-screen triangle at the far plane (depth 0 in reversed-Z), drawn first.
+struct SkyOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) ndc: vec2<f32>,
+};
+
+@vertex
+fn vs_sky(@builtin(vertex_index) i: u32) -> SkyOut {
+    let xy = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - 1.0;
+    var out: SkyOut;
+    out.clip = vec4<f32>(xy, 0.0, 1.0);
+    out.ndc = xy;
+    return out;
+}
+
+@fragment
+fn fs_sky(in: SkyOut) -> @location(0) vec4<f32> {
+    let far = frame.rel_from_clip * vec4<f32>(in.ndc, 0.5, 1.0);
+    let dir = normalize(far.xyz / far.w);
+    var color = sky_color(dir);
+    // Sun disc.
+    let s = max(dot(dir, frame.sun_dir.xyz), 0.0);
+    color = color + frame.sun_color.rgb * pow(s, 800.0) * 4.0;
+    return vec4<f32>(color, 1.0);
+}
+
+// Node bounds (debug): line list of camera-relative box corners, one colour.
+@vertex
+fn vs_lines(@location(0) rel: vec3<f32>) -> @builtin(position) vec4<f32> {
+    return frame.clip_from_rel * vec4<f32>(rel, 1.0);
+}
+
+@fragment
+fn fs_lines() -> @location(0) vec4<f32> {
+    return vec4<f32>(1.0, 0.9, 0.1, 1.0);
+}
