@@ -69,12 +69,22 @@ pub fn auto_flyover(world: &World, t: f64, viewport_px: [u32; 2]) -> Camera {
         })
         .fold(f64::NEG_INFINITY, f64::max);
     let climb = ((t - 0.5) / 0.5).clamp(0.0, 1.0);
-    let above = 25.0 + climb * climb * 0.45 * s[0].max(s[1]);
+    let above = 25.0 + climb * climb * 0.6 * s[0].max(s[1]);
     let p = path(t);
     let pos = DVec3::new(p[0], p[1], ground + above);
     let ahead = DVec3::new(s[0] * 0.6, s[1] * 0.45, 0.0).normalize();
-    let pitch = -(0.1 + 0.55 * climb);
-    let dir = DVec3::new(ahead.x * pitch.cos(), ahead.y * pitch.cos(), pitch.sin());
+    let pitch: f64 = -0.1;
+    let low = DVec3::new(ahead.x * pitch.cos(), ahead.y * pitch.cos(), pitch.sin());
+    // While climbing, turn from straight ahead to the map's centre, so the end is an overview.
+    let centre = DVec3::new(
+        o[0] + s[0] * 0.5,
+        o[1] + s[1] * 0.5,
+        world.height_m(o[0] + s[0] * 0.5, o[1] + s[1] * 0.5),
+    );
+    let w = climb * climb * (3.0 - 2.0 * climb);
+    let dir = low
+        .lerp((centre - pos).normalize_or(low), w)
+        .normalize_or(low);
     Camera::look_at(pos, pos + dir, 60f64.to_radians(), viewport_px)
 }
 

@@ -589,6 +589,7 @@ mod window {
     fn panel(
         ui: &mut egui::Ui,
         st_ui: &mut Ui,
+        view: &mut engine::render::terrain::ViewOptions,
         s: &FrameStats,
         frame_ms: f64,
         gpu: &Gpu,
@@ -606,6 +607,13 @@ mod window {
         ui.separator();
         ui.heading("Debug views");
         let mut fixed = st_ui.fixed_level.is_some();
+        if gpu.wireframe {
+            ui.checkbox(&mut view.wireframe, "wireframe");
+        } else {
+            ui.label("wireframe: not supported by this adapter");
+        }
+        ui.checkbox(&mut view.color_by_level, "colour by level");
+        ui.checkbox(&mut view.show_bounds, "node bounds");
         ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
         ui.checkbox(&mut fixed, "fixed level");
         if fixed {
@@ -653,8 +661,10 @@ mod window {
 
     fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>, script: &World2) -> Result<()> {
         let now = Instant::now();
-        let dt = (now - st.last_frame).as_secs_f64().min(0.1);
-        st.frame_ms = st.frame_ms * 0.9 + dt * 1e3 * 0.1;
+        let elapsed_s = (now - st.last_frame).as_secs_f64();
+        st.frame_ms = st.frame_ms * 0.9 + elapsed_s * 1e3 * 0.1;
+        // The simulation step is capped, so a slow frame does not jump the camera.
+        let dt = elapsed_s.min(0.1);
         st.last_frame = now;
         let vp = [st.config.width, st.config.height];
         if st.auto {
@@ -752,10 +762,10 @@ mod window {
         };
         for _ in 0..passes {
             let input = st.egui_input.take_egui_input(&st.window);
-            let (ui_state, gpu, fm) = (&mut st.ui, &st.gpu, st.frame_ms);
+            let (ui_state, view, gpu, fm) = (&mut st.ui, &mut st.viewer.view, &st.gpu, st.frame_ms);
             let mut out = st.egui_ctx.run_ui(input, |ui| {
                 egui::Panel::left("controls").show(ui, |ui| {
-                    panel(ui, ui_state, &stats, fm, gpu, &extra);
+                    panel(ui, ui_state, view, &stats, fm, gpu, &extra);
                 });
             });
             // Texture changes of an earlier pass still have to reach the renderer.
@@ -789,26 +799,7 @@ mod window {
             &prims,
             &screen,
         );
-        {
-            let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("egui pass"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            let mut pass = pass.forget_lifetime();
-            st.egui_renderer.render(&mut pass, &prims, &screen);
-        }
+        draw_ui(&mut enc, &view, &st.egui_renderer, &prims, &screen);
         st.gpu
             .queue
             .submit(extra_cmds.into_iter().chain([enc.finish()]));
@@ -820,7 +811,7 @@ mod window {
         textures.clear();
         if st.screenshot {
             st.screenshot = false;
-            screenshot(st, cli)?;
+            screenshot(st, cli, &prims, &screen)?;
         }
         if let Some(p) = &cli.stats_file {
             let doc = serde_json::json!({
@@ -838,11 +829,43 @@ mod window {
         Ok(())
     }
 
+    /// Draws the UI over what `view` already holds.
+    fn draw_ui(
+        enc: &mut wgpu::CommandEncoder,
+        view: &wgpu::TextureView,
+        renderer: &egui_wgpu::Renderer,
+        prims: &[egui::ClippedPrimitive],
+        screen: &egui_wgpu::ScreenDescriptor,
+    ) {
+        let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("egui pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Load,
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        renderer.render(&mut pass.forget_lifetime(), prims, screen);
+    }
+
     /// Renders the current view again into an offscreen target (a window surface may not be a
     /// copy source) and writes it as PNG.
-    fn screenshot(st: &mut State, cli: &Cli) -> Result<()> {
+    fn screenshot(
+        st: &mut State,
+        cli: &Cli,
+        prims: &[egui::ClippedPrimitive],
+        screen: &egui_wgpu::ScreenDescriptor,
+    ) -> Result<()> {
         let size = [st.config.width, st.config.height];
-        let target = Target::new(&st.gpu.device, size, st.config.format.add_srgb_suffix());
+        let target = Target::with_srgb_view(&st.gpu.device, size, st.config.format);
         let mut enc = st
             .gpu
             .device
@@ -856,6 +879,13 @@ mod window {
             &target.depth_view,
             &st.cam,
             0.0,
+        );
+        draw_ui(
+            &mut enc,
+            &target.plain_view,
+            &st.egui_renderer,
+            prims,
+            screen,
         );
         st.gpu.queue.submit([enc.finish()]);
         std::fs::create_dir_all(&cli.out)?;

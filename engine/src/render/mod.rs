@@ -122,13 +122,27 @@ pub struct Target {
     pub size: [u32; 2],
     pub format: wgpu::TextureFormat,
     pub color: wgpu::Texture,
+    /// The view the terrain draws through (sRGB).
     pub color_view: wgpu::TextureView,
+    /// A view in the texture's own format (for overlays such as egui that want a linear one).
+    pub plain_view: wgpu::TextureView,
     pub depth_view: wgpu::TextureView,
 }
 
 impl Target {
     /// A target of `size` pixels in `format` (RGBA or BGRA, 8 bits).
     pub fn new(device: &wgpu::Device, size: [u32; 2], format: wgpu::TextureFormat) -> Self {
+        Self::with_srgb_view(device, size, format)
+    }
+
+    /// A target stored in `format` whose `color_view` is the sRGB variant of it (the same when
+    /// `format` is already sRGB) and `plain_view` the format itself.
+    pub fn with_srgb_view(
+        device: &wgpu::Device,
+        size: [u32; 2],
+        format: wgpu::TextureFormat,
+    ) -> Self {
+        let srgb = format.add_srgb_suffix();
         let extent = wgpu::Extent3d {
             width: size[0],
             height: size[1],
@@ -142,15 +156,20 @@ impl Target {
             dimension: wgpu::TextureDimension::D2,
             format,
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
+            view_formats: &[srgb],
         });
-        let color_view = color.create_view(&wgpu::TextureViewDescriptor::default());
+        let color_view = color.create_view(&wgpu::TextureViewDescriptor {
+            format: Some(srgb),
+            ..Default::default()
+        });
+        let plain_view = color.create_view(&wgpu::TextureViewDescriptor::default());
         let depth_view = depth_view(device, size, "offscreen depth");
         Self {
             size,
             format,
             color,
             color_view,
+            plain_view,
             depth_view,
         }
     }

@@ -78,8 +78,8 @@ impl Default for ViewOptions {
             show_bounds: false,
             sky: true,
             clear: [0.0, 0.0, 0.0, 1.0],
-            fog_per_m: 1.0 / 12_000.0,
-            fog_max: 0.55,
+            fog_per_m: 1.0 / 25_000.0,
+            fog_max: 0.35,
         }
     }
 }
