@@ -210,6 +210,10 @@ pub struct FrameStats {
     pub encode_ms: f64,
     /// Waiting for the GPU to finish the frame (headless; windowed, the present waits).
     pub gpu_wait_ms: f64,
+    /// GPU time of the terrain pass from timestamp queries (a recent frame's), when supported.
+    pub gpu_terrain_ms: Option<f64>,
+    /// Of `update_ms`: the selection of wanted nodes.
+    pub selection_ms: f64,
     pub cpu_frame_ms: f64,
     pub draw_calls: u32,
     pub triangles: u64,
@@ -233,6 +237,7 @@ pub struct Viewer {
     pub view: ViewOptions,
     /// Debug: when set, selection uses this camera while rendering follows the live one.
     pub frozen: Option<Camera>,
+    timer: Option<crate::render::GpuTimer>,
     frame: u64,
 }
 
@@ -262,6 +267,7 @@ impl Viewer {
             renderer: TerrainRenderer::new(gpu, color_format, &legend),
             view: ViewOptions::default(),
             frozen: None,
+            timer: crate::render::GpuTimer::new(gpu),
             frame: 0,
         }
     }
@@ -308,9 +314,16 @@ impl Viewer {
                 })
             })
             .collect();
+        if let Some(t) = self.timer.as_mut() {
+            t.harvest(gpu);
+        }
+        let timed = self.timer.as_ref().is_some_and(|t| t.begin(encoder));
         let drawn: DrawStats = self
             .renderer
             .render(gpu, encoder, color, depth, cam, &draws, &self.view);
+        if timed && let Some(t) = &self.timer {
+            t.end(encoder);
+        }
         let mut per_level = vec![0usize; usize::from(self.streamer.tree().max_level) + 1];
         for d in &draws {
             per_level[usize::from(d.node.key.level)] += 1;
@@ -335,6 +348,8 @@ impl Viewer {
             upload_ms: ms(t1, t2),
             encode_ms: ms(t2, t3),
             gpu_wait_ms: 0.0,
+            gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
+            selection_ms: st.last_selection_s * 1e3,
             cpu_frame_ms: ms(t0, t3),
             draw_calls: drawn.draw_calls,
             triangles: drawn.triangles,
@@ -348,6 +363,14 @@ impl Viewer {
             node_buffers_bytes: node_bytes,
             cache_bytes: st.resident_bytes,
             pop_debt_nodes: wanted_missing,
+        }
+    }
+
+    /// Call after submitting the encoder given to [`Self::frame`] (starts the timestamp
+    /// readback).
+    pub fn after_submit(&self) {
+        if let Some(t) = &self.timer {
+            t.after_submit();
         }
     }
 

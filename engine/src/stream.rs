@@ -364,6 +364,8 @@ pub struct StreamStats {
     pub drawn: usize,
     /// Request-to-ready latencies (s) of jobs completed since the last `take_latencies`.
     pub latencies_s: Vec<f64>,
+    /// Time of the last update's two selections (display and prefetch sets).
+    pub last_selection_s: f64,
 }
 
 /// The streaming system. Owned by one thread (the render thread); workers run CPU phases.
@@ -568,12 +570,14 @@ impl Streamer {
         self.camera = Some(*cam);
         self.collect_results();
         let tau = self.settings.tau_px;
+        let t_select = Instant::now();
         self.wanted = self.select_wanted(cam, tau * self.settings.split_factor);
         // Everything on the path from the root to a wanted node is needed too (ancestors are
         // what is shown until the wanted nodes are ready).
         self.to_split = Self::ancestors_of(&self.wanted);
         self.needed = self.needed_for(&self.wanted, &self.to_split);
         let prefetch_wanted = self.select_wanted(cam, tau * self.settings.prefetch_factor);
+        self.stats.last_selection_s = t_select.elapsed().as_secs_f64();
         let prefetch_ancestors = Self::ancestors_of(&prefetch_wanted);
         self.prefetch = self.needed_for(&prefetch_wanted, &prefetch_ancestors);
         self.prefetch.retain(|k| !self.needed.contains(k));

@@ -165,6 +165,7 @@ fn run_headless(cli: &Cli) -> Result<()> {
         );
         let t0 = Instant::now();
         gpu.queue.submit([enc.finish()]);
+        viewer.after_submit();
         gpu.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
@@ -180,14 +181,19 @@ fn run_headless(cli: &Cli) -> Result<()> {
     }
     bar.finish_and_clear();
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 7] = [
+    let rows: [(&str, Vec<f64>); 9] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
         ),
+        ("  of which selection", col(|s| s.selection_ms)),
         ("GPU uploads", col(|s| s.upload_ms)),
         ("encode", col(|s| s.encode_ms)),
         ("GPU wait", col(|s| s.gpu_wait_ms)),
+        (
+            "GPU terrain pass (timestamp queries, when supported)",
+            all.iter().filter_map(|s| s.gpu_terrain_ms).collect(),
+        ),
         (
             "CPU frame (update + uploads + encode)",
             col(|s| s.cpu_frame_ms),
@@ -632,10 +638,10 @@ mod window {
             s.upload_ms,
             s.encode_ms
         ));
-        ui.label(if gpu.timestamps {
-            "GPU timestamps supported (not shown yet)"
-        } else {
-            "GPU time: timestamps not supported by this adapter"
+        ui.label(match (gpu.timestamps, s.gpu_terrain_ms) {
+            (true, Some(ms)) => format!("GPU: terrain pass {ms:.2} ms (timestamp queries)"),
+            (true, None) => "GPU: waiting for the first timestamps".to_string(),
+            (false, _) => "GPU time: timestamps not supported by this adapter".to_string(),
         });
         ui.label(format!(
             "triangles {}  draw calls {}  nodes {}",
@@ -803,6 +809,7 @@ mod window {
         st.gpu
             .queue
             .submit(extra_cmds.into_iter().chain([enc.finish()]));
+        st.viewer.after_submit();
         st.gpu.queue.present(frame);
         for id in &textures.free {
             st.egui_renderer.free_texture(id);
