@@ -18,6 +18,7 @@
 
 use rustc_hash::FxHashMap;
 use worldgen::map::{Decal, DecalKind};
+use worldgen::roads::segment_closest;
 use worldgen::sample::catmull_rom_weights;
 
 /// Spacing (m) of the decal offset lattice.
@@ -57,18 +58,6 @@ pub struct DecalField {
     coarse: Vec<bool>,
     coarse_dims: [usize; 2],
     coarse_cell_m: f64,
-}
-
-/// Distance from `p` to segment `ab` and the segment parameter of the closest point.
-fn segment_closest(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, f64) {
-    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = abx * abx + aby * aby;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * abx + (p[1] - a[1]) * aby) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    ((p[0] - (a[0] + t * abx)).hypot(p[1] - (a[1] + t * aby)), t)
 }
 
 /// Even-odd point-in-polygon test.

@@ -140,36 +140,18 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
     let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
     // Red (legend 0) is 1 cm above blue (legend 1).
     let mut r = TerrainRenderer::new(&g, COLOR_FORMAT, &[[255, 0, 0], [0, 0, 255]]);
-    let near_quad = TerrainRenderer::upload(
-        &g.device,
-        &tree,
-        &quad(
-            NodeKey {
-                level: 0,
-                ix: 0,
-                iy: 0,
-            },
-            [-3000.0, -3000.0],
-            6000.0,
-            0.01,
-            0,
-        ),
-    );
-    let far_quad = TerrainRenderer::upload(
-        &g.device,
-        &tree,
-        &quad(
-            NodeKey {
-                level: 0,
-                ix: 0,
-                iy: 0,
-            },
-            [-3000.0, -3000.0],
-            6000.0,
-            0.0,
-            1,
-        ),
-    );
+    let key = NodeKey {
+        level: 0,
+        ix: 0,
+        iy: 0,
+    };
+    let [near_quad, far_quad] = [(0.01, 0), (0.0, 1)].map(|(z_m, ground)| {
+        TerrainRenderer::upload(
+            &g.device,
+            &tree,
+            &quad(key, [-3000.0, -3000.0], 6000.0, z_m, ground),
+        )
+    });
     // 5 km up, looking straight down (slightly tilted so look_at has an up vector).
     let p = DVec3::new(0.0, 0.0, 5000.0);
     let mut cam = Camera::look_at(p, DVec3::new(0.0, 1.0, 0.0), 40f64.to_radians(), size);

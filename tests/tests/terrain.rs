@@ -647,14 +647,7 @@ fn closest_on_line(points: &[[f64; 3]], p: [f64; 2]) -> (f64, f64) {
     let mut best = (f64::INFINITY, 0.0);
     for s in points.windows(2) {
         let (a, b) = (s[0], s[1]);
-        let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
-        let len2 = abx * abx + aby * aby;
-        let t = if len2 > 0.0 {
-            (((p[0] - a[0]) * abx + (p[1] - a[1]) * aby) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let d = (p[0] - a[0] - t * abx).hypot(p[1] - a[1] - t * aby);
+        let (d, t) = worldgen::roads::segment_closest(p, [a[0], a[1]], [b[0], b[1]]);
         if d < best.0 {
             best = (d, a[2] + t * (b[2] - a[2]));
         }

@@ -301,6 +301,12 @@ pub fn plan(inp: &RoadInputs<'_>) -> RoadNetwork {
 
 /// Distance from point p to segment ab (2-D).
 pub fn point_segment_distance_m(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    segment_closest(p, a, b).0
+}
+
+/// Distance (m) from point p to segment ab (2-D) and the segment parameter in [0, 1] of the
+/// closest point.
+pub fn segment_closest(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, f64) {
     let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
     let len2 = abx * abx + aby * aby;
     let t = if len2 > 0.0 {
@@ -308,7 +314,7 @@ pub fn point_segment_distance_m(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     } else {
         0.0
     };
-    (p[0] - (a[0] + t * abx)).hypot(p[1] - (a[1] + t * aby))
+    ((p[0] - (a[0] + t * abx)).hypot(p[1] - (a[1] + t * aby)), t)
 }
 
 /// A boolean grid (`w` x `h` samples at `placement`) marking samples within half a decal's width
