@@ -136,7 +136,6 @@ fn run_headless(cli: &Cli) -> Result<()> {
     eprintln!("headless on {}", gpu.adapter_name());
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
-    let script_world = World2::open(&cli.map)?;
     let mut viewer = Viewer::new(&gpu, COLOR_FORMAT, world, settings(cli));
     let bar = indicatif::ProgressBar::new(cli.frames);
     bar.set_style(
@@ -149,7 +148,13 @@ fn run_headless(cli: &Cli) -> Result<()> {
     let mut written = Vec::new();
     for f in 0..cli.frames {
         let t_s = f as f64 * dt;
-        let cam = scripted_camera(cli, path.as_ref(), &script_world.0, t_s, cli.size);
+        let cam = scripted_camera(
+            cli,
+            path.as_ref(),
+            &viewer.streamer.shared.world,
+            t_s,
+            cli.size,
+        );
         let mut enc = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -238,16 +243,6 @@ fn run_headless(cli: &Cli) -> Result<()> {
     Ok(())
 }
 
-/// A second copy of the world for the scripted camera (ground heights), so the viewer's world
-/// can move into the streamer.
-struct World2(engine::world::World);
-
-impl World2 {
-    fn open(dir: &std::path::Path) -> Result<Self> {
-        Ok(Self(open_world(dir, &worldgen::progress::Silent)?))
-    }
-}
-
 fn display_available() -> bool {
     std::env::var_os("DISPLAY").is_some_and(|v| !v.is_empty())
         || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|v| !v.is_empty())
@@ -284,7 +279,7 @@ mod window {
 
     use super::{
         Arc, CameraPath, Cli, Context, DVec3, FrameStats, Gpu, Instant, PathKey, Result, Target,
-        Viewer, World2, bail, scripted_camera, settings, write_png,
+        Viewer, bail, open_world, scripted_camera, settings, write_png,
     };
     use engine::select::Camera;
     use winit::application::ApplicationHandler;
@@ -295,13 +290,13 @@ mod window {
 
     pub fn run(cli: &Cli) -> Result<()> {
         // Open the map before the window, so a map error is reported plainly.
-        let script_world =
-            World2::open(&cli.map).with_context(|| format!("opening map {}", cli.map.display()))?;
+        let world = open_world(&cli.map, &worldgen::progress::Silent)
+            .with_context(|| format!("opening map {}", cli.map.display()))?;
         let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
         let event_loop = EventLoop::new().context("creating the window event loop")?;
         let mut app = App {
             cli: cli.clone(),
-            script_world,
+            world: Some(world),
             path,
             state: None,
             error: None,
@@ -354,7 +349,8 @@ mod window {
 
     struct App {
         cli: Cli,
-        script_world: World2,
+        /// The opened map, moved into the viewer when the window exists.
+        world: Option<engine::world::World>,
         path: Option<CameraPath>,
         state: Option<State>,
         error: Option<anyhow::Error>,
@@ -397,7 +393,12 @@ mod window {
                 [config.width, config.height],
                 "window depth",
             );
-            let world = World2::open(&cli.map)?.0;
+            let world = self
+                .world
+                .take()
+                .context("the window was initialised twice")?;
+            let vp = [config.width, config.height];
+            let cam = scripted_camera(cli, self.path.as_ref(), &world, 0.0, vp);
             let viewer = Viewer::new(&gpu, config.format.add_srgb_suffix(), world, settings(cli));
             let egui_ctx = egui::Context::default();
             let egui_state = egui_winit::State::new(
@@ -413,8 +414,6 @@ mod window {
                 config.format,
                 egui_wgpu::RendererOptions::default(),
             );
-            let vp = [config.width, config.height];
-            let cam = scripted_camera(cli, self.path.as_ref(), &self.script_world.0, 0.0, vp);
             let ws = viewer.streamer.settings;
             Ok(State {
                 window,
@@ -552,7 +551,7 @@ mod window {
                     st.speed_m_s = (st.speed_m_s * 1.25f64.powf(lines)).clamp(1.0, 5000.0);
                 }
                 WindowEvent::RedrawRequested => {
-                    if let Err(e) = redraw(st, &self.cli, self.path.as_ref(), &self.script_world) {
+                    if let Err(e) = redraw(st, &self.cli, self.path.as_ref()) {
                         self.error = Some(e);
                         el.exit();
                     }
@@ -665,7 +664,7 @@ mod window {
         ui.label(extra);
     }
 
-    fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>, script: &World2) -> Result<()> {
+    fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
         let now = Instant::now();
         let elapsed_s = (now - st.last_frame).as_secs_f64();
         st.frame_ms = st.frame_ms * 0.9 + elapsed_s * 1e3 * 0.1;
@@ -675,7 +674,7 @@ mod window {
         let vp = [st.config.width, st.config.height];
         if st.auto {
             st.t_s += dt;
-            st.cam = scripted_camera(cli, path, &script.0, st.t_s, vp);
+            st.cam = scripted_camera(cli, path, &st.viewer.streamer.shared.world, st.t_s, vp);
             st.yaw_pitch = (
                 st.cam.forward.y.atan2(st.cam.forward.x),
                 st.cam.forward.z.asin(),
@@ -703,7 +702,7 @@ mod window {
             let mut s = st.viewer.streamer.settings;
             s.workers = st.ui.workers;
             s.max_in_flight = s.workers + 1;
-            let world = World2::open(&cli.map)?.0;
+            let world = engine::world::World::new(st.viewer.streamer.shared.world.map.clone());
             st.viewer.streamer =
                 engine::stream::Streamer::new(world, s, engine::stream::terrain_phases());
         }
