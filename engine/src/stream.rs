@@ -845,6 +845,11 @@ impl Streamer {
         if self.drawn.is_empty() && self.resident.contains_key(&NodeKey::ROOT) {
             self.drawn = self.compute_draw_list();
         }
+        // Finished nodes add bytes: keep the cache within its budget here too, not only in
+        // `update` (otherwise the budget holds only until the next GPU phase).
+        if ran > 0 {
+            self.evict();
+        }
         self.refresh_stats();
         ran
     }
