@@ -146,6 +146,20 @@ pub mod terrain {
     /// Builds a node mesh the way the engine does (tiles for small nodes).
     pub use engine::mesh::build_with_tiles as build_mesh;
 
+    /// The meshes of every selected node, by key.
+    pub fn build_selection(
+        world: &World,
+        tree: &QuadTree,
+        cache: &mut engine::bounds::BoundsCache,
+        tiles: &mut engine::tiles::TileCache,
+        sel: &engine::select::Selection,
+    ) -> std::collections::HashMap<engine::quadtree::NodeKey, NodeMesh> {
+        sel.nodes
+            .iter()
+            .map(|s| (s.key, build_mesh(world, tree, cache, tiles, s.key)))
+            .collect()
+    }
+
     /// The true largest |mesh - surface| of a node, measured on a dense lattice of 10 points
     /// per mesh quad (not aligned with the engine's 4-per-quad check lattice), plus the largest
     /// distance of the surface outside the node's height range.

@@ -11,7 +11,8 @@ use engine::world::World;
 use glam::DVec3;
 use std::collections::HashMap as Map;
 use tests::terrain::{
-    build_mesh, cliff_world, measure_true_error, ray_mesh, shifted, tiny_world, tree_of,
+    build_mesh, build_selection, cliff_world, measure_true_error, ray_mesh, shifted, tiny_world,
+    tree_of,
 };
 use worldgen::noise::unit3;
 
@@ -347,16 +348,7 @@ fn selections_are_watertight_from_random_cameras() {
                     cull: true,
                 },
             );
-            let meshes: Map<NodeKey, NodeMesh> = sel
-                .nodes
-                .iter()
-                .map(|s| {
-                    (
-                        s.key,
-                        build_mesh(&world, &tree, &mut cache, &mut tiles, s.key),
-                    )
-                })
-                .collect();
+            let meshes = build_selection(&world, &tree, &mut cache, &mut tiles, &sel);
             let (below, holes) = count_holes(&world, &tree, &meshes, &cam);
             assert_eq!(
                 holes, 0,
@@ -614,16 +606,7 @@ fn imported_srtm_sea_is_exact_and_the_coast_is_watertight() {
         levels.len() >= 3,
         "expected mixed levels along the coast, got {levels:?}"
     );
-    let meshes: Map<NodeKey, NodeMesh> = sel
-        .nodes
-        .iter()
-        .map(|s| {
-            (
-                s.key,
-                build_mesh(&world, &tree, &mut cache, &mut tiles, s.key),
-            )
-        })
-        .collect();
+    let meshes = build_selection(&world, &tree, &mut cache, &mut tiles, &sel);
     for s in &sel.nodes {
         let (true_err, outside) = measure_true_error(&world, &tree, &meshes[&s.key]);
         assert!(
