@@ -17,8 +17,19 @@
 //! `error <= max over check cells of (max |M - F| at its corners + between(cell))`; the height
 //! range is widened per cell by the same term. The error is measured, then made an upper bound by proof; nothing is guessed.
 //!
-//! Not guaranteed: monotonicity (a child's bound may exceed its parent's on steep detail).
-//! Selection does not need it: each selected node is tested against its own bound.
+//! Monotone errors. The four children of `N` together mesh it with a grid of spacing `s / 2`
+//! whose vertices are every `CHECK_SUBDIV / 2`-th check-lattice point, with the same diagonal
+//! direction, so the argument above applied to that grid on the same check cells bounds every
+//! child's error: `max over cells of (max |M_C - F| at its corners + between(cell))`. Every
+//! deeper descendant's triangles lie inside one check cell with legs `<= c`, where its error is
+//! at most `between(cell, c)` (its vertices are exact), and that is already inside the children's
+//! term. So `U(N)`, that children's term (computed from the same lattice, no extra surface
+//! evaluations), bounds the true error of every descendant's mesh. The stored error is
+//! `E(N) = min(max(e(N), U(N)), E(parent))` ([`monotone`]): both terms of the `min` are proven
+//! bounds of `N`'s true error (the parent's `E` bounds every descendant of the parent, by
+//! induction from the root, where `E = max(e, U)`), and `E(child) <= E(parent)` by construction.
+//! So errors are monotone and still never guessed; the price is `U(N)` where it exceeds `e(N)`
+//! (where the children's between-points terms dominate), reported by `nodebench`.
 
 use crate::quadtree::{NODE_QUADS, NodeKey, QuadTree};
 use crate::world::World;
@@ -26,14 +37,23 @@ use rustc_hash::FxHashMap;
 
 /// Check-lattice points per mesh quad side.
 pub const CHECK_SUBDIV: u32 = 4;
+const _: () = assert!(
+    CHECK_SUBDIV % 2 == 0,
+    "children's vertices must be lattice points"
+);
 
 /// Height range and error bound of one node.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NodeBounds {
     pub z_min_m: f64,
     pub z_max_m: f64,
-    /// Upper bound of the vertical distance between the node mesh and the finest surface.
+    /// Upper bound of the vertical distance between the node mesh and the finest surface, and of
+    /// the same distance for every descendant's mesh; never larger than the parent's.
     pub error_m: f64,
+    /// The measured bound `e(N)` of this node's own mesh (before the monotone step).
+    pub mesh_error_m: f64,
+    /// `U(N)`: a bound of the error of every descendant's mesh inside this node.
+    pub descendants_error_m: f64,
 }
 
 /// Linear interpolation of vertex heights `v` ((n+1)^2, row-major) at fractional grid position
@@ -86,8 +106,37 @@ pub fn between_bound(b: &crate::world::RegionBounds, c: f64) -> f64 {
     g + h + e
 }
 
-/// Measures the bounds of one node (see the module docs). About 17k surface evaluations.
+/// The stored bounds of a node from its own measurement ([`measure`]) and its parent's stored
+/// bounds (`None` at the root): `error_m = min(max(e, U), E(parent))`.
+pub fn monotone(own: NodeBounds, parent: Option<NodeBounds>) -> NodeBounds {
+    let mut error = own.mesh_error_m.max(own.descendants_error_m);
+    if let Some(p) = parent {
+        error = error.min(p.error_m);
+    }
+    NodeBounds {
+        error_m: error,
+        ..own
+    }
+}
+
+/// The stored bounds of one node, measuring every ancestor on the way (no cache; for tests and
+/// one-off use: the caches below measure each node once).
 pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
+    let mut chain = vec![key];
+    while let Some(p) = chain.last().and_then(|k| k.parent()) {
+        chain.push(p);
+    }
+    let mut parent = None;
+    for &k in chain.iter().rev() {
+        parent = Some(monotone(measure(world, tree, k), parent));
+    }
+    parent.expect("the chain holds the key")
+}
+
+/// Measures the height range, the error bound `e(N)` of one node's own mesh and the bound
+/// `U(N)` of its descendants' meshes (see the module docs; `error_m` = `mesh_error_m` here, before
+/// [`monotone`]). About 17k surface evaluations.
+pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     let r = tree.rect(key);
     let n = NODE_QUADS as usize;
     let sub = CHECK_SUBDIV as usize;
@@ -118,6 +167,29 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
             e_lattice[j * (m + 1) + i] = err_at(i, j);
         }
     }
+    // The four children together mesh the node with a (2n)^2 grid whose vertices are every
+    // (sub / 2)-th lattice point: their |M_C - F| at every lattice point.
+    let half = sub / 2;
+    let nc = 2 * n;
+    let mut child_verts = Vec::with_capacity((nc + 1) * (nc + 1));
+    for j in 0..=nc {
+        for i in 0..=nc {
+            child_verts.push(lattice[(j * half) * (m + 1) + i * half] as f32);
+        }
+    }
+    let mut e_child = vec![0.0f64; (m + 1) * (m + 1)];
+    for j in 0..=m {
+        for i in 0..=m {
+            let f = lattice[j * (m + 1) + i];
+            let g = interpolate_grid(
+                &child_verts,
+                nc,
+                i as f64 / half as f64,
+                j as f64 / half as f64,
+            );
+            e_child[j * (m + 1) + i] = (g - f).abs();
+        }
+    }
     // Fast path: when check cells tile the height and ground cells exactly (aligned, at most
     // one cell in size) and the node is inside the map, each check cell's bounds are its map
     // cells' values, read directly.
@@ -129,6 +201,7 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     let inside = r.max[0] <= o[0] + size[0] + 1e-9 && r.max[1] <= o[1] + size[1] + 1e-9;
     let direct = divides(hs) && divides(gs) && divides(block_m) && inside;
     let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    let mut descendants = 0.0f64;
     for j in 0..m {
         for i in 0..m {
             let cell = crate::world::Rect {
@@ -142,27 +215,37 @@ pub fn compute(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
             };
             let between = between_bound(&region, c);
             let corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)];
-            let mut e = 0.0f64;
+            let (mut e, mut ec) = (0.0f64, 0.0f64);
             for (ci, cj) in corners {
                 let f = lattice[cj * (m + 1) + ci];
                 lo = lo.min(f - between);
                 hi = hi.max(f + between);
                 e = e.max(e_lattice[cj * (m + 1) + ci]);
+                ec = ec.max(e_child[cj * (m + 1) + ci]);
             }
             error = error.max(e + between);
+            descendants = descendants.max(ec + between);
         }
     }
-    // f32 vertex rounding: relative 2^-24 of the height magnitude, twice for safety.
+    // f32 vertex rounding: relative 2^-24 of the height magnitude, twice for safety (descendant
+    // vertices lie in the same proven height range).
     let rounding = 2.0 * hi.abs().max(lo.abs()) * f64::from(f32::EPSILON);
     NodeBounds {
         z_min_m: lo,
         z_max_m: hi,
         error_m: error + rounding,
+        mesh_error_m: error + rounding,
+        // Leaves have no descendants.
+        descendants_error_m: if key.level < tree.max_level {
+            descendants + rounding
+        } else {
+            0.0
+        },
     }
 }
 
 /// Lazily computed bounds per node, shared by selection and mesh generation.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub struct BoundsCache {
     map: FxHashMap<NodeKey, NodeBounds>,
     /// How many nodes were measured (cache misses).
@@ -174,12 +257,13 @@ impl BoundsCache {
         Self::default()
     }
 
-    /// The node's bounds, measured on first use.
+    /// The node's bounds, measured on first use (after its parent's, see [`monotone`]).
     pub fn get(&mut self, world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
         if let Some(b) = self.map.get(&key) {
             return *b;
         }
-        let b = compute(world, tree, key);
+        let parent = key.parent().map(|p| self.get(world, tree, p));
+        let b = monotone(measure(world, tree, key), parent);
         self.computed += 1;
         self.map.insert(key, b);
         b
@@ -188,6 +272,11 @@ impl BoundsCache {
     /// Stores bounds measured elsewhere (they are a pure function of the key).
     pub fn insert(&mut self, key: NodeKey, b: NodeBounds) {
         self.map.insert(key, b);
+    }
+
+    /// Forgets one node's bounds (benchmarks measuring it again).
+    pub fn remove(&mut self, key: NodeKey) {
+        self.map.remove(&key);
     }
 
     /// The bounds if already measured.

@@ -81,12 +81,13 @@ impl BoundsStore {
             .copied()
     }
 
-    /// The node's bounds, measured outside the lock when unknown.
+    /// The node's bounds, measured outside the lock when unknown (after its parent's).
     pub fn get(&self, world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
         if let Some(b) = self.peek(key) {
             return b;
         }
-        let b = bounds::compute(world, tree, key);
+        let parent = key.parent().map(|p| self.get(world, tree, p));
+        let b = bounds::monotone(bounds::measure(world, tree, key), parent);
         self.map
             .lock()
             .unwrap_or_else(PoisonError::into_inner)

@@ -236,6 +236,8 @@ mod tests {
                 z_min_m: 0.0,
                 z_max_m: 0.0,
                 error_m: 0.0,
+                mesh_error_m: 0.0,
+                descendants_error_m: 0.0,
             },
             skirt_bottom_m: [0.0; 4],
         }

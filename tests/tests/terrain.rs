@@ -128,6 +128,80 @@ fn bounds_are_conservative_on_hard_surfaces() {
     }
 }
 
+/// Errors are monotone (a child's never exceeds its parent's) and a node's error bounds the true
+/// error of its descendants' meshes too, on the test map and the cliff map (cliff, spikes, sea).
+#[test]
+fn errors_are_monotone_and_bound_every_descendant() {
+    for (name, world) in [("tiny", tiny_world()), ("cliff", cliff_world())] {
+        let tree = tree_of(&world);
+        let mut cache = BoundsCache::new();
+        let mut tiles = TileCache::new();
+        let mut truth = TrueErrors(Map::new());
+        let (mut pairs, mut descendants, mut clamped) = (0usize, 0usize, 0usize);
+        for i in 0..40i64 {
+            // A random leaf (half of them on the cliff band, the spikes or a road) and its chain.
+            let o = world.origin_m();
+            let s = world.size_m();
+            let (x, y) = if i % 2 == 0 {
+                (o[0] + s[0] * unit3(91, i, 0), o[1] + s[1] * unit3(91, i, 1))
+            } else {
+                let d = &world.map.decals[(i as usize / 2) % world.map.decals.len()];
+                let p = d.points[(i as usize * 7) % d.points.len()];
+                match i % 4 {
+                    1 => (p[0], p[1]),
+                    _ => (
+                        o[0] + 160.0 + unit3(92, i, 0),
+                        o[1] + s[1] * unit3(92, i, 1),
+                    ),
+                }
+            };
+            let leaf = tree.key_at(tree.max_level, x, y).unwrap();
+            let mut child = leaf;
+            while let Some(parent) = child.parent() {
+                let (c, p) = (
+                    cache.get(&world, &tree, child),
+                    cache.get(&world, &tree, parent),
+                );
+                assert!(
+                    c.error_m <= p.error_m,
+                    "{name}: child {child:?} error {} m > parent {parent:?} error {} m",
+                    c.error_m,
+                    p.error_m
+                );
+                if c.error_m < c.mesh_error_m {
+                    clamped += 1;
+                }
+                pairs += 1;
+                child = parent;
+            }
+            // The true error of every node on the chain is bounded by each ancestor's error.
+            let mut chain = vec![leaf];
+            while let Some(p) = chain.last().and_then(|k| k.parent()) {
+                chain.push(p);
+            }
+            for (d, &desc) in chain.iter().enumerate().step_by(3) {
+                let (true_err, _) = truth.get(&world, &tree, &mut cache, &mut tiles, desc);
+                for &anc in &chain[d..] {
+                    let e = cache.get(&world, &tree, anc).error_m;
+                    assert!(
+                        true_err <= e,
+                        "{name}: descendant {desc:?} true error {true_err} m > ancestor {anc:?} \
+                         error {e} m"
+                    );
+                    descendants += 1;
+                }
+            }
+        }
+        assert!(
+            pairs >= 240 && descendants > 100,
+            "{name}: {pairs} pairs, {descendants} checks"
+        );
+        println!(
+            "{name}: {pairs} parent/child pairs, {descendants} descendant checks, {clamped} clamped"
+        );
+    }
+}
+
 #[test]
 fn flat_sea_node_has_zero_error_and_a_flat_box() {
     let world = cliff_world();
