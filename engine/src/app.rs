@@ -31,13 +31,16 @@ pub enum AppError {
     PathFile { path: PathBuf, reason: String },
 }
 
-/// Opens the map at `dir`; the default map folder is generated first when it is missing.
+/// Opens the map at `dir`; the default map folder is generated first when it is missing, and
+/// generated again when it was written by an older version of the map format (it is ours to
+/// regenerate; any other map gets the version error).
 pub fn open_world(
     dir: &Path,
     progress: &dyn worldgen::progress::Progress,
 ) -> Result<World, AppError> {
-    if dir == Path::new(DEFAULT_MAP) && !dir.join("map.toml").exists() {
-        eprintln!("{DEFAULT_MAP} not found: generating the default map (8 km, seed 1, ~10 s) ...");
+    let is_default = dir == Path::new(DEFAULT_MAP);
+    let generate = |why: &str| -> Result<(), AppError> {
+        eprintln!("{DEFAULT_MAP} {why}: generating the default map (8 km, seed 1, ~10 s) ...");
         let map = worldgen::generate::generate(
             &worldgen::generate::GenerateParams::default(),
             progress,
@@ -45,8 +48,20 @@ pub fn open_world(
         )
         .map_err(|e| AppError::Generate(e.to_string()))?;
         map.write(dir)?;
+        Ok(())
+    };
+    if is_default && !dir.join("map.toml").exists() {
+        generate("not found")?;
     }
-    Ok(World::new(worldgen::Map::load(dir)?))
+    match worldgen::Map::load(dir) {
+        Err(worldgen::MapError::UnknownVersion {
+            found, supported, ..
+        }) if is_default && found < i64::from(supported) => {
+            generate("is from an older map format")?;
+            Ok(World::new(worldgen::Map::load(dir)?))
+        }
+        r => Ok(World::new(r?)),
+    }
 }
 
 /// The automatic flyover: a low valley flight (25 m above the ground) for the first half, then

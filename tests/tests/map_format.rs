@@ -240,13 +240,51 @@ fn malformed_layer_file_size_disagrees_with_manifest() {
 fn malformed_unknown_version() {
     let (_t, dir) = broken_copy();
     edit_manifest(&dir, |t| {
-        t.insert("version".into(), 2.into());
+        t.insert("version".into(), 3.into());
     });
-    let e = expect_error(&dir, "map.toml", &["version", "2"]);
+    let e = expect_error(&dir, "map.toml", &["version", "3"]);
     assert!(
-        matches!(e, MapError::UnknownVersion { found: 2, .. }),
+        matches!(e, MapError::UnknownVersion { found: 3, .. }),
         "{e:?}"
     );
+    // A version-1 map (before the Poisson tile) says so and how to fix it.
+    let (_t, dir) = broken_copy();
+    edit_manifest(&dir, |t| {
+        t.insert("version".into(), 1.into());
+    });
+    expect_error(&dir, "map.toml", &["version", "1", "regenerate"]);
+}
+
+#[test]
+fn malformed_poisson_tile() {
+    let (_t, dir) = broken_copy();
+    let good = std::fs::read_to_string(dir.join("poisson.csv")).unwrap();
+    let mut lines: Vec<&str> = good.lines().collect();
+    // A point outside the unit tile, named by line.
+    lines[5] = "1.5,0.25";
+    std::fs::write(dir.join("poisson.csv"), lines.join("\n")).unwrap();
+    expect_error(&dir, "poisson.csv", &["line 6", "outside the unit tile"]);
+    // Two points too close: the spacing the manifest promises is checked.
+    let mut lines: Vec<String> = good.lines().map(str::to_owned).collect();
+    let p: Vec<f64> = lines[2].split(',').map(|v| v.parse().unwrap()).collect();
+    lines.push(format!("{},{}", p[0], (p[1] + 0.001) % 1.0));
+    std::fs::write(dir.join("poisson.csv"), lines.join("\n")).unwrap();
+    expect_error(&dir, "poisson.csv", &["closer than poisson.min_distance"]);
+    // Too few points, a bad header, a field that is not a number, a bad manifest field.
+    std::fs::write(dir.join("poisson.csv"), "tvs-poisson 1\nx,y\n0.5,0.5\n").unwrap();
+    expect_error(&dir, "poisson.csv", &["at least"]);
+    std::fs::write(dir.join("poisson.csv"), "tvs-poisson 7\nx,y\n").unwrap();
+    expect_error(&dir, "poisson.csv", &["line 1", "tvs-poisson 1"]);
+    std::fs::write(dir.join("poisson.csv"), "tvs-poisson 1\nx,y\n0.5,x\n").unwrap();
+    expect_error(&dir, "poisson.csv", &["line 3", "y"]);
+    let (_t, dir) = broken_copy();
+    edit_manifest(&dir, |t| {
+        t["poisson"]
+            .as_table_mut()
+            .unwrap()
+            .insert("min_distance".into(), 0.9.into());
+    });
+    expect_error(&dir, "map.toml", &["poisson.min_distance"]);
 }
 
 #[test]

@@ -6,6 +6,7 @@ use crate::classify::{self, GroundRules};
 use crate::erosion;
 use crate::map::{
     DensityLayer, FORMAT_NAME, FORMAT_VERSION, FileSpec, GridSpec, GroundSpec, Manifest, Map,
+    PoissonSpec,
 };
 use crate::noise;
 use crate::par;
@@ -242,6 +243,12 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
             &|x, y| crate::sample::bilinear(&a.heights, placement, x, y),
         )
     });
+    let poisson = timed(a.times, "Poisson-disc tile", || {
+        crate::poisson::PoissonTile::generate(
+            a.seed ^ 0x5EED_D15C,
+            crate::poisson::DEFAULT_MIN_DISTANCE,
+        )
+    });
     let manifest = Manifest {
         format: FORMAT_NAME.into(),
         version: FORMAT_VERSION,
@@ -274,6 +281,10 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
         buildings: FileSpec {
             file: "buildings.csv".into(),
         },
+        poisson: PoissonSpec {
+            file: "poisson.csv".into(),
+            min_distance: crate::poisson::DEFAULT_MIN_DISTANCE,
+        },
     };
     crate::map::validate_manifest(std::path::Path::new("<generated>/map.toml"), &manifest)?;
     let densities = species
@@ -289,5 +300,6 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
         trees,
         decals: a.decals,
         buildings: Vec::new(),
+        poisson,
     })
 }

@@ -1,8 +1,8 @@
 //! `worldgen`: everything that happens before the engine runs.
 //!
-//! - [`map`] owns **map format v1**: a folder with a `map.toml` manifest and layer files (heights as
+//! - [`map`] owns **map format v2**: a folder with a `map.toml` manifest and layer files (heights as
 //!   single-channel f32 OpenEXR, ground types as an indexed PNG, one 8-bit PNG per vegetation
-//!   species, text lists of large trees, decals and buildings). Every file carries a format name and
+//!   species, text lists of large trees, decals and buildings, the ranked Poisson-disc tile). Every file carries a format name and
 //!   a version. [`map::Map::load`] validates everything before it returns: a map opens whole or not
 //!   at all, and every error names the file, the field and what was expected.
 //! - [`generate`] makes a believable landscape from a seed (fBm + ridged noise, hydraulic and
@@ -23,6 +23,7 @@ pub mod grid;
 pub mod map;
 pub mod noise;
 pub mod par;
+pub mod poisson;
 pub mod progress;
 pub mod roads;
 pub mod sample;

@@ -12,10 +12,11 @@ use worldgen::progress::{Progress, StepTime};
 
 /// Map tools for the terrain streaming engine.
 ///
-/// A map is a folder: `map.toml` (manifest: format "tvs-map" version 1, world size, origin, seed,
+/// A map is a folder: `map.toml` (manifest: format "tvs-map" version 2, world size, origin, seed,
 /// layer files), `heights.exr` (f32 metres), `ground.png` (indexed ground types), one
-/// `density_<species>.png` per vegetation species, `trees.csv`, `decals.toml` and
-/// `buildings.csv`. All outputs are deterministic: the same inputs give the same bytes.
+/// `density_<species>.png` per vegetation species, `trees.csv`, `decals.toml`, `buildings.csv`
+/// and `poisson.csv` (the ranked, periodic Poisson-disc tile that places vegetation). All
+/// outputs are deterministic: the same inputs give the same bytes.
 #[derive(Parser)]
 #[command(name = "worldgen", version, about, long_about)]
 struct Cli {

@@ -1,4 +1,5 @@
-//! List layers: large trees and buildings as versioned CSV text, decals as versioned TOML.
+//! List layers: large trees, buildings and the Poisson-disc tile as versioned CSV text, decals as
+//! versioned TOML.
 //! Numbers are written with Rust's shortest round-trip formatting, so a write/read cycle is exact.
 
 use super::{Manifest, MapError, limits};
@@ -384,4 +385,70 @@ pub fn write_decals(path: &Path, decals: &[Decal]) -> Result<(), MapError> {
     let text = toml::to_string(&file)
         .map_err(|e| MapError::field(path, "decal", format!("cannot be serialised: {e}")))?;
     std::fs::write(path, text).map_err(|e| MapError::io(path, "write", e))
+}
+
+pub const POISSON_MAGIC: &str = "tvs-poisson 1";
+pub const POISSON_COLUMNS: &str = "x,y";
+/// The fewest points a Poisson tile may have (placement needs a dense tile).
+pub const POISSON_MIN_POINTS: usize = 64;
+
+/// Reads the ranked Poisson-disc tile: points in rank order, each in `[0, 1)^2`, at least
+/// `min_distance` apart on the torus (checked, so a damaged file cannot break spacing).
+pub fn read_poisson(
+    path: &Path,
+    min_distance: f64,
+) -> Result<crate::poisson::PoissonTile, MapError> {
+    let text = read_text(path)?;
+    let rows = data_rows(path, &text, POISSON_MAGIC, POISSON_COLUMNS)?;
+    let mut points = Vec::with_capacity(rows.len());
+    for (n, row) in rows {
+        let mut cols = row.split(',');
+        let x: f64 = parse_field(path, n, "x", cols.next())?;
+        let y: f64 = parse_field(path, n, "y", cols.next())?;
+        if cols.next().is_some() {
+            return Err(line_err(
+                path,
+                n,
+                format!("too many columns; expected {POISSON_COLUMNS}"),
+            ));
+        }
+        if !((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y)) {
+            return Err(line_err(
+                path,
+                n,
+                format!("point ({x}, {y}) is outside the unit tile [0, 1)^2"),
+            ));
+        }
+        points.push([x, y]);
+    }
+    if points.len() < POISSON_MIN_POINTS {
+        return Err(line_err(
+            path,
+            0,
+            format!(
+                "{} points; a tile needs at least {POISSON_MIN_POINTS}",
+                points.len()
+            ),
+        ));
+    }
+    let tile = crate::poisson::PoissonTile { points };
+    let d = tile.min_distance();
+    if d < min_distance {
+        return Err(line_err(
+            path,
+            0,
+            format!(
+                "two points are {d} apart, closer than poisson.min_distance = {min_distance} in map.toml"
+            ),
+        ));
+    }
+    Ok(tile)
+}
+
+pub fn write_poisson(path: &Path, tile: &crate::poisson::PoissonTile) -> Result<(), MapError> {
+    let mut s = format!("{POISSON_MAGIC}\n{POISSON_COLUMNS}\n");
+    for p in &tile.points {
+        let _ = writeln!(s, "{},{}", p[0], p[1]);
+    }
+    std::fs::write(path, s).map_err(|e| MapError::io(path, "write", e))
 }

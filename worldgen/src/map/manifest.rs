@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub const FORMAT_NAME: &str = "tvs-map";
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// The manifest of a map folder.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,6 +35,17 @@ pub struct Manifest {
     pub trees: FileSpec,
     pub decals: FileSpec,
     pub buildings: FileSpec,
+    /// The ranked, periodic Poisson-disc tile for vegetation placement (since version 2).
+    pub poisson: PoissonSpec,
+}
+
+/// Where the Poisson-disc tile is and the minimum distance between its points (tile units).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoissonSpec {
+    pub file: String,
+    /// Smallest distance between two points, in units of the tile side.
+    pub min_distance: f64,
 }
 
 /// A raster layer covering the whole world.
@@ -424,12 +435,24 @@ pub fn validate(path: &Path, m: &Manifest) -> Result<(), MapError> {
     check_file_name(path, "trees.file", &m.trees.file)?;
     check_file_name(path, "decals.file", &m.decals.file)?;
     check_file_name(path, "buildings.file", &m.buildings.file)?;
+    check_file_name(path, "poisson.file", &m.poisson.file)?;
+    if !(m.poisson.min_distance > 0.001 && m.poisson.min_distance < 0.5) {
+        return Err(MapError::field(
+            path,
+            "poisson.min_distance",
+            format!(
+                "{} is outside (0.001, 0.5) (tile units)",
+                m.poisson.min_distance
+            ),
+        ));
+    }
     let mut files: Vec<&str> = vec![
         &m.heights.file,
         &m.ground.file,
         &m.trees.file,
         &m.decals.file,
         &m.buildings.file,
+        &m.poisson.file,
     ];
     files.extend(m.vegetation.iter().map(|s| s.file.as_str()));
     for (i, f) in files.iter().enumerate() {

@@ -1,13 +1,14 @@
-//! Map format v1: a folder with a `map.toml` manifest and layer files.
+//! Map format v2: a folder with a `map.toml` manifest and layer files.
 //!
 //! ```text
-//! map.toml          manifest: format = "tvs-map", version = 1, world size, origin, seed, layers
+//! map.toml          manifest: format = "tvs-map", version = 2, world size, origin, seed, layers
 //! heights.exr       OpenEXR, one f32 channel "Y", metres above sea level
 //! ground.png        8-bit indexed PNG; the palette index is a ground type from the legend
 //! density_*.png     one 8-bit grayscale PNG per vegetation species; 0..255 = 0..max density
 //! trees.csv         "tvs-trees 1" then species,x_m,y_m,height_m,crown_radius_m rows
 //! decals.toml       format = "tvs-decals", version = 1, [[decal]] polylines and areas
 //! buildings.csv     "tvs-buildings 1" then mesh,x_m,y_m,z_m,yaw_deg,scale rows (may be empty)
+//! poisson.csv       "tvs-poisson 1" then x,y rows: the ranked periodic Poisson-disc tile (v2)
 //! ```
 //!
 //! Every raster layer covers the whole world: `(width - 1) * spacing_m == size_m` in both axes,
@@ -22,7 +23,8 @@ mod manifest;
 pub use lists::{Building, Decal, DecalKind, Tree};
 pub use manifest::validate as validate_manifest;
 pub use manifest::{
-    FORMAT_NAME, FORMAT_VERSION, FileSpec, GridSpec, GroundSpec, GroundType, Manifest, SpeciesSpec,
+    FORMAT_NAME, FORMAT_VERSION, FileSpec, GridSpec, GroundSpec, GroundType, Manifest, PoissonSpec,
+    SpeciesSpec,
 };
 
 use crate::Grid;
@@ -69,7 +71,12 @@ pub enum MapError {
         expected: &'static str,
     },
     #[error(
-        "{path}: field `version` is {found}, this build reads version {supported}; upgrade the engine or regenerate the map"
+        "{path}: field `version` is {found}, this build reads version {supported}; {}",
+        if *found < i64::from(*supported) {
+            "regenerate the map with `worldgen generate` (version 2 added poisson.csv, the vegetation tile)"
+        } else {
+            "upgrade the engine or regenerate the map"
+        }
     )]
     UnknownVersion {
         path: PathBuf,
@@ -176,6 +183,8 @@ pub struct Map {
     pub trees: Vec<Tree>,
     pub decals: Vec<Decal>,
     pub buildings: Vec<Building>,
+    /// The ranked Poisson-disc tile (points in rank order on the unit torus).
+    pub poisson: crate::poisson::PoissonTile,
 }
 
 /// Summary numbers for `worldgen check` and logs.
@@ -211,6 +220,10 @@ impl Map {
         let trees = lists::read_trees(&dir.join(&manifest.trees.file), &manifest)?;
         let decals = lists::read_decals(&dir.join(&manifest.decals.file), &manifest)?;
         let buildings = lists::read_buildings(&dir.join(&manifest.buildings.file), &manifest)?;
+        let poisson = lists::read_poisson(
+            &dir.join(&manifest.poisson.file),
+            manifest.poisson.min_distance,
+        )?;
         Ok(Self {
             manifest,
             heights,
@@ -219,6 +232,7 @@ impl Map {
             trees,
             decals,
             buildings,
+            poisson,
         })
     }
 
@@ -261,6 +275,7 @@ impl Map {
             &staging.join(&self.manifest.buildings.file),
             &self.buildings,
         )?;
+        lists::write_poisson(&staging.join(&self.manifest.poisson.file), &self.poisson)?;
         if dir.exists() {
             std::fs::remove_dir_all(dir).map_err(|e| MapError::io(dir, "replace folder", e))?;
         }
