@@ -38,7 +38,7 @@ use rustc_hash::FxHashMap;
 /// Check-lattice points per mesh quad side.
 pub const CHECK_SUBDIV: u32 = 4;
 const _: () = assert!(
-    CHECK_SUBDIV % 2 == 0,
+    CHECK_SUBDIV.is_multiple_of(2),
     "children's vertices must be lattice points"
 );
 

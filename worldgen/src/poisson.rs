@@ -68,11 +68,7 @@ impl TorusGrid {
         let n = self.cells as i64;
         let reach = ((r * self.cells as f64).ceil() as i64).min(n / 2);
         let (cx, cy) = self.cell_of(p);
-        let mut seen_all = false;
         if 2 * reach + 1 >= n {
-            seen_all = true;
-        }
-        if seen_all {
             return points.iter().any(|&q| torus_distance(p, q) < r);
         }
         for dy in -reach..=reach {

@@ -1,0 +1,322 @@
+//! Vegetation placement: minimum distances across tile seams and node borders, counts against
+//! the integral of the density map, monotone thinning, order-independent output, nothing on
+//! roads or in water.
+
+use engine::quadtree::QuadTree;
+use engine::vegetation::{Item, Kind, Placer};
+use engine::world::{Rect, World};
+use std::collections::HashMap;
+use tests::terrain::{cliff_world, tiny_world};
+use worldgen::map::DecalKind;
+
+fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Rect {
+    Rect {
+        min: [x0, y0],
+        max: [x1, y1],
+    }
+}
+
+/// Items of species `s` placed tile by tile (16 m tiles) over `area`.
+fn by_tiles(world: &World, p: &Placer, s: usize, area: Rect, scale: f64) -> Vec<Item> {
+    let mut out = Vec::new();
+    let mut y = area.min[1];
+    while y < area.max[1] {
+        let mut x = area.min[0];
+        while x < area.max[0] {
+            p.place(world, s, rect(x, y, x + 16.0, y + 16.0), scale, &mut out);
+            x += 16.0;
+        }
+        y += 16.0;
+    }
+    out
+}
+
+/// Smallest distance between two items (grid hashing, cell = `cell_m`).
+fn min_distance(items: &[Item], cell_m: f64) -> f64 {
+    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+    let key = |it: &Item| {
+        (
+            (it.x_m / cell_m).floor() as i64,
+            (it.y_m / cell_m).floor() as i64,
+        )
+    };
+    for (i, it) in items.iter().enumerate() {
+        grid.entry(key(it)).or_default().push(i);
+    }
+    let mut best = f64::INFINITY;
+    for (i, a) in items.iter().enumerate() {
+        let (cx, cy) = key(a);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                for &j in grid.get(&(cx + dx, cy + dy)).map_or(&[][..], Vec::as_slice) {
+                    if j != i {
+                        let b = &items[j];
+                        best = best.min((a.x_m - b.x_m).hypot(a.y_m - b.y_m));
+                    }
+                }
+            }
+        }
+    }
+    best
+}
+
+fn small_species(p: &Placer) -> Vec<usize> {
+    (0..p.species.len())
+        .filter(|&s| p.species[s].kind != Kind::LargeTree)
+        .collect()
+}
+
+fn area_for(world: &World, p: &Placer, s: usize) -> Rect {
+    let o = world.origin_m();
+    // Grass is dense: a 192 m square (about three tile periods); others the whole map.
+    let side = if p.species[s].kind == Kind::GrassClump {
+        192.0
+    } else {
+        world.size_m()[0]
+    };
+    rect(o[0], o[1], o[0] + side, o[1] + side)
+}
+
+#[test]
+fn minimum_distance_holds_across_tile_seams_and_node_borders() {
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    for s in small_species(&p) {
+        let d = p.species[s].min_distance_m;
+        let area = area_for(&world, &p, s);
+        assert!(
+            area.max[0] - area.min[0] > p.species[s].tile_side_m,
+            "{}: the area must cross tile seams in x and y",
+            p.species[s].name
+        );
+        // Map density, and a density 50x higher (every tile point kept: the tightest packing).
+        for scale in [1.0, 50.0] {
+            let items = by_tiles(&world, &p, s, area, scale);
+            assert!(
+                items.len() > 200,
+                "{}: only {} items",
+                p.species[s].name,
+                items.len()
+            );
+            let m = min_distance(&items, d);
+            assert!(
+                m >= d * (1.0 - 1e-9),
+                "{} at scale {scale}: two items {m} m apart, minimum {d} m",
+                p.species[s].name
+            );
+            // The same items whether placed per 16 m tile or per quad-tree node (64 m).
+            let mut nodes = Vec::new();
+            let tree = QuadTree::new(world.origin_m(), world.size_m());
+            let level = (0..=tree.max_level)
+                .find(|&l| (tree.node_size_m(l) - 64.0).abs() < 1e-9)
+                .unwrap();
+            for iy in 0..(1u32 << level) {
+                for ix in 0..(1u32 << level) {
+                    let r = tree.rect(engine::quadtree::NodeKey { level, ix, iy });
+                    if r.min[0] < area.max[0] && r.min[1] < area.max[1] {
+                        p.place(&world, s, r, scale, &mut nodes);
+                    }
+                }
+            }
+            let key = |it: &Item| (it.x_m.to_bits(), it.y_m.to_bits());
+            let mut a: Vec<_> = items.iter().map(key).collect();
+            let mut b: Vec<_> = nodes.iter().map(key).collect();
+            a.sort_unstable();
+            b.sort_unstable();
+            assert!(
+                a == b,
+                "{}: tiles ({} items) and nodes ({} items) disagree",
+                p.species[s].name,
+                a.len(),
+                b.len()
+            );
+        }
+    }
+}
+
+/// Midpoint-rule integral of the density over the area where things may grow.
+fn density_integral(world: &World, p: &Placer, s: usize, area: Rect, step_m: f64) -> f64 {
+    let mut sum = 0.0;
+    let mut y = area.min[1] + 0.5 * step_m;
+    while y < area.max[1] {
+        let mut x = area.min[0] + 0.5 * step_m;
+        while x < area.max[0] {
+            if !p.excluded(world, x, y) {
+                sum += p.density(world, s, x, y);
+            }
+            x += step_m;
+        }
+        y += step_m;
+    }
+    sum * step_m * step_m
+}
+
+#[test]
+fn counts_match_the_integral_of_the_density_map() {
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    for s in small_species(&p) {
+        let area = area_for(&world, &p, s);
+        let items = by_tiles(&world, &p, s, area, 1.0);
+        let expected = density_integral(&world, &p, s, area, 1.0);
+        let ratio = items.len() as f64 / expected;
+        println!(
+            "{}: {} items, integral {expected:.1}, ratio {ratio:.4}",
+            p.species[s].name,
+            items.len()
+        );
+        assert!(
+            expected > 300.0,
+            "{}: integral {expected}",
+            p.species[s].name
+        );
+        assert!(
+            (ratio - 1.0).abs() <= 0.05,
+            "{}: {} items vs integral {expected:.1}",
+            p.species[s].name,
+            items.len()
+        );
+    }
+}
+
+#[test]
+fn thinning_is_monotone() {
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    let key = |it: &Item| (it.x_m.to_bits(), it.y_m.to_bits());
+    for s in small_species(&p) {
+        let area = area_for(&world, &p, s);
+        let mut previous: Option<std::collections::HashSet<(u64, u64)>> = None;
+        for scale in [0.1, 0.3, 0.7, 1.0, 1.5, 4.0] {
+            let now: std::collections::HashSet<_> = by_tiles(&world, &p, s, area, scale)
+                .iter()
+                .map(key)
+                .collect();
+            if let Some(prev) = &previous {
+                assert!(
+                    prev.is_subset(&now),
+                    "{} at scale {scale}: {} items kept at a lower density are gone",
+                    p.species[s].name,
+                    prev.difference(&now).count()
+                );
+                assert!(now.len() >= prev.len());
+            }
+            previous = Some(now);
+        }
+    }
+}
+
+#[test]
+fn output_does_not_depend_on_generation_order() {
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    let o = world.origin_m();
+    let area = rect(o[0], o[1], o[0] + 96.0, o[1] + 96.0);
+    let mut tiles: Vec<Rect> = Vec::new();
+    for j in 0..6 {
+        for i in 0..6 {
+            let (x, y) = (o[0] + f64::from(i) * 16.0, o[1] + f64::from(j) * 16.0);
+            tiles.push(rect(x, y, x + 16.0, y + 16.0));
+        }
+    }
+    let run = |order: &[Rect], placer: &Placer| {
+        let mut per: Vec<(usize, Vec<Item>)> = Vec::new();
+        for (n, r) in order.iter().enumerate() {
+            let mut v = Vec::new();
+            placer.place_all(&world, *r, &mut v);
+            per.push((n, v));
+        }
+        per
+    };
+    let forward = run(&tiles, &p);
+    let mut reversed_tiles = tiles.clone();
+    reversed_tiles.reverse();
+    // A fresh placer, and the tiles the other way round, with other work in between.
+    let q = Placer::new(&world);
+    let mut scratch = Vec::new();
+    q.place_all(&world, area, &mut scratch);
+    let backward = run(&reversed_tiles, &q);
+    for (n, items) in &forward {
+        let m = tiles.len() - 1 - n;
+        assert_eq!(items, &backward[m].1, "tile {n} differs");
+    }
+    // And the tiles together are exactly the area placed at once.
+    let mut all: Vec<Item> = forward.into_iter().flat_map(|(_, v)| v).collect();
+    let key = |it: &Item| (it.species, it.x_m.to_bits(), it.y_m.to_bits());
+    all.sort_by_key(key);
+    scratch.sort_by_key(key);
+    assert_eq!(all, scratch);
+    assert!(all.len() > 100, "{} items", all.len());
+}
+
+#[test]
+fn nothing_grows_on_roads_or_in_water() {
+    for (name, world) in [("tiny", tiny_world()), ("cliff", cliff_world())] {
+        let p = Placer::new(&world);
+        let o = world.origin_m();
+        let s = world.size_m();
+        let water = world
+            .map
+            .manifest
+            .ground
+            .legend
+            .iter()
+            .position(|g| g.name == "water")
+            .unwrap() as u8;
+        let mut items = Vec::new();
+        let (mut near_road, mut checked) = (0usize, 0usize);
+        for sp in 0..p.species.len() {
+            let area = if p.species[sp].kind == Kind::GrassClump {
+                // Grass along the roads and on the sea edge (dense: not the whole map).
+                rect(o[0] + 180.0, o[1], o[0] + 340.0, o[1] + s[1])
+            } else {
+                rect(o[0], o[1], o[0] + s[0], o[1] + s[1])
+            };
+            items.extend(by_tiles(&world, &p, sp, area, 1.0));
+        }
+        for it in &items {
+            checked += 1;
+            assert!(
+                it.z_m > world.map.manifest.water_level_m,
+                "{name}: item at ({}, {}) is under water",
+                it.x_m,
+                it.y_m
+            );
+            assert_ne!(
+                world.ground_type(it.x_m, it.y_m),
+                water,
+                "{name}: item on water ground"
+            );
+            for d in &world.map.decals {
+                if !matches!(d.kind, DecalKind::Road | DecalKind::Path) {
+                    continue;
+                }
+                for w in d.points.windows(2) {
+                    let (dist, _) = worldgen::roads::segment_closest(
+                        [it.x_m, it.y_m],
+                        [w[0][0], w[0][1]],
+                        [w[1][0], w[1][1]],
+                    );
+                    let core = 0.5 * f64::from(d.width_m);
+                    assert!(
+                        dist >= core,
+                        "{name}: species {} at ({}, {}) is {dist} m from a {:?} centre line \
+                         (half width {core} m)",
+                        it.species,
+                        it.x_m,
+                        it.y_m,
+                        d.kind
+                    );
+                    if dist < core + f64::from(d.falloff_m) + 3.0 {
+                        near_road += 1;
+                    }
+                }
+            }
+        }
+        println!("{name}: {checked} items checked, {near_road} within 3 m of a road's edge");
+        assert!(
+            checked > 1000 && near_road > 10,
+            "{name}: {checked} / {near_road}"
+        );
+    }
+}
