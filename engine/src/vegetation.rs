@@ -269,6 +269,77 @@ impl Placer {
             .any(|&(dx, dy)| world.decals.road_weight(x_m + dx, y_m + dy) > 0.0)
     }
 
+    /// Calls `f(rank, period_seed, x, y)` for every jittered tile point of species `s` in `rect`
+    /// (half-open) whose rank is below `k_end`.
+    fn visit(&self, s: usize, rect: Rect, k_end: u32, mut f: impl FnMut(u32, u64, f64, f64)) {
+        let sp = &self.species[s];
+        let t = sp.tile_side_m;
+        let jitter = JITTER_FRACTION * sp.min_distance_m;
+        // Unjittered positions that can land in the rectangle.
+        let (lo, hi) = (
+            [rect.min[0] - jitter, rect.min[1] - jitter],
+            [rect.max[0] + jitter, rect.max[1] + jitter],
+        );
+        let period_of = |v: f64, o: f64| ((v - o) / t).floor() as i64;
+        let cells = self.tile.cells;
+        // Tile cells overlapping [a, b] in the period starting at `base`.
+        let cell_range = |a: f64, b: f64, base: f64| {
+            let u0 = ((a - base) / t * cells as f64).floor().max(0.0) as usize;
+            let u1 = ((b - base) / t * cells as f64).floor();
+            (u1 >= 0.0).then(|| (u0, (u1 as usize).min(cells - 1)))
+        };
+        for py in period_of(lo[1], sp.offset_m[1])..=period_of(hi[1], sp.offset_m[1]) {
+            for px in period_of(lo[0], sp.offset_m[0])..=period_of(hi[0], sp.offset_m[0]) {
+                let base = [
+                    sp.offset_m[0] + px as f64 * t,
+                    sp.offset_m[1] + py as f64 * t,
+                ];
+                let (Some((cx0, cx1)), Some((cy0, cy1))) = (
+                    cell_range(lo[0], hi[0], base[0]),
+                    cell_range(lo[1], hi[1], base[1]),
+                ) else {
+                    continue;
+                };
+                let period = hash3(sp.seed, px, py);
+                for cy in cy0..=cy1 {
+                    for cx in cx0..=cx1 {
+                        for &(k, u) in &self.tile.slots[cy * cells + cx] {
+                            if k >= k_end {
+                                break;
+                            }
+                            let kk = i64::from(k);
+                            let angle = std::f64::consts::TAU * unit3(period, kk, 0);
+                            let radius = jitter * unit3(period, kk, 1).sqrt();
+                            let x = base[0] + u[0] * t + radius * angle.cos();
+                            let y = base[1] + u[1] * t + radius * angle.sin();
+                            if x >= rect.min[0]
+                                && x < rect.max[0]
+                                && y >= rect.min[1]
+                                && y < rect.max[1]
+                            {
+                                f(k, period, x, y);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Positions only: the jittered tile points of species `s` in `rect` with normalised rank
+    /// below `fraction` (a uniform density of `fraction * tile_density_per_m2`). The bare tile
+    /// lookup, without density maps, heights or exclusions (what `nodebench` compares with
+    /// Bridson sampling).
+    pub fn positions(&self, s: usize, rect: Rect, fraction: f64, out: &mut Vec<[f64; 2]>) {
+        let n = self.tile.len as f64;
+        let k_end = ((n * fraction).ceil().max(0.0) as u32).min(self.tile.len as u32);
+        self.visit(s, rect, k_end, |k, _, x, y| {
+            if (f64::from(k) + 0.5) / n < fraction {
+                out.push([x, y]);
+            }
+        });
+    }
+
     /// Appends the items of species `s` whose position lies in `rect` (half-open:
     /// `min <= p < max`), at density multiplied by `scale` (1 = the map's density).
     pub fn place(&self, world: &World, s: usize, rect: Rect, scale: f64, out: &mut Vec<Item>) {
@@ -284,85 +355,24 @@ impl Placer {
         let n = self.tile.len as f64;
         // Ranks at or beyond this cannot be kept anywhere in the rectangle.
         let k_end = ((n * (dmax / sp.tile_density_per_m2)).ceil() as u32).min(self.tile.len as u32);
-        let t = sp.tile_side_m;
-        let jitter = JITTER_FRACTION * sp.min_distance_m;
-        // Unjittered positions that can land in the rectangle.
-        let (lo, hi) = (
-            [rect.min[0] - jitter, rect.min[1] - jitter],
-            [rect.max[0] + jitter, rect.max[1] + jitter],
-        );
-        let p0 = (
-            ((lo[0] - sp.offset_m[0]) / t).floor() as i64,
-            ((lo[1] - sp.offset_m[1]) / t).floor() as i64,
-        );
-        let p1 = (
-            ((hi[0] - sp.offset_m[0]) / t).floor() as i64,
-            ((hi[1] - sp.offset_m[1]) / t).floor() as i64,
-        );
-        let cells = self.tile.cells;
-        for py in p0.1..=p1.1 {
-            for px in p0.0..=p1.0 {
-                let base = [
-                    sp.offset_m[0] + px as f64 * t,
-                    sp.offset_m[1] + py as f64 * t,
-                ];
-                // Tile cells overlapping [lo, hi] in this period.
-                let cell_range = |a: f64, b: f64, base: f64| {
-                    let u0 = ((a - base) / t * cells as f64).floor().max(0.0) as usize;
-                    let u1 = ((b - base) / t * cells as f64).floor();
-                    (
-                        u0,
-                        if u1 < 0.0 {
-                            None
-                        } else {
-                            Some((u1 as usize).min(cells - 1))
-                        },
-                    )
-                };
-                let (cx0, cx1) = cell_range(lo[0], hi[0], base[0]);
-                let (cy0, cy1) = cell_range(lo[1], hi[1], base[1]);
-                let (Some(cx1), Some(cy1)) = (cx1, cy1) else {
-                    continue;
-                };
-                let period = hash3(sp.seed, px, py);
-                for cy in cy0..=cy1 {
-                    for cx in cx0..=cx1 {
-                        for &(k, u) in &self.tile.slots[cy * cells + cx] {
-                            if k >= k_end {
-                                break;
-                            }
-                            let kk = i64::from(k);
-                            let angle = std::f64::consts::TAU * unit3(period, kk, 0);
-                            let radius = jitter * unit3(period, kk, 1).sqrt();
-                            let x = base[0] + u[0] * t + radius * angle.cos();
-                            let y = base[1] + u[1] * t + radius * angle.sin();
-                            if !(x >= rect.min[0]
-                                && x < rect.max[0]
-                                && y >= rect.min[1]
-                                && y < rect.max[1])
-                            {
-                                continue;
-                            }
-                            let rank = (f64::from(k) + 0.5) / n;
-                            let d = scale * self.density(world, s, x, y);
-                            if rank >= d / sp.tile_density_per_m2 || self.excluded(world, x, y) {
-                                continue;
-                            }
-                            let size = 0.75 + 0.5 * unit3(period, kk, 2);
-                            out.push(Item {
-                                species: s as u16,
-                                x_m: x,
-                                y_m: y,
-                                z_m: world.height_m(x, y),
-                                height_m: (sp.height_m * size) as f32,
-                                radius_m: (sp.radius_m * size) as f32,
-                                yaw_rad: (std::f64::consts::TAU * unit3(period, kk, 3)) as f32,
-                            });
-                        }
-                    }
-                }
+        self.visit(s, rect, k_end, |k, period, x, y| {
+            let rank = (f64::from(k) + 0.5) / n;
+            let d = scale * self.density(world, s, x, y);
+            if rank >= d / sp.tile_density_per_m2 || self.excluded(world, x, y) {
+                return;
             }
-        }
+            let kk = i64::from(k);
+            let size = 0.75 + 0.5 * unit3(period, kk, 2);
+            out.push(Item {
+                species: s as u16,
+                x_m: x,
+                y_m: y,
+                z_m: world.height_m(x, y),
+                height_m: (sp.height_m * size) as f32,
+                radius_m: (sp.radius_m * size) as f32,
+                yaw_rad: (std::f64::consts::TAU * unit3(period, kk, 3)) as f32,
+            });
+        });
     }
 
     fn place_large_trees(&self, world: &World, s: usize, rect: Rect, out: &mut Vec<Item>) {
@@ -409,4 +419,134 @@ impl Placer {
             self.place(world, s, rect, 1.0, out);
         }
     }
+}
+
+/// How an item is drawn in a node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Representation {
+    /// Full 3D mesh.
+    Mesh,
+    /// One camera-facing textured quad.
+    Billboard,
+    /// Part of an impostor that stands for several items of the node.
+    Group,
+}
+
+/// Item height over node mesh spacing at and above which an item is a mesh.
+pub const MESH_RATIO: f64 = 2.5;
+/// ... a billboard.
+pub const BILLBOARD_RATIO: f64 = 0.6;
+/// ... part of a group billboard; below it the item is left out (smallest species first).
+pub const GROUP_RATIO: f64 = 0.15;
+
+/// The representation of an item of `kind` and height `height_m` in a node of mesh spacing
+/// `spacing_m` (`None`: left out). A node of a given size shows the same vegetation detail at any
+/// setting, like its terrain: the user's threshold only moves where nodes split. Grass clumps
+/// exist only in the finest nodes.
+pub fn representation(
+    kind: Kind,
+    height_m: f64,
+    spacing_m: f64,
+    finest: bool,
+) -> Option<Representation> {
+    if kind == Kind::GrassClump {
+        return finest.then_some(Representation::Mesh);
+    }
+    let q = height_m / spacing_m;
+    if q >= MESH_RATIO {
+        Some(Representation::Mesh)
+    } else if q >= BILLBOARD_RATIO {
+        Some(Representation::Billboard)
+    } else if q >= GROUP_RATIO {
+        Some(Representation::Group)
+    } else {
+        None
+    }
+}
+
+/// Instances of one render state in one node.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InstanceGroup {
+    pub species: u16,
+    pub representation: Representation,
+    /// True when some finer level draws these items differently, so they are drawn via this
+    /// node only while it is not split (its descendants hold their own versions); false when
+    /// every finer level draws them the same way: then they are drawn via this node always, even
+    /// while it is split, and no descendant holds them.
+    pub replaced_on_split: bool,
+    pub items: Vec<Item>,
+}
+
+/// A node's vegetation, grouped by (species, representation, replaced on split).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NodeVegetation {
+    pub groups: Vec<InstanceGroup>,
+}
+
+impl NodeVegetation {
+    pub fn instances(&self) -> usize {
+        self.groups.iter().map(|g| g.items.len()).sum()
+    }
+}
+
+/// The vegetation of node `key`: items placed in its rectangle whose representation at this
+/// level is not already held (as "not replaced") by an ancestor. A pure function of the key.
+pub fn node_vegetation(
+    world: &World,
+    placer: &Placer,
+    tree: &crate::quadtree::QuadTree,
+    key: crate::quadtree::NodeKey,
+) -> NodeVegetation {
+    let r = tree.rect(key);
+    let s_m = tree.spacing_m(key.level);
+    let finest = key.level == tree.max_level;
+    let s_finest = tree.spacing_m(tree.max_level);
+    let mut groups: Vec<InstanceGroup> = Vec::new();
+    let mut items = Vec::new();
+    for sp in 0..placer.species.len() {
+        let kind = placer.species[sp].kind;
+        // Skip species that are left out at this level whatever their size (+-25% variation).
+        let tallest = if kind == Kind::LargeTree {
+            200.0
+        } else {
+            placer.species[sp].height_m * 1.25
+        };
+        if representation(kind, tallest, s_m, finest).is_none() {
+            continue;
+        }
+        items.clear();
+        placer.place(world, sp, r, 1.0, &mut items);
+        for it in &items {
+            let h = f64::from(it.height_m);
+            let Some(here) = representation(kind, h, s_m, finest) else {
+                continue;
+            };
+            // Final: drawn the same way at every finer level (the ladder only moves towards
+            // more detail), so the coarsest level showing it that way keeps it for all of them.
+            let fin = |r: Representation| representation(kind, h, s_finest, true) == Some(r);
+            if key.level > 0 && fin(here) && representation(kind, h, 2.0 * s_m, false) == Some(here)
+            {
+                continue; // an ancestor draws it, always
+            }
+            let replaced = !fin(here);
+            let at = groups.iter().position(|g| {
+                g.species == it.species
+                    && g.representation == here
+                    && g.replaced_on_split == replaced
+            });
+            let i = at.unwrap_or_else(|| {
+                groups.push(InstanceGroup {
+                    species: it.species,
+                    representation: here,
+                    replaced_on_split: replaced,
+                    items: Vec::new(),
+                });
+                groups.len() - 1
+            });
+            let g = &mut groups[i];
+            g.items.push(*it);
+        }
+    }
+    groups.sort_by_key(|g| (g.species, g.representation, g.replaced_on_split));
+    NodeVegetation { groups }
 }

@@ -3,7 +3,7 @@
 //! roads or in water.
 
 use engine::quadtree::QuadTree;
-use engine::vegetation::{Item, Kind, Placer};
+use engine::vegetation::{Item, Kind, Placer, Representation, node_vegetation, representation};
 use engine::world::{Rect, World};
 use std::collections::HashMap;
 use tests::terrain::{cliff_world, tiny_world};
@@ -319,4 +319,122 @@ fn nothing_grows_on_roads_or_in_water() {
             "{name}: {checked} / {near_road}"
         );
     }
+}
+
+/// Items drawn when `shown` nodes are displayed: their groups plus the groups of every ancestor
+/// that are not replaced on split, as (species, x bits, y bits, representation).
+fn drawn(
+    world: &World,
+    p: &Placer,
+    tree: &QuadTree,
+    shown: &[engine::quadtree::NodeKey],
+) -> Vec<(u16, u64, u64, Representation)> {
+    let mut out = Vec::new();
+    let mut ancestors = Vec::new();
+    for &k in shown {
+        for g in node_vegetation(world, p, tree, k).groups {
+            out.extend(g.items.iter().map(|it| {
+                (
+                    it.species,
+                    it.x_m.to_bits(),
+                    it.y_m.to_bits(),
+                    g.representation,
+                )
+            }));
+        }
+        let mut a = k;
+        while let Some(parent) = a.parent() {
+            ancestors.push(parent);
+            a = parent;
+        }
+    }
+    ancestors.sort();
+    ancestors.dedup();
+    for a in ancestors {
+        for g in node_vegetation(world, p, tree, a).groups {
+            if !g.replaced_on_split {
+                out.extend(g.items.iter().map(|it| {
+                    (
+                        it.species,
+                        it.x_m.to_bits(),
+                        it.y_m.to_bits(),
+                        g.representation,
+                    )
+                }));
+            }
+        }
+    }
+    out.sort_by_key(|d| (d.0, d.1, d.2));
+    out
+}
+
+/// Whether a node is split or not, every item in it is drawn exactly once, in the
+/// representation of the displayed level; a split does not redraw what the parent keeps.
+#[test]
+fn every_item_is_drawn_once_in_the_displayed_levels_representation() {
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    let tree = QuadTree::new(world.origin_m(), world.size_m());
+    let (mut checked, mut kept_by_parent) = (0usize, 0usize);
+    for level in 2..tree.max_level {
+        let key = tree
+            .key_at(
+                level,
+                world.origin_m()[0] + 200.0,
+                world.origin_m()[1] + 300.0,
+            )
+            .unwrap();
+        for (shown, lvl) in [(vec![key], level), (key.children().to_vec(), level + 1)] {
+            // Ancestors draw their kept items over their whole area: look inside this node.
+            let r = tree.rect(key);
+            let inside = |d: &(u16, u64, u64, Representation)| {
+                let (x, y) = (f64::from_bits(d.1), f64::from_bits(d.2));
+                x >= r.min[0] && x < r.max[0] && y >= r.min[1] && y < r.max[1]
+            };
+            let d: Vec<_> = drawn(&world, &p, &tree, &shown)
+                .into_iter()
+                .filter(inside)
+                .collect();
+            for w in d.windows(2) {
+                assert!(
+                    (w[0].0, w[0].1, w[0].2) != (w[1].0, w[1].1, w[1].2),
+                    "level {lvl}: an item is drawn twice: {:?} {:?}",
+                    w[0],
+                    w[1]
+                );
+            }
+            // Exactly the items placed in the node that this level's representation keeps.
+            let s_m = tree.spacing_m(lvl);
+            let finest = lvl == tree.max_level;
+            let mut want = Vec::new();
+            for sp in 0..p.species.len() {
+                let mut items = Vec::new();
+                p.place(&world, sp, r, 1.0, &mut items);
+                for it in items {
+                    let kind = p.species[sp].kind;
+                    if let Some(rep) = representation(kind, f64::from(it.height_m), s_m, finest) {
+                        want.push((it.species, it.x_m.to_bits(), it.y_m.to_bits(), rep));
+                    }
+                }
+            }
+            want.sort_by_key(|d| (d.0, d.1, d.2));
+            assert!(
+                d == want,
+                "level {lvl}: {} drawn, {} expected",
+                d.len(),
+                want.len()
+            );
+            checked += d.len();
+        }
+        kept_by_parent += node_vegetation(&world, &p, &tree, key)
+            .groups
+            .iter()
+            .filter(|g| !g.replaced_on_split)
+            .map(|g| g.items.len())
+            .sum::<usize>();
+    }
+    assert!(
+        checked > 500 && kept_by_parent > 0,
+        "{checked} / {kept_by_parent}"
+    );
 }

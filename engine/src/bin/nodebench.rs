@@ -15,14 +15,24 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 5] = ["tiles", "terrain", "selection", "error", "streaming"];
+const SECTIONS: [&str; 6] = [
+    "tiles",
+    "terrain",
+    "selection",
+    "error",
+    "vegetation",
+    "streaming",
+];
 
 /// Node-generation benchmark: speed of every CPU phase and speed against measured error.
 ///
 /// Sections: `tiles` (16 m tile generation), `terrain` (node bounds, grid mesh, TIN mesh),
 /// `selection` (per-frame quad-tree selection along a flight), `error` (triangles against
 /// measured on-screen pixel error for tau in {0.5, 1, 2, 4, 8}, for the grid, the TIN and a
-/// CDLOD-style distance selection tuned to the same measured error), `streaming` (real-time
+/// CDLOD-style distance selection tuned to the same measured error), `vegetation` (kept points per
+/// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
+/// vegetation phase time per node, instances and draw calls per frame on the flight),
+/// `streaming` (real-time
 /// flights at 50, 150 and 300 m/s through the streaming system: request-to-ready latency,
 /// cancelled jobs, pop debt). Per-item times are on one
 /// core (p50/p95/max); throughput is given for 1 and N worker threads.
@@ -32,7 +42,8 @@ struct Cli {
     /// Map folder (the default map is generated there on first use if missing).
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
-    /// Run only these sections (comma-separated): tiles, terrain, selection, error.
+    /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
+    /// streaming.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -310,6 +321,205 @@ fn section_terrain(
             nps,
             "nodes/s",
             "cold caches per node",
+        );
+    }
+}
+
+fn section_vegetation(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+) {
+    use engine::vegetation::{self as veg, Placer};
+    let placer = Placer::new(world);
+    // 1. Kept points per second, one core: the ranked tile (bare lookup, 16 m tiles, every tile
+    // point kept) against Bridson sampling of the same area at the same minimum distance.
+    let side_m = if quick { 128.0 } else { 512.0 };
+    let reps: u32 = if quick { 2 } else { 8 };
+    let o = world.origin_m();
+    for s in 0..placer.species.len() {
+        let sp = &placer.species[s];
+        if sp.kind == veg::Kind::LargeTree {
+            continue;
+        }
+        let params = format!(
+            "{side_m} m square, min distance {} m, 1 core",
+            sp.min_distance_m
+        );
+        let mut pts = Vec::new();
+        let t0 = Instant::now();
+        let mut kept = 0usize;
+        for rep in 0..reps {
+            let base = [o[0] + f64::from(rep) * side_m, o[1] + 1024.0];
+            let mut y = 0.0;
+            while y < side_m {
+                let mut x = 0.0;
+                while x < side_m {
+                    let rect = engine::world::Rect {
+                        min: [base[0] + x, base[1] + y],
+                        max: [base[0] + x + 16.0, base[1] + y + 16.0],
+                    };
+                    pts.clear();
+                    placer.positions(s, rect, 1.0, &mut pts);
+                    kept += pts.len();
+                    x += 16.0;
+                }
+                y += 16.0;
+            }
+        }
+        let tile_pps = kept as f64 / t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let mut bridson = 0usize;
+        for rep in 0..reps {
+            bridson += fast_poisson::Poisson2D::new()
+                .with_dimensions([side_m, side_m], sp.min_distance_m)
+                .with_seed(u64::from(rep) + 1)
+                .iter()
+                .count();
+        }
+        let bridson_pps = bridson as f64 / t0.elapsed().as_secs_f64();
+        let name = &sp.name;
+        r.add(
+            "vegetation",
+            &format!("{name}: ranked tile, kept points/s"),
+            tile_pps,
+            "points/s",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            &format!("{name}: Bridson (fast_poisson), points/s"),
+            bridson_pps,
+            "points/s",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            &format!("{name}: points per m², tile / Bridson"),
+            kept as f64 / bridson.max(1) as f64,
+            "ratio",
+            &params,
+        );
+    }
+    // 2. The vegetation phase per node (placement, heights, exclusions, representation and
+    // grouping), for the nodes a flight draws at tau 2.
+    let keys = flight_nodes(
+        world,
+        tree,
+        &cams[..cams.len().min(if quick { 2 } else { 16 })],
+        if quick { 24 } else { 240 },
+    );
+    let b = bar(keys.len() as u64, "vegetation nodes");
+    let mut times = Vec::new();
+    let mut instances = 0usize;
+    for &k in &keys {
+        let t0 = Instant::now();
+        let v = veg::node_vegetation(world, &placer, tree, k);
+        times.push(t0.elapsed().as_secs_f64());
+        instances += v.instances();
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    let params = format!("{} nodes from the flight at tau 2", keys.len());
+    r.timings("vegetation", "node vegetation phase", times, &params);
+    r.add(
+        "vegetation",
+        "instances per node (mean)",
+        instances as f64 / keys.len().max(1) as f64,
+        "instances",
+        &params,
+    );
+    // 3. Instances and draw calls per frame: every drawn node's groups plus its ancestors'
+    // groups that are not replaced on split (each ancestor once).
+    let mut cache = BoundsCache::new();
+    let mut veg_cache: std::collections::HashMap<NodeKey, veg::NodeVegetation> =
+        std::collections::HashMap::new();
+    let frames = &cams[..cams.len().min(if quick { 2 } else { 32 })];
+    let b = bar(frames.len() as u64, "vegetation frames");
+    let (mut inst, mut draws, mut by_rep) = (Vec::new(), Vec::new(), [0usize; 3]);
+    for cam in frames {
+        let sel = select(
+            world,
+            tree,
+            &mut cache,
+            cam,
+            SelectParams {
+                tau_px: 2.0,
+                max_level: tree.max_level,
+                cull: true,
+            },
+        );
+        let mut ancestors: Vec<NodeKey> = Vec::new();
+        let (mut n_inst, mut n_draw) = (0usize, 0usize);
+        let mut count = |v: &veg::NodeVegetation, only_kept: bool, by_rep: &mut [usize; 3]| {
+            for g in &v.groups {
+                if only_kept && g.replaced_on_split {
+                    continue;
+                }
+                n_inst += g.items.len();
+                n_draw += 1;
+                by_rep[g.representation as usize] += g.items.len();
+            }
+        };
+        for n in &sel.nodes {
+            let v = veg_cache
+                .entry(n.key)
+                .or_insert_with(|| veg::node_vegetation(world, &placer, tree, n.key));
+            count(v, false, &mut by_rep);
+            let mut k = n.key;
+            while let Some(p) = k.parent() {
+                ancestors.push(p);
+                k = p;
+            }
+        }
+        ancestors.sort();
+        ancestors.dedup();
+        for a in ancestors {
+            let v = veg_cache
+                .entry(a)
+                .or_insert_with(|| veg::node_vegetation(world, &placer, tree, a));
+            count(v, true, &mut by_rep);
+        }
+        inst.push(n_inst as f64);
+        draws.push(n_draw as f64);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    let params = format!(
+        "tau 2 px, {} cameras of the flight, CPU count (renderer not yet drawing vegetation)",
+        frames.len()
+    );
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    r.add(
+        "vegetation",
+        "instances per frame (median)",
+        median(inst),
+        "instances",
+        &params,
+    );
+    r.add(
+        "vegetation",
+        "instance draw calls per frame (median)",
+        median(draws),
+        "draws",
+        &params,
+    );
+    let total = by_rep.iter().sum::<usize>().max(1) as f64;
+    for (i, name) in ["meshes", "billboards", "group-billboard members"]
+        .iter()
+        .enumerate()
+    {
+        r.add(
+            "vegetation",
+            &format!("share of instances drawn as {name}"),
+            100.0 * by_rep[i] as f64 / total,
+            "%",
+            &params,
         );
     }
 }
@@ -985,6 +1195,9 @@ fn run(cli: &Cli) -> Result<()> {
     let mut curve = Vec::new();
     if want("error") {
         curve = section_error(&world, &tree, &cams, &mut report, cli.quick);
+    }
+    if want("vegetation") {
+        section_vegetation(&world, &tree, &cams, &mut report, cli.quick);
     }
     if want("streaming") {
         section_streaming(&cli.map, &mut report, cli.quick, workers, [vh * 16 / 9, vh])?;
