@@ -136,3 +136,123 @@ fn vs_lines(@location(0) rel: vec3<f32>) -> @builtin(position) vec4<f32> {
 fn fs_lines() -> @location(0) vec4<f32> {
     return vec4<f32>(1.0, 0.9, 0.1, 1.0);
 }
+
+// Vegetation. Per-species looks: rgb foliage colour (linear), w: shape (0 conifer, 1 broadleaf,
+// 2 bush, 3 grass). Instances carry the position relative to the node's south-west corner (z
+// absolute), height, crown radius, yaw and look index.
+@group(0) @binding(2) var<uniform> plant_looks: array<vec4<f32>, 16>;
+
+struct PlantInstanceIn {
+    @location(3) position: vec3<f32>,
+    @location(4) height: f32,
+    @location(5) radius: f32,
+    @location(6) yaw: f32,
+    @location(7) look: u32,
+};
+
+const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
+
+// Instanced unit-shape meshes (height 1, radius 1), scaled, turned and placed per instance.
+@vertex
+fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
+    let c = cos(inst.yaw);
+    let s = sin(inst.yaw);
+    let local = vec3<f32>(v.position.xy * inst.radius, v.position.z * inst.height);
+    let turned = vec3<f32>(c * local.x - s * local.y, s * local.x + c * local.y, local.z);
+    let n = vec3<f32>(v.normal.xy / inst.radius, v.normal.z / inst.height);
+    var out: VertexOut;
+    let rel = inst.position + turned + node.offset_lo.xyz;
+    out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.rel = rel;
+    out.normal = normalize(vec3<f32>(c * n.x - s * n.y, s * n.x + c * n.y, n.z));
+    let look = plant_looks[min(inst.look, 15u)];
+    out.albedo = select(look.rgb, TRUNK, v.ground == 0u);
+    return out;
+}
+
+struct BillboardOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel: vec3<f32>,
+    // x in [-1, 1] across, y in [0, 1] up.
+    @location(1) uv: vec2<f32>,
+    @location(2) albedo: vec3<f32>,
+    @location(3) @interpolate(flat) shape: u32,
+    @location(4) right: vec3<f32>,
+};
+
+// Camera-facing (about the vertical axis) quads: 6 vertices per instance, no vertex buffer.
+@vertex
+fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> BillboardOut {
+    let corner = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    )[i % 6u];
+    let base = inst.position + node.offset_lo.xyz;
+    let flat_dir = vec2<f32>(base.x, base.y);
+    let len = max(length(flat_dir), 1e-3);
+    let right = vec3<f32>(-flat_dir.y / len, flat_dir.x / len, 0.0);
+    let rel = base + right * (corner.x * inst.radius) + vec3<f32>(0.0, 0.0, corner.y * inst.height);
+    var out: BillboardOut;
+    out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.rel = rel;
+    out.uv = corner;
+    let look = plant_looks[min(inst.look, 15u)];
+    out.albedo = look.rgb;
+    out.shape = u32(look.w + 0.5);
+    out.right = right;
+    return out;
+}
+
+// The billboard image: the shape's side silhouette, computed per pixel (procedural, the same
+// proportions as the meshes), shaded with a rounded normal.
+@fragment
+fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
+    let t = bayer8(vec2<u32>(in.clip.xy));
+    if (t < node.offset_lo.w || t >= node.hi_level.x) {
+        discard;
+    }
+    let u = in.uv.x;
+    let v = in.uv.y;
+    var foliage = false;
+    var trunk = false;
+    var across = 0.0;
+    if (in.shape == 0u) {
+        // Conifer: two stacked cones over a short trunk.
+        let w = max(select(0.0, 1.0 - (v - 0.18) / 0.52 * 0.75, v >= 0.18 && v <= 0.7),
+                    select(0.0, 0.7 * (1.0 - (v - 0.5) / 0.5), v >= 0.5));
+        foliage = abs(u) < w;
+        trunk = abs(u) < 0.07 && v < 0.3;
+        across = u / max(w, 1e-3);
+    } else if (in.shape == 1u) {
+        let d = vec2<f32>(u, (v - 0.62) / 0.38);
+        foliage = dot(d, d) < 1.0;
+        trunk = abs(u) < 0.08 && v < 0.45;
+        across = d.x;
+    } else if (in.shape == 2u) {
+        let d = vec2<f32>(u, (v - 0.5) / 0.5);
+        foliage = dot(d, d) < 1.0;
+        across = d.x;
+    } else {
+        // Grass: a few thin tapered blades.
+        let blade = fract((u + 1.0) * 2.5) - 0.5;
+        foliage = abs(blade) < 0.22 * (1.0 - v);
+        across = blade * 2.0;
+    }
+    if (!foliage && !trunk) {
+        discard;
+    }
+    var albedo = in.albedo;
+    if (!foliage) {
+        albedo = TRUNK;
+    }
+    let toward = -normalize(vec3<f32>(in.rel.x, in.rel.y, 0.0));
+    let a = clamp(across, -1.0, 1.0);
+    let n = normalize(in.right * a + toward * sqrt(1.0 - a * a) + vec3<f32>(0.0, 0.0, 0.4));
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
+    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
+    var color = albedo * (frame.sun_color.rgb * sun + ambient);
+    let dist = length(in.rel);
+    let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
+    color = mix(color, sky_color(normalize(in.rel)), fog);
+    return vec4<f32>(color, 1.0);
+}

@@ -232,6 +232,10 @@ pub struct FrameStats {
     pub cpu_frame_ms: f64,
     pub draw_calls: u32,
     pub triangles: u64,
+    /// Vegetation instances drawn (meshes and billboards), their draw calls, mesh triangles.
+    pub plant_instances: u64,
+    pub plant_draw_calls: u32,
+    pub plant_triangles: u64,
     pub drawn_nodes: usize,
     pub nodes_per_level: Vec<usize>,
     pub jobs_queued: usize,
@@ -277,9 +281,19 @@ impl Viewer {
             .iter()
             .map(|g| g.color)
             .collect();
+        let streamer = Streamer::new(world, settings, terrain_phases());
+        let mut renderer = TerrainRenderer::new(gpu, color_format, &legend);
+        let names: Vec<String> = streamer
+            .shared
+            .placer
+            .species
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        renderer.set_plant_looks(gpu, &names);
         Self {
-            streamer: Streamer::new(world, settings, terrain_phases()),
-            renderer: TerrainRenderer::new(gpu, color_format, &legend),
+            streamer,
+            renderer,
             view: ViewOptions::default(),
             frozen: None,
             timer: crate::render::GpuTimer::new(gpu),
@@ -303,10 +317,14 @@ impl Viewer {
         self.streamer.update(&select_cam, dt_s);
         let t1 = Instant::now();
         let device = &gpu.device;
+        let renderer = &self.renderer;
         self.streamer.run_gpu_phases_with(&mut |shared, work| {
             if let Some(mesh) = &work.terrain {
-                let node = TerrainRenderer::upload(device, &shared.tree, mesh);
-                work.uploaded_bytes = node.bytes;
+                let mut node = TerrainRenderer::upload(device, &shared.tree, mesh);
+                if let Some(v) = &work.vegetation {
+                    node.plants = renderer.upload_plants(device, &shared.tree, mesh.key, v);
+                }
+                work.uploaded_bytes = node.bytes + node.plants.as_ref().map_or(0, |p| p.bytes);
                 work.gpu = GpuSlot(Some(Box::new(node)));
             }
         });
@@ -333,9 +351,25 @@ impl Viewer {
             t.harvest(gpu);
         }
         let timed = self.timer.as_ref().is_some_and(|t| t.begin(encoder));
+        // Ancestors of drawn nodes draw their kept vegetation (resident: the draw list is
+        // walked down from the root through them).
+        let mut ancestors: Vec<NodeKey> = Vec::new();
+        for d in &draws {
+            let mut k = d.node.key;
+            while let Some(p) = k.parent() {
+                ancestors.push(p);
+                k = p;
+            }
+        }
+        ancestors.sort_unstable();
+        ancestors.dedup();
+        let kept: Vec<&TerrainNodeGpu> = ancestors
+            .iter()
+            .filter_map(|&k| self.streamer.resident(k)?.work.gpu.get::<TerrainNodeGpu>())
+            .collect();
         let drawn: DrawStats = self
             .renderer
-            .render(gpu, encoder, color, depth, cam, &draws, &self.view);
+            .render(gpu, encoder, color, depth, cam, &draws, &kept, &self.view);
         if timed && let Some(t) = &self.timer {
             t.end(encoder);
         }
@@ -343,7 +377,10 @@ impl Viewer {
         for d in &draws {
             per_level[usize::from(d.node.key.level)] += 1;
         }
-        let node_bytes: usize = draws.iter().map(|d| d.node.bytes).sum();
+        let node_bytes: usize = draws
+            .iter()
+            .map(|d| d.node.bytes + d.node.plants.as_ref().map_or(0, |p| p.bytes))
+            .sum();
         let t3 = Instant::now();
         let st = &self.streamer.stats;
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
@@ -368,6 +405,9 @@ impl Viewer {
             cpu_frame_ms: ms(t0, t3),
             draw_calls: drawn.draw_calls,
             triangles: drawn.triangles,
+            plant_instances: drawn.plant_instances,
+            plant_draw_calls: drawn.plant_draw_calls,
+            plant_triangles: drawn.plant_triangles,
             drawn_nodes: draws.len(),
             nodes_per_level: per_level,
             jobs_queued: st.queued,

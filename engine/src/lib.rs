@@ -1,7 +1,7 @@
 //! `engine`: the runtime of the terrain streaming engine.
 //!
 //! The CPU side (this crate's `world`, `decals`, `quadtree`, `bounds`, `select`, `tiles`, `mesh`,
-//! `tin`, `stream`, `vegetation` modules) never touches the GPU: it turns a map and a camera into plain data (node keys, bounds,
+//! `tin`, `stream`, `vegetation`, `plants` modules) never touches the GPU: it turns a map and a camera into plain data (node keys, bounds,
 //! vertex/index arrays) that a renderer uploads.
 //!
 //! Main design choices:
@@ -24,6 +24,7 @@ pub mod bounds;
 pub mod decals;
 pub mod measure;
 pub mod mesh;
+pub mod plants;
 pub mod quadtree;
 pub mod render;
 pub mod select;

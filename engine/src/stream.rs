@@ -64,6 +64,8 @@ pub struct Shared {
     pub tree: QuadTree,
     pub bounds: BoundsStore,
     pub tiles: Mutex<TileCache>,
+    /// Vegetation placement (built once from the map).
+    pub placer: crate::vegetation::Placer,
 }
 
 /// Node bounds known so far, shared by selection (reads) and jobs (writes).
@@ -115,6 +117,8 @@ pub struct NodeWork {
     /// Tiles held by this job (released when the job ends, finished or cancelled).
     pub tiles: Vec<(TileKey, Arc<Tile>)>,
     pub terrain: Option<NodeMesh>,
+    /// The node's vegetation instances (grouped for drawing).
+    pub vegetation: Option<crate::vegetation::NodeVegetation>,
     /// Set by the GPU upload phase: bytes that went to the GPU.
     pub uploaded_bytes: usize,
     /// The node's GPU objects, set by the renderer's upload hook, dropped with the node.
@@ -150,6 +154,10 @@ impl NodeWork {
     /// Bytes this node keeps resident (CPU copy of its GPU data).
     pub fn bytes(&self) -> usize {
         self.terrain.as_ref().map_or(0, NodeMesh::gpu_bytes)
+            + self
+                .vegetation
+                .as_ref()
+                .map_or(0, crate::vegetation::NodeVegetation::gpu_bytes)
     }
 }
 
@@ -191,6 +199,15 @@ fn phase_terrain_mesh(s: &Shared, w: &mut NodeWork) {
     w.terrain = Some(mesh);
 }
 
+fn phase_vegetation(s: &Shared, w: &mut NodeWork) {
+    w.vegetation = Some(crate::vegetation::node_vegetation(
+        &s.world,
+        &s.placer,
+        &s.tree,
+        w.key(),
+    ));
+}
+
 fn phase_release_tiles(s: &Shared, w: &mut NodeWork) {
     release_tiles(s, w);
 }
@@ -210,7 +227,8 @@ fn phase_upload(_s: &Shared, w: &mut NodeWork) {
     w.uploaded_bytes = w.bytes();
 }
 
-/// The terrain node pipeline: bounds -> tiles -> terrain mesh -> release tiles -> GPU upload.
+/// The node pipeline: bounds -> tiles -> terrain mesh -> vegetation -> release tiles -> GPU
+/// upload.
 pub fn terrain_phases() -> Vec<Phase> {
     vec![
         Phase {
@@ -227,6 +245,11 @@ pub fn terrain_phases() -> Vec<Phase> {
             name: "terrain mesh",
             kind: PhaseKind::Cpu,
             run: phase_terrain_mesh,
+        },
+        Phase {
+            name: "vegetation",
+            kind: PhaseKind::Cpu,
+            run: phase_vegetation,
         },
         Phase {
             name: "release tiles",
@@ -438,11 +461,13 @@ fn worker_loop(shared: &Shared, phases: &[Phase], rx: &Receiver<JobMsg>, tx: &Se
 impl Streamer {
     pub fn new(world: World, settings: StreamSettings, phases: Vec<Phase>) -> Self {
         let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let placer = crate::vegetation::Placer::new(&world);
         let shared = Arc::new(Shared {
             world,
             tree,
             bounds: BoundsStore::default(),
             tiles: Mutex::new(TileCache::new()),
+            placer,
         });
         let phases = Arc::new(phases);
         let (to_workers, rx) = crossbeam_channel::unbounded::<JobMsg>();

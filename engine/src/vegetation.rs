@@ -483,9 +483,17 @@ pub struct NodeVegetation {
     pub groups: Vec<InstanceGroup>,
 }
 
+/// Bytes of one instance on the GPU (position, height, radius, yaw, species).
+pub const INSTANCE_BYTES: usize = 32;
+
 impl NodeVegetation {
     pub fn instances(&self) -> usize {
         self.groups.iter().map(|g| g.items.len()).sum()
+    }
+
+    /// Bytes of the node's instance buffer.
+    pub fn gpu_bytes(&self) -> usize {
+        self.instances() * INSTANCE_BYTES
     }
 }
 

@@ -178,6 +178,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
             &target.depth_view,
             &cam,
             draws,
+            &[],
             &view,
         );
         g.queue.submit([enc.finish()]);

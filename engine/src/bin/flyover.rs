@@ -186,7 +186,7 @@ fn run_headless(cli: &Cli) -> Result<()> {
     }
     bar.finish_and_clear();
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 9] = [
+    let rows: [(&str, Vec<f64>); 12] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -205,6 +205,18 @@ fn run_headless(cli: &Cli) -> Result<()> {
         ),
         ("triangles", col(|s| s.triangles as f64)),
         ("draw calls", col(|s| f64::from(s.draw_calls))),
+        (
+            "vegetation instances (meshes + billboards)",
+            col(|s| s.plant_instances as f64),
+        ),
+        (
+            "vegetation draw calls",
+            col(|s| f64::from(s.plant_draw_calls)),
+        ),
+        (
+            "vegetation mesh triangles",
+            col(|s| s.plant_triangles as f64),
+        ),
     ];
     println!(
         "flyover --headless: {} frames at {}x{} on {}\n",
@@ -619,6 +631,7 @@ mod window {
         }
         ui.checkbox(&mut view.color_by_level, "colour by level");
         ui.checkbox(&mut view.show_bounds, "node bounds");
+        ui.checkbox(&mut view.plants, "vegetation");
         ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
         ui.checkbox(&mut fixed, "fixed level");
         if fixed {
@@ -645,6 +658,10 @@ mod window {
         ui.label(format!(
             "triangles {}  draw calls {}  nodes {}",
             s.triangles, s.draw_calls, s.drawn_nodes
+        ));
+        ui.label(format!(
+            "vegetation: {} instances, {} draw calls, {} mesh triangles",
+            s.plant_instances, s.plant_draw_calls, s.plant_triangles
         ));
         ui.label(format!("nodes per level {:?}", s.nodes_per_level));
         ui.label(format!(

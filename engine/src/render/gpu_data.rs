@@ -43,6 +43,21 @@ pub struct TerrainVertex {
     pub ground: u32,
 }
 
+/// Mirrors `PlantIn`'s instance part in `terrain.wgsl` (32 bytes, one per vegetation item).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+pub struct PlantInstance {
+    /// x, y relative to the node's south-west corner; z absolute ground height (m).
+    pub position: [f32; 3],
+    pub height_m: f32,
+    pub radius_m: f32,
+    pub yaw_rad: f32,
+    /// Index into the frame's plant looks (shape, colour).
+    pub look: u32,
+    pub padding: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<PlantInstance>() == crate::vegetation::INSTANCE_BYTES);
 const _: () = assert!(std::mem::size_of::<NodeUniforms>() as u64 == NODE_UNIFORM_STRIDE);
 const _: () = assert!(std::mem::size_of::<TerrainVertex>() == 28);
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 5 * 16);

@@ -1,12 +1,16 @@
 //! The terrain renderer: long-lived pipelines (terrain fill, terrain wireframe, sky, debug
 //! lines), per-node GPU buffers, per-frame uniforms.
 
-use super::gpu_data::{FrameUniforms, NODE_UNIFORM_STRIDE, NodeUniforms, TerrainVertex};
+use super::gpu_data::{
+    FrameUniforms, NODE_UNIFORM_STRIDE, NodeUniforms, PlantInstance, TerrainVertex,
+};
 use super::{DEPTH_FORMAT, Gpu};
 use crate::bounds::NodeBounds;
 use crate::mesh::NodeMesh;
+use crate::plants::{self, PlantMeshes, Shape};
 use crate::quadtree::{NodeKey, QuadTree};
 use crate::select::Camera;
+use crate::vegetation::{NodeVegetation, Representation};
 use glam::{DVec3, Vec3};
 use wgpu::util::DeviceExt;
 
@@ -37,6 +41,40 @@ pub struct TerrainNodeGpu {
     indices: wgpu::Buffer,
     index_count: u32,
     pub bytes: usize,
+    /// The node's vegetation instances, when it has any.
+    pub plants: Option<PlantsGpu>,
+}
+
+/// One instance group of a node on the GPU.
+#[derive(Debug, Clone, Copy)]
+struct PlantGroupGpu {
+    first: u32,
+    count: u32,
+    shape: Shape,
+    billboard: bool,
+    /// Drawn the same way at every finer level: drawn through the node's splits.
+    kept: bool,
+}
+
+/// A node's vegetation instances (one buffer, groups are ranges of it).
+pub struct PlantsGpu {
+    instances: wgpu::Buffer,
+    groups: Vec<PlantGroupGpu>,
+    /// World-space box of the items (ground to tree tops).
+    pub aabb_m: (DVec3, DVec3),
+    pub bytes: usize,
+    low_detail: bool,
+}
+
+impl std::fmt::Debug for PlantsGpu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "PlantsGpu({} groups, {} bytes)",
+            self.groups.len(),
+            self.bytes
+        )
+    }
 }
 
 impl std::fmt::Debug for TerrainNodeGpu {
@@ -68,6 +106,8 @@ pub struct ViewOptions {
     /// Distance fog: density per metre and largest amount (depth cueing, never hiding).
     pub fog_per_m: f32,
     pub fog_max: f32,
+    /// Draw vegetation.
+    pub plants: bool,
 }
 
 impl Default for ViewOptions {
@@ -80,6 +120,7 @@ impl Default for ViewOptions {
             clear: [0.0, 0.0, 0.0, 1.0],
             fog_per_m: 1.0 / 25_000.0,
             fog_max: 0.35,
+            plants: true,
         }
     }
 }
@@ -98,6 +139,10 @@ pub struct DrawStats {
     pub draw_calls: u32,
     pub triangles: u64,
     pub culled: u32,
+    /// Vegetation: instances drawn (meshes and billboards), their draw calls and mesh triangles.
+    pub plant_instances: u64,
+    pub plant_draw_calls: u32,
+    pub plant_triangles: u64,
 }
 
 pub struct TerrainRenderer {
@@ -113,6 +158,14 @@ pub struct TerrainRenderer {
     node_capacity: u64,
     line_buffer: wgpu::Buffer,
     line_capacity: u64,
+    plant_mesh: wgpu::RenderPipeline,
+    billboard: wgpu::RenderPipeline,
+    plant_vertices: wgpu::Buffer,
+    plant_indices: wgpu::Buffer,
+    plant_meshes: PlantMeshes,
+    looks_buffer: wgpu::Buffer,
+    /// Shape per look index (species).
+    shapes: Vec<Shape>,
 }
 
 impl std::fmt::Debug for TerrainRenderer {
@@ -172,7 +225,11 @@ impl TerrainRenderer {
         let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("terrain frame layout"),
-            entries: &[uniform_entry(0, false, vf), uniform_entry(1, false, vf)],
+            entries: &[
+                uniform_entry(0, false, vf),
+                uniform_entry(1, false, vf),
+                uniform_entry(2, false, vf),
+            ],
         });
         let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("terrain node layout"),
@@ -237,6 +294,79 @@ impl TerrainRenderer {
         let wire = gpu
             .wireframe
             .then(|| terrain_pipeline("terrain wireframe", wgpu::PolygonMode::Line));
+        let instance_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<PlantInstance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &wgpu::vertex_attr_array![
+                3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32
+            ],
+        };
+        let plant_pipeline =
+            |label: &str, vs: &str, fs: &str, buffers: &[Option<wgpu::VertexBufferLayout<'_>>]| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some(label),
+                    layout: Some(&layout),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some(vs),
+                        compilation_options: wgpu::PipelineCompilationOptions::default(),
+                        buffers,
+                    },
+                    primitive: wgpu::PrimitiveState {
+                        topology: wgpu::PrimitiveTopology::TriangleList,
+                        cull_mode: None,
+                        ..Default::default()
+                    },
+                    depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
+                    multisample: wgpu::MultisampleState::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some(fs),
+                        compilation_options: wgpu::PipelineCompilationOptions::default(),
+                        targets: &target,
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
+        let plant_mesh = plant_pipeline(
+            "plant meshes",
+            "vs_plant",
+            "fs_main",
+            &[Some(vertex_layout.clone()), Some(instance_layout.clone())],
+        );
+        let billboard = plant_pipeline(
+            "plant billboards",
+            "vs_billboard",
+            "fs_billboard",
+            &[Some(instance_layout)],
+        );
+        let plant_meshes = PlantMeshes::generate();
+        let plant_vertex_data: Vec<TerrainVertex> = plant_meshes
+            .vertices
+            .iter()
+            .map(|v| TerrainVertex {
+                position: v.position,
+                normal: v.normal,
+                ground: v.part,
+            })
+            .collect();
+        let plant_vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("plant shape vertices"),
+            contents: bytemuck::cast_slice(&plant_vertex_data),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let plant_indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("plant shape indices"),
+            contents: bytemuck::cast_slice(&plant_meshes.indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        let looks_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("plant looks"),
+            size: 16 * 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let simple = |label: &str,
                       vs: &str,
                       fs: &str,
@@ -321,6 +451,10 @@ impl TerrainRenderer {
                     binding: 1,
                     resource: colors_buffer.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: looks_buffer.as_entire_binding(),
+                },
             ],
         });
         let node_capacity = 256;
@@ -341,7 +475,97 @@ impl TerrainRenderer {
             node_capacity,
             line_buffer,
             line_capacity,
+            plant_mesh,
+            billboard,
+            plant_vertices,
+            plant_indices,
+            plant_meshes,
+            looks_buffer,
+            shapes: Vec::new(),
         }
+    }
+
+    /// Sets the shape and colour of each vegetation species (look index = species index, at
+    /// most 16), from the species names.
+    pub fn set_plant_looks(&mut self, gpu: &Gpu, species_names: &[String]) {
+        let mut data = [[0.3f32, 0.45, 0.2, 2.0]; 16];
+        self.shapes.clear();
+        for (i, name) in species_names.iter().take(16).enumerate() {
+            let (shape, c) = plants::look(name);
+            data[i] = [
+                srgb_to_linear(c[0]),
+                srgb_to_linear(c[1]),
+                srgb_to_linear(c[2]),
+                shape as u32 as f32,
+            ];
+            self.shapes.push(shape);
+        }
+        gpu.queue
+            .write_buffer(&self.looks_buffer, 0, bytemuck::cast_slice(&data));
+    }
+
+    /// Uploads a node's vegetation instances (None when it has none).
+    pub fn upload_plants(
+        &self,
+        device: &wgpu::Device,
+        tree: &QuadTree,
+        key: NodeKey,
+        veg: &NodeVegetation,
+    ) -> Option<PlantsGpu> {
+        if veg.instances() == 0 {
+            return None;
+        }
+        let o = tree.rect(key).min;
+        let mut data: Vec<PlantInstance> = Vec::with_capacity(veg.instances());
+        let mut groups = Vec::with_capacity(veg.groups.len());
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for g in &veg.groups {
+            let first = data.len() as u32;
+            for it in &g.items {
+                let r = f64::from(it.radius_m);
+                lo = lo.min(DVec3::new(it.x_m - r, it.y_m - r, it.z_m - 1.0));
+                hi = hi.max(DVec3::new(
+                    it.x_m + r,
+                    it.y_m + r,
+                    it.z_m + f64::from(it.height_m),
+                ));
+                data.push(PlantInstance {
+                    position: [
+                        (it.x_m - o[0]) as f32,
+                        (it.y_m - o[1]) as f32,
+                        it.z_m as f32,
+                    ],
+                    height_m: it.height_m,
+                    radius_m: it.radius_m,
+                    yaw_rad: it.yaw_rad,
+                    look: u32::from(it.species),
+                    padding: 0,
+                });
+            }
+            groups.push(PlantGroupGpu {
+                first,
+                count: g.items.len() as u32,
+                shape: self
+                    .shapes
+                    .get(usize::from(g.species))
+                    .copied()
+                    .unwrap_or(Shape::Bush),
+                billboard: g.representation != Representation::Mesh,
+                kept: !g.replaced_on_split,
+            });
+        }
+        let instances = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(&format!("node {}/{}/{} plants", key.level, key.ix, key.iy)),
+            contents: bytemuck::cast_slice(&data),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        Some(PlantsGpu {
+            instances,
+            groups,
+            aabb_m: (lo, hi),
+            bytes: data.len() * std::mem::size_of::<PlantInstance>(),
+            low_detail: tree.spacing_m(key.level) >= 1.0,
+        })
     }
 
     fn node_buffer(device: &wgpu::Device, slots: u64) -> wgpu::Buffer {
@@ -409,6 +633,7 @@ impl TerrainRenderer {
             indices: ib,
             index_count: mesh.indices.len() as u32,
             bytes: vertices.len() * std::mem::size_of::<TerrainVertex>() + mesh.indices.len() * 4,
+            plants: None,
         }
     }
 
@@ -450,6 +675,7 @@ impl TerrainRenderer {
         depth: &wgpu::TextureView,
         cam: &Camera,
         draws: &[Draw<'_>],
+        kept: &[&TerrainNodeGpu],
         view: &ViewOptions,
     ) -> DrawStats {
         let frustum = cam.frustum();
@@ -458,6 +684,33 @@ impl TerrainRenderer {
             .filter(|d| d.dither_hi > d.dither_lo)
             .filter(|d| frustum.intersects_aabb(d.node.aabb_m.0, d.node.aabb_m.1))
             .collect();
+        // Vegetation: the drawn nodes' groups with their dither interval (kept groups of a node
+        // that is also in `kept` go with it instead), and the kept groups of `kept` nodes (the
+        // ancestors of drawn nodes) in full. Uniform slots follow the terrain's.
+        let kept_keys: rustc_hash::FxHashSet<NodeKey> = kept.iter().map(|n| n.key).collect();
+        let mut plant_slots: Vec<(&TerrainNodeGpu, f32, f32)> = Vec::new();
+        // (slot, plants, which groups): 0 all, 1 replaced ones only, 2 kept ones only.
+        let mut plant_draws: Vec<(usize, &PlantsGpu, u8)> = Vec::new();
+        if view.plants {
+            for d in draws.iter().filter(|d| d.dither_hi > d.dither_lo) {
+                if let Some(p) = &d.node.plants
+                    && frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1)
+                {
+                    let which = u8::from(kept_keys.contains(&d.node.key));
+                    plant_draws.push((plant_slots.len(), p, which));
+                    plant_slots.push((d.node, d.dither_lo, d.dither_hi));
+                }
+            }
+            for n in kept {
+                if let Some(p) = &n.plants
+                    && p.groups.iter().any(|g| g.kept)
+                    && frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1)
+                {
+                    plant_draws.push((plant_slots.len(), p, 2));
+                    plant_slots.push((n, 0.0, 1.0));
+                }
+            }
+        }
         let mut stats = DrawStats {
             culled: (draws.len() - visible.len()) as u32,
             ..DrawStats::default()
@@ -467,28 +720,25 @@ impl TerrainRenderer {
             0,
             bytemuck::bytes_of(&Self::frame_uniforms(cam, view)),
         );
-        let needed = (visible.len() as u64).max(1);
+        let needed = ((visible.len() + plant_slots.len()) as u64).max(1);
         if needed > self.node_capacity {
             self.node_capacity = needed.next_power_of_two();
             self.node_buffer = Self::node_buffer(&gpu.device, self.node_capacity);
             self.node_group = node_group(&gpu.device, &self.node_layout, &self.node_buffer);
         }
         let c = cam.position_m;
+        let uniforms = |node: &TerrainNodeGpu, lo: f32, hi: f32| {
+            let o = node.origin_m;
+            NodeUniforms {
+                offset_lo: [(o[0] - c.x) as f32, (o[1] - c.y) as f32, (-c.z) as f32, lo],
+                hi_level: [hi, f32::from(node.key.level), 0.0, 0.0],
+                padding: [[0.0; 4]; 14],
+            }
+        };
         let nodes: Vec<NodeUniforms> = visible
             .iter()
-            .map(|d| {
-                let o = d.node.origin_m;
-                NodeUniforms {
-                    offset_lo: [
-                        (o[0] - c.x) as f32,
-                        (o[1] - c.y) as f32,
-                        (-c.z) as f32,
-                        d.dither_lo,
-                    ],
-                    hi_level: [d.dither_hi, f32::from(d.node.key.level), 0.0, 0.0],
-                    padding: [[0.0; 4]; 14],
-                }
-            })
+            .map(|d| uniforms(d.node, d.dither_lo, d.dither_hi))
+            .chain(plant_slots.iter().map(|&(n, lo, hi)| uniforms(n, lo, hi)))
             .collect();
         if !nodes.is_empty() {
             gpu.queue
@@ -574,6 +824,32 @@ impl TerrainRenderer {
             pass.draw_indexed(0..d.node.index_count, 0, 0..1);
             stats.draw_calls += 1;
             stats.triangles += u64::from(d.node.triangles());
+        }
+        let base_slot = visible.len();
+        for (slot, p, which) in plant_draws {
+            let offset = ((base_slot + slot) as u64 * NODE_UNIFORM_STRIDE) as u32;
+            pass.set_bind_group(1, &self.node_group, &[offset]);
+            for g in &p.groups {
+                if (which == 1 && g.kept) || (which == 2 && !g.kept) {
+                    continue;
+                }
+                let instances = g.first..g.first + g.count;
+                pass.set_vertex_buffer(usize::from(!g.billboard) as u32, p.instances.slice(..));
+                if g.billboard {
+                    pass.set_pipeline(&self.billboard);
+                    pass.draw(0..6, instances);
+                } else {
+                    pass.set_pipeline(&self.plant_mesh);
+                    pass.set_vertex_buffer(0, self.plant_vertices.slice(..));
+                    pass.set_index_buffer(self.plant_indices.slice(..), wgpu::IndexFormat::Uint32);
+                    let (first, count, base) =
+                        self.plant_meshes.ranges[g.shape as usize][usize::from(p.low_detail)];
+                    pass.draw_indexed(first..first + count, base, instances);
+                    stats.plant_triangles += u64::from(count / 3) * u64::from(g.count);
+                }
+                stats.plant_instances += u64::from(g.count);
+                stats.plant_draw_calls += 1;
+            }
         }
         if view.show_bounds && !lines.is_empty() {
             pass.set_pipeline(&self.lines);
