@@ -54,6 +54,16 @@ pub struct NodeBounds {
     pub mesh_error_m: f64,
     /// `U(N)`: a bound of the error of every descendant's mesh inside this node.
     pub descendants_error_m: f64,
+    /// The vegetation representation error of this level where the node has vegetation (see
+    /// [`crate::vegetation::ERROR_PER_SPACING`]), else 0. Monotone like `error_m`.
+    pub vegetation_error_m: f64,
+}
+
+impl NodeBounds {
+    /// The error selection projects: terrain or vegetation, whichever is larger.
+    pub fn selection_error_m(&self) -> f64 {
+        self.error_m.max(self.vegetation_error_m)
+    }
 }
 
 /// Linear interpolation of vertex heights `v` ((n+1)^2, row-major) at fractional grid position
@@ -235,6 +245,11 @@ pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
         z_max_m: hi,
         error_m: error + rounding,
         mesh_error_m: error + rounding,
+        vegetation_error_m: if crate::vegetation::has_vegetation(world, r) {
+            crate::vegetation::ERROR_PER_SPACING * s
+        } else {
+            0.0
+        },
         // Leaves have no descendants.
         descendants_error_m: if key.level < tree.max_level {
             descendants + rounding

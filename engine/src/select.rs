@@ -189,7 +189,7 @@ pub fn traverse<B: Into<Option<NodeBounds>>>(
         }
         let dist = distance_to_aabb(cam.position_m, min, max);
         let error_px = if dist > 0.0 {
-            b.error_m * k / dist
+            b.selection_error_m() * k / dist
         } else {
             f64::INFINITY
         };
@@ -222,6 +222,32 @@ pub fn select(
         p.cull,
         |key| cache.get(world, tree, key),
         |key, _, _, px| px > p.tau_px && key.level < p.max_level,
+    );
+    out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
+    out
+}
+
+/// Like [`select`], and splits less where vegetation blocks the view: a node's projected error
+/// is multiplied by [`crate::vegetation::Canopy::error_factor`] before the comparison with tau.
+pub fn select_occluded(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    cam: &Camera,
+    p: SelectParams,
+    canopy: &crate::vegetation::Canopy,
+) -> Selection {
+    let mut out = traverse(
+        tree,
+        cam,
+        p.cull,
+        |key| cache.get(world, tree, key),
+        |key, b, dist, px| {
+            px > p.tau_px
+                && key.level < p.max_level
+                && px * canopy.error_factor(world, cam.position_m, tree.rect(key), b.z_max_m, dist)
+                    > p.tau_px
+        },
     );
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     out

@@ -66,6 +66,8 @@ pub struct Shared {
     pub tiles: Mutex<TileCache>,
     /// Vegetation placement (built once from the map).
     pub placer: crate::vegetation::Placer,
+    /// How much vegetation blocks lines of sight.
+    pub canopy: crate::vegetation::Canopy,
 }
 
 /// Node bounds known so far, shared by selection (reads) and jobs (writes).
@@ -267,6 +269,8 @@ pub fn terrain_phases() -> Vec<Phase> {
 /// Streaming settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StreamSettings {
+    /// Split less where vegetation blocks the view (see `vegetation::Canopy`).
+    pub vegetation_occlusion: bool,
     /// Worker threads (at least 1).
     pub workers: usize,
     /// Most jobs handed to workers at once (queued there or running).
@@ -306,6 +310,7 @@ impl Default for StreamSettings {
             split_factor: 0.6,
             prefetch_factor: 0.5,
             fixed_level: None,
+            vegetation_occlusion: false,
         }
     }
 }
@@ -462,7 +467,9 @@ impl Streamer {
     pub fn new(world: World, settings: StreamSettings, phases: Vec<Phase>) -> Self {
         let tree = QuadTree::new(world.origin_m(), world.size_m());
         let placer = crate::vegetation::Placer::new(&world);
+        let canopy = crate::vegetation::Canopy::new(&world, &placer);
         let shared = Arc::new(Shared {
+            canopy,
             world,
             tree,
             bounds: BoundsStore::default(),
@@ -542,8 +549,18 @@ impl Streamer {
             cam,
             true,
             |key| self.shared.bounds.peek(key),
-            |key: NodeKey, _, _, px| match self.settings.fixed_level {
+            |key: NodeKey, b: &NodeBounds, dist, px| match self.settings.fixed_level {
                 Some(level) => key.level < level,
+                None if self.settings.vegetation_occlusion && px > tau_px => {
+                    let s = &self.shared;
+                    px * s.canopy.error_factor(
+                        &s.world,
+                        cam.position_m,
+                        s.tree.rect(key),
+                        b.z_max_m,
+                        dist,
+                    ) > tau_px
+                }
                 None => px > tau_px,
             },
         );

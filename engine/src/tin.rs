@@ -238,6 +238,7 @@ mod tests {
                 error_m: 0.0,
                 mesh_error_m: 0.0,
                 descendants_error_m: 0.0,
+                vegetation_error_m: 0.0,
             },
             skirt_bottom_m: [0.0; 4],
         }

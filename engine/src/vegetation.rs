@@ -226,27 +226,8 @@ impl Placer {
         let Some(layer) = self.species[s].layer else {
             return 0.0;
         };
-        let l = &world.map.densities[layer];
-        let o = world.origin_m();
-        let (w, h) = (l.density.width(), l.density.height());
-        let idx = |v: f64, o: f64, n: usize, f: fn(f64) -> f64| {
-            f((v - o) / l.spec.spacing_m).clamp(0.0, (n - 1) as f64) as usize
-        };
-        let (x0, x1) = (
-            idx(rect.min[0], o[0], w, f64::floor),
-            idx(rect.max[0], o[0], w, f64::ceil),
-        );
-        let (y0, y1) = (
-            idx(rect.min[1], o[1], h, f64::floor),
-            idx(rect.max[1], o[1], h, f64::ceil),
-        );
-        let mut m = 0u8;
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                m = m.max(l.density.get(x, y));
-            }
-        }
-        f64::from(m) / 255.0 * l.spec.max_density_per_m2
+        f64::from(layer_max(world, layer, rect)) / 255.0
+            * world.map.densities[layer].spec.max_density_per_m2
     }
 
     /// True where nothing may grow: on a road or path decal, on water ground, below the water
@@ -432,6 +413,47 @@ pub enum Representation {
     Group,
 }
 
+/// The vegetation error of a node that has vegetation, per metre of its mesh spacing: the
+/// selection splits while `max(terrain error, ERROR_PER_SPACING * spacing)` projects above
+/// the user's threshold. Where a node is shown, its distance is at least `error * K / tau`, so an
+/// item of height `h = q * spacing` projects to at most `q * tau / ERROR_PER_SPACING` pixels:
+/// at 0.125 a billboard (q < 2.5) is at most 20 tau px tall (40 px at the default 2 px), a
+/// group-billboard member (q < 0.6) at most 4.8 tau px, and a removed item (q < 0.15) at most
+/// 1.2 tau px, so nothing near the camera is a billboard and removal is below about tau.
+pub const ERROR_PER_SPACING: f64 = 0.125;
+
+/// Whether any species' density layer is above zero somewhere in `rect` (large trees follow the
+/// same layers in generated maps).
+pub fn has_vegetation(world: &World, rect: Rect) -> bool {
+    (0..world.map.densities.len()).any(|l| layer_max(world, l, rect) > 0)
+}
+
+/// Largest sample of density layer `layer` over the cells `rect` touches (bilinear
+/// interpolation never exceeds it).
+fn layer_max(world: &World, layer: usize, rect: Rect) -> u8 {
+    let l = &world.map.densities[layer];
+    let o = world.origin_m();
+    let (w, h) = (l.density.width(), l.density.height());
+    let idx = |v: f64, o: f64, n: usize, f: fn(f64) -> f64| {
+        f((v - o) / l.spec.spacing_m).clamp(0.0, (n - 1) as f64) as usize
+    };
+    let (x0, x1) = (
+        idx(rect.min[0], o[0], w, f64::floor),
+        idx(rect.max[0], o[0], w, f64::ceil),
+    );
+    let (y0, y1) = (
+        idx(rect.min[1], o[1], h, f64::floor),
+        idx(rect.max[1], o[1], h, f64::ceil),
+    );
+    let mut m = 0u8;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            m = m.max(l.density.get(x, y));
+        }
+    }
+    m
+}
+
 /// Item height over node mesh spacing at and above which an item is a mesh.
 pub const MESH_RATIO: f64 = 2.5;
 /// ... a billboard.
@@ -557,4 +579,141 @@ pub fn node_vegetation(
     }
     groups.sort_by_key(|g| (g.species, g.representation, g.replaced_on_split));
     NodeVegetation { groups }
+}
+
+/// Samples along a line of sight for [`Canopy::visibility`].
+pub const SIGHT_SAMPLES: usize = 16;
+
+/// A coarse model of how much vegetation blocks a line of sight, for splitting less where the
+/// view is blocked (seed 002). Per species: the extinction `density * crown diameter` (1/m) on
+/// the density layer's grid, up to the species' typical height above the ground; large trees
+/// from the map's list as crown diameters per 8 m cell, up to their mean height.
+#[derive(Debug, Clone)]
+pub struct Canopy {
+    /// Per species with a layer: (extinction grid 1/m, spacing m, height m).
+    layers: Vec<(worldgen::Grid<f32>, f64, f64)>,
+    origin_m: [f64; 2],
+    heights_spacing_m: f64,
+    /// The tallest species' height: lines of sight above the ground by more never hit.
+    pub top_m: f64,
+}
+
+impl Canopy {
+    pub fn new(world: &World, placer: &Placer) -> Self {
+        let mut layers = Vec::new();
+        let mut top = 0.0f64;
+        for sp in &placer.species {
+            let Some(l) = sp.layer else { continue };
+            let layer = &world.map.densities[l];
+            let scale = layer.spec.max_density_per_m2 / 255.0 * 2.0 * sp.radius_m;
+            let g = &layer.density;
+            let mut ext = worldgen::Grid::new(g.width(), g.height(), 0.0f32);
+            for y in 0..g.height() {
+                for x in 0..g.width() {
+                    ext.set(x, y, (f64::from(g.get(x, y)) * scale) as f32);
+                }
+            }
+            top = top.max(sp.height_m);
+            layers.push((ext, layer.spec.spacing_m, sp.height_m));
+        }
+        // Large trees: crown diameters per cell area on an 8 m grid, up to their mean height.
+        if !world.map.trees.is_empty() {
+            let cell = 8.0;
+            let s = world.size_m();
+            let (w, h) = (
+                (s[0] / cell).ceil() as usize + 1,
+                (s[1] / cell).ceil() as usize + 1,
+            );
+            let mut ext = worldgen::Grid::new(w, h, 0.0f32);
+            let o = world.origin_m();
+            let mut height_sum = 0.0;
+            for t in &world.map.trees {
+                let x = (((t.x_m - o[0]) / cell).round() as usize).min(w - 1);
+                let y = (((t.y_m - o[1]) / cell).round() as usize).min(h - 1);
+                let add = 2.0 * f64::from(t.crown_radius_m) / (cell * cell);
+                ext.set(x, y, ext.get(x, y) + add as f32);
+                height_sum += f64::from(t.height_m);
+            }
+            let mean = height_sum / world.map.trees.len() as f64;
+            top = top.max(mean);
+            layers.push((ext, cell, mean));
+        }
+        Self {
+            layers,
+            origin_m: world.origin_m(),
+            heights_spacing_m: world.map.manifest.heights.spacing_m,
+            top_m: top,
+        }
+    }
+
+    /// The fraction of the line of sight from `eye` to `target` that vegetation leaves clear,
+    /// `exp(-optical depth)`, with the optical depth summed at [`SIGHT_SAMPLES`] midpoints
+    /// (ground from the bilinear map heights).
+    pub fn visibility(&self, world: &World, eye: glam::DVec3, target: glam::DVec3) -> f64 {
+        let d = target - eye;
+        let len = d.length();
+        if len <= 0.0 || self.layers.is_empty() {
+            return 1.0;
+        }
+        let step = len / SIGHT_SAMPLES as f64;
+        let heights = worldgen::sample::GridPlacement {
+            origin_m: self.origin_m,
+            spacing_m: self.heights_spacing_m,
+        };
+        let mut depth = 0.0;
+        for i in 0..SIGHT_SAMPLES {
+            let p = eye + d * ((i as f64 + 0.5) / SIGHT_SAMPLES as f64);
+            let above = p.z - worldgen::sample::bilinear(&world.map.heights, heights, p.x, p.y);
+            if above < 0.0 || above > self.top_m {
+                continue;
+            }
+            for (ext, spacing, h) in &self.layers {
+                if above <= *h {
+                    let at = worldgen::sample::GridPlacement {
+                        origin_m: self.origin_m,
+                        spacing_m: *spacing,
+                    };
+                    depth += worldgen::sample::bilinear(ext, at, p.x, p.y) * step;
+                }
+            }
+        }
+        (-depth).exp()
+    }
+}
+
+impl Canopy {
+    /// The factor on a node's projected error for a camera at `eye`: the visibility of the
+    /// node's top centre, integrated up to the node's border (its own vegetation does not hide
+    /// it), or 1 when the camera is above the canopy or the node is near.
+    pub fn error_factor(
+        &self,
+        world: &World,
+        eye: glam::DVec3,
+        rect: Rect,
+        z_top_m: f64,
+        dist_m: f64,
+    ) -> f64 {
+        let half = 0.5 * (rect.max[0] - rect.min[0]);
+        if dist_m <= 2.0 * half || self.layers.is_empty() {
+            return 1.0;
+        }
+        let heights = worldgen::sample::GridPlacement {
+            origin_m: self.origin_m,
+            spacing_m: self.heights_spacing_m,
+        };
+        let ground = worldgen::sample::bilinear(&world.map.heights, heights, eye.x, eye.y);
+        if eye.z - ground > self.top_m {
+            return 1.0;
+        }
+        let centre = glam::DVec3::new(
+            0.5 * (rect.min[0] + rect.max[0]),
+            0.5 * (rect.min[1] + rect.max[1]),
+            z_top_m,
+        );
+        let d = centre - eye;
+        let flat = d.truncate().length().max(1e-9);
+        // Stop at the node's border (approximately: half its side before the centre).
+        let end = eye + d * (1.0 - (half / flat).min(1.0));
+        self.visibility(world, eye, end)
+    }
 }

@@ -128,6 +128,7 @@ fn quad(key: NodeKey, origin_m: [f64; 2], size_m: f32, z_m: f32, ground: u8) -> 
             error_m: 0.0,
             mesh_error_m: 0.0,
             descendants_error_m: 0.0,
+            vegetation_error_m: 0.0,
         },
         skirt_bottom_m: [f64::from(z_m); 4],
     }

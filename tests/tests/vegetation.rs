@@ -438,3 +438,99 @@ fn every_item_is_drawn_once_in_the_displayed_levels_representation() {
         "{checked} / {kept_by_parent}"
     );
 }
+
+/// The pixel metric holds for vegetation: in every selected node, an item drawn as a billboard
+/// projects to at most 20 tau px and a group-billboard member to at most 4.8 tau px (the
+/// representation error is part of each node's selection error).
+#[test]
+fn billboards_and_groups_stay_small_on_screen() {
+    use engine::bounds::BoundsCache;
+    use engine::select::{Camera, SelectParams, select};
+    use engine::vegetation::{BILLBOARD_RATIO, ERROR_PER_SPACING, MESH_RATIO};
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    let tree = QuadTree::new(world.origin_m(), world.size_m());
+    let mut cache = BoundsCache::new();
+    let o = world.origin_m();
+    let tau = 2.0;
+    let (mut billboards, mut groups) = (0usize, 0usize);
+    for i in 0..12i64 {
+        let x = o[0] + 60.0 + 390.0 * worldgen::noise::unit3(5, i, 0);
+        let y = o[1] + 60.0 + 390.0 * worldgen::noise::unit3(5, i, 1);
+        let z = world.height_m(x, y) + 2.0 + 60.0 * worldgen::noise::unit3(5, i, 2);
+        let yaw = std::f64::consts::TAU * worldgen::noise::unit3(5, i, 3);
+        let pos = glam::DVec3::new(x, y, z);
+        let dir = glam::DVec3::new(yaw.cos(), yaw.sin(), -0.15);
+        let cam = Camera::look_at(pos, pos + dir, 60f64.to_radians(), [640, 360]);
+        let sel = select(
+            &world,
+            &tree,
+            &mut cache,
+            &cam,
+            SelectParams {
+                tau_px: tau,
+                max_level: tree.max_level,
+                cull: true,
+            },
+        );
+        let k = cam.k_px();
+        for n in &sel.nodes {
+            for g in node_vegetation(&world, &p, &tree, n.key).groups {
+                let limit = match g.representation {
+                    Representation::Mesh => continue,
+                    Representation::Billboard => MESH_RATIO * tau / ERROR_PER_SPACING,
+                    Representation::Group => BILLBOARD_RATIO * tau / ERROR_PER_SPACING,
+                };
+                for it in &g.items {
+                    let d = (glam::DVec3::new(it.x_m, it.y_m, it.z_m) - pos).length();
+                    let px = f64::from(it.height_m) * k / d;
+                    assert!(
+                        px <= limit * (1.0 + 1e-9),
+                        "{:?} of species {} at {d:.1} m projects to {px:.1} px (limit {limit} px)",
+                        g.representation,
+                        it.species
+                    );
+                    match g.representation {
+                        Representation::Billboard => billboards += 1,
+                        _ => groups += 1,
+                    }
+                }
+            }
+        }
+    }
+    assert!(billboards > 100 && groups > 100, "{billboards} / {groups}");
+}
+
+/// The line-of-sight model: clear above the canopy, more blocked the longer the path through
+/// it, never more than fully clear.
+#[test]
+fn canopy_visibility_behaves() {
+    use engine::vegetation::Canopy;
+    use glam::DVec3;
+    let world = tiny_world();
+    let p = Placer::new(&world);
+    let c = Canopy::new(&world, &p);
+    let o = world.origin_m();
+    let ground = |x: f64, y: f64| world.height_m(x, y);
+    let (x0, y0) = (o[0] + 100.0, o[1] + 250.0);
+    let eye = DVec3::new(x0, y0, ground(x0, y0) + 1.5);
+    let mut last = 1.0;
+    let mut blocked = false;
+    for d in [20.0, 60.0, 120.0, 240.0, 380.0] {
+        let t = DVec3::new(x0 + d, y0, ground(x0 + d, y0) + 1.5);
+        let v = c.visibility(&world, eye, t);
+        assert!((0.0..=1.0).contains(&v), "{v}");
+        // Not a strict law with 16 samples, but over these lengths the path only grows.
+        assert!(v <= last + 0.05, "visibility grew from {last} to {v} at {d} m");
+        blocked |= v < 0.5;
+        last = v;
+    }
+    assert!(blocked, "a 380 m path at eye height through the tiny map's vegetation: {last}");
+    // High above the canopy nothing is hidden.
+    let high = DVec3::new(x0, y0, ground(x0, y0) + c.top_m + 50.0);
+    let r = Rect {
+        min: [x0 + 200.0, y0],
+        max: [x0 + 216.0, y0 + 16.0],
+    };
+    assert_eq!(c.error_factor(&world, high, r, ground(x0 + 208.0, y0 + 8.0), 250.0), 1.0);
+}

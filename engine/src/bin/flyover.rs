@@ -61,6 +61,10 @@ struct Cli {
     /// Memory budget of the node cache in MiB.
     #[arg(long, default_value_t = 512)]
     budget_mib: usize,
+    /// Split as if vegetation hid nothing (by default nodes whose view from a camera inside the
+    /// canopy is blocked by dense vegetation split less).
+    #[arg(long)]
+    no_vegetation_occlusion: bool,
     /// Duration of the automatic flyover in seconds.
     #[arg(long, default_value_t = 40.0)]
     duration_s: f64,
@@ -89,6 +93,7 @@ fn settings(cli: &Cli) -> StreamSettings {
     let mut s = StreamSettings {
         tau_px: cli.tau,
         cache_budget_bytes: cli.budget_mib << 20,
+        vegetation_occlusion: !cli.no_vegetation_occlusion,
         ..StreamSettings::default()
     };
     if let Some(w) = cli.workers {
@@ -328,6 +333,7 @@ mod window {
         budget_mib: usize,
         fixed_level: Option<u8>,
         frozen: bool,
+        occlusion: bool,
         slider_rect: [f32; 4],
     }
 
@@ -443,6 +449,7 @@ mod window {
                     budget_mib: cli.budget_mib,
                     fixed_level: None,
                     frozen: false,
+                    occlusion: !cli.no_vegetation_occlusion,
                     slider_rect: [0.0; 4],
                 },
                 auto: true,
@@ -632,6 +639,7 @@ mod window {
         ui.checkbox(&mut view.color_by_level, "colour by level");
         ui.checkbox(&mut view.show_bounds, "node bounds");
         ui.checkbox(&mut view.plants, "vegetation");
+        ui.checkbox(&mut st_ui.occlusion, "split less behind dense vegetation");
         ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
         ui.checkbox(&mut fixed, "fixed level");
         if fixed {
@@ -714,6 +722,7 @@ mod window {
             s.tau_px = st.ui.tau;
             s.cache_budget_bytes = st.ui.budget_mib << 20;
             s.fixed_level = st.ui.fixed_level;
+            s.vegetation_occlusion = st.ui.occlusion;
         }
         if st.ui.workers != st.viewer.streamer.settings.workers {
             let mut s = st.viewer.streamer.settings;
