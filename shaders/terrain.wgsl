@@ -175,10 +175,14 @@ struct BillboardOut {
     @location(0) rel: vec3<f32>,
     // x in [-1, 1] across, y in [0, 1] up.
     @location(1) uv: vec2<f32>,
-    @location(2) albedo: vec3<f32>,
-    @location(3) @interpolate(flat) shape: u32,
-    @location(4) right: vec3<f32>,
+    @location(2) @interpolate(flat) look: u32,
 };
+
+// Billboard images: one tile per look (species), baked at start-up from the plant meshes
+// (`vs_bake` / `fs_bake`): linear colour lit from the front, alpha = coverage.
+const ATLAS_TILES: f32 = 16.0;
+@group(2) @binding(0) var atlas: texture_2d<f32>;
+@group(2) @binding(1) var atlas_sampler: sampler;
 
 // Camera-facing (about the vertical axis) quads: 6 vertices per instance, no vertex buffer.
 @vertex
@@ -196,63 +200,49 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
     out.rel = rel;
     out.uv = corner;
-    let look = plant_looks[min(inst.look, 15u)];
-    out.albedo = look.rgb;
-    out.shape = u32(look.w + 0.5);
-    out.right = right;
+    out.look = min(inst.look, 15u);
     return out;
 }
 
-// The billboard image: the shape's side silhouette, computed per pixel (procedural, the same
-// proportions as the meshes), shaded with a rounded normal.
 @fragment
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     let t = bayer8(vec2<u32>(in.clip.xy));
     if (t < node.offset_lo.w || t >= node.hi_level.x) {
         discard;
     }
-    let u = in.uv.x;
-    let v = in.uv.y;
-    var foliage = false;
-    var trunk = false;
-    var across = 0.0;
-    if (in.shape == 0u) {
-        // Conifer: two stacked cones over a short trunk.
-        let w = max(select(0.0, 1.0 - (v - 0.18) / 0.52 * 0.75, v >= 0.18 && v <= 0.7),
-                    select(0.0, 0.7 * (1.0 - (v - 0.5) / 0.5), v >= 0.5));
-        foliage = abs(u) < w;
-        trunk = abs(u) < 0.07 && v < 0.3;
-        across = u / max(w, 1e-3);
-    } else if (in.shape == 1u) {
-        let d = vec2<f32>(u, (v - 0.62) / 0.38);
-        foliage = dot(d, d) < 1.0;
-        trunk = abs(u) < 0.08 && v < 0.45;
-        across = d.x;
-    } else if (in.shape == 2u) {
-        let d = vec2<f32>(u, (v - 0.5) / 0.5);
-        foliage = dot(d, d) < 1.0;
-        across = d.x;
-    } else {
-        // Grass: a few thin tapered blades.
-        let blade = fract((u + 1.0) * 2.5) - 0.5;
-        foliage = abs(blade) < 0.22 * (1.0 - v);
-        across = blade * 2.0;
-    }
-    if (!foliage && !trunk) {
+    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / ATLAS_TILES, 1.0 - in.uv.y);
+    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
+    if (texel.a < 0.5) {
         discard;
     }
-    var albedo = in.albedo;
-    if (!foliage) {
-        albedo = TRUNK;
-    }
-    let toward = -normalize(vec3<f32>(in.rel.x, in.rel.y, 0.0));
-    let a = clamp(across, -1.0, 1.0);
-    let n = normalize(in.right * a + toward * sqrt(1.0 - a * a) + vec3<f32>(0.0, 0.0, 0.4));
-    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
-    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
-    var color = albedo * (frame.sun_color.rgb * sun + ambient);
     let dist = length(in.rel);
     let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
-    color = mix(color, sky_color(normalize(in.rel)), fog);
-    return vec4<f32>(color, 1.0);
+    return vec4<f32>(mix(texel.rgb, sky_color(normalize(in.rel)), fog), 1.0);
+}
+
+// Baking the billboard images: the unit shape of look `inst.look` seen from the south (-y),
+// orthographic, x in [-1, 1] and z in [0, 1] filling the tile (the viewport picks the tile).
+struct BakeOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    @location(1) albedo: vec3<f32>,
+};
+
+@vertex
+fn vs_bake(v: VertexIn, inst: PlantInstanceIn) -> BakeOut {
+    var out: BakeOut;
+    // Depth: nearer to the viewer (smaller y) is larger, as in the reversed-Z main pass.
+    out.clip = vec4<f32>(v.position.x, v.position.z * 2.0 - 1.0, 0.5 - 0.5 * v.position.y, 1.0);
+    out.normal = v.normal;
+    let look = plant_looks[min(inst.look, 15u)];
+    out.albedo = select(look.rgb, TRUNK, v.ground == 0u);
+    return out;
+}
+
+@fragment
+fn fs_bake(in: BakeOut) -> @location(0) vec4<f32> {
+    let n = normalize(in.normal);
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
+    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
+    return vec4<f32>(in.albedo * (frame.sun_color.rgb * sun + ambient), 1.0);
 }

@@ -521,16 +521,25 @@ fn canopy_visibility_behaves() {
         let v = c.visibility(&world, eye, t);
         assert!((0.0..=1.0).contains(&v), "{v}");
         // Not a strict law with 16 samples, but over these lengths the path only grows.
-        assert!(v <= last + 0.05, "visibility grew from {last} to {v} at {d} m");
+        assert!(
+            v <= last + 0.05,
+            "visibility grew from {last} to {v} at {d} m"
+        );
         blocked |= v < 0.5;
         last = v;
     }
-    assert!(blocked, "a 380 m path at eye height through the tiny map's vegetation: {last}");
+    assert!(
+        blocked,
+        "a 380 m path at eye height through the tiny map's vegetation: {last}"
+    );
     // High above the canopy nothing is hidden.
     let high = DVec3::new(x0, y0, ground(x0, y0) + c.top_m + 50.0);
     let r = Rect {
         min: [x0 + 200.0, y0],
         max: [x0 + 216.0, y0 + 16.0],
     };
-    assert_eq!(c.error_factor(&world, high, r, ground(x0 + 208.0, y0 + 8.0), 250.0), 1.0);
+    assert_eq!(
+        c.error_factor(&world, high, r, ground(x0 + 208.0, y0 + 8.0), 250.0),
+        1.0
+    );
 }

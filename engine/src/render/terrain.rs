@@ -166,7 +166,15 @@ pub struct TerrainRenderer {
     looks_buffer: wgpu::Buffer,
     /// Shape per look index (species).
     shapes: Vec<Shape>,
+    bake: wgpu::RenderPipeline,
+    atlas_view: wgpu::TextureView,
+    atlas_group: wgpu::BindGroup,
 }
+
+/// Billboard atlas: one tile per look, `ATLAS_TILE_PX` each, linear colour + coverage.
+const ATLAS_TILES: u32 = 16;
+const ATLAS_TILE_PX: [u32; 2] = [64, 128];
+const ATLAS_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 impl std::fmt::Debug for TerrainRenderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -301,46 +309,146 @@ impl TerrainRenderer {
                 3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32
             ],
         };
-        let plant_pipeline =
-            |label: &str, vs: &str, fs: &str, buffers: &[Option<wgpu::VertexBufferLayout<'_>>]| {
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some(label),
-                    layout: Some(&layout),
-                    vertex: wgpu::VertexState {
-                        module: &module,
-                        entry_point: Some(vs),
-                        compilation_options: wgpu::PipelineCompilationOptions::default(),
-                        buffers,
+        let atlas_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("billboard atlas layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
                     },
-                    primitive: wgpu::PrimitiveState {
-                        topology: wgpu::PrimitiveTopology::TriangleList,
-                        cull_mode: None,
-                        ..Default::default()
-                    },
-                    depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
-                    multisample: wgpu::MultisampleState::default(),
-                    fragment: Some(wgpu::FragmentState {
-                        module: &module,
-                        entry_point: Some(fs),
-                        compilation_options: wgpu::PipelineCompilationOptions::default(),
-                        targets: &target,
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
-            };
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let billboard_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("billboard pipeline layout"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&node_layout), Some(&atlas_layout)],
+            immediate_size: 0,
+        });
+        let plant_pipeline = |label: &str,
+                              vs: &str,
+                              fs: &str,
+                              buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+                              layout: &wgpu::PipelineLayout| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(vs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    buffers,
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    targets: &target,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
         let plant_mesh = plant_pipeline(
             "plant meshes",
             "vs_plant",
             "fs_main",
             &[Some(vertex_layout.clone()), Some(instance_layout.clone())],
+            &layout,
         );
         let billboard = plant_pipeline(
             "plant billboards",
             "vs_billboard",
             "fs_billboard",
-            &[Some(instance_layout)],
+            &[Some(instance_layout.clone())],
+            &billboard_layout,
         );
+        let atlas = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("billboard atlas"),
+            size: wgpu::Extent3d {
+                width: ATLAS_TILE_PX[0] * ATLAS_TILES,
+                height: ATLAS_TILE_PX[1],
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: ATLAS_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let atlas_view = atlas.create_view(&wgpu::TextureViewDescriptor::default());
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("billboard atlas sampler"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let atlas_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("billboard atlas group"),
+            layout: &atlas_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&atlas_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+            ],
+        });
+        let bake_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("billboard bake layout"),
+            bind_group_layouts: &[Some(&frame_layout)],
+            immediate_size: 0,
+        });
+        let bake = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("billboard bake"),
+            layout: Some(&bake_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_bake"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[Some(vertex_layout.clone()), Some(instance_layout)],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_bake"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: ATLAS_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
         let plant_meshes = PlantMeshes::generate();
         let plant_vertex_data: Vec<TerrainVertex> = plant_meshes
             .vertices
@@ -482,6 +590,9 @@ impl TerrainRenderer {
             plant_meshes,
             looks_buffer,
             shapes: Vec::new(),
+            bake,
+            atlas_view,
+            atlas_group,
         }
     }
 
@@ -502,6 +613,89 @@ impl TerrainRenderer {
         }
         gpu.queue
             .write_buffer(&self.looks_buffer, 0, bytemuck::cast_slice(&data));
+        self.bake_billboards(gpu);
+    }
+
+    /// Renders every look's billboard image from its high-detail mesh into the atlas (seen
+    /// from the south, lit by the frame's sun and sky).
+    fn bake_billboards(&self, gpu: &Gpu) {
+        let device = &gpu.device;
+        let cam = Camera::look_at(DVec3::ZERO, DVec3::new(0.0, 1.0, 0.0), 1.0, [64, 64]);
+        gpu.queue.write_buffer(
+            &self.frame_buffer,
+            0,
+            bytemuck::bytes_of(&Self::frame_uniforms(&cam, &ViewOptions::default())),
+        );
+        let instances: Vec<PlantInstance> = (0..ATLAS_TILES)
+            .map(|i| PlantInstance {
+                position: [0.0; 3],
+                height_m: 1.0,
+                radius_m: 1.0,
+                yaw_rad: 0.0,
+                look: i,
+                padding: 0,
+            })
+            .collect();
+        let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("billboard bake instances"),
+            contents: bytemuck::cast_slice(&instances),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let depth = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("billboard bake depth"),
+            size: wgpu::Extent3d {
+                width: ATLAS_TILE_PX[0] * ATLAS_TILES,
+                height: ATLAS_TILE_PX[1],
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("billboard bake"),
+        });
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("billboard bake pass"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.atlas_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.bake);
+            pass.set_bind_group(0, &self.frame_group, &[]);
+            pass.set_vertex_buffer(0, self.plant_vertices.slice(..));
+            pass.set_vertex_buffer(1, instance_buffer.slice(..));
+            pass.set_index_buffer(self.plant_indices.slice(..), wgpu::IndexFormat::Uint32);
+            for (i, shape) in self.shapes.iter().enumerate().take(ATLAS_TILES as usize) {
+                let [w, h] = ATLAS_TILE_PX;
+                pass.set_viewport((i as u32 * w) as f32, 0.0, w as f32, h as f32, 0.0, 1.0);
+                let (first, count, base) = self.plant_meshes.ranges[*shape as usize][0];
+                pass.draw_indexed(first..first + count, base, i as u32..i as u32 + 1);
+            }
+        }
+        gpu.queue.submit([enc.finish()]);
     }
 
     /// Uploads a node's vegetation instances (None when it has none).
@@ -837,6 +1031,7 @@ impl TerrainRenderer {
                 pass.set_vertex_buffer(usize::from(!g.billboard) as u32, p.instances.slice(..));
                 if g.billboard {
                     pass.set_pipeline(&self.billboard);
+                    pass.set_bind_group(2, &self.atlas_group, &[]);
                     pass.draw(0..6, instances);
                 } else {
                     pass.set_pipeline(&self.plant_mesh);
