@@ -246,3 +246,76 @@ fn fs_bake(in: BakeOut) -> @location(0) vec4<f32> {
     let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
     return vec4<f32>(in.albedo * (frame.sun_color.rgb * sun + ambient), 1.0);
 }
+
+// Group billboards: per node, the group members of each cluster (an 8 x 8 grid over the node)
+// are baked into one tile of the node's 8 x 8 impostor texture, seen from the south; the
+// clusters are then drawn as camera-facing quads sampling their tile.
+struct Cluster {
+    // x, y: centre relative to the node's south-west corner; z: bottom (absolute); w: half width.
+    centre_bottom_half: vec4<f32>,
+    // x: height; yzw: unused.
+    height: vec4<f32>,
+};
+const CLUSTERS_PER_SIDE: u32 = 8u;
+@group(1) @binding(1) var<uniform> clusters: array<Cluster, 64>;
+
+struct GroupBakeOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) @interpolate(flat) look: u32,
+};
+
+// One member billboard (species `look`, cluster index in `cluster`) into its cluster's tile.
+@vertex
+fn vs_group_bake(
+    @builtin(vertex_index) i: u32,
+    inst: PlantInstanceIn,
+    @location(8) cluster: u32,
+) -> GroupBakeOut {
+    let corner = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    )[i % 6u];
+    let c = clusters[min(cluster, 63u)];
+    let cb = c.centre_bottom_half;
+    let u = (inst.position.x + corner.x * inst.radius - cb.x) / cb.w;
+    let h = (inst.position.z + corner.y * inst.height - cb.z) / max(c.height.x, 1e-3);
+    let n = f32(CLUSTERS_PER_SIDE);
+    let tile = vec2<f32>(f32(cluster % CLUSTERS_PER_SIDE), f32(cluster / CLUSTERS_PER_SIDE));
+    let x = ((tile.x + 0.5 + 0.5 * u) / n) * 2.0 - 1.0;
+    let y = 1.0 - ((tile.y + 1.0 - h) / n) * 2.0;
+    let depth = 0.5 - 0.5 * clamp((inst.position.y - cb.y) / cb.w, -1.0, 1.0);
+    var out: GroupBakeOut;
+    out.clip = vec4<f32>(x, y, depth, 1.0);
+    out.uv = corner;
+    out.look = min(inst.look, 15u);
+    return out;
+}
+
+@fragment
+fn fs_group_bake(in: GroupBakeOut) -> @location(0) vec4<f32> {
+    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / ATLAS_TILES, 1.0 - in.uv.y);
+    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
+    if (texel.a < 0.5) {
+        discard;
+    }
+    return vec4<f32>(texel.rgb, 1.0);
+}
+
+// Drawing the clusters: `look` holds the cluster's tile index.
+@fragment
+fn fs_impostor(in: BillboardOut) -> @location(0) vec4<f32> {
+    let t = bayer8(vec2<u32>(in.clip.xy));
+    if (t < node.offset_lo.w || t >= node.hi_level.x) {
+        discard;
+    }
+    let tile = vec2<f32>(f32(in.look % CLUSTERS_PER_SIDE), f32(in.look / CLUSTERS_PER_SIDE));
+    let uv = (tile + vec2<f32>(0.5 + 0.5 * in.uv.x, 1.0 - in.uv.y)) / f32(CLUSTERS_PER_SIDE);
+    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
+    if (texel.a < 0.5) {
+        discard;
+    }
+    let dist = length(in.rel);
+    let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
+    return vec4<f32>(mix(texel.rgb, sky_color(normalize(in.rel)), fog), 1.0);
+}

@@ -236,6 +236,8 @@ pub struct FrameStats {
     pub plant_instances: u64,
     pub plant_draw_calls: u32,
     pub plant_triangles: u64,
+    /// Of the vegetation instances: group-billboard quads (one per cluster of items).
+    pub group_billboards: u64,
     pub drawn_nodes: usize,
     pub nodes_per_level: Vec<usize>,
     pub jobs_queued: usize,
@@ -322,7 +324,7 @@ impl Viewer {
             if let Some(mesh) = &work.terrain {
                 let mut node = TerrainRenderer::upload(device, &shared.tree, mesh);
                 if let Some(v) = &work.vegetation {
-                    node.plants = renderer.upload_plants(device, &shared.tree, mesh.key, v);
+                    node.plants = renderer.upload_plants(gpu, &shared.tree, mesh.key, v);
                 }
                 work.uploaded_bytes = node.bytes + node.plants.as_ref().map_or(0, |p| p.bytes);
                 work.gpu = GpuSlot(Some(Box::new(node)));
@@ -408,6 +410,7 @@ impl Viewer {
             plant_instances: drawn.plant_instances,
             plant_draw_calls: drawn.plant_draw_calls,
             plant_triangles: drawn.plant_triangles,
+            group_billboards: drawn.group_billboards,
             drawn_nodes: draws.len(),
             nodes_per_level: per_level,
             jobs_queued: st.queued,

@@ -191,7 +191,7 @@ fn run_headless(cli: &Cli) -> Result<()> {
     }
     bar.finish_and_clear();
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 12] = [
+    let rows: [(&str, Vec<f64>); 13] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -213,6 +213,10 @@ fn run_headless(cli: &Cli) -> Result<()> {
         (
             "vegetation instances (meshes + billboards)",
             col(|s| s.plant_instances as f64),
+        ),
+        (
+            "  of which group billboards (cluster quads)",
+            col(|s| s.group_billboards as f64),
         ),
         (
             "vegetation draw calls",

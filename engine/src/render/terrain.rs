@@ -11,6 +11,7 @@ use crate::plants::{self, PlantMeshes, Shape};
 use crate::quadtree::{NodeKey, QuadTree};
 use crate::select::Camera;
 use crate::vegetation::{NodeVegetation, Representation};
+use bytemuck::Zeroable;
 use glam::{DVec3, Vec3};
 use wgpu::util::DeviceExt;
 
@@ -51,14 +52,39 @@ struct PlantGroupGpu {
     first: u32,
     count: u32,
     shape: Shape,
-    billboard: bool,
+    kind: PlantDraw,
     /// Drawn the same way at every finer level: drawn through the node's splits.
     kept: bool,
+}
+
+/// How a group is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PlantDraw {
+    Mesh,
+    Billboard,
+    /// Cluster quads sampling the node's impostor texture.
+    Impostor,
+}
+
+/// Group billboards: clusters per node side (an 8 x 8 grid) and the tile size of a cluster in the
+/// node's impostor texture.
+const CLUSTERS_PER_SIDE: u32 = 8;
+const IMPOSTOR_TILE_PX: u32 = 32;
+const IMPOSTOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// Mirrors `Cluster` in `terrain.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ClusterUniform {
+    centre_bottom_half: [f32; 4],
+    height: [f32; 4],
 }
 
 /// A node's vegetation instances (one buffer, groups are ranges of it).
 pub struct PlantsGpu {
     instances: wgpu::Buffer,
+    /// The node's group-billboard texture (8 x 8 cluster tiles), when it has group members.
+    impostors: Option<wgpu::BindGroup>,
     groups: Vec<PlantGroupGpu>,
     /// World-space box of the items (ground to tree tops).
     pub aabb_m: (DVec3, DVec3),
@@ -143,6 +169,8 @@ pub struct DrawStats {
     pub plant_instances: u64,
     pub plant_draw_calls: u32,
     pub plant_triangles: u64,
+    /// Of the instances: group-billboard quads (each stands for a cluster of items).
+    pub group_billboards: u64,
 }
 
 pub struct TerrainRenderer {
@@ -169,6 +197,11 @@ pub struct TerrainRenderer {
     bake: wgpu::RenderPipeline,
     atlas_view: wgpu::TextureView,
     atlas_group: wgpu::BindGroup,
+    atlas_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    group_bake: wgpu::RenderPipeline,
+    cluster_layout: wgpu::BindGroupLayout,
+    impostor: wgpu::RenderPipeline,
 }
 
 /// Billboard atlas: one tile per look, `ATLAS_TILE_PX` each, linear colour + coverage.
@@ -380,6 +413,7 @@ impl TerrainRenderer {
             &[Some(instance_layout.clone())],
             &billboard_layout,
         );
+        let impostor_instance_layout = instance_layout.clone();
         let atlas = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("billboard atlas"),
             size: wgpu::Extent3d {
@@ -449,6 +483,62 @@ impl TerrainRenderer {
             multiview_mask: None,
             cache: None,
         });
+        let cluster_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("impostor cluster layout"),
+            entries: &[uniform_entry(1, false, wgpu::ShaderStages::VERTEX)],
+        });
+        let group_bake_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("impostor bake layout"),
+            bind_group_layouts: &[
+                Some(&frame_layout),
+                Some(&cluster_layout),
+                Some(&atlas_layout),
+            ],
+            immediate_size: 0,
+        });
+        let member_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<PlantInstance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &wgpu::vertex_attr_array![
+                3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32, 8 => Uint32
+            ],
+        };
+        let group_bake = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("impostor bake"),
+            layout: Some(&group_bake_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_group_bake"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[Some(member_layout)],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_group_bake"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: IMPOSTOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let impostor = plant_pipeline(
+            "plant group billboards",
+            "vs_billboard",
+            "fs_impostor",
+            &[Some(impostor_instance_layout)],
+            &billboard_layout,
+        );
         let plant_meshes = PlantMeshes::generate();
         let plant_vertex_data: Vec<TerrainVertex> = plant_meshes
             .vertices
@@ -593,6 +683,11 @@ impl TerrainRenderer {
             bake,
             atlas_view,
             atlas_group,
+            atlas_layout,
+            sampler,
+            group_bake,
+            cluster_layout,
+            impostor,
         }
     }
 
@@ -698,10 +793,12 @@ impl TerrainRenderer {
         gpu.queue.submit([enc.finish()]);
     }
 
-    /// Uploads a node's vegetation instances (None when it has none).
+    /// Uploads a node's vegetation instances (None when it has none). Group-billboard members
+    /// are baked, cluster by cluster, into the node's impostor texture (a render pass submitted
+    /// here); the node then draws one quad per cluster instead of its members.
     pub fn upload_plants(
         &self,
-        device: &wgpu::Device,
+        gpu: &Gpu,
         tree: &QuadTree,
         key: NodeKey,
         veg: &NodeVegetation,
@@ -709,12 +806,42 @@ impl TerrainRenderer {
         if veg.instances() == 0 {
             return None;
         }
-        let o = tree.rect(key).min;
+        let device = &gpu.device;
+        let rect = tree.rect(key);
+        let o = rect.min;
+        let side = rect.max[0] - rect.min[0];
+        let instance = |it: &crate::vegetation::Item, cluster: u32| PlantInstance {
+            position: [
+                (it.x_m - o[0]) as f32,
+                (it.y_m - o[1]) as f32,
+                it.z_m as f32,
+            ],
+            height_m: it.height_m,
+            radius_m: it.radius_m,
+            yaw_rad: it.yaw_rad,
+            look: u32::from(it.species),
+            padding: cluster,
+        };
         let mut data: Vec<PlantInstance> = Vec::with_capacity(veg.instances());
         let mut groups = Vec::with_capacity(veg.groups.len());
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        // Group members by cluster: (x range, y range, bottom, top, radius) and the members.
+        let n = CLUSTERS_PER_SIDE as usize;
+        let mut boxes = vec![
+            [
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                0.0
+            ];
+            n * n
+        ];
+        let mut members: Vec<PlantInstance> = Vec::new();
+        let mut member_kept = true;
         for g in &veg.groups {
-            let first = data.len() as u32;
             for it in &g.items {
                 let r = f64::from(it.radius_m);
                 lo = lo.min(DVec3::new(it.x_m - r, it.y_m - r, it.z_m - 1.0));
@@ -723,19 +850,26 @@ impl TerrainRenderer {
                     it.y_m + r,
                     it.z_m + f64::from(it.height_m),
                 ));
-                data.push(PlantInstance {
-                    position: [
-                        (it.x_m - o[0]) as f32,
-                        (it.y_m - o[1]) as f32,
-                        it.z_m as f32,
-                    ],
-                    height_m: it.height_m,
-                    radius_m: it.radius_m,
-                    yaw_rad: it.yaw_rad,
-                    look: u32::from(it.species),
-                    padding: 0,
-                });
             }
+            if g.representation == Representation::Group {
+                member_kept &= !g.replaced_on_split;
+                for it in &g.items {
+                    let cell = |v: f64| (((v / side) * n as f64) as usize).min(n - 1);
+                    let c = cell(it.y_m - o[1]) * n + cell(it.x_m - o[0]);
+                    let b = &mut boxes[c];
+                    let r = f64::from(it.radius_m);
+                    b[0] = b[0].min(it.x_m - o[0] - r);
+                    b[1] = b[1].max(it.x_m - o[0] + r);
+                    b[2] = b[2].min(it.y_m - o[1] - r);
+                    b[3] = b[3].max(it.y_m - o[1] + r);
+                    b[4] = b[4].min(it.z_m);
+                    b[5] = b[5].max(it.z_m + f64::from(it.height_m));
+                    members.push(instance(it, c as u32));
+                }
+                continue;
+            }
+            let first = data.len() as u32;
+            data.extend(g.items.iter().map(|it| instance(it, 0)));
             groups.push(PlantGroupGpu {
                 first,
                 count: g.items.len() as u32,
@@ -744,9 +878,56 @@ impl TerrainRenderer {
                     .get(usize::from(g.species))
                     .copied()
                     .unwrap_or(Shape::Bush),
-                billboard: g.representation != Representation::Mesh,
+                kind: if g.representation == Representation::Mesh {
+                    PlantDraw::Mesh
+                } else {
+                    PlantDraw::Billboard
+                },
                 kept: !g.replaced_on_split,
             });
+        }
+        let mut impostors = None;
+        let mut texture_bytes = 0;
+        if !members.is_empty() {
+            // Cluster quads: centre, bottom, half width (the wider of the x and y spans, so a
+            // turned quad still covers the members), height; `look` = tile index.
+            let mut uniforms = [ClusterUniform::zeroed(); 64];
+            let first = data.len() as u32;
+            for (c, b) in boxes.iter().enumerate() {
+                if b[0] > b[1] {
+                    continue;
+                }
+                let centre = [0.5 * (b[0] + b[1]), 0.5 * (b[2] + b[3])];
+                let half = 0.5 * (b[1] - b[0]).max(b[3] - b[2]);
+                let height = b[5] - b[4];
+                uniforms[c] = ClusterUniform {
+                    centre_bottom_half: [
+                        centre[0] as f32,
+                        centre[1] as f32,
+                        b[4] as f32,
+                        half as f32,
+                    ],
+                    height: [height as f32, 0.0, 0.0, 0.0],
+                };
+                data.push(PlantInstance {
+                    position: [centre[0] as f32, centre[1] as f32, b[4] as f32],
+                    height_m: height as f32,
+                    radius_m: half as f32,
+                    yaw_rad: 0.0,
+                    look: c as u32,
+                    padding: 0,
+                });
+            }
+            groups.push(PlantGroupGpu {
+                first,
+                count: data.len() as u32 - first,
+                shape: Shape::Bush,
+                kind: PlantDraw::Impostor,
+                kept: member_kept,
+            });
+            let (group, bytes) = self.bake_impostors(gpu, key, &uniforms, &members);
+            impostors = Some(group);
+            texture_bytes = bytes;
         }
         let instances = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(&format!("node {}/{}/{} plants", key.level, key.ix, key.iy)),
@@ -755,11 +936,121 @@ impl TerrainRenderer {
         });
         Some(PlantsGpu {
             instances,
+            impostors,
             groups,
             aabb_m: (lo, hi),
-            bytes: data.len() * std::mem::size_of::<PlantInstance>(),
+            bytes: data.len() * std::mem::size_of::<PlantInstance>() + texture_bytes,
             low_detail: tree.spacing_m(key.level) >= 1.0,
         })
+    }
+
+    /// Renders a node's group members into its impostor texture (one tile per cluster, seen
+    /// from the south) and returns the texture's bind group and size in bytes.
+    fn bake_impostors(
+        &self,
+        gpu: &Gpu,
+        key: NodeKey,
+        clusters: &[ClusterUniform; 64],
+        members: &[PlantInstance],
+    ) -> (wgpu::BindGroup, usize) {
+        let device = &gpu.device;
+        let label = format!("node {}/{}/{} impostors", key.level, key.ix, key.iy);
+        let px = CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX;
+        let size = wgpu::Extent3d {
+            width: px,
+            height: px,
+            depth_or_array_layers: 1,
+        };
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(&label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: IMPOSTOR_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let depth = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("impostor bake depth"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+        let cluster_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("impostor clusters"),
+            contents: bytemuck::cast_slice(clusters),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let cluster_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("impostor clusters"),
+            layout: &self.cluster_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 1,
+                resource: cluster_buffer.as_entire_binding(),
+            }],
+        });
+        let member_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("impostor members"),
+            contents: bytemuck::cast_slice(members),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some(&label),
+        });
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("impostor bake pass"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.group_bake);
+            pass.set_bind_group(0, &self.frame_group, &[]);
+            pass.set_bind_group(1, &cluster_group, &[]);
+            pass.set_bind_group(2, &self.atlas_group, &[]);
+            pass.set_vertex_buffer(0, member_buffer.slice(..));
+            pass.draw(0..6, 0..members.len() as u32);
+        }
+        gpu.queue.submit([enc.finish()]);
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&label),
+            layout: &self.atlas_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+            ],
+        });
+        (group, (px * px * 4) as usize)
     }
 
     fn node_buffer(device: &wgpu::Device, slots: u64) -> wgpu::Buffer {
@@ -1028,19 +1319,34 @@ impl TerrainRenderer {
                     continue;
                 }
                 let instances = g.first..g.first + g.count;
-                pass.set_vertex_buffer(usize::from(!g.billboard) as u32, p.instances.slice(..));
-                if g.billboard {
-                    pass.set_pipeline(&self.billboard);
-                    pass.set_bind_group(2, &self.atlas_group, &[]);
-                    pass.draw(0..6, instances);
-                } else {
-                    pass.set_pipeline(&self.plant_mesh);
-                    pass.set_vertex_buffer(0, self.plant_vertices.slice(..));
-                    pass.set_index_buffer(self.plant_indices.slice(..), wgpu::IndexFormat::Uint32);
-                    let (first, count, base) =
-                        self.plant_meshes.ranges[g.shape as usize][usize::from(p.low_detail)];
-                    pass.draw_indexed(first..first + count, base, instances);
-                    stats.plant_triangles += u64::from(count / 3) * u64::from(g.count);
+                match g.kind {
+                    PlantDraw::Billboard => {
+                        pass.set_pipeline(&self.billboard);
+                        pass.set_bind_group(2, &self.atlas_group, &[]);
+                        pass.set_vertex_buffer(0, p.instances.slice(..));
+                        pass.draw(0..6, instances);
+                    }
+                    PlantDraw::Impostor => {
+                        let Some(tex) = &p.impostors else { continue };
+                        pass.set_pipeline(&self.impostor);
+                        pass.set_bind_group(2, tex, &[]);
+                        pass.set_vertex_buffer(0, p.instances.slice(..));
+                        pass.draw(0..6, instances);
+                        stats.group_billboards += u64::from(g.count);
+                    }
+                    PlantDraw::Mesh => {
+                        pass.set_pipeline(&self.plant_mesh);
+                        pass.set_vertex_buffer(0, self.plant_vertices.slice(..));
+                        pass.set_vertex_buffer(1, p.instances.slice(..));
+                        pass.set_index_buffer(
+                            self.plant_indices.slice(..),
+                            wgpu::IndexFormat::Uint32,
+                        );
+                        let (first, count, base) =
+                            self.plant_meshes.ranges[g.shape as usize][usize::from(p.low_detail)];
+                        pass.draw_indexed(first..first + count, base, instances);
+                        stats.plant_triangles += u64::from(count / 3) * u64::from(g.count);
+                    }
                 }
                 stats.plant_instances += u64::from(g.count);
                 stats.plant_draw_calls += 1;
