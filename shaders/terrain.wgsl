@@ -69,6 +69,18 @@ fn bayer8(p: vec2<u32>) -> f32 {
     return (f32(v) + 0.5) / 64.0;
 }
 
+// Whether this node draws the pixel at `xy` (its dither interval holds the pixel's threshold).
+fn in_dither(xy: vec2<f32>) -> bool {
+    let t = bayer8(vec2<u32>(xy));
+    return t >= node.offset_lo.w && t < node.hi_level.x;
+}
+
+// Distance fog towards the sky colour (depth cue, capped).
+fn fogged(color: vec3<f32>, rel: vec3<f32>) -> vec4<f32> {
+    let fog = min(1.0 - exp(-length(rel) * frame.fog.x), frame.fog.y);
+    return vec4<f32>(mix(color, sky_color(normalize(rel)), fog), 1.0);
+}
+
 fn level_color(level: f32) -> vec3<f32> {
     let t = level * 0.61803;
     return 0.5 + 0.45 * cos(6.28318 * (vec3<f32>(t) + vec3<f32>(0.0, 0.33, 0.67)));
@@ -81,8 +93,7 @@ fn sky_color(dir: vec3<f32>) -> vec3<f32> {
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let t = bayer8(vec2<u32>(in.clip.xy));
-    if (t < node.offset_lo.w || t >= node.hi_level.x) {
+    if (!in_dither(in.clip.xy)) {
         discard;
     }
     let mode = u32(frame.fog.z + 0.5);
@@ -93,11 +104,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let n = normalize(in.normal);
     let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
     let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
-    var color = albedo * (frame.sun_color.rgb * sun + ambient);
-    let dist = length(in.rel);
-    let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
-    color = mix(color, sky_color(normalize(in.rel)), fog);
-    return vec4<f32>(color, 1.0);
+    return fogged(albedo * (frame.sun_color.rgb * sun + ambient), in.rel);
 }
 
 // Sky: one full-screen triangle at the far plane (depth 0 in reversed-Z), drawn first.
@@ -206,18 +213,20 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
 
 @fragment
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
-    let t = bayer8(vec2<u32>(in.clip.xy));
-    if (t < node.offset_lo.w || t >= node.hi_level.x) {
+    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / ATLAS_TILES, 1.0 - in.uv.y);
+    return billboard_pixel(in, uv);
+}
+
+// A billboard or impostor pixel: dither test, atlas texel at `uv` with an alpha test, fog.
+fn billboard_pixel(in: BillboardOut, uv: vec2<f32>) -> vec4<f32> {
+    if (!in_dither(in.clip.xy)) {
         discard;
     }
-    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / ATLAS_TILES, 1.0 - in.uv.y);
     let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
     if (texel.a < 0.5) {
         discard;
     }
-    let dist = length(in.rel);
-    let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
-    return vec4<f32>(mix(texel.rgb, sky_color(normalize(in.rel)), fog), 1.0);
+    return fogged(texel.rgb, in.rel);
 }
 
 // Baking the billboard images: the unit shape of look `inst.look` seen from the south (-y),
@@ -305,17 +314,7 @@ fn fs_group_bake(in: GroupBakeOut) -> @location(0) vec4<f32> {
 // Drawing the clusters: `look` holds the cluster's tile index.
 @fragment
 fn fs_impostor(in: BillboardOut) -> @location(0) vec4<f32> {
-    let t = bayer8(vec2<u32>(in.clip.xy));
-    if (t < node.offset_lo.w || t >= node.hi_level.x) {
-        discard;
-    }
     let tile = vec2<f32>(f32(in.look % CLUSTERS_PER_SIDE), f32(in.look / CLUSTERS_PER_SIDE));
     let uv = (tile + vec2<f32>(0.5 + 0.5 * in.uv.x, 1.0 - in.uv.y)) / f32(CLUSTERS_PER_SIDE);
-    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
-    if (texel.a < 0.5) {
-        discard;
-    }
-    let dist = length(in.rel);
-    let fog = min(1.0 - exp(-dist * frame.fog.x), frame.fog.y);
-    return vec4<f32>(mix(texel.rgb, sky_color(normalize(in.rel)), fog), 1.0);
+    return billboard_pixel(in, uv);
 }

@@ -216,26 +216,19 @@ pub fn select(
     cam: &Camera,
     p: SelectParams,
 ) -> Selection {
-    let mut out = traverse(
-        tree,
-        cam,
-        p.cull,
-        |key| cache.get(world, tree, key),
-        |key, _, _, px| px > p.tau_px && key.level < p.max_level,
-    );
-    out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
-    out
+    select_occluded(world, tree, cache, cam, p, None)
 }
 
-/// Like [`select`], and splits less where vegetation blocks the view: a node's projected error
-/// is multiplied by [`crate::vegetation::Canopy::error_factor`] before the comparison with tau.
+/// Like [`select`], and with a canopy splits less where vegetation blocks the view: a node's
+/// projected error is multiplied by [`crate::vegetation::Canopy::error_factor`] before the
+/// comparison with tau.
 pub fn select_occluded(
     world: &World,
     tree: &QuadTree,
     cache: &mut BoundsCache,
     cam: &Camera,
     p: SelectParams,
-    canopy: &crate::vegetation::Canopy,
+    canopy: Option<&crate::vegetation::Canopy>,
 ) -> Selection {
     let mut out = traverse(
         tree,
@@ -245,8 +238,10 @@ pub fn select_occluded(
         |key, b, dist, px| {
             px > p.tau_px
                 && key.level < p.max_level
-                && px * canopy.error_factor(world, cam.position_m, tree.rect(key), b.z_max_m, dist)
-                    > p.tau_px
+                && canopy.is_none_or(|c| {
+                    px * c.error_factor(world, cam.position_m, tree.rect(key), b.z_max_m, dist)
+                        > p.tau_px
+                })
         },
     );
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;

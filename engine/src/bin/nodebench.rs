@@ -552,12 +552,12 @@ fn section_vegetation(
         for cam in &low {
             // Bounds first, so the timings compare the traversals only.
             let _ = select(world, tree, &mut cache, cam, p);
-            let _ = engine::select::select_occluded(world, tree, &mut cache, cam, p, &canopy);
+            let _ = engine::select::select_occluded(world, tree, &mut cache, cam, p, Some(&canopy));
             let t0 = Instant::now();
             let a = select(world, tree, &mut cache, cam, p);
             t_plain += t0.elapsed().as_secs_f64();
             let t0 = Instant::now();
-            let b = engine::select::select_occluded(world, tree, &mut cache, cam, p, &canopy);
+            let b = engine::select::select_occluded(world, tree, &mut cache, cam, p, Some(&canopy));
             t_occl += t0.elapsed().as_secs_f64();
             plain_nodes += a.nodes.len();
             occl_nodes += b.nodes.len();
