@@ -989,7 +989,7 @@ fn loop_path(
 }
 
 fn section_streaming(
-    world_path: &PathBuf,
+    world_path: &std::path::Path,
     r: &mut Report,
     quick: bool,
     workers: usize,
@@ -1255,22 +1255,10 @@ fn machine_block(workers: usize) -> serde_json::Value {
     })
 }
 
-fn open_world(path: &PathBuf) -> Result<World> {
-    if !path.join("map.toml").exists() && path == &PathBuf::from("maps/default") {
-        eprintln!(
-            "{} not found: generating the default map (8 km, seed 1) ...",
-            path.display()
-        );
-        let map = worldgen::generate::generate(
-            &worldgen::generate::GenerateParams::default(),
-            &worldgen::progress::Silent,
-            &mut Vec::new(),
-        )?;
-        map.write(path)?;
-    }
-    let map =
-        worldgen::Map::load(path).with_context(|| format!("opening map {}", path.display()))?;
-    Ok(World::new(map))
+fn open_world(path: &std::path::Path) -> Result<World> {
+    // The viewer's: generates the default map when missing or from an older map format.
+    engine::app::open_world(path, &worldgen::progress::Silent)
+        .with_context(|| format!("opening map {}", path.display()))
 }
 
 fn run(cli: &Cli) -> Result<()> {
