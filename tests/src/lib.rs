@@ -97,6 +97,35 @@ pub mod terrain {
     use glam::DVec3;
     use worldgen::Map;
 
+    /// A camera over the map from `(seed, i)`: position in the inner 90%, log-uniform height
+    /// above the ground in `[min_above_m, max_above_m]`, any heading, looking down 0.05-1.05 rad.
+    pub fn random_camera(
+        world: &World,
+        seed: u64,
+        i: i64,
+        min_above_m: f64,
+        max_above_m: f64,
+        viewport: [u32; 2],
+    ) -> engine::select::Camera {
+        let o = world.origin_m();
+        let s = world.size_m();
+        let x = o[0] + s[0] * (0.05 + 0.9 * worldgen::noise::unit3(seed, i, 0));
+        let y = o[1] + s[1] * (0.05 + 0.9 * worldgen::noise::unit3(seed, i, 1));
+        // Log-uniform height above the ground.
+        let above =
+            min_above_m * (max_above_m / min_above_m).powf(worldgen::noise::unit3(seed, i, 2));
+        let z = world.height_m(x, y) + above;
+        let yaw = std::f64::consts::TAU * worldgen::noise::unit3(seed, i, 3);
+        let pitch = -(0.05 + 1.0 * worldgen::noise::unit3(seed, i, 4));
+        let dir = DVec3::new(
+            yaw.cos() * pitch.cos(),
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+        );
+        let p = DVec3::new(x, y, z);
+        engine::select::Camera::look_at(p, p + dir, 60f64.to_radians(), viewport)
+    }
+
     /// The committed tiny map as a world.
     pub fn tiny_world() -> World {
         World::new(Map::load(&super::tiny_map_dir()).expect("tiny map loads"))

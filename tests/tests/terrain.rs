@@ -11,36 +11,10 @@ use engine::world::World;
 use glam::DVec3;
 use std::collections::HashMap as Map;
 use tests::terrain::{
-    build_mesh, build_selection, cliff_world, measure_true_error, ray_mesh, shifted, tiny_world,
-    tree_of,
+    build_mesh, build_selection, cliff_world, measure_true_error, random_camera, ray_mesh, shifted,
+    tiny_world, tree_of,
 };
 use worldgen::noise::unit3;
-
-fn random_camera(
-    world: &World,
-    seed: u64,
-    i: i64,
-    min_above_m: f64,
-    max_above_m: f64,
-    viewport: [u32; 2],
-) -> Camera {
-    let o = world.origin_m();
-    let s = world.size_m();
-    let x = o[0] + s[0] * (0.05 + 0.9 * unit3(seed, i, 0));
-    let y = o[1] + s[1] * (0.05 + 0.9 * unit3(seed, i, 1));
-    // Log-uniform height above the ground.
-    let above = min_above_m * (max_above_m / min_above_m).powf(unit3(seed, i, 2));
-    let z = world.height_m(x, y) + above;
-    let yaw = std::f64::consts::TAU * unit3(seed, i, 3);
-    let pitch = -(0.05 + 1.0 * unit3(seed, i, 4));
-    let dir = DVec3::new(
-        yaw.cos() * pitch.cos(),
-        yaw.sin() * pitch.cos(),
-        pitch.sin(),
-    );
-    let p = DVec3::new(x, y, z);
-    Camera::look_at(p, p + dir, 60f64.to_radians(), viewport)
-}
 
 /// Dense true error per node, measured once.
 struct TrueErrors(Map<NodeKey, (f64, f64)>);

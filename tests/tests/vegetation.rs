@@ -445,23 +445,17 @@ fn every_item_is_drawn_once_in_the_displayed_levels_representation() {
 #[test]
 fn billboards_and_groups_stay_small_on_screen() {
     use engine::bounds::BoundsCache;
-    use engine::select::{Camera, SelectParams, select};
+    use engine::select::{SelectParams, select};
     use engine::vegetation::{BILLBOARD_RATIO, ERROR_PER_SPACING, MESH_RATIO};
     let world = tiny_world();
     let p = Placer::new(&world);
     let tree = QuadTree::new(world.origin_m(), world.size_m());
     let mut cache = BoundsCache::new();
-    let o = world.origin_m();
     let tau = 2.0;
     let (mut billboards, mut groups) = (0usize, 0usize);
     for i in 0..12i64 {
-        let x = o[0] + 60.0 + 390.0 * worldgen::noise::unit3(5, i, 0);
-        let y = o[1] + 60.0 + 390.0 * worldgen::noise::unit3(5, i, 1);
-        let z = world.height_m(x, y) + 2.0 + 60.0 * worldgen::noise::unit3(5, i, 2);
-        let yaw = std::f64::consts::TAU * worldgen::noise::unit3(5, i, 3);
-        let pos = glam::DVec3::new(x, y, z);
-        let dir = glam::DVec3::new(yaw.cos(), yaw.sin(), -0.15);
-        let cam = Camera::look_at(pos, pos + dir, 60f64.to_radians(), [640, 360]);
+        let cam = tests::terrain::random_camera(&world, 5, i, 2.0, 62.0, [640, 360]);
+        let pos = cam.position_m;
         let sel = select(
             &world,
             &tree,

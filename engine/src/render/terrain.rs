@@ -215,22 +215,6 @@ impl std::fmt::Debug for TerrainRenderer {
     }
 }
 
-/// A depth target for an offscreen bake of `size`.
-fn bake_depth(device: &wgpu::Device, size: wgpu::Extent3d) -> wgpu::TextureView {
-    device
-        .create_texture(&wgpu::TextureDescriptor {
-            label: Some("bake depth"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        })
-        .create_view(&wgpu::TextureViewDescriptor::default())
-}
-
 /// A bake pass: colour cleared to transparent, reversed-Z depth cleared to 0 (far).
 fn bake_pass<'e>(
     enc: &'e mut wgpu::CommandEncoder,
@@ -416,11 +400,14 @@ impl TerrainRenderer {
             bind_group_layouts: &[Some(&frame_layout), Some(&node_layout), Some(&atlas_layout)],
             immediate_size: 0,
         });
+        // Triangle lists, no culling, reversed-Z depth: plants, billboards and the two bakes
+        // (which draw into their own formats).
         let plant_pipeline = |label: &str,
                               vs: &str,
                               fs: &str,
                               buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
-                              layout: &wgpu::PipelineLayout| {
+                              layout: &wgpu::PipelineLayout,
+                              format: wgpu::TextureFormat| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
@@ -441,7 +428,11 @@ impl TerrainRenderer {
                     module: &module,
                     entry_point: Some(fs),
                     compilation_options: wgpu::PipelineCompilationOptions::default(),
-                    targets: &target,
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -453,6 +444,7 @@ impl TerrainRenderer {
             "fs_main",
             &[Some(vertex_layout.clone()), Some(instance_layout.clone())],
             &layout,
+            color_format,
         );
         let billboard = plant_pipeline(
             "plant billboards",
@@ -460,6 +452,7 @@ impl TerrainRenderer {
             "fs_billboard",
             &[Some(instance_layout.clone())],
             &billboard_layout,
+            color_format,
         );
         let impostor_instance_layout = instance_layout.clone();
         let atlas = device.create_texture(&wgpu::TextureDescriptor {
@@ -502,35 +495,14 @@ impl TerrainRenderer {
             bind_group_layouts: &[Some(&frame_layout)],
             immediate_size: 0,
         });
-        let bake = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("billboard bake"),
-            layout: Some(&bake_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_bake"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[Some(vertex_layout.clone()), Some(instance_layout)],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_bake"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: ATLAS_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let bake = plant_pipeline(
+            "billboard bake",
+            "vs_bake",
+            "fs_bake",
+            &[Some(vertex_layout.clone()), Some(instance_layout)],
+            &bake_layout,
+            ATLAS_FORMAT,
+        );
         let cluster_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("impostor cluster layout"),
             entries: &[uniform_entry(1, false, wgpu::ShaderStages::VERTEX)],
@@ -551,41 +523,21 @@ impl TerrainRenderer {
                 3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32, 8 => Uint32
             ],
         };
-        let group_bake = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("impostor bake"),
-            layout: Some(&group_bake_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_group_bake"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[Some(member_layout)],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(depth(true, wgpu::CompareFunction::Greater)),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_group_bake"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: IMPOSTOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let group_bake = plant_pipeline(
+            "impostor bake",
+            "vs_group_bake",
+            "fs_group_bake",
+            &[Some(member_layout)],
+            &group_bake_layout,
+            IMPOSTOR_FORMAT,
+        );
         let impostor = plant_pipeline(
             "plant group billboards",
             "vs_billboard",
             "fs_impostor",
             &[Some(impostor_instance_layout)],
             &billboard_layout,
+            color_format,
         );
         let plant_meshes = PlantMeshes::generate();
         let plant_vertex_data: Vec<TerrainVertex> = plant_meshes
@@ -784,13 +736,10 @@ impl TerrainRenderer {
             contents: bytemuck::cast_slice(&instances),
             usage: wgpu::BufferUsages::VERTEX,
         });
-        let depth_view = bake_depth(
+        let depth_view = super::depth_view(
             device,
-            wgpu::Extent3d {
-                width: ATLAS_TILE_PX[0] * ATLAS_TILES,
-                height: ATLAS_TILE_PX[1],
-                depth_or_array_layers: 1,
-            },
+            [ATLAS_TILE_PX[0] * ATLAS_TILES, ATLAS_TILE_PX[1]],
+            "billboard bake depth",
         );
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("billboard bake"),
@@ -996,7 +945,7 @@ impl TerrainRenderer {
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let depth_view = bake_depth(device, size);
+        let depth_view = super::depth_view(device, [px, px], "impostor bake depth");
         let cluster_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("impostor clusters"),
             contents: bytemuck::cast_slice(clusters),
