@@ -33,14 +33,21 @@ cargo fmt --all -- --check
 step "cargo clippy (all targets, warnings are errors)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 
-# The viewer test (tests/tests/viewer_xvfb.rs) drives the flyover binary: build it first.
+step "cargo doc (rustdoc lints, warnings are errors)"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked --quiet
+
+# The viewer test (tests/tests/e2e/viewer_xvfb.rs) drives the flyover binary: build it first.
 step "cargo build --bins"
 cargo build --workspace --bins --locked
 
 step "cargo test"
 cargo test --workspace --locked 2>&1 | tee target/test-output.log
-# Fail loudly if the runner executed nothing (e.g. everything filtered out).
-grep -q "test result: ok" target/test-output.log
+# Fail loudly if the runner executed nothing (e.g. everything filtered out): count the tests
+# that ran (doc-test summaries say "ok" with 0 passed, so a grep for "ok" proves nothing).
+ran=$(grep -oE "test result: ok\. [0-9]+ passed" target/test-output.log | awk '{s+=$4} END {print s+0}')
+if [ "$ran" -eq 0 ]; then
+  echo "cargo test ran no test" >&2; exit 1
+fi
 
 # --- smoke runs: the binaries in the dev profile (deps already built by the tests) ---
 
@@ -81,8 +88,25 @@ if ./target/debug/flyover --headless --map "$smoke/does-not-exist" --frames 1 2>
   echo "flyover accepted a missing map" >&2; exit 1
 fi
 grep -q "does-not-exist" "$smoke/flyover-err.log"
+for bad in "--tau 0" "--fps 0" "--duration-s -5"; do
+  # shellcheck disable=SC2086
+  if ./target/debug/flyover --headless --map maps/tiny --frames 1 $bad 2>/dev/null >/dev/null; then
+    echo "flyover accepted $bad" >&2; exit 1
+  fi
+done
 
-passed=$(grep -oE "test result: ok\. [0-9]+ passed" target/test-output.log | awk '{s+=$4} END {print s+0}')
+step "smoke: flyover without any Vulkan driver says what to install (no panic)"
+if VK_ICD_FILENAMES=/nonexistent.json VK_DRIVER_FILES=/nonexistent.json \
+   ./target/debug/flyover --headless --map maps/tiny --frames 1 --out "$smoke/nodriver" \
+   2> "$smoke/nodriver.log" >/dev/null; then
+  echo "flyover ran without a Vulkan driver" >&2; exit 1
+fi
+grep -q "mesa-vulkan-drivers" "$smoke/nodriver.log"
+if grep -qiE "panicked|backtrace" "$smoke/nodriver.log"; then
+  cat "$smoke/nodriver.log" >&2; echo "flyover panicked without a driver" >&2; exit 1
+fi
+
+passed=$ran
 failed=$(grep -oE "[0-9]+ failed" target/test-output.log | awk '{s+=$1} END {print s+0}')
 step "all checks passed"
 echo "tests: ${passed} passed, ${failed} failed"

@@ -2,11 +2,12 @@
 //! finest surface, the on-screen pixel error of a whole view, and a CDLOD-style distance-based
 //! selection to compare against. Used by tests and by `nodebench`.
 
-use crate::bounds::BoundsCache;
-use crate::mesh::NodeMesh;
-use crate::quadtree::{NODE_QUADS, QuadTree};
-use crate::select::{Camera, Selection, traverse};
-use crate::world::World;
+use crate::camera::Camera;
+use crate::surface::world::World;
+use crate::terrain::bounds::BoundsCache;
+use crate::terrain::mesh::NodeMesh;
+use crate::terrain::quadtree::{NODE_QUADS, QuadTree};
+use crate::terrain::select::{Selection, traverse};
 use glam::DVec3;
 
 /// The true largest |mesh - surface| of a node on a lattice of `per_quad` points per mesh quad

@@ -91,9 +91,9 @@ pub fn hash_dir(dir: &Path) -> u64 {
 
 /// Terrain test helpers: worlds with hard surfaces, dense error measurement, ray casting.
 pub mod terrain {
-    use engine::mesh::NodeMesh;
-    use engine::quadtree::QuadTree;
-    use engine::world::World;
+    use engine::surface::world::World;
+    use engine::terrain::mesh::NodeMesh;
+    use engine::terrain::quadtree::QuadTree;
     use glam::DVec3;
     use worldgen::Map;
 
@@ -106,7 +106,7 @@ pub mod terrain {
         min_above_m: f64,
         max_above_m: f64,
         viewport: [u32; 2],
-    ) -> engine::select::Camera {
+    ) -> engine::camera::Camera {
         let o = world.origin_m();
         let s = world.size_m();
         let x = o[0] + s[0] * (0.05 + 0.9 * worldgen::noise::unit3(seed, i, 0));
@@ -123,7 +123,7 @@ pub mod terrain {
             pitch.sin(),
         );
         let p = DVec3::new(x, y, z);
-        engine::select::Camera::look_at(p, p + dir, 60f64.to_radians(), viewport)
+        engine::camera::Camera::look_at(p, p + dir, 60f64.to_radians(), viewport)
     }
 
     /// The committed tiny map as a world.
@@ -173,16 +173,16 @@ pub mod terrain {
     }
 
     /// Builds a node mesh the way the engine does (tiles for small nodes).
-    pub use engine::mesh::build_with_tiles as build_mesh;
+    pub use engine::terrain::mesh::build_with_tiles as build_mesh;
 
     /// The meshes of every selected node, by key.
     pub fn build_selection(
         world: &World,
         tree: &QuadTree,
-        cache: &mut engine::bounds::BoundsCache,
-        tiles: &mut engine::tiles::TileCache,
-        sel: &engine::select::Selection,
-    ) -> std::collections::HashMap<engine::quadtree::NodeKey, NodeMesh> {
+        cache: &mut engine::terrain::bounds::BoundsCache,
+        tiles: &mut engine::terrain::tiles::TileCache,
+        sel: &engine::terrain::select::Selection,
+    ) -> std::collections::HashMap<engine::terrain::quadtree::NodeKey, NodeMesh> {
         sel.nodes
             .iter()
             .map(|s| (s.key, build_mesh(world, tree, cache, tiles, s.key)))
@@ -239,10 +239,10 @@ pub mod terrain {
 
 /// GPU helpers: a headless device (lavapipe here and in CI) and a settled viewer.
 pub mod gpu {
-    use engine::app::{FrameStats, Viewer};
+    use engine::camera::Camera;
     use engine::render::{COLOR_FORMAT, Gpu, Target};
-    use engine::select::Camera;
     use engine::stream::StreamSettings;
+    use engine::viewer::{FrameStats, Viewer};
 
     /// A headless GPU device, or None with a printed reason outside CI. In CI a missing adapter
     /// fails the test (the test script installs lavapipe).

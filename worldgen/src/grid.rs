@@ -86,11 +86,6 @@ impl<T: Copy> Grid<T> {
         self.data[yc * self.width + xc]
     }
 
-    /// Rows as mutable slices, south first (for row-parallel work).
-    pub fn rows_mut(&mut self) -> std::slice::ChunksExactMut<'_, T> {
-        self.data.chunks_exact_mut(self.width.max(1))
-    }
-
     /// A new grid of the same size with `f` applied to each sample.
     pub fn map<U: Copy>(&self, f: impl Fn(T) -> U) -> Grid<U> {
         Grid {

@@ -1,9 +1,10 @@
-//! Plain structs uploaded to the GPU. Each mirrors a WGSL struct in `shaders/terrain.wgsl`
-//! field by field (std140-compatible: only vec4 and mat4x4 members).
+//! Plain structs shared by every renderer, each mirroring a WGSL struct of
+//! `shaders/prelude.inc.wgsl` field by field (std140-compatible: only vec4 and mat4x4 members in
+//! uniforms). Renderer-specific structs live with their renderer.
 
 use bytemuck::{Pod, Zeroable};
 
-/// Mirrors `Frame` in `terrain.wgsl`.
+/// Mirrors `Frame`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct FrameUniforms {
@@ -17,7 +18,7 @@ pub struct FrameUniforms {
     pub fog: [f32; 4],
 }
 
-/// Mirrors `Node` in `terrain.wgsl`; one per draw, at a 256-byte stride (dynamic offset).
+/// Mirrors `Node`; one per draw, at a 256-byte stride (dynamic offset).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct NodeUniforms {
@@ -32,32 +33,27 @@ pub struct NodeUniforms {
 /// Bytes between two draws' node uniforms (the largest `min_uniform_buffer_offset_alignment`).
 pub const NODE_UNIFORM_STRIDE: u64 = 256;
 
-/// Mirrors `VertexIn` in `terrain.wgsl` (28 bytes).
+/// Mirrors `VertexIn` (28 bytes): terrain vertices and plant-shape vertices.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
-pub struct TerrainVertex {
-    /// x, y relative to the node's south-west corner; z absolute (m).
+pub struct MeshVertex {
+    /// Terrain: x, y relative to the node's south-west corner, z absolute (m). Plant shapes:
+    /// unit shape coordinates.
     pub position: [f32; 3],
     pub normal: [f32; 3],
-    /// Ground-type legend index.
-    pub ground: u32,
+    /// Terrain: ground-type legend index. Plant shapes: part (0 trunk, 1 foliage).
+    pub tag: u32,
 }
 
-/// Mirrors `PlantIn`'s instance part in `terrain.wgsl` (32 bytes, one per vegetation item).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Pod, Zeroable)]
-pub struct PlantInstance {
-    /// x, y relative to the node's south-west corner; z absolute ground height (m).
-    pub position: [f32; 3],
-    pub height_m: f32,
-    pub radius_m: f32,
-    pub yaw_rad: f32,
-    /// Index into the frame's plant looks (shape, colour).
-    pub look: u32,
-    pub padding: u32,
+impl MeshVertex {
+    /// The vertex buffer layout (locations 0, 1, 2).
+    pub const LAYOUT: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Self>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Uint32],
+    };
 }
 
-const _: () = assert!(std::mem::size_of::<PlantInstance>() == crate::vegetation::INSTANCE_BYTES);
 const _: () = assert!(std::mem::size_of::<NodeUniforms>() as u64 == NODE_UNIFORM_STRIDE);
-const _: () = assert!(std::mem::size_of::<TerrainVertex>() == 28);
+const _: () = assert!(std::mem::size_of::<MeshVertex>() == 28);
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 5 * 16);

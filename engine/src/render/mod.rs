@@ -3,20 +3,32 @@
 //!
 //! - [`Gpu`]: instance, adapter, device and queue, with an error that says which Debian packages
 //!   provide a software adapter when none is found.
-//! - [`terrain::TerrainRenderer`]: long-lived pipelines for terrain nodes, sky and debug lines,
-//!   per-node GPU buffers ([`terrain::TerrainNodeGpu`]) created by the streaming GPU phase, and
-//!   per-frame draw data (camera-relative node offsets, dither intervals).
+//! - [`scene`]: the [`scene::NodeRenderer`] trait (upload, prepare, draw hooks) and the
+//!   [`scene::Scene`] that holds the renderers in drawing order.
+//! - [`frame`]: what all renderers share: frame uniforms (group 0), per-draw node uniforms
+//!   (group 1, dynamic offsets), view options, draw statistics, pipeline and pass helpers.
+//! - One renderer per kind of thing drawn: [`sky`] (sky, node-bounds lines), [`terrain`],
+//!   [`vegetation`] (with its atlas and impostor bakes). Each owns its pipelines, its per-node
+//!   GPU objects and its `gpu_data` structs; [`gpu_data`] holds the structs of the shared prelude.
+//! - [`shader`]: WGSL assembly (generated constants + prelude + the renderer's file).
 //! - [`Target`]: an offscreen colour + depth target with PNG readback (headless frames, tests,
-//!   screenshots).
+//!   screenshots); [`GpuTimer`]: timestamp queries read back without stalling.
 //!
 //! Depth is reversed-Z `Depth32Float` with an infinite far plane: clear to 0, test `Greater`.
 //! Positions reach the GPU camera-relative: node origin minus camera in f64, then f32.
 
+pub mod frame;
 pub mod gpu_data;
-
+pub mod scene;
+pub mod shader;
+pub mod sky;
+mod target;
 pub mod terrain;
+mod timer;
+pub mod vegetation;
 
-use std::path::Path;
+pub use target::{Target, depth_view, write_png};
+pub use timer::GpuTimer;
 
 /// Colour format of every target (sRGB, so shading happens in linear space).
 pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -26,8 +38,9 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
     #[error(
-        "no GPU adapter found ({0}). For a software adapter install the Debian packages \
-         `mesa-vulkan-drivers libvulkan1` (lavapipe); `WGPU_BACKEND=vulkan` or `gl` picks a backend"
+        "no GPU adapter found: install the Debian packages `mesa-vulkan-drivers libvulkan1` \
+         for a software Vulkan adapter (lavapipe; `./flyover` installs them), or a GPU driver; \
+         `WGPU_BACKEND=vulkan` or `gl` picks a backend (wgpu: {0})"
     )]
     NoAdapter(String),
     #[error("the GPU adapter {adapter} refused to create a device: {reason}")]
@@ -117,260 +130,11 @@ impl Gpu {
     }
 }
 
-/// An offscreen colour + depth target.
-pub struct Target {
-    pub size: [u32; 2],
-    pub format: wgpu::TextureFormat,
-    pub color: wgpu::Texture,
-    /// The view the terrain draws through (sRGB).
-    pub color_view: wgpu::TextureView,
-    /// A view in the texture's own format (for overlays such as egui that want a linear one).
-    pub plain_view: wgpu::TextureView,
-    pub depth_view: wgpu::TextureView,
-}
-
-impl Target {
-    /// A target of `size` pixels in `format` (RGBA or BGRA, 8 bits).
-    pub fn new(device: &wgpu::Device, size: [u32; 2], format: wgpu::TextureFormat) -> Self {
-        Self::with_srgb_view(device, size, format)
-    }
-
-    /// A target stored in `format` whose `color_view` is the sRGB variant of it (the same when
-    /// `format` is already sRGB) and `plain_view` the format itself.
-    pub fn with_srgb_view(
-        device: &wgpu::Device,
-        size: [u32; 2],
-        format: wgpu::TextureFormat,
-    ) -> Self {
-        let srgb = format.add_srgb_suffix();
-        let extent = wgpu::Extent3d {
-            width: size[0],
-            height: size[1],
-            depth_or_array_layers: 1,
-        };
-        let color = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("offscreen colour"),
-            size: extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[srgb],
-        });
-        let color_view = color.create_view(&wgpu::TextureViewDescriptor {
-            format: Some(srgb),
-            ..Default::default()
-        });
-        let plain_view = color.create_view(&wgpu::TextureViewDescriptor::default());
-        let depth_view = depth_view(device, size, "offscreen depth");
-        Self {
-            size,
-            format,
-            color,
-            color_view,
-            plain_view,
-            depth_view,
-        }
-    }
-
-    /// Copies the colour target to the CPU: RGBA8 rows, top row first.
-    pub fn read_rgba(&self, gpu: &Gpu) -> Result<Vec<u8>, GpuError> {
-        let [w, h] = self.size;
-        let row = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
-            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: u64::from(row) * u64::from(h),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("readback copy"),
-            });
-        enc.copy_texture_to_buffer(
-            self.color.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(h),
-                },
-            },
-            wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-        );
-        gpu.queue.submit([enc.finish()]);
-        let slice = buffer.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        gpu.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let data = slice
-            .get_mapped_range()
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let mut out = Vec::with_capacity((w * h * 4) as usize);
-        for y in 0..h as usize {
-            out.extend_from_slice(&data[y * row as usize..][..(w * 4) as usize]);
-        }
-        if matches!(
-            self.format,
-            wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
-        ) {
-            for px in out.chunks_exact_mut(4) {
-                px.swap(0, 2);
-            }
-        }
-        drop(data);
-        buffer.unmap();
-        Ok(out)
-    }
-}
-
-/// A reversed-Z depth view of `size`.
-pub fn depth_view(device: &wgpu::Device, size: [u32; 2], label: &str) -> wgpu::TextureView {
-    device
-        .create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: size[0],
-                height: size[1],
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        })
-        .create_view(&wgpu::TextureViewDescriptor::default())
-}
-
-/// Writes RGBA8 rows (top first) as a PNG.
-pub fn write_png(path: &Path, size: [u32; 2], rgba: &[u8]) -> Result<(), GpuError> {
-    let err = |reason: String| GpuError::WritePng {
-        path: path.display().to_string(),
-        reason,
-    };
-    let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), size[0], size[1]);
-    enc.set_color(png::ColorType::Rgba);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc.write_header().map_err(|e| err(e.to_string()))?;
-    w.write_image_data(rgba).map_err(|e| err(e.to_string()))?;
-    w.finish().map_err(|e| err(e.to_string()))
-}
-
-/// GPU time of a span of commands from timestamp queries, read back without stalling: the
-/// result of one frame arrives a frame or more later.
-pub struct GpuTimer {
-    queries: wgpu::QuerySet,
-    resolve: wgpu::Buffer,
-    read: wgpu::Buffer,
-    period_ns: f64,
-    /// 0: idle, 1: written into an encoder, 2: mapping requested, 3: mapped.
-    state: std::sync::Arc<std::sync::atomic::AtomicU8>,
-    /// The latest measurement (ms).
-    pub last_ms: Option<f64>,
-}
-
-impl GpuTimer {
-    /// A timer when the device has timestamp queries inside encoders, else None.
-    pub fn new(gpu: &Gpu) -> Option<Self> {
-        if !gpu.timestamps {
-            return None;
-        }
-        let buffer = |label: &str, usage: wgpu::BufferUsages| {
-            gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: 16,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        Some(Self {
-            queries: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("frame timestamps"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2,
-            }),
-            resolve: buffer(
-                "timestamp resolve",
-                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            ),
-            read: buffer(
-                "timestamp readback",
-                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            ),
-            period_ns: f64::from(gpu.queue.get_timestamp_period()),
-            state: std::sync::Arc::new(std::sync::atomic::AtomicU8::new(0)),
-            last_ms: None,
-        })
-    }
-
-    /// Collects a finished measurement, if any (call once per frame before `begin`).
-    pub fn harvest(&mut self, gpu: &Gpu) {
-        use std::sync::atomic::Ordering;
-        if self.state.load(Ordering::Acquire) == 2 {
-            let _ = gpu.device.poll(wgpu::PollType::Poll);
-        }
-        if self.state.load(Ordering::Acquire) == 3 {
-            if let Ok(view) = self.read.slice(..).get_mapped_range() {
-                let t: [u64; 2] = [
-                    u64::from_le_bytes(view[0..8].try_into().unwrap_or_default()),
-                    u64::from_le_bytes(view[8..16].try_into().unwrap_or_default()),
-                ];
-                drop(view);
-                self.last_ms = Some(t[1].saturating_sub(t[0]) as f64 * self.period_ns * 1e-6);
-            }
-            self.read.unmap();
-            self.state.store(0, Ordering::Release);
-        }
-    }
-
-    /// Writes the start timestamp when the timer is free; returns whether it did.
-    pub fn begin(&self, enc: &mut wgpu::CommandEncoder) -> bool {
-        use std::sync::atomic::Ordering;
-        if self.state.load(Ordering::Acquire) != 0 {
-            return false;
-        }
-        enc.write_timestamp(&self.queries, 0);
-        self.state.store(1, Ordering::Release);
-        true
-    }
-
-    /// Writes the end timestamp and the copy to the readback buffer.
-    pub fn end(&self, enc: &mut wgpu::CommandEncoder) {
-        enc.write_timestamp(&self.queries, 1);
-        enc.resolve_query_set(&self.queries, 0..2, &self.resolve, 0);
-        enc.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
-    }
-
-    /// Requests the readback; call after the encoder holding `end` was submitted.
-    pub fn after_submit(&self) {
-        use std::sync::atomic::Ordering;
-        if self.state.load(Ordering::Acquire) != 1 {
-            return;
-        }
-        self.state.store(2, Ordering::Release);
-        let state = std::sync::Arc::clone(&self.state);
-        self.read
-            .slice(..)
-            .map_async(wgpu::MapMode::Read, move |r| {
-                state.store(if r.is_ok() { 3 } else { 0 }, Ordering::Release);
-            });
-    }
+/// Every renderer's assembled shader source, by file name (for validation).
+pub fn shader_sources() -> Vec<(&'static str, String)> {
+    vec![
+        ("sky", sky::shader_source()),
+        ("terrain", terrain::shader_source()),
+        ("vegetation", vegetation::shader_source()),
+    ]
 }

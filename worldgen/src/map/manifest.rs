@@ -96,14 +96,6 @@ impl GroundSpec {
             spacing_m: self.spacing_m,
         }
     }
-
-    /// The legend index of the ground type called `name`.
-    pub fn index_of(&self, name: &str) -> Option<u8> {
-        self.legend
-            .iter()
-            .position(|t| t.name == name)
-            .map(|i| i as u8)
-    }
 }
 
 /// One vegetation species density layer.
@@ -342,6 +334,13 @@ pub fn validate(path: &Path, m: &Manifest) -> Result<(), MapError> {
             "a height layer needs at least 2x2 samples",
         ));
     }
+    validate_ground(path, m)?;
+    validate_vegetation(path, m)?;
+    validate_files(path, m)
+}
+
+/// The ground layer's grid and legend.
+fn validate_ground(path: &Path, m: &Manifest) -> Result<(), MapError> {
     check_grid(path, "ground", &m.ground.grid(), m.size_m)?;
     if m.ground.legend.is_empty() || m.ground.legend.len() > limits::MAX_GROUND_TYPES {
         return Err(MapError::field(
@@ -371,6 +370,11 @@ pub fn validate(path: &Path, m: &Manifest) -> Result<(), MapError> {
             "",
         )?;
     }
+    Ok(())
+}
+
+/// The vegetation species, their density layers and the large-tree species names.
+fn validate_vegetation(path: &Path, m: &Manifest) -> Result<(), MapError> {
     if m.vegetation.len() > limits::MAX_SPECIES {
         return Err(MapError::field(
             path,
@@ -432,6 +436,11 @@ pub fn validate(path: &Path, m: &Manifest) -> Result<(), MapError> {
             "names must be non-empty and unique",
         ));
     }
+    Ok(())
+}
+
+/// The list and tile files: plain names, each used by one layer; the Poisson tile's distance.
+fn validate_files(path: &Path, m: &Manifest) -> Result<(), MapError> {
     check_file_name(path, "trees.file", &m.trees.file)?;
     check_file_name(path, "decals.file", &m.decals.file)?;
     check_file_name(path, "buildings.file", &m.buildings.file)?;

@@ -1,0 +1,145 @@
+//! Headless runs: offscreen frames along the automatic flyover (or a replayed path), PNG frames
+//! every `--every` frames, a table of per-frame times and `stats.json`.
+
+use crate::{Cli, scripted_camera, settings};
+use anyhow::{Context, Result};
+use apps::{open_world, percentile};
+use engine::flight::CameraPath;
+use engine::render::{COLOR_FORMAT, Gpu, Target, write_png};
+use engine::viewer::{FrameStats, Viewer};
+use std::time::Instant;
+
+pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
+    let world = open_world(&cli.map, &worldgen::progress::Silent)
+        .with_context(|| format!("opening map {}", cli.map.display()))?;
+    let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
+    let gpu = Gpu::new_headless()?;
+    eprintln!("headless on {}", gpu.adapter_name());
+    std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
+    let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
+    let mut viewer = Viewer::new(&gpu, COLOR_FORMAT, world, settings(cli));
+    let bar = indicatif::ProgressBar::new(cli.frames);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames ({eta})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_message("rendering");
+    let dt = 1.0 / cli.fps;
+    let mut all: Vec<FrameStats> = Vec::new();
+    let mut written = Vec::new();
+    for f in 0..cli.frames {
+        let t_s = f as f64 * dt;
+        let cam = scripted_camera(
+            cli,
+            path.as_ref(),
+            &viewer.streamer.shared.world,
+            t_s,
+            cli.size,
+        );
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("headless frame"),
+            });
+        let mut st = viewer.frame(
+            &gpu,
+            &mut enc,
+            &target.color_view,
+            &target.depth_view,
+            &cam,
+            dt,
+        );
+        let t0 = Instant::now();
+        gpu.queue.submit([enc.finish()]);
+        viewer.after_submit();
+        gpu.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
+        st.gpu_wait_ms = t0.elapsed().as_secs_f64() * 1e3;
+        st.t_s = t_s;
+        if cli.every > 0 && (f % cli.every == 0 || f + 1 == cli.frames) {
+            let png = cli.out.join(format!("frame_{f:05}.png"));
+            write_png(&png, target.size, &target.read_rgba(&gpu)?)?;
+            written.push(png);
+        }
+        all.push(st);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
+    let rows: [(&str, Vec<f64>); 13] = [
+        (
+            "streaming update (selection + bookkeeping)",
+            col(|s| s.update_ms),
+        ),
+        ("  of which selection", col(|s| s.selection_ms)),
+        ("GPU uploads", col(|s| s.upload_ms)),
+        ("encode", col(|s| s.encode_ms)),
+        ("GPU wait", col(|s| s.gpu_wait_ms)),
+        (
+            "GPU terrain pass (timestamp queries, when supported)",
+            all.iter().filter_map(|s| s.gpu_terrain_ms).collect(),
+        ),
+        (
+            "CPU frame (update + uploads + encode)",
+            col(|s| s.cpu_frame_ms),
+        ),
+        ("triangles", col(|s| s.triangles as f64)),
+        ("draw calls", col(|s| f64::from(s.draw_calls))),
+        (
+            "vegetation instances (meshes + billboards)",
+            col(|s| s.plant_instances as f64),
+        ),
+        (
+            "  of which group billboards (cluster quads)",
+            col(|s| s.group_billboards as f64),
+        ),
+        (
+            "vegetation draw calls",
+            col(|s| f64::from(s.plant_draw_calls)),
+        ),
+        (
+            "vegetation mesh triangles",
+            col(|s| s.plant_triangles as f64),
+        ),
+    ];
+    println!(
+        "flyover --headless: {} frames at {}x{} on {}\n",
+        all.len(),
+        cli.size[0],
+        cli.size[1],
+        gpu.adapter_name()
+    );
+    println!("| per frame | median | p95 | max |\n|---|---:|---:|---:|");
+    let mut summary = serde_json::Map::new();
+    for (name, mut v) in rows {
+        v.sort_by(f64::total_cmp);
+        let (m, p, max) = (
+            percentile(&v, 0.5),
+            percentile(&v, 0.95),
+            percentile(&v, 1.0),
+        );
+        println!("| {name} | {m:.2} | {p:.2} | {max:.2} |");
+        summary.insert(
+            name.to_string(),
+            serde_json::json!({"median": m, "p95": p, "max": max}),
+        );
+    }
+    let json = cli.out.join("stats.json");
+    let doc = serde_json::json!({
+        "adapter": gpu.adapter_name(),
+        "size": cli.size,
+        "tau_px": cli.tau,
+        "summary": summary,
+        "frames": all,
+    });
+    std::fs::write(&json, serde_json::to_string_pretty(&doc)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    println!(
+        "\n{} PNG frames in {}, statistics in {}",
+        written.len(),
+        cli.out.display(),
+        json.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,181 @@
+//! The flyover viewer: a window with the streamed terrain and an egui panel (detail level,
+//! workers, memory budget, debug views, live statistics), or, with `--headless` or when no
+//! display is available, an offscreen run that writes PNG frames and per-frame statistics.
+
+mod headless;
+mod panel;
+mod window;
+
+use anyhow::Result;
+use apps::DEFAULT_MAP;
+use clap::{CommandFactory, FromArgMatches, Parser};
+use engine::camera::Camera;
+use engine::flight::{CameraPath, auto_flyover};
+use engine::stream::StreamSettings;
+use std::path::PathBuf;
+
+#[derive(Parser, Debug, Clone)]
+#[command(
+    name = "flyover",
+    about = "Fly over a map with streamed quad-tree terrain",
+    long_about = "Fly over a map with streamed quad-tree terrain.\n\n\
+        Window controls: the automatic flyover runs until you press a movement key or Space; \
+        then W/A/S/D move, Q/E go down/up, hold the right mouse button and move to look, the \
+        wheel changes speed, Space toggles the automatic flyover, F12 writes a screenshot, R \
+        starts/stops recording a camera path (written to --record), Esc quits.\n\n\
+        Without a display (no DISPLAY or WAYLAND_DISPLAY) it runs --headless instead, by default \
+        a short run (240 frames of 640x360 covering the whole automatic flight, about a minute \
+        on 2 cores with a software adapter) unless --frames, --size or --fps are given."
+)]
+pub(crate) struct Cli {
+    /// Map folder. The default map is generated there on first run when missing.
+    #[arg(long, default_value = DEFAULT_MAP)]
+    pub(crate) map: PathBuf,
+    /// Render offscreen: write PNG frames and a JSON of per-frame statistics into --out.
+    #[arg(long)]
+    pub(crate) headless: bool,
+    /// Frames to render (headless), at --fps steps of simulated time.
+    #[arg(long, default_value_t = 600)]
+    pub(crate) frames: u64,
+    /// Simulated frames per second (headless) for the camera clock.
+    #[arg(long, default_value_t = 30.0, value_parser = positive)]
+    pub(crate) fps: f64,
+    /// Output folder for frames, statistics and screenshots.
+    #[arg(long, default_value = "out/flyover")]
+    pub(crate) out: PathBuf,
+    /// Write every Nth frame as PNG (headless).
+    #[arg(long, default_value_t = 30)]
+    pub(crate) every: u64,
+    /// Replay this camera path file (see --record) instead of the automatic flyover.
+    #[arg(long)]
+    pub(crate) path: Option<PathBuf>,
+    /// Where R (in the window) records a camera path.
+    #[arg(long, default_value = "out/flyover/camera-path.txt")]
+    pub(crate) record: PathBuf,
+    /// Viewport size WxH in pixels.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub(crate) size: [u32; 2],
+    /// Detail level: the largest projected geometric error in pixels.
+    #[arg(long, default_value_t = 2.0, value_parser = positive)]
+    pub(crate) tau: f64,
+    /// Worker threads for node generation (default: cores - 1).
+    #[arg(long)]
+    pub(crate) workers: Option<usize>,
+    /// Memory budget of the node cache in MiB.
+    #[arg(long, default_value_t = 512)]
+    pub(crate) budget_mib: usize,
+    /// Split as if vegetation hid nothing (by default nodes whose view from a camera inside the
+    /// canopy is blocked by dense vegetation split less).
+    #[arg(long)]
+    pub(crate) no_vegetation_occlusion: bool,
+    /// Duration of the automatic flyover in seconds.
+    #[arg(long, default_value_t = 40.0, value_parser = positive)]
+    pub(crate) duration_s: f64,
+    /// Window: write live statistics (JSON, overwritten each frame) to this file.
+    #[arg(long)]
+    pub(crate) stats_file: Option<PathBuf>,
+    /// Window: quit after this many seconds.
+    #[arg(long)]
+    pub(crate) exit_after_s: Option<f64>,
+}
+
+/// A finite number above zero (thresholds, rates, durations).
+fn positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(v) => Err(format!("{v} must be a finite number above 0")),
+        Err(e) => Err(format!("{s:?} is not a number: {e}")),
+    }
+}
+
+fn parse_size(s: &str) -> Result<[u32; 2], String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or_else(|| format!("expected WxH such as 1280x720, got {s:?}"))?;
+    let p = |v: &str| {
+        v.parse::<u32>()
+            .ok()
+            .filter(|&n| (16..=8192).contains(&n))
+            .ok_or_else(|| format!("size {v:?} must be a number of pixels in 16..=8192"))
+    };
+    Ok([p(w)?, p(h)?])
+}
+
+pub(crate) fn settings(cli: &Cli) -> StreamSettings {
+    let mut s = StreamSettings {
+        tau_px: cli.tau,
+        cache_budget_bytes: cli.budget_mib << 20,
+        vegetation_occlusion: !cli.no_vegetation_occlusion,
+        ..StreamSettings::default()
+    };
+    if let Some(w) = cli.workers {
+        s.workers = w.max(1);
+        s.max_in_flight = s.workers + 1;
+    }
+    s
+}
+
+/// The camera at time `t_s`: the replayed path, or the automatic flyover.
+pub(crate) fn scripted_camera(
+    cli: &Cli,
+    path: Option<&CameraPath>,
+    world: &engine::surface::World,
+    t_s: f64,
+    viewport: [u32; 2],
+) -> Camera {
+    match path {
+        Some(p) => p.at(t_s, viewport),
+        None => auto_flyover(world, t_s / cli.duration_s, viewport),
+    }
+}
+
+fn display_available() -> bool {
+    std::env::var_os("DISPLAY").is_some_and(|v| !v.is_empty())
+        || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|v| !v.is_empty())
+}
+
+fn main() -> std::process::ExitCode {
+    env_logger::Builder::from_env(
+        env_logger::Env::default()
+            .default_filter_or("warn,winit=error,egui_wgpu=error,wgpu_hal=off"),
+    )
+    .init();
+    let matches = Cli::command().get_matches();
+    let mut cli = match Cli::from_arg_matches(&matches) {
+        Ok(c) => c,
+        Err(e) => e.exit(),
+    };
+    let result = if cli.headless {
+        headless::run_headless(&cli)
+    } else if !display_available() {
+        let defaulted =
+            |id: &str| matches.value_source(id) == Some(clap::parser::ValueSource::DefaultValue);
+        if defaulted("frames") && defaulted("size") && defaulted("fps") {
+            // The whole automatic flight in about a minute on a software adapter.
+            cli.frames = 240;
+            cli.size = [640, 360];
+            cli.fps = 240.0 / cli.duration_s;
+            if defaulted("every") {
+                cli.every = 24;
+            }
+        }
+        eprintln!(
+            "no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless, {} frames of \
+             {}x{}, frames go to {}",
+            cli.frames,
+            cli.size[0],
+            cli.size[1],
+            cli.out.display()
+        );
+        headless::run_headless(&cli)
+    } else {
+        window::run(&cli)
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

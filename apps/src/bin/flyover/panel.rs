@@ -1,0 +1,95 @@
+//! The egui panel: detail level, workers, memory budget, debug views and live statistics.
+
+use engine::render::Gpu;
+use engine::render::frame::ViewOptions;
+use engine::viewer::FrameStats;
+
+/// The panel's settings, applied to the streamer each frame.
+pub(crate) struct Ui {
+    pub(crate) tau: f64,
+    pub(crate) workers: usize,
+    pub(crate) budget_mib: usize,
+    pub(crate) fixed_level: Option<u8>,
+    pub(crate) frozen: bool,
+    pub(crate) occlusion: bool,
+    pub(crate) slider_rect: [f32; 4],
+}
+
+pub(crate) fn panel(
+    ui: &mut egui::Ui,
+    st_ui: &mut Ui,
+    view: &mut ViewOptions,
+    s: &FrameStats,
+    frame_ms: f64,
+    gpu: &Gpu,
+    extra: &str,
+) {
+    ui.heading("Detail");
+    let r = ui.add(
+        egui::Slider::new(&mut st_ui.tau, 0.5..=16.0)
+            .logarithmic(true)
+            .text("pixel error τ (px)"),
+    );
+    st_ui.slider_rect = [r.rect.min.x, r.rect.min.y, r.rect.max.x, r.rect.max.y];
+    ui.add(egui::Slider::new(&mut st_ui.workers, 1..=32).text("workers (restarts streaming)"));
+    ui.add(egui::Slider::new(&mut st_ui.budget_mib, 32..=8192).text("node cache MiB"));
+    ui.separator();
+    ui.heading("Debug views");
+    let mut fixed = st_ui.fixed_level.is_some();
+    if gpu.wireframe {
+        ui.checkbox(&mut view.wireframe, "wireframe");
+    } else {
+        ui.label("wireframe: not supported by this adapter");
+    }
+    ui.checkbox(&mut view.color_by_level, "colour by level");
+    ui.checkbox(&mut view.show_bounds, "node bounds");
+    ui.checkbox(&mut view.plants, "vegetation");
+    ui.checkbox(&mut st_ui.occlusion, "split less behind dense vegetation");
+    ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
+    ui.checkbox(&mut fixed, "fixed level");
+    if fixed {
+        let mut l = st_ui.fixed_level.unwrap_or(6);
+        ui.add(egui::Slider::new(&mut l, 0..=12).text("level"));
+        st_ui.fixed_level = Some(l);
+    } else {
+        st_ui.fixed_level = None;
+    }
+    ui.separator();
+    ui.heading("Statistics");
+    ui.label(format!(
+        "{:.1} fps, frame {frame_ms:.1} ms (CPU: update {:.2}, uploads {:.2}, encode {:.2} ms)",
+        1000.0 / frame_ms.max(1e-3),
+        s.update_ms,
+        s.upload_ms,
+        s.encode_ms
+    ));
+    ui.label(match (gpu.timestamps, s.gpu_terrain_ms) {
+        (true, Some(ms)) => format!("GPU: terrain pass {ms:.2} ms (timestamp queries)"),
+        (true, None) => "GPU: waiting for the first timestamps".to_string(),
+        (false, _) => "GPU time: timestamps not supported by this adapter".to_string(),
+    });
+    ui.label(format!(
+        "triangles {}  draw calls {}  nodes {}",
+        s.triangles, s.draw_calls, s.drawn_nodes
+    ));
+    ui.label(format!(
+        "vegetation: {} instances, {} draw calls, {} mesh triangles",
+        s.plant_instances, s.plant_draw_calls, s.plant_triangles
+    ));
+    ui.label(format!("nodes per level {:?}", s.nodes_per_level));
+    ui.label(format!(
+        "jobs: queued {} running {} waiting GPU {} cancelled {}",
+        s.jobs_queued, s.jobs_running, s.jobs_waiting_gpu, s.jobs_cancelled_total
+    ));
+    ui.label(format!(
+        "memory: tiles {:.1} MiB, drawn node buffers {:.1} MiB, node cache {:.1} MiB",
+        s.tiles_bytes as f64 / 1_048_576.0,
+        s.node_buffers_bytes as f64 / 1_048_576.0,
+        s.cache_bytes as f64 / 1_048_576.0
+    ));
+    ui.label(format!(
+        "pop debt: {} wanted nodes not shown yet",
+        s.pop_debt_nodes
+    ));
+    ui.label(extra);
+}

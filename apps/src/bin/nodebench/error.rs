@@ -1,0 +1,256 @@
+//! Section `error`: triangles against measured on-screen error for the grid, the TIN and a
+//! CDLOD-style distance selection.
+
+use crate::plot::CurvePoint;
+use crate::report::{Report, bar};
+use engine::camera::Camera;
+use engine::measure::{self, ViewError};
+use engine::surface::World;
+use engine::terrain::bounds::BoundsCache;
+use engine::terrain::mesh::{self, NodeMesh};
+use engine::terrain::quadtree::{NodeKey, QuadTree};
+use engine::terrain::select::{SelectParams, Selection, select};
+use engine::terrain::tiles::TileCache;
+use engine::terrain::tin;
+
+/// Node meshes (grid and TIN) built once and reused across thresholds and bisection steps.
+#[derive(Default)]
+struct MeshCache {
+    grid: std::collections::HashMap<NodeKey, NodeMesh>,
+    tin: std::collections::HashMap<NodeKey, NodeMesh>,
+}
+
+impl MeshCache {
+    fn grid(
+        &mut self,
+        world: &World,
+        tree: &QuadTree,
+        cache: &mut BoundsCache,
+        tiles: &mut TileCache,
+        key: NodeKey,
+    ) -> &NodeMesh {
+        self.grid
+            .entry(key)
+            .or_insert_with(|| mesh::build_with_tiles(world, tree, cache, tiles, key))
+    }
+
+    fn tin(
+        &mut self,
+        world: &World,
+        tree: &QuadTree,
+        cache: &mut BoundsCache,
+        tiles: &mut TileCache,
+        key: NodeKey,
+        target: f64,
+    ) -> &NodeMesh {
+        if !self.tin.contains_key(&key) {
+            let g = self.grid(world, tree, cache, tiles, key);
+            let t = tin::build(g, target * g.bounds.error_m).0;
+            self.tin.insert(key, t);
+        }
+        &self.tin[&key]
+    }
+}
+
+/// Builds meshes for a selection (optionally as TINs) and measures the view's pixel error.
+fn measure_view(
+    world: &World,
+    tree: &QuadTree,
+    ctx: &mut (BoundsCache, TileCache, MeshCache),
+    cam: &Camera,
+    sel: &Selection,
+    per_side: u32,
+    tin_target: Option<f64>,
+) -> (usize, ViewError) {
+    let (cache, tiles, meshes_cache) = ctx;
+    let mut meshes = Vec::with_capacity(sel.nodes.len());
+    let mut tris = 0;
+    for s in &sel.nodes {
+        let m = match tin_target {
+            Some(f) => meshes_cache
+                .tin(world, tree, cache, tiles, s.key, f)
+                .clone(),
+            None => meshes_cache.grid(world, tree, cache, tiles, s.key).clone(),
+        };
+        tris += m.indices.len() / 3;
+        meshes.push(m);
+    }
+    (
+        tris,
+        measure::view_error(world, tree, &meshes, cam, per_side),
+    )
+}
+
+/// Selection where each node's error bound is that of its TIN (grid error + exact TIN delta),
+/// so the TIN variant is held to the same threshold honestly.
+fn select_tin(
+    world: &World,
+    tree: &QuadTree,
+    ctx: &mut (BoundsCache, TileCache, MeshCache),
+    cam: &Camera,
+    tau: f64,
+    target: f64,
+) -> Selection {
+    // Both closures need the caches, one after the other; the TIN is built only for nodes that
+    // survive culling.
+    let ctx = std::cell::RefCell::new(ctx);
+    let k = cam.k_px();
+    engine::terrain::select::traverse(
+        tree,
+        cam,
+        true,
+        |key| ctx.borrow_mut().0.get(world, tree, key),
+        |key, _, dist, _| {
+            let mut c = ctx.borrow_mut();
+            let (cache, tiles, meshes) = &mut **c;
+            let err = meshes
+                .tin(world, tree, cache, tiles, key, target)
+                .bounds
+                .error_m;
+            dist <= 0.0 || err * k / dist > tau
+        },
+    )
+}
+
+pub(crate) fn section_error(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+) -> Vec<CurvePoint> {
+    let taus: &[f64] = if quick {
+        &[2.0, 8.0]
+    } else {
+        &[0.5, 1.0, 2.0, 4.0, 8.0]
+    };
+    let n_cams = if quick { 1 } else { 4 };
+    let step = (cams.len() / n_cams).max(1);
+    let cams: Vec<Camera> = cams.iter().step_by(step).take(n_cams).copied().collect();
+    let per_side = if quick { 12 } else { 24 };
+    let tin_target = 0.5;
+    let mut ctx = (BoundsCache::new(), TileCache::new(), MeshCache::default());
+    let mut curve = Vec::new();
+    let b = bar((taus.len() * cams.len()) as u64, "speed vs error");
+    for &tau in taus {
+        let params = format!(
+            "tau {tau} px, {} cameras, lattice {per_side}² per node",
+            cams.len()
+        );
+        let (mut g_tris, mut g_max, mut g_mean) = (0usize, 0.0f64, 0.0f64);
+        let (mut t_tris, mut t_max, mut t_mean) = (0usize, 0.0f64, 0.0f64);
+        for cam in &cams {
+            let sel = select(
+                world,
+                tree,
+                &mut ctx.0,
+                cam,
+                SelectParams {
+                    tau_px: tau,
+                    max_level: tree.max_level,
+                    cull: true,
+                },
+            );
+            let (tris, e) = measure_view(world, tree, &mut ctx, cam, &sel, per_side, None);
+            g_tris += tris;
+            g_max = g_max.max(e.max_px);
+            g_mean += e.mean_px / cams.len() as f64;
+            let sel_t = select_tin(world, tree, &mut ctx, cam, tau, tin_target);
+            let (tris, e) = measure_view(
+                world,
+                tree,
+                &mut ctx,
+                cam,
+                &sel_t,
+                per_side,
+                Some(tin_target),
+            );
+            t_tris += tris;
+            t_max = t_max.max(e.max_px);
+            t_mean += e.mean_px / cams.len() as f64;
+            b.inc(1);
+        }
+        let nc = cams.len() as f64;
+        // CDLOD-style baseline: the smallest distance ratio whose measured max error is at most
+        // the grid's measured max error (bisection; error falls as the ratio grows).
+        let measure_ratio = |ratio: f64, ctx: &mut (BoundsCache, TileCache, MeshCache)| {
+            let (mut tris, mut mx, mut mean) = (0usize, 0.0f64, 0.0f64);
+            for cam in &cams {
+                let sel = measure::select_by_distance(world, tree, &mut ctx.0, cam, ratio);
+                let (t, e) = measure_view(world, tree, ctx, cam, &sel, per_side, None);
+                tris += t;
+                mx = mx.max(e.max_px);
+                mean += e.mean_px / nc;
+            }
+            (tris, mx, mean)
+        };
+        let (mut lo, mut hi) = (0.25f64, 32.0f64);
+        let mut best = measure_ratio(hi, &mut ctx);
+        for _ in 0..if quick { 5 } else { 8 } {
+            let mid = (lo * hi).sqrt();
+            let m = measure_ratio(mid, &mut ctx);
+            if m.1 <= g_max {
+                hi = mid;
+                best = m;
+            } else {
+                lo = mid;
+            }
+        }
+        r.add(
+            "error",
+            "grid triangles per frame",
+            g_tris as f64 / nc,
+            "triangles",
+            &params,
+        );
+        r.add("error", "grid measured max error", g_max, "px", &params);
+        r.add("error", "grid measured mean error", g_mean, "px", &params);
+        r.add(
+            "error",
+            "TIN triangles per frame",
+            t_tris as f64 / nc,
+            "triangles",
+            &params,
+        );
+        r.add("error", "TIN measured max error", t_max, "px", &params);
+        r.add("error", "TIN measured mean error", t_mean, "px", &params);
+        r.add(
+            "error",
+            "CDLOD-style triangles per frame",
+            best.0 as f64 / nc,
+            "triangles",
+            &format!("{params}, ratio {hi:.2}"),
+        );
+        r.add(
+            "error",
+            "CDLOD-style measured max error",
+            best.1,
+            "px",
+            &format!("{params}, ratio {hi:.2}"),
+        );
+        r.add(
+            "error",
+            "CDLOD-style measured mean error",
+            best.2,
+            "px",
+            &format!("{params}, ratio {hi:.2}"),
+        );
+        curve.push(CurvePoint {
+            method: "grid (ours)",
+            triangles: g_tris as f64 / nc,
+            max_px: g_max,
+        });
+        curve.push(CurvePoint {
+            method: "TIN (ours)",
+            triangles: t_tris as f64 / nc,
+            max_px: t_max,
+        });
+        curve.push(CurvePoint {
+            method: "CDLOD-style distance",
+            triangles: best.0 as f64 / nc,
+            max_px: best.1,
+        });
+    }
+    b.finish_and_clear();
+    curve
+}

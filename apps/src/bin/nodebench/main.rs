@@ -1,0 +1,169 @@
+//! `nodebench`: the headless node-generation benchmark. Prints Markdown tables, optionally writes
+//! JSON rows and a speed-against-error plot. See `--help`. One file per section.
+
+mod error;
+mod plot;
+mod report;
+mod selection;
+mod streaming;
+mod terrain;
+mod tiles;
+mod vegetation;
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use engine::measure;
+use engine::surface::World;
+use engine::terrain::quadtree::QuadTree;
+use report::Report;
+use std::path::PathBuf;
+use std::time::Instant;
+
+const SECTIONS: [&str; 6] = [
+    "tiles",
+    "terrain",
+    "selection",
+    "error",
+    "vegetation",
+    "streaming",
+];
+
+/// Node-generation benchmark: speed of every CPU phase and speed against measured error.
+///
+/// Sections: `tiles` (16 m tile generation), `terrain` (node bounds, grid mesh, TIN mesh),
+/// `selection` (per-frame quad-tree selection along a flight), `error` (triangles against
+/// measured on-screen pixel error for tau in {0.5, 1, 2, 4, 8}, for the grid, the TIN and a
+/// CDLOD-style distance selection tuned to the same measured error), `vegetation` (kept points per
+/// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
+/// vegetation phase time per node, instances and draw calls per frame on the flight),
+/// `streaming` (real-time
+/// flights at 50, 150 and 300 m/s through the streaming system: request-to-ready latency,
+/// cancelled jobs, pop debt). Per-item times are on one
+/// core (p50/p95/max); throughput is given for 1 and N worker threads.
+#[derive(Parser)]
+#[command(name = "nodebench", version, about, long_about)]
+struct Cli {
+    /// Map folder (the default map is generated there on first use if missing).
+    #[arg(long, default_value = "maps/default")]
+    map: PathBuf,
+    /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
+    /// streaming.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
+    #[arg(long)]
+    quick: bool,
+    /// Write the rows as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write the benchmark document (Markdown: command, machine, every row of this run) here,
+    /// e.g. docs/benchmarks.md.
+    #[arg(long)]
+    doc: Option<PathBuf>,
+    /// Write the speed-against-error plot (PNG) here.
+    #[arg(long, default_value = "target/nodebench/speed_vs_error.png")]
+    plot: PathBuf,
+    /// Worker threads for the throughput rows (default: all cores).
+    #[arg(long)]
+    workers: Option<usize>,
+    /// Viewport height in pixels for selection and error (width is 16:9).
+    #[arg(long, default_value_t = 720)]
+    viewport_height: u32,
+}
+
+pub(crate) fn open_world(path: &std::path::Path) -> Result<World> {
+    // The viewer's: generates the default map when missing or from an older map format.
+    apps::open_world(path, &worldgen::progress::Silent)
+        .with_context(|| format!("opening map {}", path.display()))
+}
+
+fn run(cli: &Cli) -> Result<()> {
+    for s in &cli.only {
+        if !SECTIONS.contains(&s.as_str()) {
+            bail!("unknown section {s:?}; choose from {}", SECTIONS.join(", "));
+        }
+    }
+    let want = |s: &str| cli.only.is_empty() || cli.only.iter().any(|o| o == s);
+    let workers = cli
+        .workers
+        .unwrap_or_else(|| {
+            std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+        })
+        .max(1);
+    let world = open_world(&cli.map)?;
+    let tree = QuadTree::new(world.origin_m(), world.size_m());
+    let vh = cli.viewport_height.max(16);
+    let cams = measure::default_flight(&world, if cli.quick { 8 } else { 64 }, [vh * 16 / 9, vh]);
+    let mut report = Report { rows: Vec::new() };
+    let t0 = Instant::now();
+    if want("tiles") {
+        tiles::section_tiles(&world, &mut report, cli.quick, workers);
+    }
+    if want("terrain") {
+        terrain::section_terrain(&world, &tree, &cams, &mut report, cli.quick, workers);
+    }
+    if want("selection") {
+        selection::section_selection(&world, &tree, &cams, &mut report, cli.quick);
+    }
+    let mut curve = Vec::new();
+    if want("error") {
+        curve = error::section_error(&world, &tree, &cams, &mut report, cli.quick);
+    }
+    if want("vegetation") {
+        vegetation::section_vegetation(&world, &tree, &cams, &mut report, cli.quick);
+    }
+    if want("streaming") {
+        streaming::section_streaming(&cli.map, &mut report, cli.quick, workers, [vh * 16 / 9, vh])?;
+    }
+    let summary = format!(
+        "nodebench on {} ({} x {} m, {} levels), {} worker(s), {:.1} s{}",
+        cli.map.display(),
+        world.size_m()[0],
+        world.size_m()[1],
+        tree.max_level + 1,
+        workers,
+        t0.elapsed().as_secs_f64(),
+        if cli.quick { ", --quick" } else { "" }
+    );
+    println!("{summary}\n\n{}", report.markdown());
+    if !curve.is_empty() {
+        match plot::write_plot(&cli.plot, &curve) {
+            Ok(()) => println!("\nplot: {}", cli.plot.display()),
+            Err(e) => eprintln!("warning: plot not written: {e:#}"),
+        }
+    }
+    let machine = report::machine_block(workers);
+    if let Some(p) = &cli.doc {
+        let command: Vec<String> = std::env::args()
+            .enumerate()
+            .map(|(i, a)| if i == 0 { "nodebench".to_string() } else { a })
+            .collect();
+        write_file(p, &report.document(&command.join(" "), &summary, &machine))?;
+        println!("benchmark document: {}", p.display());
+    }
+    if let Some(p) = &cli.json {
+        let doc = serde_json::json!({ "machine": machine, "rows": report.rows });
+        write_file(p, &serde_json::to_string_pretty(&doc)?)?;
+        println!("json: {}", p.display());
+    }
+    Ok(())
+}
+
+/// Writes `text` to `path`, creating its folder.
+fn write_file(path: &std::path::Path, text: &str) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+fn main() -> std::process::ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    match run(&Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

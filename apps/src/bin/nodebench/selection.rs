@@ -1,0 +1,95 @@
+//! Section `selection`: per-frame quad-tree selection along the flight at several thresholds.
+
+use crate::report::{Report, bar};
+use engine::camera::Camera;
+use engine::surface::World;
+use engine::terrain::bounds::BoundsCache;
+use engine::terrain::quadtree::QuadTree;
+use engine::terrain::select::{SelectParams, Selection, select};
+use std::time::Instant;
+
+pub(crate) fn triangles(sel: &Selection) -> usize {
+    // Grid nodes: 32 x 32 x 2 surface + 4 x 32 x 2 skirt triangles.
+    sel.nodes.len() * (2048 + 256)
+}
+
+pub(crate) fn section_selection(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+) {
+    let mut cache = BoundsCache::new();
+    let taus: &[f64] = if quick { &[2.0] } else { &[1.0, 2.0, 4.0] };
+    for &tau in taus {
+        let p = SelectParams {
+            tau_px: tau,
+            max_level: tree.max_level,
+            cull: true,
+        };
+        let b = bar(cams.len() as u64, &format!("selection tau {tau}"));
+        let t0 = Instant::now();
+        let before = cache.computed;
+        for cam in cams {
+            select(world, tree, &mut cache, cam, p);
+            b.inc(1);
+        }
+        b.finish_and_clear();
+        let cold_s = t0.elapsed().as_secs_f64();
+        let params = format!(
+            "tau {tau} px, {} cameras, {}x{}",
+            cams.len(),
+            cams[0].viewport_px[0],
+            cams[0].viewport_px[1]
+        );
+        r.add(
+            "selection",
+            "first pass incl. node bounds",
+            cold_s * 1e3,
+            "ms",
+            &format!("{params}, {} bounds measured", cache.computed - before),
+        );
+        let mut times = Vec::new();
+        let (mut nodes, mut tris, mut over) = (0usize, 0usize, 0u32);
+        let reps = if quick { 3 } else { 10 };
+        for _ in 0..reps {
+            for cam in cams {
+                let t = Instant::now();
+                let s = select(world, tree, &mut cache, cam, p);
+                times.push(t.elapsed().as_secs_f64());
+                nodes += s.nodes.len();
+                tris += triangles(&s);
+                over += s.over_tau_at_finest;
+            }
+        }
+        let frames = (reps * cams.len()) as f64;
+        r.timings(
+            "selection",
+            "selection per frame (bounds cached)",
+            times,
+            &params,
+        );
+        r.add(
+            "selection",
+            "nodes per frame",
+            nodes as f64 / frames,
+            "nodes",
+            &params,
+        );
+        r.add(
+            "selection",
+            "triangles per frame",
+            tris as f64 / frames,
+            "triangles",
+            &params,
+        );
+        r.add(
+            "selection",
+            "finest nodes still over tau",
+            f64::from(over) / frames,
+            "nodes",
+            &params,
+        );
+    }
+}

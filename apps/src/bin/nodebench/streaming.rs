@@ -1,0 +1,187 @@
+//! Section `streaming`: real-time flights through the streaming system (latency, cancelled
+//! jobs, pop debt, bookkeeping per frame).
+
+use crate::open_world;
+use crate::report::{Report, bar};
+use anyhow::Result;
+use engine::camera::Camera;
+use engine::surface::World;
+use engine::terrain::quadtree::NodeKey;
+use std::time::Instant;
+
+/// A closed loop over the map at a fixed height above the ground, sampled at `speed_m_s`
+/// for `frames` frames of `dt_s`.
+fn loop_path(
+    world: &World,
+    speed_m_s: f64,
+    frames: usize,
+    dt_s: f64,
+    viewport_px: [u32; 2],
+) -> Vec<Camera> {
+    let o = world.origin_m();
+    let s = world.size_m();
+    let (cx, cy) = (o[0] + 0.5 * s[0], o[1] + 0.5 * s[1]);
+    let (rx, ry) = (0.32 * s[0], 0.28 * s[1]);
+    let circumference = std::f64::consts::TAU * f64::midpoint(rx * rx, ry * ry).sqrt();
+    (0..frames)
+        .map(|f| {
+            let a = std::f64::consts::TAU * (f as f64 * dt_s * speed_m_s / circumference);
+            let (x, y) = (cx + rx * a.cos(), cy + ry * a.sin());
+            let z = world.height_m(x, y).max(world.map.manifest.water_level_m) + 40.0;
+            let tangent = glam::DVec3::new(-rx * a.sin(), ry * a.cos(), 0.0).normalize();
+            let dir = (tangent + glam::DVec3::new(0.0, 0.0, -0.25)).normalize();
+            let pos = glam::DVec3::new(x, y, z);
+            Camera::look_at(pos, pos + dir, 60f64.to_radians(), viewport_px)
+        })
+        .collect()
+}
+
+pub(crate) fn section_streaming(
+    world_path: &std::path::Path,
+    r: &mut Report,
+    quick: bool,
+    workers: usize,
+    viewport_px: [u32; 2],
+) -> Result<()> {
+    use engine::stream::{StreamSettings, Streamer};
+    let dt = 1.0 / 60.0;
+    let seconds = if quick { 2.0 } else { 12.0 };
+    let frames = (seconds / dt) as usize;
+    let tau = 2.0;
+    for speed in [50.0, 150.0, 300.0] {
+        let world = open_world(world_path)?;
+        let cams = loop_path(&world, speed, frames, dt, viewport_px);
+        let settings = StreamSettings {
+            workers: workers.saturating_sub(1).max(1),
+            tau_px: tau,
+            ..StreamSettings::default()
+        };
+        let kinds = engine::kinds::content_kinds(&world);
+        let mut s = Streamer::new(world, settings, kinds);
+        // Warm start at the first camera, as after loading.
+        s.settle(&cams[0], 300.0);
+        s.take_latencies();
+        let c0 = s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu;
+        let b = bar(frames as u64, &format!("streaming {speed} m/s"));
+        let (mut debt_frames, mut worst_excess, mut frame_times) =
+            (0usize, 0.0f64, Vec::with_capacity(frames));
+        let start = Instant::now();
+        for (f, cam) in cams.iter().enumerate() {
+            let t = Instant::now();
+            s.update(cam, dt);
+            s.run_gpu_phases();
+            frame_times.push(t.elapsed().as_secs_f64());
+            // Pop debt: a drawn node standing in for nodes that the ideal selection at tau wants
+            // (so it is visible and too coarse). Its excess is its error projected at the
+            // distance of the visible nodes it stands in for, minus tau.
+            let k = cam.k_px();
+            let tree = *s.tree();
+            let drawn: std::collections::HashSet<NodeKey> =
+                s.draw_list().iter().map(|d| d.key).collect();
+            let mut excess = 0.0f64;
+            for want in s.select_wanted(cam, tau) {
+                if drawn.contains(&want) {
+                    continue;
+                }
+                let Some(wb) = s.shared.bounds.peek(want) else {
+                    continue;
+                };
+                let (wmin, wmax) = engine::terrain::select::node_aabb(&tree, want, &wb);
+                let dist =
+                    engine::camera::distance_to_aabb(cam.position_m, wmin, wmax).max(cam.near_m);
+                if let Some(n) = want.ancestors().find(|n| drawn.contains(n))
+                    && let Some(nb) = s.shared.bounds.peek(n)
+                {
+                    excess = excess.max(nb.error_m * k / dist - tau);
+                }
+            }
+            if excess > 0.0 {
+                debt_frames += 1;
+                worst_excess = worst_excess.max(excess);
+            }
+            b.inc(1);
+            // Real time: frame f ends at (f + 1) * dt.
+            let due = (f + 1) as f64 * dt;
+            let now = start.elapsed().as_secs_f64();
+            if now < due {
+                std::thread::sleep(std::time::Duration::from_secs_f64(due - now));
+            }
+        }
+        b.finish_and_clear();
+        let mut lat = s.take_latencies();
+        lat.sort_by(f64::total_cmp);
+        let q = |p: f64| apps::percentile(&lat, p);
+        let params = format!(
+            "{speed} m/s, {seconds} s at 60 Hz, tau {tau} px, {} worker(s)",
+            s.settings.workers
+        );
+        r.add(
+            "streaming",
+            "request-to-ready latency p50",
+            q(0.5) * 1e3,
+            "ms",
+            &params,
+        );
+        r.add(
+            "streaming",
+            "request-to-ready latency p95",
+            q(0.95) * 1e3,
+            "ms",
+            &params,
+        );
+        r.add(
+            "streaming",
+            "request-to-ready latency p99",
+            q(0.99) * 1e3,
+            "ms",
+            &params,
+        );
+        r.add(
+            "streaming",
+            "jobs completed",
+            lat.len() as f64,
+            "jobs",
+            &params,
+        );
+        let cancelled =
+            s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
+        r.add(
+            "streaming",
+            "jobs cancelled",
+            cancelled as f64,
+            "jobs",
+            &params,
+        );
+        r.add(
+            "streaming",
+            "pop debt (frames with a drawn node over tau)",
+            100.0 * debt_frames as f64 / frames as f64,
+            "%",
+            &params,
+        );
+        r.add(
+            "streaming",
+            "worst excess over tau",
+            worst_excess,
+            "px",
+            &params,
+        );
+        frame_times.sort_by(f64::total_cmp);
+        let fq = |p: f64| apps::percentile(&frame_times, p);
+        r.add(
+            "streaming",
+            "bookkeeping per frame p50 (update + GPU phases)",
+            fq(0.5) * 1e6,
+            "µs",
+            &params,
+        );
+        r.add(
+            "streaming",
+            "bookkeeping per frame p99",
+            fq(0.99) * 1e6,
+            "µs",
+            &params,
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,376 @@
+//! Section `vegetation`: the ranked Poisson tile against Bridson sampling, the vegetation phase
+//! per node, instances and draw calls per frame, and the occlusion rows.
+
+use crate::report::{Report, bar};
+use crate::terrain::flight_nodes;
+use engine::camera::Camera;
+use engine::surface::World;
+use engine::terrain::bounds::BoundsCache;
+use engine::terrain::quadtree::{NodeKey, QuadTree};
+use engine::terrain::select::{SelectParams, select};
+use engine::vegetation::representation::group_dither;
+use engine::vegetation::{self as veg, Placer};
+use std::time::Instant;
+
+pub(crate) fn section_vegetation(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+) {
+    let placer = Placer::new(world);
+    tile_against_bridson(world, r, quick, &placer);
+    phase_per_node(world, tree, cams, r, quick, &placer);
+    instances_per_frame(world, tree, cams, r, quick, &placer);
+    occlusion(world, tree, cams, r, quick, &placer);
+}
+
+/// Kept points per second of the ranked tile against Bridson sampling.
+fn tile_against_bridson(world: &World, r: &mut Report, quick: bool, placer: &Placer) {
+    // 1. Kept points per second, one core: the ranked tile (bare lookup, 16 m tiles, every tile
+    // point kept) against Bridson sampling of the same area at the same minimum distance.
+    let side_m = if quick { 128.0 } else { 512.0 };
+    let reps: u32 = if quick { 2 } else { 8 };
+    let o = world.origin_m();
+    for s in 0..placer.species.len() {
+        let sp = &placer.species[s];
+        if sp.kind == veg::Kind::LargeTree {
+            continue;
+        }
+        let params = format!(
+            "{side_m} m square, min distance {} m, 1 core",
+            sp.min_distance_m
+        );
+        let mut pts = Vec::new();
+        let t0 = Instant::now();
+        let mut kept = 0usize;
+        for rep in 0..reps {
+            let base = [o[0] + f64::from(rep) * side_m, o[1] + 1024.0];
+            let mut y = 0.0;
+            while y < side_m {
+                let mut x = 0.0;
+                while x < side_m {
+                    let rect = engine::surface::world::Rect {
+                        min: [base[0] + x, base[1] + y],
+                        max: [base[0] + x + 16.0, base[1] + y + 16.0],
+                    };
+                    pts.clear();
+                    placer.positions(s, rect, 1.0, &mut pts);
+                    kept += pts.len();
+                    x += 16.0;
+                }
+                y += 16.0;
+            }
+        }
+        let tile_pps = kept as f64 / t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let mut bridson = 0usize;
+        for rep in 0..reps {
+            bridson += fast_poisson::Poisson2D::new()
+                .with_dimensions([side_m, side_m], sp.min_distance_m)
+                .with_seed(u64::from(rep) + 1)
+                .iter()
+                .count();
+        }
+        let bridson_pps = bridson as f64 / t0.elapsed().as_secs_f64();
+        let name = &sp.name;
+        r.add(
+            "vegetation",
+            &format!("{name}: ranked tile, kept points/s"),
+            tile_pps,
+            "points/s",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            &format!("{name}: Bridson (fast_poisson), points/s"),
+            bridson_pps,
+            "points/s",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            &format!("{name}: points per m², tile / Bridson"),
+            kept as f64 / bridson.max(1) as f64,
+            "ratio",
+            &params,
+        );
+    }
+}
+
+/// The vegetation phase per node of the flight.
+fn phase_per_node(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+    placer: &Placer,
+) {
+    // 2. The vegetation phase per node (placement, heights, exclusions, representation and
+    // grouping), for the nodes a flight draws at tau 2.
+    let keys = flight_nodes(
+        world,
+        tree,
+        &cams[..cams.len().min(if quick { 2 } else { 16 })],
+        if quick { 24 } else { 240 },
+    );
+    let b = bar(keys.len() as u64, "vegetation nodes");
+    let mut times = Vec::new();
+    let mut instances = 0usize;
+    for &k in &keys {
+        let t0 = Instant::now();
+        let v = veg::node_vegetation(world, placer, tree, k);
+        times.push(t0.elapsed().as_secs_f64());
+        instances += v.instances();
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    let params = format!("{} nodes from the flight at tau 2", keys.len());
+    r.timings("vegetation", "node vegetation phase", times, &params);
+    r.add(
+        "vegetation",
+        "instances per node (mean)",
+        instances as f64 / keys.len().max(1) as f64,
+        "instances",
+        &params,
+    );
+}
+
+/// Instances and draw calls per frame of the flight.
+fn instances_per_frame(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+    placer: &Placer,
+) {
+    // 3. Instances and draw calls per frame: every drawn node's groups plus its ancestors'
+    // groups that are not replaced on split (each ancestor once).
+    let mut cache = BoundsCache::new();
+    let mut veg_cache: std::collections::HashMap<NodeKey, veg::NodeVegetation> =
+        std::collections::HashMap::new();
+    let frames = &cams[..cams.len().min(if quick { 2 } else { 32 })];
+    let b = bar(frames.len() as u64, "vegetation frames");
+    let (mut inst, mut draws, mut by_rep) = (Vec::new(), Vec::new(), [0usize; 3]);
+    for cam in frames {
+        let sel = select(
+            world,
+            tree,
+            &mut cache,
+            cam,
+            SelectParams {
+                tau_px: 2.0,
+                max_level: tree.max_level,
+                cull: true,
+            },
+        );
+        let mut ancestors: Vec<NodeKey> = Vec::new();
+        let (mut n_inst, mut n_draw) = (0usize, 0usize);
+        // Selected nodes are drawn; their ancestors draw what they keep (the renderer's rule).
+        let mut count = |v: &veg::NodeVegetation, drawn: bool, by_rep: &mut [usize; 3]| {
+            for g in &v.groups {
+                if group_dither(g.replaced_on_split, drawn, !drawn).is_none() {
+                    continue;
+                }
+                n_inst += g.items.len();
+                n_draw += 1;
+                by_rep[g.representation as usize] += g.items.len();
+            }
+        };
+        for n in &sel.nodes {
+            let v = veg_cache
+                .entry(n.key)
+                .or_insert_with(|| veg::node_vegetation(world, placer, tree, n.key));
+            count(v, true, &mut by_rep);
+            ancestors.extend(n.key.ancestors());
+        }
+        ancestors.sort();
+        ancestors.dedup();
+        for a in ancestors {
+            let v = veg_cache
+                .entry(a)
+                .or_insert_with(|| veg::node_vegetation(world, placer, tree, a));
+            count(v, false, &mut by_rep);
+        }
+        inst.push(n_inst as f64);
+        draws.push(n_draw as f64);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    let params = format!(
+        "tau 2 px, {} cameras of the flight, CPU count of what the selected nodes hold",
+        frames.len()
+    );
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            0.0
+        } else {
+            apps::percentile(&v, 0.5)
+        }
+    };
+    r.add(
+        "vegetation",
+        "instances per frame (median)",
+        median(inst),
+        "instances",
+        &params,
+    );
+    r.add(
+        "vegetation",
+        "instance draw calls per frame (median)",
+        median(draws),
+        "draws",
+        &params,
+    );
+    let total = by_rep.iter().sum::<usize>().max(1) as f64;
+    for (i, name) in ["meshes", "billboards", "group-billboard members"]
+        .iter()
+        .enumerate()
+    {
+        r.add(
+            "vegetation",
+            &format!("share of instances drawn as {name}"),
+            100.0 * by_rep[i] as f64 / total,
+            "%",
+            &params,
+        );
+    }
+}
+
+/// Splitting less behind dense vegetation, on the low valley flight.
+fn occlusion(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+    placer: &Placer,
+) {
+    let mut cache = BoundsCache::new();
+    // 4. Splitting less behind dense vegetation, on the low half of the automatic flyover
+    // (25 m above the valley floor): nodes and triangles with and without, at tau 2.
+    let canopy = veg::Canopy::new(world, placer);
+    let vp = cams[0].viewport_px;
+    let n_low: u32 = if quick { 4 } else { 48 };
+    for walk in [false, true] {
+        let low: Vec<Camera> = (0..n_low)
+            .map(|i| {
+                let mut c =
+                    engine::flight::auto_flyover(world, 0.5 * f64::from(i) / f64::from(n_low), vp);
+                if walk {
+                    // The same track at eye height, 1.8 m above the ground.
+                    let p = c.position_m;
+                    c.position_m.z = world.height_m(p.x, p.y) + 1.8;
+                }
+                c
+            })
+            .collect();
+        let p = SelectParams {
+            tau_px: 2.0,
+            max_level: tree.max_level,
+            cull: true,
+        };
+        let (mut plain_nodes, mut occl_nodes, mut hidden, mut t_plain, mut t_occl) =
+            (0usize, 0usize, 0usize, 0.0f64, 0.0f64);
+        let mut worst_visible_px = 0.0f64;
+        for cam in &low {
+            // Bounds first, so the timings compare the traversals only.
+            let _ = select(world, tree, &mut cache, cam, p);
+            let _ = engine::terrain::select::select_occluded(
+                world,
+                tree,
+                &mut cache,
+                cam,
+                p,
+                Some(&canopy),
+            );
+            let t0 = Instant::now();
+            let a = select(world, tree, &mut cache, cam, p);
+            t_plain += t0.elapsed().as_secs_f64();
+            let t0 = Instant::now();
+            let b = engine::terrain::select::select_occluded(
+                world,
+                tree,
+                &mut cache,
+                cam,
+                p,
+                Some(&canopy),
+            );
+            t_occl += t0.elapsed().as_secs_f64();
+            plain_nodes += a.nodes.len();
+            occl_nodes += b.nodes.len();
+            for n in &b.nodes {
+                if n.error_px > p.tau_px && n.key.level < tree.max_level {
+                    hidden += 1;
+                    let f = canopy.error_factor(
+                        world,
+                        cam.position_m,
+                        tree.rect(n.key),
+                        n.bounds.z_max_m,
+                        n.dist_m,
+                    );
+                    worst_visible_px = worst_visible_px.max(n.error_px * f);
+                }
+            }
+        }
+        let per = |v: usize| v as f64 / low.len() as f64;
+        let params = format!(
+            "tau 2 px, {} cameras of the low valley flight (auto_flyover t < 0.5){}",
+            low.len(),
+            if walk {
+                ", at 1.8 m eye height"
+            } else {
+                ", 25 m above the ground"
+            }
+        );
+        r.add(
+            "vegetation",
+            "occlusion: nodes per frame without",
+            per(plain_nodes),
+            "nodes",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            "occlusion: nodes per frame with",
+            per(occl_nodes),
+            "nodes",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            "occlusion: terrain triangles saved",
+            100.0 * (1.0 - occl_nodes as f64 / plain_nodes.max(1) as f64),
+            "%",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            "occlusion: nodes over tau left unsplit because hidden (per frame)",
+            per(hidden),
+            "nodes",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            "occlusion: largest visible error of those (px x visibility)",
+            worst_visible_px,
+            "px",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            "occlusion: selection time with / without",
+            t_occl / t_plain.max(1e-12),
+            "ratio",
+            &format!(
+                "{params}; without {:.1} µs per frame",
+                1e6 * t_plain / low.len() as f64
+            ),
+        );
+    }
+}

@@ -1,0 +1,78 @@
+//! `apps`: support shared by the binaries `flyover` (the viewer) and `nodebench` (the
+//! benchmark): opening (or generating) a map, and the one percentile rule their tables use.
+
+use engine::surface::World;
+use std::path::Path;
+
+/// The map folder used when none is given.
+pub const DEFAULT_MAP: &str = "maps/default";
+
+/// A map that cannot be opened (or generated).
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    #[error("{0}")]
+    Map(#[from] worldgen::MapError),
+    #[error("generating the default map: {0}")]
+    Generate(String),
+}
+
+/// Opens the map at `dir`; the default map folder is generated first when it is missing, and
+/// generated again when it was written by an older version of the map format (it is ours to
+/// regenerate; any other map gets the version error).
+pub fn open_world(
+    dir: &Path,
+    progress: &dyn worldgen::progress::Progress,
+) -> Result<World, OpenError> {
+    let is_default = dir == Path::new(DEFAULT_MAP);
+    let generate = |why: &str| -> Result<(), OpenError> {
+        eprintln!("{DEFAULT_MAP} {why}: generating the default map (8 km, seed 1, ~10 s) ...");
+        let map = worldgen::generate::generate(
+            &worldgen::generate::GenerateParams::default(),
+            progress,
+            &mut Vec::new(),
+        )
+        .map_err(|e| OpenError::Generate(e.to_string()))?;
+        map.write(dir)?;
+        Ok(())
+    };
+    if is_default && !dir.join("map.toml").exists() {
+        generate("not found")?;
+    }
+    match worldgen::Map::load(dir) {
+        Err(worldgen::MapError::UnknownVersion {
+            found, supported, ..
+        }) if is_default && found < i64::from(supported) => {
+            generate("is from an older map format")?;
+            Ok(World::new(worldgen::Map::load(dir)?))
+        }
+        r => Ok(World::new(r?)),
+    }
+}
+
+/// The `p`-quantile (0..=1) of `sorted` (ascending): the element at index `round((n - 1) p)`,
+/// so 0 is the minimum, 1 the maximum and 0.5 the median (for an even count, the upper of the
+/// two middle elements: `round` goes half away from zero). NaN for an empty slice.
+pub fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((sorted.len() - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize;
+    sorted[i]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::percentile;
+
+    #[test]
+    fn percentile_picks_the_nearest_rank() {
+        let v: Vec<f64> = (0..=100).map(f64::from).collect();
+        assert_eq!(percentile(&v, 0.0), 0.0);
+        assert_eq!(percentile(&v, 0.5), 50.0);
+        assert_eq!(percentile(&v, 0.95), 95.0);
+        assert_eq!(percentile(&v, 0.99), 99.0);
+        assert_eq!(percentile(&v, 1.0), 100.0);
+        assert_eq!(percentile(&[3.0, 7.0], 0.5), 7.0);
+        assert!(percentile(&[], 0.5).is_nan());
+    }
+}

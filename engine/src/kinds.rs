@@ -1,0 +1,58 @@
+//! The registry of node-content kinds: the one place where a kind is added. Each entry pairs
+//! the CPU side (a [`ContentKind`] in the kind's own folder) with its renderer's constructor (a
+//! [`NodeRenderer`] in `render/`). The streamer runs the kinds' phases in this order and the
+//! viewer draws their renderers in this order (after the sky, before debug lines).
+//!
+//! Adding a kind (say `ground/`): write `ground/` with its `ContentKind` and payload, write
+//! `render/ground.rs` with its `NodeRenderer`, and add one line below. The scheduler, the
+//! viewer and the other renderers stay as they are.
+
+use crate::render::Gpu;
+use crate::render::frame::FrameResources;
+use crate::render::scene::NodeRenderer;
+use crate::stream::{ContentKind, Shared};
+use crate::surface::World;
+use crate::terrain::content::TerrainContent;
+use crate::vegetation::content::VegetationContent;
+use std::sync::Arc;
+
+/// Makes a kind's renderer (at viewer start-up, from the streamer's shared state).
+pub type RendererFactory = fn(&Gpu, &FrameResources, &Shared) -> Box<dyn NodeRenderer>;
+
+/// One registered kind.
+pub struct Registration {
+    pub kind: Arc<dyn ContentKind>,
+    pub renderer: RendererFactory,
+}
+
+impl std::fmt::Debug for Registration {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Registration({})", self.kind.name())
+    }
+}
+
+fn entry(kind: impl ContentKind, renderer: RendererFactory) -> Registration {
+    Registration {
+        kind: Arc::new(kind),
+        renderer,
+    }
+}
+
+/// Every node-content kind, in phase and drawing order.
+pub fn registered(world: &World) -> Vec<Registration> {
+    vec![
+        entry(
+            TerrainContent,
+            crate::render::terrain::TerrainRenderer::create,
+        ),
+        entry(
+            VegetationContent::new(world),
+            crate::render::vegetation::VegetationRenderer::create,
+        ),
+    ]
+}
+
+/// The CPU side of every registered kind (for a streamer without a renderer).
+pub fn content_kinds(world: &World) -> Vec<Arc<dyn ContentKind>> {
+    registered(world).into_iter().map(|r| r.kind).collect()
+}

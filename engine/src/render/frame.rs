@@ -1,0 +1,394 @@
+//! What every renderer shares: the frame uniforms (camera, sun, sky, fog, debug mode) in bind
+//! group 0, the per-draw node uniforms (camera-relative origin, dither interval, level) in bind
+//! group 1 at a dynamic offset, the view options and draw statistics, and the pipeline and pass
+//! helpers.
+
+use super::DEPTH_FORMAT;
+use super::gpu_data::{FrameUniforms, NODE_UNIFORM_STRIDE, NodeUniforms};
+use crate::camera::Camera;
+use glam::{DVec3, Vec3};
+
+/// Debug views and per-view switches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(
+    clippy::struct_excessive_bools,
+    reason = "independent on/off switches of the viewer's panel"
+)]
+pub struct ViewOptions {
+    pub wireframe: bool,
+    pub color_by_level: bool,
+    pub show_bounds: bool,
+    /// Draw the sky gradient (off: the clear colour shows wherever nothing was drawn).
+    pub sky: bool,
+    /// Clear colour (linear RGBA) behind everything.
+    pub clear: [f64; 4],
+    /// Distance fog: density per metre and largest amount (depth cueing, never hiding).
+    pub fog_per_m: f32,
+    pub fog_max: f32,
+    /// Draw vegetation.
+    pub plants: bool,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        Self {
+            wireframe: false,
+            color_by_level: false,
+            show_bounds: false,
+            sky: true,
+            clear: [0.0, 0.0, 0.0, 1.0],
+            fog_per_m: 1.0 / 25_000.0,
+            fog_max: 0.35,
+            plants: true,
+        }
+    }
+}
+
+/// What one frame drew.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DrawStats {
+    /// Terrain draws and triangles; nodes culled (outside the frustum or an empty interval).
+    pub draw_calls: u32,
+    pub triangles: u64,
+    pub culled: u32,
+    /// Vegetation: instances drawn (meshes and billboards), their draw calls and mesh triangles.
+    pub plant_instances: u64,
+    pub plant_draw_calls: u32,
+    pub plant_triangles: u64,
+    /// Of the instances: group-billboard quads (each stands for a cluster of items).
+    pub group_billboards: u64,
+}
+
+/// The frame and node uniforms and their bind groups, shared by all renderers.
+pub struct FrameResources {
+    /// The colour format every renderer draws into (sRGB).
+    pub color_format: wgpu::TextureFormat,
+    buffer: wgpu::Buffer,
+    /// Group 0: the frame uniforms.
+    pub layout: wgpu::BindGroupLayout,
+    pub group: wgpu::BindGroup,
+    /// Group 1: one node's uniforms (dynamic offset).
+    pub node_layout: wgpu::BindGroupLayout,
+    node_buffer: wgpu::Buffer,
+    node_group: wgpu::BindGroup,
+    node_capacity: u64,
+    /// This frame's node uniforms, written by [`Self::flush_nodes`].
+    nodes: Vec<NodeUniforms>,
+    camera_m: DVec3,
+}
+
+impl std::fmt::Debug for FrameResources {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "FrameResources({} node slots)", self.node_capacity)
+    }
+}
+
+/// A uniform-buffer layout entry.
+pub fn uniform_entry(
+    binding: u32,
+    dynamic: bool,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+impl FrameResources {
+    pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Self {
+        let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame layout"),
+            entries: &[uniform_entry(0, false, vf)],
+        });
+        let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("node layout"),
+            entries: &[uniform_entry(0, true, vf)],
+        });
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame uniforms"),
+            size: std::mem::size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame group"),
+            layout: &layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: buffer.as_entire_binding(),
+            }],
+        });
+        let node_capacity = 256;
+        let (node_buffer, node_group) = Self::node_slots(device, &node_layout, node_capacity);
+        Self {
+            color_format,
+            buffer,
+            layout,
+            group,
+            node_layout,
+            node_buffer,
+            node_group,
+            node_capacity,
+            nodes: Vec::new(),
+            camera_m: DVec3::ZERO,
+        }
+    }
+
+    fn node_slots(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        slots: u64,
+    ) -> (wgpu::Buffer, wgpu::BindGroup) {
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("node uniforms"),
+            size: slots * NODE_UNIFORM_STRIDE,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("node uniforms"),
+            layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &buffer,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<NodeUniforms>() as u64),
+                }),
+            }],
+        });
+        (buffer, group)
+    }
+
+    /// Frame uniforms for a camera: the view rotation and an infinite reversed-Z projection.
+    pub fn uniforms(cam: &Camera, view: &ViewOptions) -> FrameUniforms {
+        let f = cam.forward.as_vec3();
+        let u = cam.up.as_vec3();
+        let view_m = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, f, u);
+        // WebGPU convention: NDC z in [0, 1], y up; reversed-Z with an infinite far plane.
+        let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(
+            cam.fovy_rad as f32,
+            cam.aspect() as f32,
+            cam.near_m as f32,
+        );
+        let clip_from_rel = proj * view_m;
+        let sun = Vec3::new(0.45, 0.3, 0.62).normalize();
+        FrameUniforms {
+            clip_from_rel: clip_from_rel.to_cols_array_2d(),
+            rel_from_clip: clip_from_rel.inverse().to_cols_array_2d(),
+            sun_dir: [sun.x, sun.y, sun.z, 0.0],
+            sun_color: [1.0, 0.93, 0.82, 0.0],
+            sky_zenith: [0.16, 0.32, 0.66, 1.0],
+            sky_horizon: [0.62, 0.72, 0.84, 1.0],
+            fog: [
+                view.fog_per_m,
+                view.fog_max,
+                if view.color_by_level { 1.0 } else { 0.0 },
+                0.0,
+            ],
+        }
+    }
+
+    /// Writes the frame uniforms (bakes write their own camera before their pass).
+    pub fn write_uniforms(&self, queue: &wgpu::Queue, cam: &Camera, view: &ViewOptions) {
+        queue.write_buffer(
+            &self.buffer,
+            0,
+            bytemuck::bytes_of(&Self::uniforms(cam, view)),
+        );
+    }
+
+    /// Starts a frame: writes the frame uniforms and empties the node slots.
+    pub fn begin(&mut self, queue: &wgpu::Queue, cam: &Camera, view: &ViewOptions) {
+        self.write_uniforms(queue, cam, view);
+        self.nodes.clear();
+        self.camera_m = cam.position_m;
+    }
+
+    /// Adds one draw's node uniforms (node origin minus camera in f64, then f32) and returns
+    /// its dynamic offset in the node group.
+    pub fn push_node(&mut self, origin_m: [f64; 2], level: u8, dither: [f32; 2]) -> u32 {
+        let c = self.camera_m;
+        self.nodes.push(NodeUniforms {
+            offset_lo: [
+                (origin_m[0] - c.x) as f32,
+                (origin_m[1] - c.y) as f32,
+                (-c.z) as f32,
+                dither[0],
+            ],
+            hi_level: [dither[1], f32::from(level), 0.0, 0.0],
+            padding: [[0.0; 4]; 14],
+        });
+        ((self.nodes.len() as u64 - 1) * NODE_UNIFORM_STRIDE) as u32
+    }
+
+    /// Writes this frame's node uniforms (growing the buffer when needed).
+    pub fn flush_nodes(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        let needed = (self.nodes.len() as u64).max(1);
+        if needed > self.node_capacity {
+            self.node_capacity = needed.next_power_of_two();
+            (self.node_buffer, self.node_group) =
+                Self::node_slots(device, &self.node_layout, self.node_capacity);
+        }
+        if !self.nodes.is_empty() {
+            queue.write_buffer(&self.node_buffer, 0, bytemuck::cast_slice(&self.nodes));
+        }
+    }
+
+    /// Binds the node uniforms at `offset` (from [`Self::push_node`]) as group 1.
+    pub fn bind_node(&self, pass: &mut wgpu::RenderPass<'_>, offset: u32) {
+        pass.set_bind_group(1, &self.node_group, &[offset]);
+    }
+
+    /// A pipeline layout of the frame group, the node group (or a gap) and `extra` groups.
+    pub fn pipeline_layout(
+        &self,
+        device: &wgpu::Device,
+        label: &str,
+        node: bool,
+        extra: &[Option<&wgpu::BindGroupLayout>],
+    ) -> wgpu::PipelineLayout {
+        let mut groups = vec![Some(&self.layout), node.then_some(&self.node_layout)];
+        groups.extend_from_slice(extra);
+        device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &groups,
+            immediate_size: 0,
+        })
+    }
+}
+
+/// Reversed-Z depth state.
+pub fn depth_state(write: bool, compare: wgpu::CompareFunction) -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format: DEPTH_FORMAT,
+        depth_write_enabled: Some(write),
+        depth_compare: Some(compare),
+        stencil: wgpu::StencilState::default(),
+        bias: wgpu::DepthBiasState::default(),
+    }
+}
+
+/// What differs between the engine's render pipelines (all: no blending, no MSAA, no culling).
+#[derive(Debug, Clone)]
+pub struct PipelineSpec<'a> {
+    pub label: &'a str,
+    pub vs: &'a str,
+    pub fs: &'a str,
+    pub buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
+    pub topology: wgpu::PrimitiveTopology,
+    pub polygon_mode: wgpu::PolygonMode,
+    pub depth: wgpu::DepthStencilState,
+    pub format: wgpu::TextureFormat,
+}
+
+impl<'a> PipelineSpec<'a> {
+    /// Filled triangle lists with reversed-Z depth test and write, into `format`.
+    pub fn triangles(
+        label: &'a str,
+        vs: &'a str,
+        fs: &'a str,
+        buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
+        format: wgpu::TextureFormat,
+    ) -> Self {
+        Self {
+            label,
+            vs,
+            fs,
+            buffers,
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            polygon_mode: wgpu::PolygonMode::Fill,
+            depth: depth_state(true, wgpu::CompareFunction::Greater),
+            format,
+        }
+    }
+}
+
+/// A render pipeline of `module` with `layout` as `spec` says.
+pub fn pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    spec: &PipelineSpec<'_>,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(spec.label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some(spec.vs),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            buffers: spec.buffers,
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: spec.topology,
+            cull_mode: None,
+            polygon_mode: spec.polygon_mode,
+            ..Default::default()
+        },
+        depth_stencil: Some(spec.depth.clone()),
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(spec.fs),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: spec.format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// A bake pass: colour cleared to transparent, reversed-Z depth cleared to 0 (far).
+pub fn bake_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    color: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: color,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(0.0),
+                store: wgpu::StoreOp::Discard,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
+/// sRGB-encoded 8-bit to linear.
+pub fn srgb_to_linear(c: u8) -> f32 {
+    let c = f32::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}

@@ -1,0 +1,144 @@
+//! Renderers as plug-ins: each [`NodeRenderer`] owns its pipelines and its per-node GPU objects
+//! (created by its upload hook in the streaming GPU phase, stored in the node's `GpuSlots`) and
+//! records its own draws. A [`Scene`] holds the shared [`FrameResources`] and the renderers in
+//! drawing order (sky, then the registered node-content kinds, then debug lines).
+
+use super::Gpu;
+use super::frame::{DrawStats, FrameResources, ViewOptions};
+use crate::camera::{Camera, Frustum};
+use crate::stream::NodeWork;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+
+/// One drawn node: its prepared content and its dither interval.
+#[derive(Debug, Clone, Copy)]
+pub struct DrawnNode<'a> {
+    pub key: NodeKey,
+    pub work: &'a NodeWork,
+    pub dither: [f32; 2],
+}
+
+/// What a frame draws: the camera, the view options, the drawn nodes and the resident
+/// ancestors of drawn nodes (content kept through splits is drawn via them).
+#[derive(Debug, Clone, Copy)]
+pub struct FrameDraws<'a> {
+    pub camera: &'a Camera,
+    pub frustum: &'a Frustum,
+    pub view: &'a ViewOptions,
+    pub tree: &'a QuadTree,
+    pub drawn: &'a [DrawnNode<'a>],
+    pub ancestors: &'a [DrawnNode<'a>],
+}
+
+/// The GPU side of one kind of thing drawn.
+pub trait NodeRenderer {
+    fn name(&self) -> &'static str;
+
+    /// The GPU phase of a prepared node: create this renderer's objects from the node's payload
+    /// (store them with `work.gpu.put`) and return the bytes uploaded. Default: nothing.
+    fn upload(
+        &mut self,
+        _gpu: &Gpu,
+        _frame: &FrameResources,
+        _tree: &QuadTree,
+        _work: &mut NodeWork,
+    ) -> usize {
+        0
+    }
+
+    /// Before the pass: choose this frame's draws and take node-uniform slots
+    /// ([`FrameResources::push_node`]).
+    fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>);
+
+    /// Inside the frame's pass (group 0 bound): record the draws chosen by `prepare`.
+    fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        frame: &FrameResources,
+        draws: &FrameDraws<'_>,
+        stats: &mut DrawStats,
+    );
+}
+
+/// The frame resources and the renderers, in drawing order.
+pub struct Scene {
+    pub frame: FrameResources,
+    renderers: Vec<Box<dyn NodeRenderer>>,
+}
+
+impl std::fmt::Debug for Scene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let names: Vec<&str> = self.renderers.iter().map(|r| r.name()).collect();
+        write!(f, "Scene({names:?})")
+    }
+}
+
+impl Scene {
+    /// A scene drawing into `color_format`, with no renderers yet.
+    pub fn new(gpu: &Gpu, color_format: wgpu::TextureFormat) -> Self {
+        Self {
+            frame: FrameResources::new(&gpu.device, color_format),
+            renderers: Vec::new(),
+        }
+    }
+
+    /// Appends a renderer (drawn after the ones before it).
+    pub fn push(&mut self, renderer: Box<dyn NodeRenderer>) {
+        self.renderers.push(renderer);
+    }
+
+    /// The GPU phase of a node: every renderer's upload hook. Returns the bytes uploaded.
+    pub fn upload(&mut self, gpu: &Gpu, tree: &QuadTree, work: &mut NodeWork) -> usize {
+        let frame = &self.frame;
+        self.renderers
+            .iter_mut()
+            .map(|r| r.upload(gpu, frame, tree, work))
+            .sum()
+    }
+
+    /// Records the frame into `encoder`: one pass cleared to the view's colour and far depth,
+    /// every renderer in order.
+    pub fn render(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        draws: &FrameDraws<'_>,
+    ) -> DrawStats {
+        self.frame.begin(&gpu.queue, draws.camera, draws.view);
+        for r in &mut self.renderers {
+            r.prepare(gpu, &mut self.frame, draws);
+        }
+        self.frame.flush_nodes(&gpu.device, &gpu.queue);
+        let [r, g, b, a] = draws.view.clear;
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("frame pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &self.frame.group, &[]);
+        let mut stats = DrawStats::default();
+        for r in &self.renderers {
+            r.draw(&mut pass, &self.frame, draws, &mut stats);
+        }
+        stats
+    }
+}

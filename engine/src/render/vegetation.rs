@@ -1,0 +1,795 @@
+//! The vegetation renderer: per node one instance buffer (groups are ranges of it), drawn as
+//! instanced plant meshes, billboards sampling the species atlas, or group-billboard quads
+//! sampling the node's impostor texture. Owns the two bakes: the species atlas (at start-up,
+//! from the high-detail plant meshes) and each node's impostors (in its upload hook).
+
+use super::Gpu;
+use super::frame::{
+    DrawStats, FrameResources, PipelineSpec, ViewOptions, bake_pass, pipeline, srgb_to_linear,
+    uniform_entry,
+};
+use super::gpu_data::MeshVertex;
+use super::scene::{FrameDraws, NodeRenderer};
+use crate::camera::Camera;
+use crate::stream::{NodeWork, Shared};
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::vegetation::content::VegetationContent;
+use crate::vegetation::plants::{self, PlantMeshes, Shape};
+use crate::vegetation::representation::{
+    CLUSTER_COUNT, CLUSTERS_PER_SIDE, GroupDither, group_dither,
+};
+use crate::vegetation::{NodeVegetation, Representation};
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+use rustc_hash::FxHashSet;
+use wgpu::util::DeviceExt;
+
+/// Species looks (shape and colour) the renderer holds; the atlas has one tile per look.
+pub const MAX_LOOKS: u32 = 16;
+/// Billboard atlas: one tile per look, linear colour + coverage.
+const ATLAS_TILE_PX: [u32; 2] = [64, 128];
+const ATLAS_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Group billboards: the tile size of a cluster in a node's impostor texture.
+const IMPOSTOR_TILE_PX: u32 = 32;
+const IMPOSTOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// The WGSL constants of `vegetation.wgsl`, from the Rust definitions.
+fn wgsl_constants() -> String {
+    format!(
+        "const MAX_LOOKS: u32 = {MAX_LOOKS}u;\nconst ATLAS_TILES: u32 = {MAX_LOOKS}u;\n\
+         const CLUSTERS_PER_SIDE: u32 = {CLUSTERS_PER_SIDE}u;\nconst CLUSTER_COUNT: u32 = {CLUSTER_COUNT}u;"
+    )
+}
+
+/// The assembled shader source (generated constants + prelude + `vegetation.wgsl`).
+pub fn shader_source() -> String {
+    super::shader::assemble("vegetation", &wgsl_constants())
+}
+
+/// Mirrors `PlantInstanceIn` in `vegetation.wgsl` (32 bytes, one per item or cluster quad).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+pub struct PlantInstance {
+    /// x, y relative to the node's south-west corner; z absolute ground height (m).
+    pub position: [f32; 3],
+    pub height_m: f32,
+    pub radius_m: f32,
+    pub yaw_rad: f32,
+    /// Index into the plant looks (species); for a cluster quad, the cluster's tile.
+    pub look: u32,
+    /// The cluster of a group member in the impostor bake (location 8); 0 elsewhere.
+    pub cluster: u32,
+}
+
+const _: () = assert!(
+    std::mem::size_of::<PlantInstance>() == crate::vegetation::representation::INSTANCE_BYTES
+);
+
+impl PlantInstance {
+    /// Per-instance attributes at locations 3..=7 (and the cluster at 8 with `with_cluster`).
+    const ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![
+        3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32, 8 => Uint32
+    ];
+
+    fn layout(with_cluster: bool) -> wgpu::VertexBufferLayout<'static> {
+        wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Self>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: if with_cluster {
+                &Self::ATTRIBUTES
+            } else {
+                &Self::ATTRIBUTES[..5]
+            },
+        }
+    }
+}
+
+/// Mirrors `Cluster` in `vegetation.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct ClusterUniform {
+    centre_bottom_half: [f32; 4],
+    height: [f32; 4],
+}
+
+/// How a group is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PlantDraw {
+    Mesh,
+    Billboard,
+    /// Cluster quads sampling the node's impostor texture.
+    Impostor,
+}
+
+/// One instance group of a node on the GPU.
+#[derive(Debug, Clone, Copy)]
+struct PlantGroupGpu {
+    first: u32,
+    count: u32,
+    shape: Shape,
+    kind: PlantDraw,
+    /// Drawn the same way at every finer level: drawn through the node's splits.
+    kept: bool,
+}
+
+/// A node's vegetation on the GPU.
+pub struct PlantsGpu {
+    origin_m: [f64; 2],
+    instances: wgpu::Buffer,
+    /// The node's group-billboard texture (8 x 8 cluster tiles), when it has group members.
+    impostors: Option<wgpu::BindGroup>,
+    groups: Vec<PlantGroupGpu>,
+    /// World-space box of the items (ground to tree tops).
+    pub aabb_m: (DVec3, DVec3),
+    pub bytes: usize,
+    low_detail: bool,
+}
+
+impl std::fmt::Debug for PlantsGpu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "PlantsGpu({} groups, {} bytes)",
+            self.groups.len(),
+            self.bytes
+        )
+    }
+}
+
+/// Where a planned draw's node comes from.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    Drawn(usize),
+    Ancestor(usize),
+}
+
+/// Vegetation pipelines, the shared plant shapes, the species atlas, this frame's plan.
+pub struct VegetationRenderer {
+    plant_mesh: wgpu::RenderPipeline,
+    billboard: wgpu::RenderPipeline,
+    impostor: wgpu::RenderPipeline,
+    group_bake: wgpu::RenderPipeline,
+    shape_vertices: wgpu::Buffer,
+    shape_indices: wgpu::Buffer,
+    meshes: PlantMeshes,
+    /// Shape per look index (species).
+    shapes: Vec<Shape>,
+    /// Atlas, sampler and looks (plant meshes and billboards).
+    atlas_group: wgpu::BindGroup,
+    /// The atlas as a plain texture + sampler (sampled by the impostor bake).
+    atlas_texture_group: wgpu::BindGroup,
+    texture_layout: wgpu::BindGroupLayout,
+    cluster_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// This frame: (node, node-uniform offset, whether the node is also an ancestor of drawn
+    /// nodes).
+    plan: Vec<(Source, u32, bool)>,
+}
+
+impl std::fmt::Debug for VegetationRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "VegetationRenderer({} looks)", self.shapes.len())
+    }
+}
+
+fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn sampler_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        count: None,
+    }
+}
+
+fn texture_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+    looks: Option<&wgpu::Buffer>,
+) -> wgpu::BindGroup {
+    let mut entries = vec![
+        wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::TextureView(view),
+        },
+        wgpu::BindGroupEntry {
+            binding: 1,
+            resource: wgpu::BindingResource::Sampler(sampler),
+        },
+    ];
+    if let Some(b) = looks {
+        entries.push(wgpu::BindGroupEntry {
+            binding: 2,
+            resource: b.as_entire_binding(),
+        });
+    }
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// A texture that a bake renders into and renderers then sample.
+fn bake_target(
+    device: &wgpu::Device,
+    label: &str,
+    size: [u32; 2],
+    format: wgpu::TextureFormat,
+) -> wgpu::TextureView {
+    device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: size[0],
+                height: size[1],
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        })
+        .create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// The shared plant-shape vertex and index buffers.
+fn shape_buffers(device: &wgpu::Device, meshes: &PlantMeshes) -> (wgpu::Buffer, wgpu::Buffer) {
+    let vertices: Vec<MeshVertex> = meshes
+        .vertices
+        .iter()
+        .map(|v| MeshVertex {
+            position: v.position,
+            normal: v.normal,
+            tag: v.part,
+        })
+        .collect();
+    let vb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("plant shape vertices"),
+        contents: bytemuck::cast_slice(&vertices),
+        usage: wgpu::BufferUsages::VERTEX,
+    });
+    let ib = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("plant shape indices"),
+        contents: bytemuck::cast_slice(&meshes.indices),
+        usage: wgpu::BufferUsages::INDEX,
+    });
+    (vb, ib)
+}
+
+/// Per look (species): rgb linear colour and w shape, and the shapes.
+fn looks(species_names: &[String]) -> ([[f32; 4]; MAX_LOOKS as usize], Vec<Shape>) {
+    let mut looks = [[0.3f32, 0.45, 0.2, 2.0]; MAX_LOOKS as usize];
+    let mut shapes = Vec::new();
+    for (i, name) in species_names.iter().take(MAX_LOOKS as usize).enumerate() {
+        let (shape, c) = plants::look(name);
+        looks[i] = [
+            srgb_to_linear(c[0]),
+            srgb_to_linear(c[1]),
+            srgb_to_linear(c[2]),
+            shape as u32 as f32,
+        ];
+        shapes.push(shape);
+    }
+    (looks, shapes)
+}
+
+impl VegetationRenderer {
+    /// Pipelines, plant shapes and the species atlas, baked for `species_names` (look index =
+    /// species index, at most [`MAX_LOOKS`]).
+    pub fn new(gpu: &Gpu, frame: &FrameResources, species_names: &[String]) -> Self {
+        let device = &gpu.device;
+        let module = super::shader::module(device, "vegetation", &shader_source());
+        let layout = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries,
+            })
+        };
+        let looks_entry = uniform_entry(2, false, wgpu::ShaderStages::VERTEX);
+        let atlas_layout = layout(
+            "vegetation atlas + looks layout",
+            &[texture_entry(0), sampler_entry(1), looks_entry],
+        );
+        let texture_layout = layout(
+            "vegetation texture layout",
+            &[texture_entry(0), sampler_entry(1)],
+        );
+        let looks_layout = layout("vegetation looks layout", &[looks_entry]);
+        let cluster_entry = uniform_entry(1, false, wgpu::ShaderStages::VERTEX);
+        let cluster_layout = layout("impostor cluster layout", &[cluster_entry]);
+        let drawn_layout =
+            frame.pipeline_layout(device, "vegetation layout", true, &[Some(&atlas_layout)]);
+        let impostor_layout = frame.pipeline_layout(
+            device,
+            "group billboard layout",
+            true,
+            &[Some(&texture_layout)],
+        );
+        let bake_layout = frame.pipeline_layout(
+            device,
+            "billboard bake layout",
+            false,
+            &[Some(&looks_layout)],
+        );
+        let group_bake_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("impostor bake layout"),
+            bind_group_layouts: &[
+                Some(&frame.layout),
+                Some(&cluster_layout),
+                Some(&texture_layout),
+            ],
+            immediate_size: 0,
+        });
+        let format = frame.color_format;
+        let make = |layout: &wgpu::PipelineLayout,
+                    names: [&str; 3],
+                    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+                    format| {
+            let [label, vs, fs] = names;
+            pipeline(
+                device,
+                &module,
+                layout,
+                &PipelineSpec::triangles(label, vs, fs, buffers, format),
+            )
+        };
+        let mesh_buffers = [Some(MeshVertex::LAYOUT), Some(PlantInstance::layout(false))];
+        let quads = [Some(PlantInstance::layout(false))];
+        let plant_mesh = make(
+            &drawn_layout,
+            ["plant meshes", "vs_plant", "fs_plant"],
+            &mesh_buffers,
+            format,
+        );
+        let billboard = make(
+            &drawn_layout,
+            ["plant billboards", "vs_billboard", "fs_billboard"],
+            &quads,
+            format,
+        );
+        let impostor = make(
+            &impostor_layout,
+            ["plant group billboards", "vs_billboard", "fs_impostor"],
+            &quads,
+            format,
+        );
+        let bake = make(
+            &bake_layout,
+            ["billboard bake", "vs_bake", "fs_bake"],
+            &mesh_buffers,
+            ATLAS_FORMAT,
+        );
+        let members = [Some(PlantInstance::layout(true))];
+        let group_bake = make(
+            &group_bake_layout,
+            ["impostor bake", "vs_group_bake", "fs_group_bake"],
+            &members,
+            IMPOSTOR_FORMAT,
+        );
+        let meshes = PlantMeshes::generate();
+        let (shape_vertices, shape_indices) = shape_buffers(device, &meshes);
+        let (looks, shapes) = looks(species_names);
+        let looks_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("plant looks"),
+            contents: bytemuck::cast_slice(&looks),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let atlas_size = [ATLAS_TILE_PX[0] * MAX_LOOKS, ATLAS_TILE_PX[1]];
+        let atlas_view = bake_target(device, "billboard atlas", atlas_size, ATLAS_FORMAT);
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("vegetation sampler"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let looks_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("plant looks"),
+            layout: &looks_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 2,
+                resource: looks_buffer.as_entire_binding(),
+            }],
+        });
+        let renderer = Self {
+            plant_mesh,
+            billboard,
+            impostor,
+            group_bake,
+            shape_vertices,
+            shape_indices,
+            meshes,
+            shapes,
+            atlas_group: texture_group(
+                device,
+                "billboard atlas",
+                &atlas_layout,
+                &atlas_view,
+                &sampler,
+                Some(&looks_buffer),
+            ),
+            atlas_texture_group: texture_group(
+                device,
+                "billboard atlas texture",
+                &texture_layout,
+                &atlas_view,
+                &sampler,
+                None,
+            ),
+            texture_layout,
+            cluster_layout,
+            sampler,
+            plan: Vec::new(),
+        };
+        renderer.bake_atlas(gpu, frame, &bake, &looks_group, &atlas_view, atlas_size);
+        renderer
+    }
+
+    /// The registered constructor: looks from the vegetation kind's species.
+    pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
+        let names: Vec<String> = shared
+            .kind::<VegetationContent>()
+            .map(|v| v.placer.species.iter().map(|s| s.name.clone()).collect())
+            .unwrap_or_default();
+        Box::new(Self::new(gpu, frame, &names))
+    }
+
+    /// Renders every look's billboard image from its high-detail mesh into the atlas (seen
+    /// from the south, lit by the frame's sun and sky).
+    fn bake_atlas(
+        &self,
+        gpu: &Gpu,
+        frame: &FrameResources,
+        bake: &wgpu::RenderPipeline,
+        looks_group: &wgpu::BindGroup,
+        atlas_view: &wgpu::TextureView,
+        atlas_size: [u32; 2],
+    ) {
+        let device = &gpu.device;
+        let cam = Camera::look_at(DVec3::ZERO, DVec3::new(0.0, 1.0, 0.0), 1.0, [64, 64]);
+        frame.write_uniforms(&gpu.queue, &cam, &ViewOptions::default());
+        let instances: Vec<PlantInstance> = (0..MAX_LOOKS)
+            .map(|i| PlantInstance {
+                position: [0.0; 3],
+                height_m: 1.0,
+                radius_m: 1.0,
+                yaw_rad: 0.0,
+                look: i,
+                cluster: 0,
+            })
+            .collect();
+        let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("billboard bake instances"),
+            contents: bytemuck::cast_slice(&instances),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let depth_view = super::depth_view(device, atlas_size, "billboard bake depth");
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("billboard bake"),
+        });
+        {
+            let mut pass = bake_pass(&mut enc, "billboard bake pass", atlas_view, &depth_view);
+            pass.set_pipeline(bake);
+            pass.set_bind_group(0, &frame.group, &[]);
+            pass.set_bind_group(2, looks_group, &[]);
+            pass.set_vertex_buffer(0, self.shape_vertices.slice(..));
+            pass.set_vertex_buffer(1, instance_buffer.slice(..));
+            pass.set_index_buffer(self.shape_indices.slice(..), wgpu::IndexFormat::Uint32);
+            for (i, shape) in self.shapes.iter().enumerate() {
+                let [w, h] = ATLAS_TILE_PX;
+                pass.set_viewport((i as u32 * w) as f32, 0.0, w as f32, h as f32, 0.0, 1.0);
+                let (first, count, base) = self.meshes.ranges[*shape as usize][0];
+                pass.draw_indexed(first..first + count, base, i as u32..i as u32 + 1);
+            }
+        }
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Uploads a node's vegetation (None when it has none). Group-billboard members are baked,
+    /// cluster by cluster, into the node's impostor texture (a render pass submitted here); the
+    /// node then draws one quad per cluster instead of its members.
+    pub fn upload_node(
+        &self,
+        gpu: &Gpu,
+        frame: &FrameResources,
+        tree: &QuadTree,
+        key: NodeKey,
+        veg: &NodeVegetation,
+    ) -> Option<PlantsGpu> {
+        let aabb_m = veg.items_box_m?;
+        let o = tree.rect(key).min;
+        let instance = |it: &crate::vegetation::Item, cluster: u32| PlantInstance {
+            position: [
+                (it.x_m - o[0]) as f32,
+                (it.y_m - o[1]) as f32,
+                it.z_m as f32,
+            ],
+            height_m: it.height_m,
+            radius_m: it.radius_m,
+            yaw_rad: it.yaw_rad,
+            look: u32::from(it.species),
+            cluster,
+        };
+        let mut data: Vec<PlantInstance> = Vec::with_capacity(veg.instances());
+        let mut groups = Vec::with_capacity(veg.groups.len());
+        let mut members: Vec<PlantInstance> = Vec::new();
+        for g in &veg.groups {
+            if g.representation == Representation::Group {
+                let at = members.len();
+                members.extend(
+                    g.items
+                        .iter()
+                        .zip(&veg.clusters.member_clusters[at..])
+                        .map(|(it, &c)| instance(it, u32::from(c))),
+                );
+                continue;
+            }
+            let first = data.len() as u32;
+            data.extend(g.items.iter().map(|it| instance(it, 0)));
+            groups.push(PlantGroupGpu {
+                first,
+                count: g.items.len() as u32,
+                shape: self
+                    .shapes
+                    .get(usize::from(g.species))
+                    .copied()
+                    .unwrap_or(Shape::Bush),
+                kind: if g.representation == Representation::Mesh {
+                    PlantDraw::Mesh
+                } else {
+                    PlantDraw::Billboard
+                },
+                kept: !g.replaced_on_split,
+            });
+        }
+        let mut impostors = None;
+        let mut texture_bytes = 0;
+        if !members.is_empty() {
+            // Cluster quads: centre, bottom, half width, height; `look` = tile index.
+            let mut uniforms = [ClusterUniform::zeroed(); CLUSTER_COUNT];
+            let first = data.len() as u32;
+            for (c, b) in veg.clusters.boxes.iter().enumerate() {
+                let Some(b) = b else { continue };
+                uniforms[c] = ClusterUniform {
+                    centre_bottom_half: [
+                        b.centre_m[0] as f32,
+                        b.centre_m[1] as f32,
+                        b.bottom_m as f32,
+                        b.half_width_m as f32,
+                    ],
+                    height: [b.height_m as f32, 0.0, 0.0, 0.0],
+                };
+                data.push(PlantInstance {
+                    position: [
+                        b.centre_m[0] as f32,
+                        b.centre_m[1] as f32,
+                        b.bottom_m as f32,
+                    ],
+                    height_m: b.height_m as f32,
+                    radius_m: b.half_width_m as f32,
+                    yaw_rad: 0.0,
+                    look: c as u32,
+                    cluster: 0,
+                });
+            }
+            groups.push(PlantGroupGpu {
+                first,
+                count: data.len() as u32 - first,
+                shape: Shape::Bush,
+                kind: PlantDraw::Impostor,
+                kept: veg.clusters.kept,
+            });
+            let (group, bytes) = self.bake_impostors(gpu, frame, key, &uniforms, &members);
+            impostors = Some(group);
+            texture_bytes = bytes;
+        }
+        let instances = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("node {}/{}/{} plants", key.level, key.ix, key.iy)),
+                contents: bytemuck::cast_slice(&data),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+        Some(PlantsGpu {
+            origin_m: o,
+            instances,
+            impostors,
+            groups,
+            aabb_m,
+            bytes: data.len() * std::mem::size_of::<PlantInstance>() + texture_bytes,
+            low_detail: tree.spacing_m(key.level) >= 1.0,
+        })
+    }
+
+    /// Renders a node's group members into its impostor texture (one tile per cluster, seen
+    /// from the south) and returns the texture's bind group and size in bytes.
+    fn bake_impostors(
+        &self,
+        gpu: &Gpu,
+        frame: &FrameResources,
+        key: NodeKey,
+        clusters: &[ClusterUniform; CLUSTER_COUNT],
+        members: &[PlantInstance],
+    ) -> (wgpu::BindGroup, usize) {
+        let device = &gpu.device;
+        let label = format!("node {}/{}/{} impostors", key.level, key.ix, key.iy);
+        let px = CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX;
+        let view = bake_target(device, &label, [px, px], IMPOSTOR_FORMAT);
+        let depth_view = super::depth_view(device, [px, px], "impostor bake depth");
+        let cluster_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("impostor clusters"),
+            contents: bytemuck::cast_slice(clusters),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let cluster_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("impostor clusters"),
+            layout: &self.cluster_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 1,
+                resource: cluster_buffer.as_entire_binding(),
+            }],
+        });
+        let member_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("impostor members"),
+            contents: bytemuck::cast_slice(members),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some(&label),
+        });
+        {
+            let mut pass = bake_pass(&mut enc, "impostor bake pass", &view, &depth_view);
+            pass.set_pipeline(&self.group_bake);
+            pass.set_bind_group(0, &frame.group, &[]);
+            pass.set_bind_group(1, &cluster_group, &[]);
+            pass.set_bind_group(2, &self.atlas_texture_group, &[]);
+            pass.set_vertex_buffer(0, member_buffer.slice(..));
+            pass.draw(0..6, 0..members.len() as u32);
+        }
+        gpu.queue.submit([enc.finish()]);
+        let group = texture_group(
+            device,
+            &label,
+            &self.texture_layout,
+            &view,
+            &self.sampler,
+            None,
+        );
+        (group, (px * px * 4) as usize)
+    }
+
+    fn plants<'a>(draws: &'a FrameDraws<'a>, source: Source) -> Option<&'a PlantsGpu> {
+        let node = match source {
+            Source::Drawn(i) => &draws.drawn[i],
+            Source::Ancestor(i) => &draws.ancestors[i],
+        };
+        node.work.gpu.get::<PlantsGpu>()
+    }
+}
+
+impl NodeRenderer for VegetationRenderer {
+    fn name(&self) -> &'static str {
+        "vegetation"
+    }
+
+    fn upload(
+        &mut self,
+        gpu: &Gpu,
+        frame: &FrameResources,
+        tree: &QuadTree,
+        work: &mut NodeWork,
+    ) -> usize {
+        let Some(node) = work
+            .get::<NodeVegetation>()
+            .and_then(|v| self.upload_node(gpu, frame, tree, work.key, v))
+        else {
+            return 0;
+        };
+        let bytes = node.bytes;
+        work.gpu.put(node);
+        bytes
+    }
+
+    fn prepare(&mut self, _gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+        self.plan.clear();
+        if !draws.view.plants {
+            return;
+        }
+        let ancestors: FxHashSet<NodeKey> = draws.ancestors.iter().map(|a| a.key).collect();
+        let visible = |p: &PlantsGpu| draws.frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1);
+        // Drawn nodes with their own interval, then ancestors' kept groups in full.
+        for (i, d) in draws.drawn.iter().enumerate() {
+            if let Some(p) = d.work.gpu.get::<PlantsGpu>()
+                && d.dither[1] > d.dither[0]
+                && visible(p)
+            {
+                let offset = frame.push_node(p.origin_m, d.key.level, d.dither);
+                self.plan
+                    .push((Source::Drawn(i), offset, ancestors.contains(&d.key)));
+            }
+        }
+        for (i, a) in draws.ancestors.iter().enumerate() {
+            if let Some(p) = a.work.gpu.get::<PlantsGpu>()
+                && p.groups.iter().any(|g| g.kept)
+                && visible(p)
+            {
+                let offset = frame.push_node(p.origin_m, a.key.level, [0.0, 1.0]);
+                self.plan.push((Source::Ancestor(i), offset, true));
+            }
+        }
+    }
+
+    fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        frame: &FrameResources,
+        draws: &FrameDraws<'_>,
+        stats: &mut DrawStats,
+    ) {
+        for &(source, offset, is_ancestor) in &self.plan {
+            let Some(p) = Self::plants(draws, source) else {
+                continue;
+            };
+            let (drawn, wanted) = match source {
+                Source::Drawn(_) => (true, GroupDither::Own),
+                Source::Ancestor(_) => (false, GroupDither::Full),
+            };
+            frame.bind_node(pass, offset);
+            for g in &p.groups {
+                if group_dither(!g.kept, drawn, is_ancestor) != Some(wanted) {
+                    continue;
+                }
+                let instances = g.first..g.first + g.count;
+                match g.kind {
+                    PlantDraw::Billboard => {
+                        pass.set_pipeline(&self.billboard);
+                        pass.set_bind_group(2, &self.atlas_group, &[]);
+                        pass.set_vertex_buffer(0, p.instances.slice(..));
+                        pass.draw(0..6, instances);
+                    }
+                    PlantDraw::Impostor => {
+                        let Some(tex) = &p.impostors else { continue };
+                        pass.set_pipeline(&self.impostor);
+                        pass.set_bind_group(2, tex, &[]);
+                        pass.set_vertex_buffer(0, p.instances.slice(..));
+                        pass.draw(0..6, instances);
+                        stats.group_billboards += u64::from(g.count);
+                    }
+                    PlantDraw::Mesh => {
+                        pass.set_pipeline(&self.plant_mesh);
+                        pass.set_bind_group(2, &self.atlas_group, &[]);
+                        pass.set_vertex_buffer(0, self.shape_vertices.slice(..));
+                        pass.set_vertex_buffer(1, p.instances.slice(..));
+                        pass.set_index_buffer(
+                            self.shape_indices.slice(..),
+                            wgpu::IndexFormat::Uint32,
+                        );
+                        let (first, count, base) =
+                            self.meshes.ranges[g.shape as usize][usize::from(p.low_detail)];
+                        pass.draw_indexed(first..first + count, base, instances);
+                        stats.plant_triangles += u64::from(count / 3) * u64::from(g.count);
+                    }
+                }
+                stats.plant_instances += u64::from(g.count);
+                stats.plant_draw_calls += 1;
+            }
+        }
+    }
+}

@@ -1,0 +1,48 @@
+//! Node bounds known so far, shared by selection (reads) and jobs (writes).
+
+use crate::surface::World;
+use crate::terrain::bounds::{self, NodeBounds};
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use rustc_hash::FxHashMap;
+use std::sync::{Mutex, PoisonError};
+
+/// Node bounds known so far, shared by selection (reads) and jobs (writes).
+#[derive(Debug, Default)]
+pub struct BoundsStore {
+    map: Mutex<FxHashMap<NodeKey, NodeBounds>>,
+}
+
+impl BoundsStore {
+    pub fn peek(&self, key: NodeKey) -> Option<NodeBounds> {
+        self.map
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .get(&key)
+            .copied()
+    }
+
+    /// The node's bounds, measured outside the lock when unknown (after its parent's).
+    pub fn get(&self, world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
+        if let Some(b) = self.peek(key) {
+            return b;
+        }
+        let parent = key.parent().map(|p| self.get(world, tree, p));
+        let b = bounds::monotone(bounds::measure(world, tree, key), parent);
+        self.map
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .insert(key, b);
+        b
+    }
+
+    pub fn len(&self) -> usize {
+        self.map
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}

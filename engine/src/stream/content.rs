@@ -1,0 +1,171 @@
+//! Node content as plug-ins. A [`ContentKind`] (terrain, vegetation, later ground textures,
+//! light grids, buildings) names itself, lists the CPU [`Phase`]s that make its [`Payload`] for a
+//! node, and may scale the split metric where it blocks the view. The scheduler knows only these
+//! traits: it runs the phases of every registered kind in registration order, keeps the payloads
+//! in the node's [`NodeWork`], and counts their bytes in the cache budget. The GPU side of a
+//! kind (upload and draw hooks) is a `render::NodeRenderer` registered next to it.
+
+use super::Shared;
+use crate::surface::Rect;
+use crate::terrain::bounds::NodeBounds;
+use crate::terrain::quadtree::NodeKey;
+use crate::terrain::tiles::{Tile, TileKey};
+use glam::DVec3;
+use std::any::Any;
+use std::sync::Arc;
+
+/// Where a phase runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PhaseKind {
+    /// On a worker thread.
+    Cpu,
+    /// On the owner (render) thread, under the per-frame GPU budget.
+    Gpu,
+}
+
+/// The work of one phase: reads the shared state and the node's earlier results, writes its own.
+pub type PhaseFn = Arc<dyn Fn(&Shared, &mut NodeWork) + Send + Sync>;
+
+/// One step of preparing a node.
+#[derive(Clone)]
+pub struct Phase {
+    pub name: &'static str,
+    pub kind: PhaseKind,
+    pub run: PhaseFn,
+}
+
+impl Phase {
+    /// A phase that runs on a worker thread.
+    pub fn cpu(
+        name: &'static str,
+        run: impl Fn(&Shared, &mut NodeWork) + Send + Sync + 'static,
+    ) -> Self {
+        Self {
+            name,
+            kind: PhaseKind::Cpu,
+            run: Arc::new(run),
+        }
+    }
+
+    /// A phase that runs on the owner thread under the GPU budget.
+    pub fn gpu(
+        name: &'static str,
+        run: impl Fn(&Shared, &mut NodeWork) + Send + Sync + 'static,
+    ) -> Self {
+        Self {
+            name,
+            kind: PhaseKind::Gpu,
+            run: Arc::new(run),
+        }
+    }
+}
+
+impl std::fmt::Debug for Phase {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ({:?})", self.name, self.kind)
+    }
+}
+
+/// What one content kind keeps for a node once prepared.
+pub trait Payload: Any + Send + Sync + std::fmt::Debug {
+    /// Bytes the node keeps resident for this payload (its GPU data), counted in the node-cache
+    /// budget.
+    fn bytes(&self) -> usize;
+}
+
+/// One kind of node content. Register it with the streamer (`Streamer::new`) and its renderer
+/// with the viewer; nothing else changes.
+pub trait ContentKind: Any + Send + Sync + std::fmt::Debug {
+    /// A short name (phase names and statistics).
+    fn name(&self) -> &'static str;
+
+    /// The CPU phases that make this kind's payload of a node, in order. They run on workers
+    /// after the phases of the kinds registered before this one (so they may read those
+    /// payloads), and put their result with [`NodeWork::put`].
+    fn phases(self: Arc<Self>) -> Vec<Phase>;
+
+    /// How visible (0..=1) the top of a node at `rect` (highest point `z_max_m`, at `dist_m`) is
+    /// from `camera_m` through this content; selection multiplies a node's projected error by it
+    /// when `StreamSettings::vegetation_occlusion` is on. 1: this content blocks nothing.
+    fn visibility(
+        &self,
+        _shared: &Shared,
+        _camera_m: DVec3,
+        _rect: Rect,
+        _z_max_m: f64,
+        _dist_m: f64,
+    ) -> f64 {
+        1.0
+    }
+}
+
+/// A node's content while it is being prepared, and once prepared.
+#[derive(Debug)]
+pub struct NodeWork {
+    pub key: NodeKey,
+    pub bounds: Option<NodeBounds>,
+    /// Tiles held by this job (released when the job's CPU phases end, finished or cancelled).
+    pub tiles: Vec<(TileKey, Arc<Tile>)>,
+    /// One payload per content kind that produced one (at most one of each type).
+    payloads: Vec<Box<dyn Payload>>,
+    /// Set by the GPU phase: bytes that went to the GPU.
+    pub uploaded_bytes: usize,
+    /// The node's GPU objects, set by the renderers' upload hooks, dropped with the node.
+    pub gpu: GpuSlots,
+}
+
+impl NodeWork {
+    pub fn new(key: NodeKey) -> Self {
+        Self {
+            key,
+            bounds: None,
+            tiles: Vec::new(),
+            payloads: Vec::new(),
+            uploaded_bytes: 0,
+            gpu: GpuSlots::default(),
+        }
+    }
+
+    /// Stores a payload (replacing one of the same type).
+    pub fn put<T: Payload>(&mut self, payload: T) {
+        self.payloads
+            .retain(|p| !(p.as_ref() as &dyn Any).is::<T>());
+        self.payloads.push(Box::new(payload));
+    }
+
+    /// The payload of type `T`, if a phase stored one.
+    pub fn get<T: Payload>(&self) -> Option<&T> {
+        self.payloads
+            .iter()
+            .find_map(|p| (p.as_ref() as &dyn Any).downcast_ref::<T>())
+    }
+
+    /// Bytes this node keeps resident (all payloads).
+    pub fn bytes(&self) -> usize {
+        self.payloads.iter().map(|p| p.bytes()).sum()
+    }
+}
+
+/// GPU objects of one node, one per renderer, of types only the renderers know (the streaming
+/// system stays free of wgpu).
+#[derive(Default)]
+pub struct GpuSlots(Vec<Box<dyn Any + Send + Sync>>);
+
+impl std::fmt::Debug for GpuSlots {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "GpuSlots({} set)", self.0.len())
+    }
+}
+
+impl GpuSlots {
+    /// Stores a renderer's object for the node (replacing one of the same type).
+    pub fn put<T: Any + Send + Sync>(&mut self, object: T) {
+        self.0.retain(|o| !o.is::<T>());
+        self.0.push(Box::new(object));
+    }
+
+    /// The stored object of type `T`.
+    pub fn get<T: Any>(&self) -> Option<&T> {
+        self.0.iter().find_map(|o| o.downcast_ref::<T>())
+    }
+}

@@ -1,0 +1,337 @@
+//! Jobs: requests, the worker threads that run CPU phases, cancellation, result collection and
+//! the GPU phases on the owner thread.
+
+use super::{NodeWork, Phase, PhaseKind, Resident, Shared, Streamer};
+use crate::terrain::quadtree::NodeKey;
+use crossbeam_channel::{Receiver, Sender};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, PoisonError};
+use std::time::Instant;
+
+/// What a worker sends back.
+pub(super) enum JobResult {
+    /// CPU phases done; the next phase index (a GPU phase) or `phases.len()` when complete.
+    Done {
+        key: NodeKey,
+        generation: u64,
+        work: Box<NodeWork>,
+        next_phase: usize,
+    },
+    Cancelled,
+}
+
+pub(super) struct JobMsg {
+    pub(super) key: NodeKey,
+    pub(super) generation: u64,
+    pub(super) cancel: Arc<AtomicBool>,
+    pub(super) start_phase: usize,
+    pub(super) work: Box<NodeWork>,
+}
+
+/// A request's state on the owner thread.
+pub(super) enum RequestState {
+    Queued,
+    Running {
+        cancel: Arc<AtomicBool>,
+    },
+    WaitingGpu {
+        work: Box<NodeWork>,
+        next_phase: usize,
+    },
+}
+
+pub(super) struct Request {
+    pub(super) generation: u64,
+    pub(super) state: RequestState,
+    pub(super) requested_at: Instant,
+    /// 0: needed for display; 1: prefetch.
+    pub(super) class: usize,
+}
+
+/// Releases the tiles a job holds (a core phase, and on cancellation).
+pub(super) fn release_tiles(s: &Shared, w: &mut NodeWork) {
+    if w.tiles.is_empty() {
+        return;
+    }
+    let mut tiles = s.tiles.lock().unwrap_or_else(PoisonError::into_inner);
+    for (k, _) in w.tiles.drain(..) {
+        tiles.release(k);
+    }
+}
+
+pub(super) fn worker_loop(
+    shared: &Shared,
+    phases: &[Phase],
+    rx: &Receiver<JobMsg>,
+    tx: &Sender<JobResult>,
+) {
+    while let Ok(mut job) = rx.recv() {
+        let mut i = job.start_phase;
+        let mut cancelled = false;
+        while i < phases.len() && phases[i].kind == PhaseKind::Cpu {
+            if job.cancel.load(Ordering::Acquire) {
+                cancelled = true;
+                break;
+            }
+            (phases[i].run)(shared, &mut job.work);
+            i += 1;
+        }
+        let msg = if cancelled {
+            release_tiles(shared, &mut job.work);
+            JobResult::Cancelled
+        } else {
+            JobResult::Done {
+                key: job.key,
+                generation: job.generation,
+                work: job.work,
+                next_phase: i,
+            }
+        };
+        if tx.send(msg).is_err() {
+            break;
+        }
+    }
+}
+
+impl Streamer {
+    pub(super) fn request(&mut self, key: NodeKey, class: usize) {
+        let generation = self.next_generation;
+        self.next_generation += 1;
+        let state = RequestState::Queued;
+        self.requests.insert(
+            key,
+            Request {
+                generation,
+                state,
+                requested_at: Instant::now(),
+                class,
+            },
+        );
+        self.buckets[class][usize::from(key.level)].push(key);
+        self.stats.requested += 1;
+    }
+
+    pub(super) fn cancel(&mut self, key: NodeKey) {
+        let Some(req) = self.requests.remove(&key) else {
+            return;
+        };
+        match req.state {
+            RequestState::Queued => {
+                self.buckets[req.class][usize::from(key.level)].retain(|&k| k != key);
+                self.stats.cancelled_queued += 1;
+            }
+            RequestState::Running { cancel } => {
+                cancel.store(true, Ordering::Release);
+                self.stats.cancelled_running += 1;
+            }
+            RequestState::WaitingGpu { mut work, .. } => {
+                release_tiles(&self.shared, &mut work);
+                self.stats.cancelled_gpu += 1;
+            }
+        }
+    }
+
+    /// Hands queued jobs to workers: coarsest level first, then nearest to the camera.
+    pub(super) fn dispatch(&mut self) {
+        let running = self
+            .requests
+            .values()
+            .filter(|r| matches!(r.state, RequestState::Running { .. }))
+            .count();
+        let mut free = self.settings.max_in_flight.saturating_sub(running);
+        let cam_pos = self.camera.map(|c| c.position_m);
+        let tree = self.shared.tree;
+        let levels = self.buckets[0].len();
+        for (class, level) in (0..2).flat_map(|c| (0..levels).map(move |l| (c, l))) {
+            while free > 0 && !self.buckets[class][level].is_empty() {
+                let bucket = &mut self.buckets[class][level];
+                let idx = match cam_pos {
+                    Some(p) => {
+                        let dist = |k: &NodeKey| {
+                            let r = tree.rect(*k);
+                            let c = glam::DVec3::new(
+                                (r.min[0] + r.max[0]) * 0.5,
+                                (r.min[1] + r.max[1]) * 0.5,
+                                p.z,
+                            );
+                            (c - p).length_squared()
+                        };
+                        (0..bucket.len())
+                            .min_by(|&a, &b| {
+                                dist(&bucket[a])
+                                    .total_cmp(&dist(&bucket[b]))
+                                    .then(bucket[a].cmp(&bucket[b]))
+                            })
+                            .unwrap_or(0)
+                    }
+                    None => 0,
+                };
+                let key = bucket.swap_remove(idx);
+                let Some(req) = self.requests.get_mut(&key) else {
+                    continue;
+                };
+                let cancel = Arc::new(AtomicBool::new(false));
+                let msg = JobMsg {
+                    key,
+                    generation: req.generation,
+                    cancel: Arc::clone(&cancel),
+                    start_phase: 0,
+                    work: Box::new(NodeWork::new(key)),
+                };
+                req.state = RequestState::Running { cancel };
+                if let Some(tx) = &self.to_workers
+                    && tx.send(msg).is_err()
+                {
+                    log::error!("node workers have stopped");
+                }
+                free -= 1;
+            }
+        }
+    }
+
+    pub(super) fn collect_results(&mut self) {
+        while let Ok(res) = self.from_workers.try_recv() {
+            match res {
+                JobResult::Cancelled => self.stats.cancels_acknowledged += 1,
+                JobResult::Done {
+                    key,
+                    generation,
+                    mut work,
+                    next_phase,
+                } => {
+                    let current = self
+                        .requests
+                        .get(&key)
+                        .is_some_and(|r| r.generation == generation);
+                    if !current {
+                        // A cancelled (or superseded) job's late result: never shown.
+                        release_tiles(&self.shared, &mut work);
+                        self.stats.late_results_discarded += 1;
+                        continue;
+                    }
+                    if next_phase < self.phases.len() {
+                        if let Some(r) = self.requests.get_mut(&key) {
+                            r.state = RequestState::WaitingGpu { work, next_phase };
+                        }
+                    } else {
+                        self.finish(key, *work);
+                    }
+                }
+            }
+        }
+    }
+
+    pub(super) fn finish(&mut self, key: NodeKey, work: NodeWork) {
+        if let Some(req) = self.requests.remove(&key) {
+            self.stats
+                .latencies_s
+                .push(req.requested_at.elapsed().as_secs_f64());
+        }
+        self.stats.completed += 1;
+        self.resident.insert(
+            key,
+            Resident {
+                work,
+                last_used_frame: self.frame,
+            },
+        );
+    }
+
+    /// Runs waiting GPU phases (coarsest, then oldest first) until the frame's time or byte
+    /// budget is spent; at least one per call. Returns the number of phases run.
+    pub fn run_gpu_phases(&mut self) -> usize {
+        self.run_gpu_phases_with(&mut |_, _| {})
+    }
+
+    /// [`Self::run_gpu_phases`] where each GPU phase also calls `upload` (the renderer creates
+    /// the node's buffers there and stores them in [`NodeWork::gpu`]).
+    pub fn run_gpu_phases_with(&mut self, upload: &mut dyn FnMut(&Shared, &mut NodeWork)) -> usize {
+        let t0 = Instant::now();
+        let mut bytes = 0usize;
+        let mut order: Vec<(u8, u64, NodeKey)> = self
+            .requests
+            .iter()
+            .filter(|(_, r)| matches!(r.state, RequestState::WaitingGpu { .. }))
+            .map(|(k, r)| (k.level, r.generation, *k))
+            .collect();
+        order.sort_unstable();
+        let mut ran = 0;
+        for (_, _, key) in order {
+            if ran > 0
+                && (t0.elapsed().as_secs_f64() >= self.settings.gpu_budget_s
+                    || bytes >= self.settings.gpu_budget_bytes)
+            {
+                break;
+            }
+            let Some(req) = self.requests.get_mut(&key) else {
+                continue;
+            };
+            let RequestState::WaitingGpu { work, next_phase } = &mut req.state else {
+                continue;
+            };
+            let mut w = std::mem::replace(work, Box::new(NodeWork::new(key)));
+            let mut i = *next_phase;
+            while i < self.phases.len() && self.phases[i].kind == PhaseKind::Gpu {
+                (self.phases[i].run)(&self.shared, &mut w);
+                upload(&self.shared, &mut w);
+                i += 1;
+            }
+            bytes += w.uploaded_bytes;
+            ran += 1;
+            if i >= self.phases.len() {
+                self.finish(key, *w);
+            } else {
+                // More CPU phases follow: back to a worker.
+                let cancel = Arc::new(AtomicBool::new(false));
+                let generation = req.generation;
+                req.state = RequestState::Running {
+                    cancel: Arc::clone(&cancel),
+                };
+                if let Some(tx) = &self.to_workers {
+                    let _ = tx.send(JobMsg {
+                        key,
+                        generation,
+                        cancel,
+                        start_phase: i,
+                        work: w,
+                    });
+                }
+            }
+        }
+        // Finished nodes change the draw list only when the root first becomes ready (splits
+        // wait for fades, which advance in `update`).
+        if self.drawn.is_empty() && self.resident.contains_key(&NodeKey::ROOT) {
+            self.drawn = self.compute_draw_list();
+        }
+        // Finished nodes add bytes: keep the cache within its budget here too, not only in
+        // `update` (otherwise the budget holds only until the next GPU phase).
+        if ran > 0 {
+            self.evict();
+        }
+        self.refresh_stats();
+        ran
+    }
+
+    /// Cancelled running jobs whose worker has not reported back yet (it will: with an
+    /// acknowledgement at the next phase boundary, or a late result that is discarded).
+    pub fn cancelled_outstanding(&self) -> u64 {
+        self.stats.cancelled_running
+            - self.stats.cancels_acknowledged
+            - self.stats.late_results_discarded
+    }
+}
+
+impl Drop for Streamer {
+    fn drop(&mut self) {
+        // Cancel everything, close the channel, and join the workers.
+        for req in self.requests.values() {
+            if let RequestState::Running { cancel } = &req.state {
+                cancel.store(true, Ordering::Release);
+            }
+        }
+        self.to_workers = None;
+        for w in self.workers.drain(..) {
+            let _ = w.join();
+        }
+    }
+}

@@ -1,0 +1,432 @@
+//! Streaming: turning each frame's wanted node set into prioritized, cancellable, phased
+//! background jobs, keeping prepared nodes in an LRU cache under a memory budget, and deciding
+//! what is drawn (with cross-fades) so that nothing is ever missing from the screen.
+//!
+//! - **Content kinds are plug-ins** ([`content`]). A job runs the phases of every registered
+//!   [`ContentKind`] in order, between the core phases `bounds` (first) and `release tiles` and
+//!   `gpu upload` (last). CPU phases run on worker threads; GPU phases are handed back to the
+//!   owner (render) thread and run there under a per-frame budget
+//!   ([`Streamer::run_gpu_phases`]). New content is a new kind, not a new scheduler.
+//!
+//! Files: [`content`] (kinds, payloads, node work), `bounds_store` (bounds known so far),
+//! `jobs` (requests, workers, cancellation, GPU phases), `display` (fades and the draw list),
+//! `residency` (LRU eviction under the budget, statistics).
+//! - **Priority** is larger nodes first, then nearer to the camera. Pending requests sit in one
+//!   bucket per level; the distance is computed when a job is dispatched, so priorities follow
+//!   the camera without rebuilding a queue.
+//! - **Cancellation**: a request that is no longer wanted is removed from its bucket if still
+//!   queued; if running, its flag is set and the worker stops at the next phase boundary,
+//!   releasing its tiles; if waiting for its GPU phase, it is dropped. Every result carries
+//!   (key, generation); results of an older generation are discarded, so a cancelled job's late
+//!   result is never shown.
+//! - **Replacement**: a node is replaced by its children only when every child that is needed
+//!   (overlaps the map and is wanted or has wanted descendants) is ready; going back up works
+//!   the same way. Changes cross-fade over [`StreamSettings::fade_s`]. Each drawn node gets a
+//!   dither interval `[lo, hi)`: a pixel with ordered-dither value `d` is drawn by the node whose
+//!   interval contains `d`. The intervals of the nodes covering a point partition [0, 1), so the
+//!   parent and its children never both draw a pixel and never both skip it (complementary
+//!   patterns, no sorting).
+//! - Selection during streaming uses only bounds already known: a node whose bounds are unknown
+//!   is wanted (its job measures them) but not descended into until they are.
+
+pub mod bounds_store;
+pub mod content;
+mod display;
+mod jobs;
+mod residency;
+
+pub use bounds_store::BoundsStore;
+pub use content::{ContentKind, GpuSlots, NodeWork, Payload, Phase, PhaseFn, PhaseKind};
+pub use display::DrawNode;
+
+use crate::camera::Camera;
+use crate::surface::World;
+use crate::terrain::bounds::NodeBounds;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::terrain::tiles::TileCache;
+use crossbeam_channel::{Receiver, Sender};
+use jobs::{JobMsg, JobResult, Request, RequestState};
+use rustc_hash::{FxHashMap, FxHashSet};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Everything phases may read, shared by all threads.
+#[derive(Debug)]
+pub struct Shared {
+    pub world: World,
+    pub tree: QuadTree,
+    pub bounds: BoundsStore,
+    pub tiles: Mutex<TileCache>,
+    /// The registered content kinds, in phase order.
+    pub kinds: Vec<Arc<dyn ContentKind>>,
+}
+
+impl Shared {
+    /// The registered kind of type `T`.
+    pub fn kind<T: ContentKind>(&self) -> Option<&T> {
+        self.kinds
+            .iter()
+            .find_map(|k| (k.as_ref() as &dyn std::any::Any).downcast_ref::<T>())
+    }
+}
+
+/// The phases of a node job: `bounds`, then every kind's CPU phases in registration order, then
+/// `release tiles` and the `gpu upload` phase (whose work the owner supplies, see
+/// [`Streamer::run_gpu_phases_with`]).
+pub fn node_phases(kinds: &[Arc<dyn ContentKind>]) -> Vec<Phase> {
+    let mut phases = vec![Phase::cpu("bounds", |s: &Shared, w: &mut NodeWork| {
+        w.bounds = Some(s.bounds.get(&s.world, &s.tree, w.key));
+    })];
+    for k in kinds {
+        phases.extend(Arc::clone(k).phases());
+    }
+    phases.push(Phase::cpu("release tiles", jobs::release_tiles));
+    phases.push(Phase::gpu("gpu upload", |_: &Shared, w: &mut NodeWork| {
+        // Headless this only accounts bytes; a renderer's upload hook replaces the figure.
+        w.uploaded_bytes = w.bytes();
+    }));
+    phases
+}
+
+/// Streaming settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamSettings {
+    /// Split less where vegetation blocks the view (see `vegetation::Canopy`).
+    pub vegetation_occlusion: bool,
+    /// Worker threads (at least 1).
+    pub workers: usize,
+    /// Most jobs handed to workers at once (queued there or running).
+    pub max_in_flight: usize,
+    /// Memory budget for prepared nodes kept resident (bytes).
+    pub cache_budget_bytes: usize,
+    /// GPU phases per frame: time and bytes budgets (at least one phase runs per frame).
+    pub gpu_budget_s: f64,
+    pub gpu_budget_bytes: usize,
+    /// Cross-fade duration.
+    pub fade_s: f64,
+    /// The user's detail level: largest projected error (px) to show.
+    pub tau_px: f64,
+    /// Nodes are split for display when their error passes `split_factor * tau`, so a fade
+    /// finishes before the error reaches tau.
+    pub split_factor: f64,
+    /// Nodes down to `prefetch_factor * tau` are prepared ahead (lower priority, not shown
+    /// until needed), so they are ready when the camera gets there.
+    pub prefetch_factor: f64,
+    /// Debug: show every node at this level (no pixel-error test), like seed 003's MLFIX.
+    pub fixed_level: Option<u8>,
+}
+
+impl Default for StreamSettings {
+    fn default() -> Self {
+        let cores = std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get);
+        Self {
+            workers: (cores - 1).max(1),
+            // A shallow hand-off: jobs handed to workers run in FIFO order, so a deep backlog
+            // would make urgent display jobs wait behind prefetch.
+            max_in_flight: (cores - 1).max(1) + 1,
+            cache_budget_bytes: 512 << 20,
+            gpu_budget_s: 0.004,
+            gpu_budget_bytes: 32 << 20,
+            fade_s: 0.2,
+            tau_px: 2.0,
+            split_factor: 0.6,
+            prefetch_factor: 0.5,
+            fixed_level: None,
+            vegetation_occlusion: false,
+        }
+    }
+}
+
+/// A prepared node.
+#[derive(Debug)]
+pub struct Resident {
+    pub work: NodeWork,
+    pub last_used_frame: u64,
+}
+
+/// Counters and per-frame statistics.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StreamStats {
+    pub requested: u64,
+    pub completed: u64,
+    pub cancelled_queued: u64,
+    pub cancelled_running: u64,
+    pub cancelled_gpu: u64,
+    pub late_results_discarded: u64,
+    /// Running jobs that stopped at a phase boundary after being cancelled.
+    pub cancels_acknowledged: u64,
+    pub evicted: u64,
+    pub queued: usize,
+    pub running: usize,
+    pub waiting_gpu: usize,
+    pub resident: usize,
+    pub resident_bytes: usize,
+    /// Bytes of resident nodes that cannot be evicted now (needed, drawn or fading).
+    pub pinned_bytes: usize,
+    pub wanted: usize,
+    pub drawn: usize,
+    /// Request-to-ready latencies (s) of jobs completed since the last `take_latencies`.
+    pub latencies_s: Vec<f64>,
+    /// Time of the last update's two selections (display and prefetch sets).
+    pub last_selection_s: f64,
+}
+
+/// The streaming system. Owned by one thread (the render thread); workers run CPU phases.
+pub struct Streamer {
+    pub shared: Arc<Shared>,
+    pub settings: StreamSettings,
+    phases: Arc<Vec<Phase>>,
+    to_workers: Option<Sender<JobMsg>>,
+    from_workers: Receiver<JobResult>,
+    workers: Vec<std::thread::JoinHandle<()>>,
+    requests: FxHashMap<NodeKey, Request>,
+    /// Pending (queued) requests per priority class (display, prefetch) and level.
+    buckets: [Vec<Vec<NodeKey>>; 2],
+    next_generation: u64,
+    resident: FxHashMap<NodeKey, Resident>,
+    wanted: FxHashSet<NodeKey>,
+    /// Nodes needed for display (wanted, ancestors, children of ancestors) and for prefetch.
+    needed: FxHashSet<NodeKey>,
+    /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
+    to_split: FxHashSet<NodeKey>,
+    prefetch: FxHashSet<NodeKey>,
+    /// This frame's draw list, computed once after the fades advance.
+    drawn: Vec<DrawNode>,
+    /// Split state per node: 0 = the node is drawn, 1 = its children are; in between, fading.
+    split: FxHashMap<NodeKey, f32>,
+    frame: u64,
+    camera: Option<Camera>,
+    pub stats: StreamStats,
+}
+
+impl std::fmt::Debug for Streamer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Streamer")
+            .field("settings", &self.settings)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Streamer {
+    /// A streamer for `world` preparing the content of every kind in `kinds` (in that order;
+    /// see [`node_phases`]).
+    pub fn new(world: World, settings: StreamSettings, kinds: Vec<Arc<dyn ContentKind>>) -> Self {
+        let phases = node_phases(&kinds);
+        Self::with_phases(world, settings, kinds, phases)
+    }
+
+    /// A streamer running `phases` (normally [`node_phases`] of `kinds`; tests insert their own).
+    pub fn with_phases(
+        world: World,
+        settings: StreamSettings,
+        kinds: Vec<Arc<dyn ContentKind>>,
+        phases: Vec<Phase>,
+    ) -> Self {
+        let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let shared = Arc::new(Shared {
+            world,
+            tree,
+            bounds: BoundsStore::default(),
+            tiles: Mutex::new(TileCache::new()),
+            kinds,
+        });
+        let phases = Arc::new(phases);
+        let (to_workers, rx) = crossbeam_channel::unbounded::<JobMsg>();
+        let (tx, from_workers) = crossbeam_channel::unbounded::<JobResult>();
+        let workers = (0..settings.workers.max(1))
+            .map(|i| {
+                let (s, p, r, t) = (
+                    Arc::clone(&shared),
+                    Arc::clone(&phases),
+                    rx.clone(),
+                    tx.clone(),
+                );
+                std::thread::Builder::new()
+                    .name(format!("node-worker-{i}"))
+                    .spawn(move || jobs::worker_loop(&s, &p, &r, &t))
+                    .map_err(|e| log::error!("cannot start worker thread: {e}"))
+                    .ok()
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .flatten()
+            .collect();
+        let levels = usize::from(tree.max_level) + 1;
+        Self {
+            shared,
+            settings,
+            phases,
+            to_workers: Some(to_workers),
+            from_workers,
+            workers,
+            requests: FxHashMap::default(),
+            buckets: [vec![Vec::new(); levels], vec![Vec::new(); levels]],
+            next_generation: 1,
+            resident: FxHashMap::default(),
+            wanted: FxHashSet::default(),
+            needed: FxHashSet::default(),
+            to_split: FxHashSet::default(),
+            prefetch: FxHashSet::default(),
+            split: FxHashMap::default(),
+            drawn: Vec::new(),
+            frame: 0,
+            camera: None,
+            stats: StreamStats::default(),
+        }
+    }
+
+    pub fn tree(&self) -> &QuadTree {
+        &self.shared.tree
+    }
+
+    pub fn resident(&self, key: NodeKey) -> Option<&Resident> {
+        self.resident.get(&key)
+    }
+
+    pub fn is_ready(&self, key: NodeKey) -> bool {
+        self.resident.contains_key(&key)
+    }
+
+    pub fn wanted(&self) -> &FxHashSet<NodeKey> {
+        &self.wanted
+    }
+
+    pub fn in_flight(&self) -> usize {
+        self.requests.len()
+    }
+
+    /// The wanted set for a camera at threshold `tau_px`, using only bounds already known (see
+    /// the module docs).
+    pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
+        let sel = crate::terrain::select::traverse(
+            &self.shared.tree,
+            cam,
+            true,
+            |key| self.shared.bounds.peek(key),
+            |key: NodeKey, b: &NodeBounds, dist, px| match self.settings.fixed_level {
+                Some(level) => key.level < level,
+                None if self.settings.vegetation_occlusion && px > tau_px => {
+                    let s = &self.shared;
+                    let rect = s.tree.rect(key);
+                    let visibility: f64 = s
+                        .kinds
+                        .iter()
+                        .map(|k| k.visibility(s, cam.position_m, rect, b.z_max_m, dist))
+                        .product();
+                    px * visibility > tau_px
+                }
+                None => px > tau_px,
+            },
+        );
+        sel.nodes
+            .iter()
+            .map(|n| n.key)
+            .chain(sel.unknown_bounds)
+            .collect()
+    }
+
+    /// Every ancestor of the nodes in `wanted`.
+    fn ancestors_of(wanted: &FxHashSet<NodeKey>) -> FxHashSet<NodeKey> {
+        let mut ancestors = FxHashSet::default();
+        for &k in wanted {
+            // Stop at the first ancestor already in the set: its own ancestors are there too.
+            for a in k.ancestors() {
+                if !ancestors.insert(a) {
+                    break;
+                }
+            }
+        }
+        ancestors
+    }
+
+    /// The nodes needed to show `wanted` given its `ancestors`: the wanted nodes, the ancestors,
+    /// and every child of an ancestor (a node is only replaced by all four children, so the
+    /// drawn set always covers the whole map, culled parts included).
+    fn needed_for(
+        &self,
+        wanted: &FxHashSet<NodeKey>,
+        ancestors: &FxHashSet<NodeKey>,
+    ) -> FxHashSet<NodeKey> {
+        let mut out: FxHashSet<NodeKey> = wanted.clone();
+        for &a in ancestors {
+            out.insert(a);
+            out.extend(
+                a.children()
+                    .into_iter()
+                    .filter(|c| self.shared.tree.overlaps_map(*c)),
+            );
+        }
+        out
+    }
+
+    /// One frame: new wanted set from the camera, cancel what is no longer needed, request what
+    /// is missing, collect worker results, dispatch jobs by priority, advance fades.
+    pub fn update(&mut self, cam: &Camera, dt_s: f64) {
+        self.frame += 1;
+        self.camera = Some(*cam);
+        self.collect_results();
+        let tau = self.settings.tau_px;
+        let t_select = Instant::now();
+        self.wanted = self.select_wanted(cam, tau * self.settings.split_factor);
+        // Everything on the path from the root to a wanted node is needed too (ancestors are
+        // what is shown until the wanted nodes are ready).
+        self.to_split = Self::ancestors_of(&self.wanted);
+        self.needed = self.needed_for(&self.wanted, &self.to_split);
+        let prefetch_wanted = self.select_wanted(cam, tau * self.settings.prefetch_factor);
+        self.stats.last_selection_s = t_select.elapsed().as_secs_f64();
+        let prefetch_ancestors = Self::ancestors_of(&prefetch_wanted);
+        self.prefetch = self.needed_for(&prefetch_wanted, &prefetch_ancestors);
+        self.prefetch.retain(|k| !self.needed.contains(k));
+        // Cancel requests no longer needed or prefetched.
+        let stale: Vec<NodeKey> = self
+            .requests
+            .keys()
+            .filter(|k| !self.needed.contains(k) && !self.prefetch.contains(k))
+            .copied()
+            .collect();
+        for k in stale {
+            self.cancel(k);
+        }
+        // Request what is missing: display first, then prefetch; promote prefetch requests that
+        // became needed for display.
+        for class in 0..2 {
+            let set = if class == 0 {
+                &self.needed
+            } else {
+                &self.prefetch
+            };
+            let mut missing: Vec<NodeKey> = set
+                .iter()
+                .filter(|k| !self.resident.contains_key(k))
+                .copied()
+                .collect();
+            missing.sort_unstable();
+            for k in missing {
+                match self.requests.get_mut(&k) {
+                    None => self.request(k, class),
+                    Some(r) if r.class > class => {
+                        r.class = class;
+                        if matches!(r.state, RequestState::Queued) {
+                            let level = usize::from(k.level);
+                            self.buckets[1][level].retain(|&q| q != k);
+                            self.buckets[class][level].push(k);
+                        }
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+        let frame = self.frame;
+        for k in self.needed.iter().chain(&self.prefetch) {
+            if let Some(r) = self.resident.get_mut(k) {
+                r.last_used_frame = frame;
+            }
+        }
+        self.dispatch();
+        self.advance_fades(dt_s);
+        self.drawn = self.compute_draw_list();
+        self.evict();
+        self.refresh_stats();
+    }
+}

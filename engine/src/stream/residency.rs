@@ -1,0 +1,120 @@
+//! Residency: which prepared nodes stay (pinned or recently used) under the memory budget, and
+//! the statistics of the cache and the job queue.
+
+use super::Streamer;
+use super::jobs::RequestState;
+use crate::camera::Camera;
+use crate::terrain::quadtree::NodeKey;
+use rustc_hash::FxHashSet;
+use std::sync::PoisonError;
+use std::time::Instant;
+
+impl Streamer {
+    /// Resident nodes that must stay: needed, prefetched, drawn, or in a fade.
+    pub(super) fn pinned(&self) -> FxHashSet<NodeKey> {
+        let mut p = self.needed.clone();
+        p.extend(self.prefetch.iter().copied());
+        p.extend(self.drawn.iter().map(|d| d.key));
+        p.extend(self.split.keys().copied());
+        p
+    }
+
+    /// Drops the least recently used prepared nodes that are not pinned while over the memory
+    /// budget. Pinned nodes alone may exceed it; then nothing else is kept.
+    pub(super) fn evict(&mut self) {
+        let mut bytes: usize = self.resident.values().map(|r| r.work.bytes()).sum();
+        if bytes <= self.settings.cache_budget_bytes {
+            return;
+        }
+        let pinned = self.pinned();
+        let mut candidates: Vec<(u64, NodeKey)> = self
+            .resident
+            .iter()
+            .filter(|(k, _)| !pinned.contains(k))
+            .map(|(k, r)| (r.last_used_frame, *k))
+            .collect();
+        candidates.sort_unstable();
+        for (_, k) in candidates {
+            if bytes <= self.settings.cache_budget_bytes {
+                break;
+            }
+            if let Some(r) = self.resident.remove(&k) {
+                bytes -= r.work.bytes();
+                self.stats.evicted += 1;
+            }
+        }
+    }
+
+    pub(super) fn refresh_stats(&mut self) {
+        let (mut q, mut r, mut g) = (0, 0, 0);
+        for req in self.requests.values() {
+            match req.state {
+                RequestState::Queued => q += 1,
+                RequestState::Running { .. } => r += 1,
+                RequestState::WaitingGpu { .. } => g += 1,
+            }
+        }
+        self.stats.queued = q;
+        self.stats.running = r;
+        self.stats.waiting_gpu = g;
+        self.stats.resident = self.resident.len();
+        self.stats.resident_bytes = self.resident.values().map(|r| r.work.bytes()).sum();
+        let pinned = self.pinned();
+        self.stats.pinned_bytes = self
+            .resident
+            .iter()
+            .filter(|(k, _)| pinned.contains(k))
+            .map(|(_, r)| r.work.bytes())
+            .sum();
+        self.stats.wanted = self.wanted.len();
+        self.stats.drawn = self.drawn.len();
+    }
+
+    /// Takes the request-to-ready latencies recorded since the last call.
+    pub fn take_latencies(&mut self) -> Vec<f64> {
+        std::mem::take(&mut self.stats.latencies_s)
+    }
+
+    /// Keys of all resident nodes.
+    pub fn resident_keys(&self) -> Vec<NodeKey> {
+        let mut v: Vec<NodeKey> = self.resident.keys().copied().collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Waits (up to `timeout_s`) until no job is queued, running or waiting for the GPU, every
+    /// needed node is resident and no fade is in progress, running GPU phases as they arrive.
+    /// Returns false on timeout.
+    pub fn settle(&mut self, cam: &Camera, timeout_s: f64) -> bool {
+        let t0 = Instant::now();
+        loop {
+            self.update(cam, 1.0 / 60.0);
+            self.run_gpu_phases();
+            if self.requests.is_empty()
+                && self.cancelled_outstanding() == 0
+                && self.needed.iter().all(|k| self.resident.contains_key(k))
+                && self.split.values().all(|&v| v >= 1.0)
+            {
+                return true;
+            }
+            if t0.elapsed().as_secs_f64() > timeout_s {
+                return false;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
+
+    /// Nodes needed for display (wanted, ancestors, and children of split ancestors).
+    pub fn needed(&self) -> &FxHashSet<NodeKey> {
+        &self.needed
+    }
+
+    /// Tiles currently held (by running jobs).
+    pub fn tiles_resident(&self) -> usize {
+        self.shared
+            .tiles
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .resident()
+    }
+}

@@ -1,0 +1,506 @@
+//! Decal height shaping: roads and paths flatten the ground to their centre line's height (plus
+//! their offset), rock patches raise it.
+//!
+//! The shaping is a displacement field `E` added to the finest surface. `E` is the C1
+//! Catmull-Rom interpolation of offsets stored at a 0.5 m sample lattice (zero where no decal
+//! reaches), so its slope and curvature are bounded per cell from sample differences exactly like
+//! the map's own bicubic heights ([`crate::surface::world`]). A sample's offset is `w * (target - G)` for
+//! roads and paths (`G` the bicubic map height at the sample, `target` the centre line's
+//! interpolated z plus the decal's offset) and `w * offset` for rock patches, where the weight
+//! `w` is 1 within half the width (plus [`FLAT_MARGIN_M`] for roads and paths, so the visible
+//! width is exactly flat) and falls to 0 over `falloff_m` (smoothstep). Where decals
+//! overlap, the one with the larger weight wins (the first in the file on ties). Sampling at
+//! lattice points means a closest-point discontinuity inside a tight bend is just a larger
+//! difference between two samples: the bounds stay honest and `E` stays C1.
+//!
+//! Samples are stored sparsely in 8 x 8 blocks, so a map with 28 km of roads holds about 9 MB;
+//! the per-block slope and curvature bounds live in a sparse max pyramid.
+
+use rustc_hash::FxHashMap;
+use worldgen::map::{Decal, DecalKind};
+use worldgen::roads::segment_closest;
+use worldgen::sample::catmull_rom_weights;
+
+/// Spacing (m) of the decal offset lattice.
+pub const DECAL_SPACING_M: f64 = 0.5;
+/// The flat core of a road or path reaches this much beyond its half width, so that every
+/// sample of the 4 x 4 interpolation stencil of a point within the half width is in the core
+/// (the stencil's farthest sample is `2 sqrt(2)` spacings away): the visible road is flat.
+pub const FLAT_MARGIN_M: f64 = 2.0 * std::f64::consts::SQRT_2 * DECAL_SPACING_M;
+/// Samples per block side.
+const BLOCK: i64 = 8;
+/// Block side (m): bounds are kept per block.
+pub const DECAL_BLOCK_M: f64 = DECAL_SPACING_M * BLOCK as f64;
+
+/// Packs signed block coordinates into a hash key.
+fn key(bx: i64, by: i64) -> u64 {
+    ((bx as u32 as u64) << 32) | u64::from(by as u32)
+}
+
+/// Slope and curvature bounds (|grad E|, Hessian norm of E) per block.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DecalBounds {
+    pub slope: f64,
+    pub curvature: f64,
+}
+
+/// The decal displacement field of a map (see the module docs).
+#[derive(Debug, Default)]
+pub struct DecalField {
+    origin_m: [f64; 2],
+    /// Block key -> samples, row-major from the block's south-west sample.
+    blocks: FxHashMap<u64, Box<[f32; (BLOCK * BLOCK) as usize]>>,
+    /// Level k: bounds over 2^k x 2^k blocks; absent = zero.
+    bounds: Vec<FxHashMap<u64, [f32; 2]>>,
+    /// Largest road/path weight per sample (for suppressing procedural detail on roads).
+    road_weight: FxHashMap<(i64, i64), f32>,
+    /// Coarse occupancy over the map: false where no stored block can reach (fast zero).
+    coarse: Vec<bool>,
+    coarse_dims: [usize; 2],
+    coarse_cell_m: f64,
+}
+
+/// Even-odd point-in-polygon test.
+fn inside_polygon(p: [f64; 2], pts: &[[f64; 3]]) -> bool {
+    let mut inside = false;
+    let n = pts.len();
+    for i in 0..n {
+        let (a, b) = (pts[i], pts[(i + n - 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p[0] < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
+/// Decal weight at distance `d_m` from its centre line (or outside its area).
+pub fn decal_weight(d: &Decal, d_m: f64) -> f64 {
+    let half = flat_half_width_m(d);
+    let falloff = f64::from(d.falloff_m);
+    if d_m <= half {
+        1.0
+    } else if falloff <= 0.0 || d_m >= half + falloff {
+        0.0
+    } else {
+        let s = 1.0 - (d_m - half) / falloff;
+        s * s * (3.0 - 2.0 * s)
+    }
+}
+
+/// Half the width of the part at full weight (roads and paths get [`FLAT_MARGIN_M`] more).
+fn flat_half_width_m(d: &Decal) -> f64 {
+    let half = f64::from(d.width_m) * 0.5;
+    match d.kind {
+        DecalKind::Road | DecalKind::Path => half + FLAT_MARGIN_M,
+        DecalKind::RockPatch => half,
+    }
+}
+
+/// Per lattice sample within reach of one decal: (distance m, centre-line z at the closest point).
+fn decal_footprint(d: &Decal, origin_m: [f64; 2]) -> FxHashMap<(i64, i64), (f64, f64)> {
+    let reach = flat_half_width_m(d) + f64::from(d.falloff_m);
+    let s = DECAL_SPACING_M;
+    let mut out: FxHashMap<(i64, i64), (f64, f64)> = FxHashMap::default();
+    let lattice_box = |lo: [f64; 2], hi: [f64; 2]| {
+        (
+            ((lo[0] - reach - origin_m[0]) / s).floor() as i64,
+            ((hi[0] + reach - origin_m[0]) / s).ceil() as i64,
+            ((lo[1] - reach - origin_m[1]) / s).floor() as i64,
+            ((hi[1] + reach - origin_m[1]) / s).ceil() as i64,
+        )
+    };
+    let n = d.points.len();
+    let segments = if d.closed { n } else { n - 1 };
+    for k in 0..segments {
+        let (pa, pb) = (d.points[k], d.points[(k + 1) % n]);
+        let (a, b) = ([pa[0], pa[1]], [pb[0], pb[1]]);
+        let (x0, x1, y0, y1) = lattice_box(
+            [a[0].min(b[0]), a[1].min(b[1])],
+            [a[0].max(b[0]), a[1].max(b[1])],
+        );
+        for iy in y0..=y1 {
+            for ix in x0..=x1 {
+                let p = [origin_m[0] + ix as f64 * s, origin_m[1] + iy as f64 * s];
+                let (dist, t) = segment_closest(p, a, b);
+                if dist > reach {
+                    continue;
+                }
+                let z = pa[2] + t * (pb[2] - pa[2]);
+                let e = out.entry((ix, iy)).or_insert((f64::INFINITY, z));
+                if dist < e.0 {
+                    *e = (dist, z);
+                }
+            }
+        }
+    }
+    if d.closed {
+        // Inside the area the distance is zero.
+        let lo = d
+            .points
+            .iter()
+            .fold([f64::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]);
+        let hi = d.points.iter().fold([f64::NEG_INFINITY; 2], |m, p| {
+            [m[0].max(p[0]), m[1].max(p[1])]
+        });
+        let (x0, x1, y0, y1) = lattice_box(lo, hi);
+        for iy in y0..=y1 {
+            for ix in x0..=x1 {
+                let p = [origin_m[0] + ix as f64 * s, origin_m[1] + iy as f64 * s];
+                if inside_polygon(p, &d.points) {
+                    out.insert((ix, iy), (0.0, 0.0));
+                }
+            }
+        }
+    }
+    out
+}
+
+impl DecalField {
+    /// Rasterizes the decals. `ground_height_m` is the map's bicubic height (without detail).
+    pub fn new(
+        decals: &[Decal],
+        origin_m: [f64; 2],
+        size_m: [f64; 2],
+        ground_height_m: impl Fn(f64, f64) -> f64,
+    ) -> Self {
+        // Per sample: (weight, offset); the larger weight wins, the earlier decal on ties.
+        let mut samples: FxHashMap<(i64, i64), (f64, f64)> = FxHashMap::default();
+        let mut road_weight: FxHashMap<(i64, i64), f32> = FxHashMap::default();
+        for d in decals {
+            for ((ix, iy), (dist, z)) in decal_footprint(d, origin_m) {
+                let w = decal_weight(d, dist);
+                if w <= 0.0 {
+                    continue;
+                }
+                let offset = match d.kind {
+                    DecalKind::Road | DecalKind::Path => {
+                        let p = [
+                            origin_m[0] + ix as f64 * DECAL_SPACING_M,
+                            origin_m[1] + iy as f64 * DECAL_SPACING_M,
+                        ];
+                        let rw = road_weight.entry((ix, iy)).or_insert(0.0);
+                        *rw = rw.max(w as f32);
+                        w * (z + f64::from(d.height_offset_m) - ground_height_m(p[0], p[1]))
+                    }
+                    DecalKind::RockPatch => w * f64::from(d.height_offset_m),
+                };
+                let e = samples.entry((ix, iy)).or_insert((0.0, 0.0));
+                if w > e.0 {
+                    *e = (w, offset);
+                }
+            }
+        }
+        let mut field = Self {
+            origin_m,
+            blocks: FxHashMap::default(),
+            bounds: Vec::new(),
+            road_weight,
+            coarse: Vec::new(),
+            coarse_dims: [0, 0],
+            coarse_cell_m: 1.0,
+        };
+        for ((ix, iy), (_, offset)) in samples {
+            if offset == 0.0 {
+                continue;
+            }
+            let (bx, by) = (ix.div_euclid(BLOCK), iy.div_euclid(BLOCK));
+            let block = field
+                .blocks
+                .entry(key(bx, by))
+                .or_insert_with(|| Box::new([0.0; (BLOCK * BLOCK) as usize]));
+            block[(iy.rem_euclid(BLOCK) * BLOCK + ix.rem_euclid(BLOCK)) as usize] = offset as f32;
+        }
+        field.build_bounds();
+        field.build_coarse(size_m);
+        field
+    }
+
+    /// Marks the coarse cells (at least 32 m, at most 1024 x 1024 over the map) that a stored
+    /// block's interpolation stencil can reach.
+    fn build_coarse(&mut self, size_m: [f64; 2]) {
+        let cell = 32f64.max(size_m[0].max(size_m[1]) / 1024.0);
+        let dims = [
+            (size_m[0] / cell).ceil() as usize + 1,
+            (size_m[1] / cell).ceil() as usize + 1,
+        ];
+        let mut coarse = vec![false; dims[0] * dims[1]];
+        let margin = 2.0 * DECAL_SPACING_M;
+        for &k in self.blocks.keys() {
+            let (bx, by) = (
+                i64::from((k >> 32) as u32 as i32),
+                i64::from(k as u32 as i32),
+            );
+            let cells = |b: i64, n: usize| {
+                let lo = ((b as f64 * DECAL_BLOCK_M - margin) / cell)
+                    .floor()
+                    .max(0.0) as usize;
+                let hi = (((b + 1) as f64 * DECAL_BLOCK_M + margin) / cell)
+                    .floor()
+                    .max(0.0) as usize;
+                lo.min(n - 1)..=hi.min(n - 1)
+            };
+            for cy in cells(by, dims[1]) {
+                for cx in cells(bx, dims[0]) {
+                    coarse[cy * dims[0] + cx] = true;
+                }
+            }
+        }
+        self.coarse = coarse;
+        self.coarse_dims = dims;
+        self.coarse_cell_m = cell;
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.blocks.is_empty()
+    }
+
+    /// Stored samples (blocks x 64).
+    pub fn bytes(&self) -> usize {
+        self.blocks.len() * (BLOCK * BLOCK) as usize * 4
+    }
+
+    /// Offset (m) stored at lattice sample (ix, iy); zero where no decal reaches.
+    pub fn sample(&self, ix: i64, iy: i64) -> f64 {
+        self.blocks
+            .get(&key(ix.div_euclid(BLOCK), iy.div_euclid(BLOCK)))
+            .map_or(0.0, |b| {
+                f64::from(b[(iy.rem_euclid(BLOCK) * BLOCK + ix.rem_euclid(BLOCK)) as usize])
+            })
+    }
+
+    /// The displacement `E` (m) at a world position.
+    pub fn offset_m(&self, x_m: f64, y_m: f64) -> f64 {
+        if self.blocks.is_empty() {
+            return 0.0;
+        }
+        // Fast zero away from decals (positions outside the map take the full path).
+        let (cx, cy) = (
+            (x_m - self.origin_m[0]) / self.coarse_cell_m,
+            (y_m - self.origin_m[1]) / self.coarse_cell_m,
+        );
+        if cx >= 0.0 && cy >= 0.0 {
+            let (ix, iy) = (cx as usize, cy as usize);
+            if ix < self.coarse_dims[0]
+                && iy < self.coarse_dims[1]
+                && !self.coarse[iy * self.coarse_dims[0] + ix]
+            {
+                return 0.0;
+            }
+        }
+        let gx = (x_m - self.origin_m[0]) / DECAL_SPACING_M;
+        let gy = (y_m - self.origin_m[1]) / DECAL_SPACING_M;
+        let (x0, y0) = (gx.floor(), gy.floor());
+        let (ix, iy) = (x0 as i64, y0 as i64);
+        // The 4 x 4 stencil touches at most 2 x 2 blocks; none stored means zero.
+        let (bx0, bx1) = ((ix - 1).div_euclid(BLOCK), (ix + 2).div_euclid(BLOCK));
+        let (by0, by1) = ((iy - 1).div_euclid(BLOCK), (iy + 2).div_euclid(BLOCK));
+        if !(by0..=by1).any(|by| (bx0..=bx1).any(|bx| self.blocks.contains_key(&key(bx, by)))) {
+            return 0.0;
+        }
+        let (wx, wy) = (catmull_rom_weights(gx - x0), catmull_rom_weights(gy - y0));
+        let mut sum = 0.0;
+        for (j, wyj) in wy.iter().enumerate() {
+            let mut row = 0.0;
+            for (i, wxi) in wx.iter().enumerate() {
+                row += wxi * self.sample(ix + i as i64 - 1, iy + j as i64 - 1);
+            }
+            sum += wyj * row;
+        }
+        sum
+    }
+
+    /// Largest road or path weight at the lattice sample nearest to a world position.
+    pub fn road_weight(&self, x_m: f64, y_m: f64) -> f64 {
+        let ix = ((x_m - self.origin_m[0]) / DECAL_SPACING_M).round() as i64;
+        let iy = ((y_m - self.origin_m[1]) / DECAL_SPACING_M).round() as i64;
+        self.road_weight
+            .get(&(ix, iy))
+            .map_or(0.0, |&w| f64::from(w))
+    }
+
+    /// Road/path lattice samples with their weight (for suppressing detail on roads).
+    pub fn road_samples(&self) -> impl Iterator<Item = ([f64; 2], f64)> + '_ {
+        self.road_weight.iter().map(|(&(ix, iy), &w)| {
+            (
+                [
+                    self.origin_m[0] + ix as f64 * DECAL_SPACING_M,
+                    self.origin_m[1] + iy as f64 * DECAL_SPACING_M,
+                ],
+                f64::from(w),
+            )
+        })
+    }
+
+    /// Per-block bounds from the samples: a cell (ix, iy) reads samples ix-1..ix+2, so a stored
+    /// block affects cells of its own block and of its eight neighbours.
+    fn build_bounds(&mut self) {
+        let mut level0: FxHashMap<u64, [f32; 2]> = FxHashMap::default();
+        let mut candidates: Vec<(i64, i64)> = Vec::new();
+        for &k in self.blocks.keys() {
+            let (bx, by) = (
+                i64::from((k >> 32) as u32 as i32),
+                i64::from(k as u32 as i32),
+            );
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    candidates.push((bx + dx, by + dy));
+                }
+            }
+        }
+        candidates.sort_unstable();
+        candidates.dedup();
+        for (bx, by) in candidates {
+            let mut b = DecalBounds::default();
+            for cy in 0..BLOCK {
+                for cx in 0..BLOCK {
+                    let (ix, iy) = (bx * BLOCK + cx, by * BLOCK + cy);
+                    let p = |a: i64, c: i64| self.sample(ix + a, iy + c);
+                    b.slope = b
+                        .slope
+                        .max(super::spline::catmull_rom_cell_slope(&p, DECAL_SPACING_M));
+                    b.curvature = b.curvature.max(super::spline::catmull_rom_cell_curvature(
+                        &p,
+                        DECAL_SPACING_M,
+                    ));
+                }
+            }
+            if b.slope > 0.0 || b.curvature > 0.0 {
+                // Rounded up so the f32 value stays an upper bound.
+                let up = |v: f64| (v * (1.0 + 1e-6)) as f32;
+                level0.insert(key(bx, by), [up(b.slope), up(b.curvature)]);
+            }
+        }
+        let mut levels = vec![level0];
+        while levels.last().is_some_and(|l| l.len() > 1) && levels.len() < 40 {
+            let prev = levels.last().expect("non-empty");
+            let mut next: FxHashMap<u64, [f32; 2]> = FxHashMap::default();
+            for (&k, v) in prev {
+                let (bx, by) = (
+                    i64::from((k >> 32) as u32 as i32),
+                    i64::from(k as u32 as i32),
+                );
+                let e = next.entry(key(bx >> 1, by >> 1)).or_insert([0.0; 2]);
+                e[0] = e[0].max(v[0]);
+                e[1] = e[1].max(v[1]);
+            }
+            levels.push(next);
+        }
+        self.bounds = levels;
+    }
+
+    /// Bounds of `E` over a world rectangle (possibly over a little more: still an upper bound).
+    pub fn region_bounds(&self, min_m: [f64; 2], max_m: [f64; 2]) -> DecalBounds {
+        if self.bounds.is_empty() {
+            return DecalBounds::default();
+        }
+        let cell = DECAL_SPACING_M * BLOCK as f64;
+        // A point on a block border touches both blocks; widen by a hair so both are counted.
+        let e = cell * 1e-9;
+        let to = |v: f64, o: f64| ((v - o) / cell).floor() as i64;
+        let (x0, x1) = (
+            to(min_m[0] - e, self.origin_m[0]),
+            to(max_m[0] + e, self.origin_m[0]),
+        );
+        let (y0, y1) = (
+            to(min_m[1] - e, self.origin_m[1]),
+            to(max_m[1] + e, self.origin_m[1]),
+        );
+        let span = (x1 - x0 + 1).max(y1 - y0 + 1) as u64;
+        let k = ((u64::BITS - 1 - span.leading_zeros()) as usize).min(self.bounds.len() - 1);
+        let level = &self.bounds[k];
+        let mut m = [0.0f32; 2];
+        for by in (y0 >> k)..=(y1 >> k) {
+            for bx in (x0 >> k)..=(x1 >> k) {
+                if let Some(v) = level.get(&key(bx, by)) {
+                    m[0] = m[0].max(v[0]);
+                    m[1] = m[1].max(v[1]);
+                }
+            }
+        }
+        DecalBounds {
+            slope: f64::from(m[0]),
+            curvature: f64::from(m[1]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn road(points: Vec<[f64; 3]>) -> Decal {
+        Decal {
+            kind: DecalKind::Road,
+            closed: false,
+            width_m: 6.0,
+            falloff_m: 4.0,
+            height_offset_m: 0.0,
+            points,
+        }
+    }
+
+    #[test]
+    fn road_flattens_a_slope_to_its_centre_line() {
+        // Ground rising 0.3 m per m in y; a road along x at y = 50 with z = 20.
+        let ground = |_x: f64, y: f64| 5.0 + 0.3 * y;
+        let f = DecalField::new(
+            &[road(vec![[10.0, 50.0, 20.0], [90.0, 50.0, 20.0]])],
+            [0.0; 2],
+            [100.0; 2],
+            ground,
+        );
+        for &(x, y) in &[(30.0, 50.0), (50.5, 51.7), (70.2, 48.1)] {
+            let h = ground(x, y) + f.offset_m(x, y);
+            assert!((h - 20.0).abs() < 1e-5, "({x}, {y}): {h}");
+        }
+        // Far away: untouched.
+        assert_eq!(f.offset_m(50.0, 80.0), 0.0);
+        assert!(f.road_weight(50.0, 50.0) > 0.99 && f.road_weight(50.0, 70.0) == 0.0);
+    }
+
+    #[test]
+    fn rock_patch_raises_inside_and_bounds_hold() {
+        let patch = Decal {
+            kind: DecalKind::RockPatch,
+            closed: true,
+            width_m: 0.0,
+            falloff_m: 3.0,
+            height_offset_m: 2.0,
+            points: vec![
+                [20.0, 20.0, 0.0],
+                [40.0, 20.0, 0.0],
+                [40.0, 35.0, 0.0],
+                [20.0, 35.0, 0.0],
+            ],
+        };
+        let f = DecalField::new(&[patch], [0.0; 2], [100.0; 2], |_, _| 0.0);
+        assert!((f.offset_m(30.0, 27.0) - 2.0).abs() < 1e-6);
+        assert_eq!(f.offset_m(60.0, 27.0), 0.0);
+        // Finite-difference slope and curvature never exceed the block bounds.
+        let h = 1e-4;
+        for i in 0..4000i64 {
+            let x = 10.0 + 40.0 * worldgen::noise::unit3(3, i, 0);
+            let y = 10.0 + 35.0 * worldgen::noise::unit3(3, i, 1);
+            let e = |a: f64, b: f64| f.offset_m(a, b);
+            let gx = (e(x + h, y) - e(x - h, y)) / (2.0 * h);
+            let gy = (e(x, y + h) - e(x, y - h)) / (2.0 * h);
+            let b = f.region_bounds([x - 0.1, y - 0.1], [x + 0.1, y + 0.1]);
+            assert!(
+                gx.hypot(gy) <= b.slope + 1e-6,
+                "slope {} > {}",
+                gx.hypot(gy),
+                b.slope
+            );
+            let (hh, f0) = (1e-3, e(x, y));
+            let fxx = (e(x + hh, y) - 2.0 * f0 + e(x - hh, y)) / (hh * hh);
+            let fyy = (e(x, y + hh) - 2.0 * f0 + e(x, y - hh)) / (hh * hh);
+            assert!(fxx.abs().max(fyy.abs()) <= b.curvature * 1.01 + 1e-3);
+            // A big region's bound covers a small one's.
+            let big = f.region_bounds([0.0, 0.0], [100.0, 100.0]);
+            assert!(big.slope >= b.slope && big.curvature >= b.curvature);
+        }
+    }
+}

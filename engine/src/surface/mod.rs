@@ -1,0 +1,12 @@
+//! The finest surface: the map's heights plus procedural detail plus decal shaping, evaluated
+//! in f64 at any world position, with proven per-region bounds of its slope and curvature.
+//!
+//! - [`world`]: [`World`] wraps a loaded map and defines `F = G + H + E`.
+//! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised).
+//! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
+
+pub mod decals;
+pub mod spline;
+pub mod world;
+
+pub use world::{Rect, RegionBounds, World};

@@ -1,0 +1,537 @@
+//! Map access in f64 world coordinates and the finest terrain surface.
+//!
+//! `height_m(x, y) = G(x, y) + A(x, y) * D(x, y) + E(x, y)` where `G` is the map's C1 bicubic
+//! height, `A` the detail amplitude of the ground types (bilinear between ground samples, so it
+//! is continuous; zero on and next to roads and paths), `D` three octaves of gradient noise with
+//! wavelengths 8, 4 and 2 m (|D| <= 1) and `E` the decal shaping (flattened roads, raised rock
+//! patches; see [`super::decals`]).
+//! Detail is evaluated in map-local coordinates, so the same map placed at another origin gives
+//! the same surface.
+
+use super::spline::{catmull_rom_cell_curvature, catmull_rom_cell_slope};
+use crate::surface::decals::{DecalBounds, DecalField};
+use worldgen::Map;
+use worldgen::noise;
+
+/// Detail-noise octaves: (wavelength m, weight). The weights sum to 1, so |D| <= 1.
+pub const DETAIL_OCTAVES: [(f64, f64); 3] = [(8.0, 4.0 / 7.0), (4.0, 2.0 / 7.0), (2.0, 1.0 / 7.0)];
+
+/// Upper bound of |grad| of `worldgen::noise::gradient` per lattice unit. Measured: 2.909 over
+/// 4 million random points; 3.5 keeps a 20% margin. `gradient_noise_bound_holds` re-measures it.
+pub const GRADIENT_NOISE_LIPSCHITZ: f64 = 3.5;
+
+/// Upper bound of the Frobenius norm of the Hessian of `worldgen::noise::gradient` per lattice
+/// unit squared. Measured: 14.34 over 3 million random points; 18 keeps a 25% margin.
+/// `gradient_noise_hessian_bound_holds` re-measures it.
+pub const GRADIENT_NOISE_HESSIAN: f64 = 18.0;
+
+/// A map opened for the runtime.
+#[derive(Debug)]
+pub struct World {
+    pub map: Map,
+    /// Detail amplitude (m) at each ground sample, from the legend.
+    amplitude_m: worldgen::Grid<f32>,
+    detail_seed: u64,
+    /// Slope bound of the bicubic map surface per height cell.
+    slope_g: MaxPyramid,
+    /// Slope bound of the detail term per ground cell.
+    slope_detail: MaxPyramid,
+    /// Hessian-norm bound of the bicubic map surface per height cell.
+    curv_g: MaxPyramid,
+    /// Hessian-norm bound of the detail term inside each ground cell (it is only C0 across
+    /// ground-cell borders, where the bilinear amplitude has kinks).
+    curv_detail: MaxPyramid,
+    /// Largest detail amplitude at the corners of each ground cell.
+    amp_max: MaxPyramid,
+    /// Decal shaping E.
+    pub decals: DecalField,
+}
+
+/// How far the finest surface can stray from its linear interpolation over a small region,
+/// split into the map part G and the detail part H (see `bounds`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegionBounds {
+    /// Bound of |grad G|.
+    pub slope_g: f64,
+    /// Bound of |grad H|.
+    pub slope_h: f64,
+    /// Bound of the Hessian norm of G (None where the region leaves the map).
+    pub curvature_g: Option<f64>,
+    /// Bound of the Hessian norm of H (None where the region crosses a ground-cell border).
+    pub curvature_h: Option<f64>,
+    /// Largest detail amplitude, so |H| <= this.
+    pub amplitude_max_m: f64,
+    /// Bounds of the decal shaping E (C1 everywhere, so both always hold).
+    pub decal: DecalBounds,
+}
+
+/// A rectangle in world metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rect {
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+impl World {
+    pub fn new(map: Map) -> Self {
+        let legend: Vec<f32> = map
+            .manifest
+            .ground
+            .legend
+            .iter()
+            .map(|t| t.detail_amplitude_m)
+            .collect();
+        let decals = DecalField::new(
+            &map.decals,
+            map.manifest.origin_m,
+            map.manifest.size_m,
+            |x, y| map.height_bicubic_m(x, y),
+        );
+        let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
+        suppress_detail_on_roads(&mut amplitude_m, &map, &decals);
+        let detail_seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0) ^ 0xDE7A_11ED;
+        let slope_g = MaxPyramid::new(bicubic_cell_slopes(
+            &map.heights,
+            map.manifest.heights.spacing_m,
+        ));
+        let slope_detail = MaxPyramid::new(detail_cell_slopes(
+            &amplitude_m,
+            map.manifest.ground.spacing_m,
+        ));
+        let curv_g = MaxPyramid::new(bicubic_cell_curvatures(
+            &map.heights,
+            map.manifest.heights.spacing_m,
+        ));
+        let curv_detail = MaxPyramid::new(detail_cell_curvatures(
+            &amplitude_m,
+            map.manifest.ground.spacing_m,
+        ));
+        let amp_max = MaxPyramid::new(cell_corner_max(&amplitude_m));
+        Self {
+            map,
+            amplitude_m,
+            detail_seed,
+            slope_g,
+            slope_detail,
+            curv_g,
+            curv_detail,
+            amp_max,
+            decals,
+        }
+    }
+
+    pub fn origin_m(&self) -> [f64; 2] {
+        self.map.manifest.origin_m
+    }
+
+    pub fn size_m(&self) -> [f64; 2] {
+        self.map.manifest.size_m
+    }
+
+    /// Detail amplitude (m) at a world position (bilinear, clamped).
+    fn amplitude_at(&self, x_m: f64, y_m: f64) -> f64 {
+        let at = worldgen::sample::GridPlacement {
+            origin_m: self.origin_m(),
+            spacing_m: self.map.manifest.ground.spacing_m,
+        };
+        worldgen::sample::bilinear(&self.amplitude_m, at, x_m, y_m)
+    }
+
+    /// Detail noise D in [-1, 1] at a map-local position.
+    fn detail(&self, lx: f64, ly: f64) -> f64 {
+        DETAIL_OCTAVES
+            .iter()
+            .enumerate()
+            .map(|(i, &(wavelength, weight))| {
+                weight
+                    * noise::gradient(
+                        self.detail_seed.wrapping_add(i as u64),
+                        lx / wavelength,
+                        ly / wavelength,
+                    )
+            })
+            .sum()
+    }
+
+    /// The finest surface height (m) at a world position.
+    pub fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        let o = self.origin_m();
+        let a = self.amplitude_at(x_m, y_m);
+        let d = if a > 0.0 {
+            a * self.detail(x_m - o[0], y_m - o[1])
+        } else {
+            0.0
+        };
+        self.map.height_bicubic_m(x_m, y_m) + d + self.decals.offset_m(x_m, y_m)
+    }
+
+    /// Ground type index at a world position (nearest ground sample).
+    pub fn ground_type(&self, x_m: f64, y_m: f64) -> u8 {
+        self.map.ground_type_at(x_m, y_m)
+    }
+
+    /// Proven bounds of the surface's parts over `rect` (see [`RegionBounds`]).
+    pub fn region_bounds(&self, rect: Rect) -> RegionBounds {
+        let o = self.origin_m();
+        let size = self.size_m();
+        let hs = self.map.manifest.heights.spacing_m;
+        let gs = self.map.manifest.ground.spacing_m;
+        let inside = rect.min[0] >= o[0]
+            && rect.min[1] >= o[1]
+            && rect.max[0] <= o[0] + size[0]
+            && rect.max[1] <= o[1] + size[1];
+        // One ground cell: the rectangle may touch the cell's border but not cross it.
+        let one_cell = |lo: f64, hi: f64, o: f64| {
+            let (a, b) = (((lo - o) / gs).floor(), ((hi - o) / gs).ceil());
+            b - a <= 1.0
+        };
+        let in_one_ground_cell =
+            one_cell(rect.min[0], rect.max[0], o[0]) && one_cell(rect.min[1], rect.max[1], o[1]);
+        RegionBounds {
+            slope_g: f64::from(self.cells_max(rect, hs, &self.slope_g)),
+            slope_h: f64::from(self.cells_max(rect, gs, &self.slope_detail)),
+            curvature_g: inside.then(|| f64::from(self.cells_max(rect, hs, &self.curv_g))),
+            curvature_h: (inside && in_one_ground_cell)
+                .then(|| f64::from(self.cells_max(rect, gs, &self.curv_detail))),
+            amplitude_max_m: f64::from(self.cells_max(rect, gs, &self.amp_max)),
+            decal: self.decals.region_bounds(rect.min, rect.max),
+        }
+    }
+
+    /// Cell spacing (m) of the height and ground grids.
+    pub fn cell_spacings_m(&self) -> (f64, f64) {
+        (
+            self.map.manifest.heights.spacing_m,
+            self.map.manifest.ground.spacing_m,
+        )
+    }
+
+    /// [`Self::region_bounds`] for a rectangle known to lie inside one height cell, one ground
+    /// cell and one decal block, and inside the map: direct lookups.
+    pub fn cell_region_bounds(&self, rect: Rect) -> RegionBounds {
+        let o = self.origin_m();
+        let (hs, gs) = self.cell_spacings_m();
+        // The centre picks the cells that contain the rectangle.
+        let (cx, cy) = (
+            (rect.min[0] + rect.max[0]) * 0.5 - o[0],
+            (rect.min[1] + rect.max[1]) * 0.5 - o[1],
+        );
+        let (hx, hy) = ((cx / hs) as usize, (cy / hs) as usize);
+        let (gx, gy) = ((cx / gs) as usize, (cy / gs) as usize);
+        let l0 = |p: &MaxPyramid, x: usize, y: usize| {
+            f64::from(p.levels[0].get(x.min(p.width() - 1), y.min(p.height() - 1)))
+        };
+        RegionBounds {
+            slope_g: l0(&self.slope_g, hx, hy),
+            slope_h: l0(&self.slope_detail, gx, gy),
+            curvature_g: Some(l0(&self.curv_g, hx, hy)),
+            curvature_h: Some(l0(&self.curv_detail, gx, gy)),
+            amplitude_max_m: l0(&self.amp_max, gx, gy),
+            decal: self.decals.region_bounds(rect.min, rect.max),
+        }
+    }
+
+    /// Max of a per-cell field over the cells a rectangle touches.
+    fn cells_max(&self, rect: Rect, spacing: f64, p: &MaxPyramid) -> f32 {
+        let o = self.origin_m();
+        let to = |v: f64, o: f64, n: usize| {
+            ((v - o) / spacing).floor().clamp(0.0, (n - 1) as f64) as usize
+        };
+        // A point on a cell border touches both cells; widen by a hair so both are counted.
+        let e = spacing * 1e-9;
+        p.max_in(
+            to(rect.min[0] - e, o[0], p.width()),
+            to(rect.max[0] + e, o[0], p.width()),
+            to(rect.min[1] - e, o[1], p.height()),
+            to(rect.max[1] + e, o[1], p.height()),
+        )
+    }
+}
+
+/// Scales the detail amplitude down to zero at ground samples near roads and paths, so the
+/// flattened surface stays flat: a ground sample within one ground-cell diagonal of a road
+/// lattice sample of weight `w` keeps at most `1 - w` of its amplitude. Then A (bilinear) is zero
+/// everywhere on a road's core and falloff.
+fn suppress_detail_on_roads(amplitude_m: &mut worldgen::Grid<f32>, map: &Map, decals: &DecalField) {
+    let gs = map.manifest.ground.spacing_m;
+    let o = map.manifest.origin_m;
+    let reach = gs * std::f64::consts::SQRT_2;
+    let (w, h) = (amplitude_m.width() as i64, amplitude_m.height() as i64);
+    let mut keep = worldgen::Grid::new(amplitude_m.width(), amplitude_m.height(), 1.0f32);
+    for (p, weight) in decals.road_samples() {
+        let (gx, gy) = ((p[0] - o[0]) / gs, (p[1] - o[1]) / gs);
+        let (x0, x1) = (
+            (gx - reach / gs).floor() as i64,
+            (gx + reach / gs).ceil() as i64,
+        );
+        let (y0, y1) = (
+            (gy - reach / gs).floor() as i64,
+            (gy + reach / gs).ceil() as i64,
+        );
+        for y in y0.max(0)..=y1.min(h - 1) {
+            for x in x0.max(0)..=x1.min(w - 1) {
+                let d = (x as f64 - gx).hypot(y as f64 - gy) * gs;
+                if d <= reach {
+                    let k = keep.get(x as usize, y as usize).min((1.0 - weight) as f32);
+                    keep.set(x as usize, y as usize, k);
+                }
+            }
+        }
+    }
+    for y in 0..amplitude_m.height() {
+        for x in 0..amplitude_m.width() {
+            amplitude_m.set(x, y, amplitude_m.get(x, y) * keep.get(x, y));
+        }
+    }
+}
+
+/// A grid with one value per cell of `src` (between samples x..x+1, y..y+1), rounded up so
+/// the f32 value stays an upper bound of the f64 one.
+fn per_cell(src: &worldgen::Grid<f32>, value: impl Fn(usize, usize) -> f64) -> worldgen::Grid<f32> {
+    let (w, h) = ((src.width() - 1).max(1), (src.height() - 1).max(1));
+    let mut out = worldgen::Grid::new(w, h, 0.0f32);
+    for y in 0..h {
+        for x in 0..w {
+            out.set(x, y, (value(x, y) * (1.0 + 1e-6)) as f32);
+        }
+    }
+    out
+}
+
+/// The four corner samples of cell (x, y), clamped at the far border.
+fn cell_corners(a: &worldgen::Grid<f32>, x: usize, y: usize) -> [f64; 4] {
+    let (x1, y1) = ((x + 1).min(a.width() - 1), (y + 1).min(a.height() - 1));
+    [a.get(x, y), a.get(x1, y), a.get(x, y1), a.get(x1, y1)].map(f64::from)
+}
+
+/// Bound of |grad| of the bilinear interpolation of a cell's corners `c` (x-neighbours 0-1 and
+/// 2-3, y-neighbours 0-2 and 1-3).
+fn bilinear_gradient_bound(c: &[f64; 4], spacing_m: f64) -> f64 {
+    let gx = (c[1] - c[0]).abs().max((c[3] - c[2]).abs());
+    let gy = (c[2] - c[0]).abs().max((c[3] - c[1]).abs());
+    gx.hypot(gy) / spacing_m
+}
+
+/// Bound of |grad D| for the detail noise (|D| <= 1).
+fn detail_gradient_bound() -> f64 {
+    DETAIL_OCTAVES
+        .iter()
+        .map(|&(wl, w)| w * GRADIENT_NOISE_LIPSCHITZ / wl)
+        .sum()
+}
+
+/// Per height cell: a bound of |grad G| over the cell (clamped at the map border like G).
+fn bicubic_cell_slopes(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
+    per_cell(h, |x, y| {
+        let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
+        catmull_rom_cell_slope(&p, spacing_m)
+    })
+}
+
+/// Per height cell: a bound of the Frobenius norm of the Hessian of G over the cell.
+fn bicubic_cell_curvatures(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
+    per_cell(h, |x, y| {
+        let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
+        catmull_rom_cell_curvature(&p, spacing_m)
+    })
+}
+
+/// Per ground cell: a bound of the Hessian norm of A D inside the cell:
+/// `A_max |H(D)| + 2 |grad A| |grad D| + |A_xy|` (A is bilinear, so A_xx = A_yy = 0).
+fn detail_cell_curvatures(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
+    let grad_d = detail_gradient_bound();
+    let hess_d: f64 = DETAIL_OCTAVES
+        .iter()
+        .map(|&(wl, w)| w * GRADIENT_NOISE_HESSIAN / (wl * wl))
+        .sum();
+    per_cell(a, |x, y| {
+        let c = cell_corners(a, x, y);
+        let a_max = c.iter().copied().fold(0.0, f64::max);
+        let grad_a = bilinear_gradient_bound(&c, spacing_m);
+        let a_xy = (c[3] - c[2] - c[1] + c[0]).abs() / (spacing_m * spacing_m);
+        a_max * hess_d + 2.0 * grad_a * grad_d + a_xy
+    })
+}
+
+/// Per cell: the largest of its four corner samples.
+fn cell_corner_max(a: &worldgen::Grid<f32>) -> worldgen::Grid<f32> {
+    per_cell(a, |x, y| {
+        cell_corners(a, x, y)
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    })
+}
+
+/// Per ground cell: a bound of |grad (A D)| <= A_max |grad D| + |grad A| (|D| <= 1), with A
+/// bilinear between the cell's corners.
+fn detail_cell_slopes(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
+    let grad_d = detail_gradient_bound();
+    per_cell(a, |x, y| {
+        let c = cell_corners(a, x, y);
+        let a_max = c.iter().copied().fold(0.0, f64::max);
+        let grad_a = bilinear_gradient_bound(&c, spacing_m);
+        a_max * grad_d + grad_a
+    })
+}
+
+/// A max-mipmap over a grid: level k holds the max over 2^k x 2^k blocks.
+#[derive(Debug)]
+struct MaxPyramid {
+    levels: Vec<worldgen::Grid<f32>>,
+}
+
+impl MaxPyramid {
+    fn new(base: worldgen::Grid<f32>) -> Self {
+        let mut levels = vec![base];
+        while let Some(prev) = levels.last() {
+            if prev.width() == 1 && prev.height() == 1 {
+                break;
+            }
+            let (w, h) = (prev.width().div_ceil(2), prev.height().div_ceil(2));
+            let mut next = worldgen::Grid::new(w, h, 0.0f32);
+            for y in 0..h {
+                for x in 0..w {
+                    let m = prev
+                        .get(2 * x, 2 * y)
+                        .max(prev.get_clamped(2 * x as i64 + 1, 2 * y as i64))
+                        .max(prev.get_clamped(2 * x as i64, 2 * y as i64 + 1))
+                        .max(prev.get_clamped(2 * x as i64 + 1, 2 * y as i64 + 1));
+                    next.set(x, y, m);
+                }
+            }
+            levels.push(next);
+        }
+        Self { levels }
+    }
+
+    fn width(&self) -> usize {
+        self.levels[0].width()
+    }
+
+    fn height(&self) -> usize {
+        self.levels[0].height()
+    }
+
+    /// Max over cells [x0, x1] x [y0, y1] (inclusive), possibly over a few more cells around
+    /// (still an upper bound), in at most 9 lookups.
+    fn max_in(&self, x0: usize, x1: usize, y0: usize, y1: usize) -> f32 {
+        let span = (x1 - x0 + 1).max(y1 - y0 + 1);
+        let k = (usize::BITS - 1 - span.leading_zeros()) as usize;
+        let g = &self.levels[k.min(self.levels.len() - 1)];
+        let k = k.min(self.levels.len() - 1);
+        let mut m = 0.0f32;
+        for y in (y0 >> k)..=(y1 >> k).min(g.height() - 1) {
+            for x in (x0 >> k)..=(x1 >> k).min(g.width() - 1) {
+                m = m.max(g.get(x, y));
+            }
+        }
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn max_pyramid_queries_match_brute_force() {
+        let mut g = worldgen::Grid::new(37, 23, 0.0f32);
+        for y in 0..23 {
+            for x in 0..37 {
+                g.set(x, y, (noise::unit3(4, x as i64, y as i64) * 100.0) as f32);
+            }
+        }
+        let p = MaxPyramid::new(g.clone());
+        for q in 0..300i64 {
+            let xa = (noise::unit3(5, q, 0) * 37.0) as usize;
+            let xb = (noise::unit3(5, q, 1) * 37.0) as usize;
+            let ya = (noise::unit3(5, q, 2) * 23.0) as usize;
+            let yb = (noise::unit3(5, q, 3) * 23.0) as usize;
+            let (x0, x1, y0, y1) = (xa.min(xb), xa.max(xb), ya.min(yb), ya.max(yb));
+            let mut brute = 0.0f32;
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    brute = brute.max(g.get(x, y));
+                }
+            }
+            let got = p.max_in(x0, x1, y0, y1);
+            assert!(got >= brute, "pyramid max {got} below true max {brute}");
+        }
+    }
+
+    #[test]
+    fn gradient_noise_hessian_bound_holds() {
+        let g = noise::gradient;
+        let h = 1e-4;
+        let mut m: f64 = 0.0;
+        for i in 0..200_000i64 {
+            let x = noise::unit3(21, i, 0) * 64.0 - 32.0;
+            let y = noise::unit3(22, i, 0) * 64.0 - 32.0;
+            let s = (i % 5) as u64;
+            let f = g(s, x, y);
+            let fxx = (g(s, x + h, y) - 2.0 * f + g(s, x - h, y)) / (h * h);
+            let fyy = (g(s, x, y + h) - 2.0 * f + g(s, x, y - h)) / (h * h);
+            let fxy = (g(s, x + h, y + h) - g(s, x + h, y - h) - g(s, x - h, y + h)
+                + g(s, x - h, y - h))
+                / (4.0 * h * h);
+            m = m.max((fxx * fxx + 2.0 * fxy * fxy + fyy * fyy).sqrt());
+        }
+        assert!(m < GRADIENT_NOISE_HESSIAN, "measured {m} exceeds the bound");
+        assert!(m > 8.0, "suspiciously smooth noise: {m}");
+    }
+
+    #[test]
+    fn gradient_noise_bound_holds() {
+        let h = 1e-5;
+        let mut max_g: f64 = 0.0;
+        for i in 0..200_000i64 {
+            let x = noise::unit3(11, i, 0) * 64.0 - 32.0;
+            let y = noise::unit3(12, i, 0) * 64.0 - 32.0;
+            let s = (i % 5) as u64;
+            let gx = (noise::gradient(s, x + h, y) - noise::gradient(s, x - h, y)) / (2.0 * h);
+            let gy = (noise::gradient(s, x, y + h) - noise::gradient(s, x, y - h)) / (2.0 * h);
+            max_g = max_g.max(gx.hypot(gy));
+        }
+        assert!(
+            max_g < GRADIENT_NOISE_LIPSCHITZ,
+            "measured {max_g} exceeds the bound"
+        );
+        assert!(max_g > 2.0, "suspiciously smooth noise: {max_g}");
+    }
+
+    #[test]
+    fn catmull_rom_cell_bounds_hold_on_random_grids() {
+        // Random grids: finite-difference slope and curvature inside a cell never exceed the
+        // cell's bounds.
+        for seed in 0..20u64 {
+            let mut g = worldgen::Grid::new(6, 6, 0.0f32);
+            for y in 0..6 {
+                for x in 0..6 {
+                    g.set(x, y, (noise::unit3(seed, x as i64, y as i64) * 10.0) as f32);
+                }
+            }
+            let at = worldgen::sample::GridPlacement {
+                origin_m: [0.0, 0.0],
+                spacing_m: 1.0,
+            };
+            let f = |x: f64, y: f64| worldgen::sample::bicubic(&g, at, x, y);
+            for i in 0..400 {
+                let x = 1.0 + 3.0 * noise::unit3(seed, i, 1);
+                let y = 1.0 + 3.0 * noise::unit3(seed, i, 2);
+                let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+                let p = |a: i64, b: i64| f64::from(g.get_clamped(cx + a, cy + b));
+                let e = 1e-6;
+                let gx = (f(x + e, y) - f(x - e, y)) / (2.0 * e);
+                let gy = (f(x, y + e) - f(x, y - e)) / (2.0 * e);
+                assert!(gx.hypot(gy) <= catmull_rom_cell_slope(&p, 1.0) + 1e-6);
+                let (h, f0) = (1e-3, f(x, y));
+                if (x - x.round()).abs() > 2.0 * h && (y - y.round()).abs() > 2.0 * h {
+                    let fxx = (f(x + h, y) - 2.0 * f0 + f(x - h, y)) / (h * h);
+                    let fyy = (f(x, y + h) - 2.0 * f0 + f(x, y - h)) / (h * h);
+                    assert!(fxx.hypot(fyy) <= catmull_rom_cell_curvature(&p, 1.0) + 1e-3);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,291 @@
+//! Node mesh generation: a regular grid of `(NODE_QUADS + 1)^2` vertices sampled from the
+//! finest surface, positions relative to the node's south-west corner (x, y in f32; z absolute
+//! metres), normals, ground types, and skirts that make the tiling watertight at any level
+//! difference.
+//!
+//! **Why skirts of this depth close every crack.** Along a shared border, a coarser node `C`
+//! and a finer node `N` each interpolate the finest surface `F` linearly between their own
+//! border vertices. (1) Where `C`'s border lies above `N`'s: `N`'s border is a convex
+//! combination of `F` samples on `C`'s border, so it is at least `C.z_min`; `C`'s skirt reaches
+//! down to `C.z_min`. (2) Where `N`'s border lies above `C`'s: `C`'s border is within
+//! `C.error` of `F`, and `F >= N.z_min` there, so `C`'s border is at least
+//! `N.z_min - C.error`; `N`'s skirt on that side reaches `N.z_min - max(error of every coarser
+//! node across that side)`. Same-level neighbours share border vertices exactly.
+
+use crate::surface::world::World;
+use crate::terrain::bounds::{BoundsCache, NodeBounds, interpolate_grid};
+use crate::terrain::quadtree::{NODE_QUADS, NodeKey, QuadTree, Side};
+use crate::terrain::tiles::{TILE_SIZE_M, TILE_SPACING_M, Tile, TileKey};
+
+/// Vertices per node side.
+pub const NODE_VERTS: usize = NODE_QUADS as usize + 1;
+
+/// One node's mesh, ready to upload.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeMesh {
+    pub key: NodeKey,
+    /// World position of the node's south-west corner; vertex x, y are relative to it.
+    pub origin_m: [f64; 2],
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    /// Ground type per vertex (legend index).
+    pub ground: Vec<u8>,
+    /// Triangles, counter-clockwise seen from above; the first `surface_index_count` indices are
+    /// the surface, the rest are skirts.
+    pub indices: Vec<u32>,
+    pub surface_index_count: u32,
+    pub bounds: NodeBounds,
+    /// Skirt bottom height per side (West, East, South, North).
+    pub skirt_bottom_m: [f64; 4],
+}
+
+impl NodeMesh {
+    /// World-space box of the mesh, skirts included.
+    pub fn aabb_m(&self, tree: &QuadTree) -> (glam::DVec3, glam::DVec3) {
+        let size = tree.node_size_m(self.key.level);
+        let skirt_min = self
+            .skirt_bottom_m
+            .iter()
+            .copied()
+            .fold(self.bounds.z_min_m, f64::min);
+        let o = self.origin_m;
+        (
+            glam::DVec3::new(o[0], o[1], skirt_min),
+            glam::DVec3::new(o[0] + size, o[1] + size, self.bounds.z_max_m),
+        )
+    }
+
+    /// Surface height of the mesh at a world position inside the node.
+    pub fn height_at(&self, tree: &QuadTree, x_m: f64, y_m: f64) -> f64 {
+        let s = tree.spacing_m(self.key.level);
+        let z: Vec<f32> = self.positions[..NODE_VERTS * NODE_VERTS]
+            .iter()
+            .map(|p| p[2])
+            .collect();
+        let gx = ((x_m - self.origin_m[0]) / s).clamp(0.0, f64::from(NODE_QUADS));
+        let gy = ((y_m - self.origin_m[1]) / s).clamp(0.0, f64::from(NODE_QUADS));
+        interpolate_grid(&z, NODE_QUADS as usize, gx, gy)
+    }
+
+    /// Bytes of vertex and index data (as uploaded: 28 bytes a vertex, 4 an index).
+    pub fn gpu_bytes(&self) -> usize {
+        self.positions.len() * 28 + self.indices.len() * 4
+    }
+
+    /// A stable hash of every byte of the mesh (for determinism tests).
+    pub fn content_hash(&self) -> u64 {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut feed = |b: &[u8]| {
+            for &x in b {
+                h ^= u64::from(x);
+                h = h.wrapping_mul(0x0100_0000_01b3);
+            }
+        };
+        feed(&[self.key.level]);
+        feed(&self.key.ix.to_le_bytes());
+        feed(&self.key.iy.to_le_bytes());
+        for p in self.positions.iter().chain(&self.normals) {
+            for c in p {
+                feed(&c.to_le_bytes());
+            }
+        }
+        feed(&self.ground);
+        for i in &self.indices {
+            feed(&i.to_le_bytes());
+        }
+        h
+    }
+}
+
+/// The tile a node takes its samples from: nodes of at most one tile's size whose vertex
+/// spacing is a multiple of the tile spacing. Larger nodes evaluate the surface directly.
+pub fn source_tile(world: &World, tree: &QuadTree, key: NodeKey) -> Option<TileKey> {
+    let size = tree.node_size_m(key.level);
+    let s = tree.spacing_m(key.level);
+    if size > TILE_SIZE_M || s < TILE_SPACING_M {
+        return None;
+    }
+    let r = tree.rect(key);
+    let o = world.origin_m();
+    Some(TileKey {
+        tx: ((r.min[0] - o[0]) / TILE_SIZE_M).floor() as i32,
+        ty: ((r.min[1] - o[1]) / TILE_SIZE_M).floor() as i32,
+    })
+}
+
+/// Heights and ground types on the vertex grid plus a one-vertex ring (for normals):
+/// `(NODE_VERTS + 2)^2` values, row-major, index (i + 1, j + 1) for vertex (i, j).
+fn sample_grid(
+    world: &World,
+    tree: &QuadTree,
+    key: NodeKey,
+    tile: Option<&Tile>,
+) -> (Vec<f32>, Vec<u8>) {
+    let r = tree.rect(key);
+    let s = tree.spacing_m(key.level);
+    let w = NODE_VERTS + 2;
+    let mut h = Vec::with_capacity(w * w);
+    let mut g = Vec::with_capacity(w * w);
+    match tile {
+        Some(t) => {
+            let step = (s / TILE_SPACING_M).round() as i64;
+            let o = world.origin_m();
+            let base_i = ((r.min[0] - o[0] - f64::from(t.key.tx) * TILE_SIZE_M) / TILE_SPACING_M)
+                .round() as i64;
+            let base_j = ((r.min[1] - o[1] - f64::from(t.key.ty) * TILE_SIZE_M) / TILE_SPACING_M)
+                .round() as i64;
+            for j in -1..=(NODE_VERTS as i64) {
+                for i in -1..=(NODE_VERTS as i64) {
+                    h.push(t.height_at(base_i + i * step, base_j + j * step));
+                    g.push(t.ground_at(base_i + i * step, base_j + j * step));
+                }
+            }
+        }
+        None => {
+            for j in -1..=(NODE_VERTS as i64) {
+                for i in -1..=(NODE_VERTS as i64) {
+                    let (x, y) = (r.min[0] + i as f64 * s, r.min[1] + j as f64 * s);
+                    h.push(world.height_m(x, y) as f32);
+                    g.push(world.ground_type(x, y));
+                }
+            }
+        }
+    }
+    (h, g)
+}
+
+/// The depth each side's skirt must reach (see the module docs); `bounds` gives any node's
+/// bounds (a cache, or a shared store).
+pub fn skirt_bottoms(
+    tree: &QuadTree,
+    bounds: &mut dyn FnMut(NodeKey) -> NodeBounds,
+    key: NodeKey,
+    b: &NodeBounds,
+) -> [f64; 4] {
+    let mut out = [b.z_min_m; 4];
+    for (k, side) in Side::ALL.iter().enumerate() {
+        let mut worst = 0.0f64;
+        for level in 0..key.level {
+            if let Some(n) = tree.neighbour_across(key, *side, level)
+                && tree.overlaps_map(n)
+            {
+                worst = worst.max(bounds(n).error_m);
+            }
+        }
+        out[k] = b.z_min_m - worst;
+    }
+    out
+}
+
+/// Builds the mesh of `key`, taking its source tile (if any) from `tiles` for the duration.
+pub fn build_with_tiles(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    tiles: &mut crate::terrain::tiles::TileCache,
+    key: NodeKey,
+) -> NodeMesh {
+    let tile_key = source_tile(world, tree, key);
+    let tile = tile_key.map(|k| tiles.acquire(world, k));
+    let m = build(
+        world,
+        tree,
+        &mut |k| cache.get(world, tree, k),
+        key,
+        tile.as_deref(),
+    );
+    if let Some(k) = tile_key {
+        tiles.release(k);
+    }
+    m
+}
+
+/// Builds the mesh of `key`. `tile` must be [`source_tile`]'s tile when that is `Some`;
+/// `bounds` gives node bounds (this node's and its coarser neighbours', for skirt depths).
+pub fn build(
+    world: &World,
+    tree: &QuadTree,
+    bounds: &mut dyn FnMut(NodeKey) -> NodeBounds,
+    key: NodeKey,
+    tile: Option<&Tile>,
+) -> NodeMesh {
+    let own = bounds(key);
+    let skirt_bottom_m = skirt_bottoms(tree, bounds, key, &own);
+    let r = tree.rect(key);
+    let s = tree.spacing_m(key.level);
+    let (h, g) = sample_grid(world, tree, key, tile);
+    let w = NODE_VERTS + 2;
+    let at = |i: usize, j: usize| h[(j + 1) * w + i + 1];
+    let n = NODE_VERTS;
+    let mut positions = Vec::with_capacity(n * n + 4 * n);
+    let mut normals = Vec::with_capacity(n * n + 4 * n);
+    let mut ground = Vec::with_capacity(n * n + 4 * n);
+    for j in 0..n {
+        for i in 0..n {
+            positions.push([(i as f64 * s) as f32, (j as f64 * s) as f32, at(i, j)]);
+            let dzdx =
+                (f64::from(h[(j + 1) * w + i + 2]) - f64::from(h[(j + 1) * w + i])) / (2.0 * s);
+            let dzdy =
+                (f64::from(h[(j + 2) * w + i + 1]) - f64::from(h[j * w + i + 1])) / (2.0 * s);
+            let len = (dzdx * dzdx + dzdy * dzdy + 1.0).sqrt();
+            normals.push([
+                (-dzdx / len) as f32,
+                (-dzdy / len) as f32,
+                (1.0 / len) as f32,
+            ]);
+            ground.push(g[(j + 1) * w + i + 1]);
+        }
+    }
+    let mut indices = Vec::with_capacity(
+        NODE_QUADS as usize * NODE_QUADS as usize * 6 + 4 * NODE_QUADS as usize * 6,
+    );
+    let vid = |i: usize, j: usize| (j * n + i) as u32;
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let (a, b, c, d) = (vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1));
+            indices.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+    }
+    let surface_index_count = indices.len() as u32;
+    // Skirts: per side, a copy of the border vertices at the skirt bottom, joined by quads.
+    for (k, side) in Side::ALL.iter().enumerate() {
+        let border: Vec<u32> = (0..n)
+            .map(|t| match side {
+                Side::West => vid(0, t),
+                Side::East => vid(n - 1, t),
+                Side::South => vid(t, 0),
+                Side::North => vid(t, n - 1),
+            })
+            .collect();
+        let base = positions.len() as u32;
+        for &v in &border {
+            let p = positions[v as usize];
+            positions.push([p[0], p[1], skirt_bottom_m[k] as f32]);
+            normals.push(normals[v as usize]);
+            ground.push(ground[v as usize]);
+        }
+        // Outward-facing: on West/North the border runs so that (top t, top t+1, bottom) is
+        // counter-clockwise seen from outside.
+        let flip = matches!(side, Side::East | Side::South);
+        for t in 0..n - 1 {
+            let (top0, top1) = (border[t], border[t + 1]);
+            let (bot0, bot1) = (base + t as u32, base + t as u32 + 1);
+            if flip {
+                indices.extend_from_slice(&[top0, bot0, bot1, top0, bot1, top1]);
+            } else {
+                indices.extend_from_slice(&[top0, top1, bot1, top0, bot1, bot0]);
+            }
+        }
+    }
+    NodeMesh {
+        key,
+        origin_m: r.min,
+        positions,
+        normals,
+        ground,
+        indices,
+        surface_index_count,
+        bounds: own,
+        skirt_bottom_m,
+    }
+}

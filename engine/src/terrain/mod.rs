@@ -1,0 +1,19 @@
+//! Terrain: the quad tree, conservative node bounds, per-frame selection by the pixel metric,
+//! 16 m tiles of the finest surface, and crack-free skirted node meshes.
+//!
+//! - [`quadtree`]: node keys and geometry (root over the map, 8 m leaves, 32 x 32 quads a node).
+//! - [`bounds`]: proven, monotone per-node errors and height ranges.
+//! - [`select`]: split while the projected error exceeds tau; frustum culling.
+//! - [`tiles`]: 16 m tiles of the finest surface at 0.25 m, refcounted.
+//! - [`mesh`]: node meshes with skirts of proven depth.
+//! - [`content`]: terrain as a node-content kind of the streaming system.
+//! - `tin` (feature `measure`): an error-bounded TIN variant, a benchmark reference.
+
+pub mod bounds;
+pub mod content;
+pub mod mesh;
+pub mod quadtree;
+pub mod select;
+pub mod tiles;
+#[cfg(feature = "measure")]
+pub mod tin;

@@ -1,0 +1,170 @@
+//! Per-frame node selection: split a node while its projected error exceeds the pixel
+//! threshold; cull by the view frustum against node AABBs.
+//!
+//! `px = error_m * K / dist_m` with `K = viewport_height_px / (2 tan(fovy / 2))` and `dist_m`
+//! the distance from the camera to the nearest point of the node's AABB (so the projected error
+//! of every point of the node is at most `px`).
+
+use crate::camera::{Camera, distance_to_aabb};
+use crate::surface::world::World;
+use crate::terrain::bounds::{BoundsCache, NodeBounds};
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use glam::DVec3;
+
+/// The world-space box of a node.
+pub fn node_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> (DVec3, DVec3) {
+    let r = tree.rect(key);
+    (
+        DVec3::new(r.min[0], r.min[1], b.z_min_m),
+        DVec3::new(r.max[0], r.max[1], b.z_max_m),
+    )
+}
+
+/// One selected node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Selected {
+    pub key: NodeKey,
+    pub bounds: NodeBounds,
+    pub dist_m: f64,
+    /// Projected error bound in pixels at `dist_m`.
+    pub error_px: f64,
+}
+
+/// The result of one selection.
+#[derive(Debug, Clone, Default)]
+pub struct Selection {
+    pub nodes: Vec<Selected>,
+    pub visited: u32,
+    pub culled: u32,
+    /// Nodes reached whose bounds are not known yet (only when the bounds source may not know
+    /// them, as during streaming): kept as they are, not culled or descended into.
+    pub unknown_bounds: Vec<NodeKey>,
+    /// Selected nodes at the finest level whose error bound still exceeds the threshold (the
+    /// engine has no finer data there; reported, never hidden).
+    pub over_tau_at_finest: u32,
+}
+
+/// Selection settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SelectParams {
+    /// The user's detail level: largest projected error in pixels.
+    pub tau_px: f64,
+    /// Finest level to descend to (the tree's `max_level` normally; lower for debugging).
+    pub max_level: u8,
+    /// Frustum culling on (off: select everywhere, e.g. for shadow or debug).
+    pub cull: bool,
+}
+
+/// The traversal every selection shares: depth-first from the root, skipping nodes outside the
+/// map, culling by the frustum (when `cull`), and descending while `split(key, bounds, dist_m,
+/// error_px)` says so (never below the finest level). `bounds` gives each visited node's
+/// bounds; a node whose bounds are unknown (`None`) goes to `unknown_bounds`.
+pub fn traverse<B: Into<Option<NodeBounds>>>(
+    tree: &QuadTree,
+    cam: &Camera,
+    cull: bool,
+    mut bounds: impl FnMut(NodeKey) -> B,
+    mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
+) -> Selection {
+    let mut out = Selection::default();
+    let frustum = cam.frustum();
+    let k = cam.k_px();
+    let mut stack = vec![NodeKey::ROOT];
+    while let Some(key) = stack.pop() {
+        if !tree.overlaps_map(key) {
+            continue;
+        }
+        out.visited += 1;
+        let Some(b) = bounds(key).into() else {
+            out.unknown_bounds.push(key);
+            continue;
+        };
+        let (min, max) = node_aabb(tree, key, &b);
+        if cull && !frustum.intersects_aabb(min, max) {
+            out.culled += 1;
+            continue;
+        }
+        let dist = distance_to_aabb(cam.position_m, min, max);
+        let error_px = if dist > 0.0 {
+            b.selection_error_m() * k / dist
+        } else {
+            f64::INFINITY
+        };
+        if key.level < tree.max_level && split(key, &b, dist, error_px) {
+            // Children pushed in reverse so the output is in SW, SE, NW, NE order.
+            stack.extend(key.children().into_iter().rev());
+        } else {
+            out.nodes.push(Selected {
+                key,
+                bounds: b,
+                dist_m: dist,
+                error_px,
+            });
+        }
+    }
+    out
+}
+
+/// Selects the nodes to draw for `cam`: split while the projected error exceeds `tau_px`.
+pub fn select(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    cam: &Camera,
+    p: SelectParams,
+) -> Selection {
+    select_occluded(world, tree, cache, cam, p, None)
+}
+
+/// Like [`select`], and with a canopy splits less where vegetation blocks the view: a node's
+/// projected error is multiplied by [`crate::vegetation::Canopy::error_factor`] before the
+/// comparison with tau.
+pub fn select_occluded(
+    world: &World,
+    tree: &QuadTree,
+    cache: &mut BoundsCache,
+    cam: &Camera,
+    p: SelectParams,
+    canopy: Option<&crate::vegetation::Canopy>,
+) -> Selection {
+    let mut out = traverse(
+        tree,
+        cam,
+        p.cull,
+        |key| cache.get(world, tree, key),
+        |key, b, dist, px| {
+            px > p.tau_px
+                && key.level < p.max_level
+                && canopy.is_none_or(|c| {
+                    px * c.error_factor(world, cam.position_m, tree.rect(key), b.z_max_m, dist)
+                        > p.tau_px
+                })
+        },
+    );
+    out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frustum_keeps_boxes_in_front_and_drops_boxes_behind() {
+        let cam = Camera::look_at(DVec3::ZERO, DVec3::new(0.0, 100.0, 0.0), 1.0, [640, 480]);
+        let f = cam.frustum();
+        assert!(f.intersects_aabb(DVec3::new(-1.0, 50.0, -1.0), DVec3::new(1.0, 52.0, 1.0)));
+        assert!(!f.intersects_aabb(DVec3::new(-1.0, -52.0, -1.0), DVec3::new(1.0, -50.0, 1.0)));
+        assert!(!f.intersects_aabb(DVec3::new(200.0, 50.0, -1.0), DVec3::new(201.0, 52.0, 1.0)));
+        // A box around the camera always intersects.
+        assert!(f.intersects_aabb(DVec3::splat(-1.0), DVec3::splat(1.0)));
+        assert!((cam.k_px() - 480.0 / (2.0 * 0.5f64.tan())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn aabb_distance_is_zero_inside_and_euclidean_outside() {
+        let (lo, hi) = (DVec3::ZERO, DVec3::ONE);
+        assert_eq!(distance_to_aabb(DVec3::splat(0.5), lo, hi), 0.0);
+        assert!((distance_to_aabb(DVec3::new(4.0, 5.0, 0.5), lo, hi) - 5.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,429 @@
+//! Vegetation placement: the map's ranked Poisson-disc tile, scaled per species, thinned by the
+//! species' density layer, plus the map's explicit large trees.
+//!
+//! Each species repeats the unit tile with side `tile_side_m = min_distance_m * (1 + 2 J) /
+//! tile_min_distance` (J = [`JITTER_FRACTION`]) from a per-species offset, and moves every point by
+//! a deterministic jitter of at most `J * min_distance_m`; so any two items of one species are at
+//! least `min_distance_m` apart, across tile periods, 16 m tiles and node borders alike. A point
+//! of rank `k` (of `N`) is kept where `(k + 1/2) / N < scale * density(p) / tile_density`, with
+//! `tile_density = N / tile_side_m^2` (every point kept): the expected count over a region is the
+//! integral of `scale * density`, and a point kept at one scale is kept at every larger one
+//! (monotone thinning). Nothing is kept on a road or path decal (road weight > 0 at any of the
+//! decal lattice points around it), on water ground or below the water level.
+//!
+//! Every item is a pure function of the map and its world position: the result for a rectangle
+//! does not depend on what was placed before, nor on how the world is cut into rectangles.
+
+use crate::surface::world::{Rect, World};
+use worldgen::noise::{hash3, unit3};
+
+/// Largest jitter of a point, as a fraction of the species' minimum distance.
+pub const JITTER_FRACTION: f64 = 0.05;
+
+/// What an item is drawn as (the size classes of the representation ladder).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Kind {
+    GrassClump,
+    Bush,
+    SmallTree,
+    LargeTree,
+}
+
+/// One placed item.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Item {
+    /// Index into [`Placer::species`].
+    pub species: u16,
+    pub x_m: f64,
+    pub y_m: f64,
+    /// Ground height at the item (finest surface), metres.
+    pub z_m: f64,
+    pub height_m: f32,
+    pub radius_m: f32,
+    /// Rotation about z, radians.
+    pub yaw_rad: f32,
+}
+
+/// A species as placement sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Species {
+    pub name: String,
+    pub kind: Kind,
+    /// Index of the density layer in the map, `None` for large trees (explicit list).
+    pub layer: Option<usize>,
+    pub min_distance_m: f64,
+    pub max_density_per_m2: f64,
+    /// Side of one period of the Poisson tile for this species, metres.
+    pub tile_side_m: f64,
+    /// Items per m² with every tile point kept.
+    pub tile_density_per_m2: f64,
+    pub offset_m: [f64; 2],
+    /// Typical height (m) and crown radius (m); items vary by +-25%.
+    pub height_m: f64,
+    pub radius_m: f64,
+    seed: u64,
+}
+
+/// The tile's points bucketed into a grid of cells, each cell's points in rank order.
+#[derive(Debug, Clone)]
+struct TileIndex {
+    cells: usize,
+    /// Per cell: (rank, x, y) in the unit tile, ascending rank.
+    slots: Vec<Vec<(u32, [f64; 2])>>,
+    len: usize,
+}
+
+impl TileIndex {
+    fn new(points: &[[f64; 2]]) -> Self {
+        let cells = (((points.len() as f64) / 4.0).sqrt().ceil() as usize).clamp(1, 256);
+        let mut slots = vec![Vec::new(); cells * cells];
+        for (k, p) in points.iter().enumerate() {
+            let c = |v: f64| ((v * cells as f64) as usize).min(cells - 1);
+            slots[c(p[1]) * cells + c(p[0])].push((k as u32, *p));
+        }
+        Self {
+            cells,
+            slots,
+            len: points.len(),
+        }
+    }
+}
+
+/// Large trees bucketed by 64 m cells for rectangle queries.
+#[derive(Debug, Clone)]
+struct TreeIndex {
+    cell_m: f64,
+    origin_m: [f64; 2],
+    cols: usize,
+    rows: usize,
+    slots: Vec<Vec<u32>>,
+}
+
+/// Places vegetation for any rectangle of the world (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Placer {
+    pub species: Vec<Species>,
+    tile: TileIndex,
+    trees: TreeIndex,
+    /// Index of the first large-tree species in `species` (one per map tree species).
+    large_tree_base: usize,
+    water_type: Option<u8>,
+}
+
+/// Size class defaults by species name (height, crown radius, kind).
+fn looks(name: &str) -> (Kind, f64, f64) {
+    match name {
+        "grass_clump" => (Kind::GrassClump, 0.45, 0.25),
+        "bush" => (Kind::Bush, 1.4, 0.9),
+        "small_tree" => (Kind::SmallTree, 5.0, 1.6),
+        _ => (Kind::Bush, 1.2, 0.8),
+    }
+}
+
+impl Placer {
+    pub fn new(world: &World) -> Self {
+        let map = &world.map;
+        let tile = TileIndex::new(&map.poisson.points);
+        let tile_min = map.manifest.poisson.min_distance;
+        let n = tile.len as f64;
+        let mut species = Vec::new();
+        for (i, layer) in map.densities.iter().enumerate() {
+            let spec = &layer.spec;
+            let (kind, height_m, radius_m) = looks(&spec.species);
+            let side = spec.min_distance_m * (1.0 + 2.0 * JITTER_FRACTION) / tile_min;
+            let seed = hash3(0x7665_6765, i as i64, 0);
+            species.push(Species {
+                name: spec.species.clone(),
+                kind,
+                layer: Some(i),
+                min_distance_m: spec.min_distance_m,
+                max_density_per_m2: spec.max_density_per_m2,
+                tile_side_m: side,
+                tile_density_per_m2: n / (side * side),
+                offset_m: [unit3(seed, 1, 0) * side, unit3(seed, 1, 1) * side],
+                height_m,
+                radius_m,
+                seed,
+            });
+        }
+        let large_tree_base = species.len();
+        for name in &map.manifest.tree_species {
+            species.push(Species {
+                name: name.clone(),
+                kind: Kind::LargeTree,
+                layer: None,
+                min_distance_m: 0.0,
+                max_density_per_m2: 0.0,
+                tile_side_m: 0.0,
+                tile_density_per_m2: 0.0,
+                offset_m: [0.0; 2],
+                height_m: 20.0,
+                radius_m: 4.0,
+                seed: 0,
+            });
+        }
+        let water_type = map
+            .manifest
+            .ground
+            .legend
+            .iter()
+            .position(|g| g.name == "water")
+            .and_then(|i| u8::try_from(i).ok());
+        Self {
+            species,
+            tile,
+            trees: Self::index_trees(world),
+            large_tree_base,
+            water_type,
+        }
+    }
+
+    fn index_trees(world: &World) -> TreeIndex {
+        let cell_m = 64.0;
+        let o = world.origin_m();
+        let s = world.size_m();
+        let cols = ((s[0] / cell_m).ceil() as usize).max(1);
+        let rows = ((s[1] / cell_m).ceil() as usize).max(1);
+        let mut slots = vec![Vec::new(); cols * rows];
+        for (i, t) in world.map.trees.iter().enumerate() {
+            let cx = (((t.x_m - o[0]) / cell_m) as usize).min(cols - 1);
+            let cy = (((t.y_m - o[1]) / cell_m) as usize).min(rows - 1);
+            slots[cy * cols + cx].push(i as u32);
+        }
+        TreeIndex {
+            cell_m,
+            origin_m: o,
+            cols,
+            rows,
+            slots,
+        }
+    }
+
+    /// Density of species `s` at a point (items per m², bilinear in the layer, 0 outside the map).
+    pub fn density(&self, world: &World, s: usize, x_m: f64, y_m: f64) -> f64 {
+        let Some(layer) = self.species[s].layer else {
+            return 0.0;
+        };
+        let l = &world.map.densities[layer];
+        let o = world.origin_m();
+        let gx = (x_m - o[0]) / l.spec.spacing_m;
+        let gy = (y_m - o[1]) / l.spec.spacing_m;
+        let (w, h) = (l.density.width(), l.density.height());
+        if !(gx >= 0.0 && gy >= 0.0 && gx <= (w - 1) as f64 && gy <= (h - 1) as f64) {
+            return 0.0;
+        }
+        let (ix, iy) = ((gx as usize).min(w - 2), (gy as usize).min(h - 2));
+        let (fx, fy) = (gx - ix as f64, gy - iy as f64);
+        let v = |x: usize, y: usize| f64::from(l.density.get(x, y));
+        let top = v(ix, iy + 1) * (1.0 - fx) + v(ix + 1, iy + 1) * fx;
+        let bottom = v(ix, iy) * (1.0 - fx) + v(ix + 1, iy) * fx;
+        (bottom * (1.0 - fy) + top * fy) / 255.0 * l.spec.max_density_per_m2
+    }
+
+    /// Largest density of species `s` over a rectangle (the largest sample of the cells it
+    /// touches; bilinear interpolation never exceeds it).
+    fn density_max(&self, world: &World, s: usize, rect: Rect) -> f64 {
+        let Some(layer) = self.species[s].layer else {
+            return 0.0;
+        };
+        f64::from(layer_max(world, layer, rect)) / 255.0
+            * world.map.densities[layer].spec.max_density_per_m2
+    }
+
+    /// True where nothing may grow: on a road or path decal, on water ground, below the water
+    /// level, or outside the map.
+    pub fn excluded(&self, world: &World, x_m: f64, y_m: f64) -> bool {
+        let o = world.origin_m();
+        let s = world.size_m();
+        if !(x_m >= o[0] && y_m >= o[1] && x_m <= o[0] + s[0] && y_m <= o[1] + s[1]) {
+            return true;
+        }
+        if self.water_type == Some(world.ground_type(x_m, y_m))
+            || world.height_m(x_m, y_m) <= world.map.manifest.water_level_m
+        {
+            return true;
+        }
+        // The road weight is stored on a 0.5 m lattice: look at the lattice points around.
+        let d = crate::surface::decals::DECAL_SPACING_M;
+        [(0.0, 0.0), (d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)]
+            .iter()
+            .any(|&(dx, dy)| world.decals.road_weight(x_m + dx, y_m + dy) > 0.0)
+    }
+
+    /// Calls `f(rank, period_seed, x, y)` for every jittered tile point of species `s` in `rect`
+    /// (half-open) whose rank is below `k_end`.
+    fn visit(&self, s: usize, rect: Rect, k_end: u32, mut f: impl FnMut(u32, u64, f64, f64)) {
+        let sp = &self.species[s];
+        let t = sp.tile_side_m;
+        let jitter = JITTER_FRACTION * sp.min_distance_m;
+        // Unjittered positions that can land in the rectangle.
+        let (lo, hi) = (
+            [rect.min[0] - jitter, rect.min[1] - jitter],
+            [rect.max[0] + jitter, rect.max[1] + jitter],
+        );
+        let period_of = |v: f64, o: f64| ((v - o) / t).floor() as i64;
+        let cells = self.tile.cells;
+        // Tile cells overlapping [a, b] in the period starting at `base`.
+        let cell_range = |a: f64, b: f64, base: f64| {
+            let u0 = ((a - base) / t * cells as f64).floor().max(0.0) as usize;
+            let u1 = ((b - base) / t * cells as f64).floor();
+            (u1 >= 0.0).then(|| (u0, (u1 as usize).min(cells - 1)))
+        };
+        for py in period_of(lo[1], sp.offset_m[1])..=period_of(hi[1], sp.offset_m[1]) {
+            for px in period_of(lo[0], sp.offset_m[0])..=period_of(hi[0], sp.offset_m[0]) {
+                let base = [
+                    sp.offset_m[0] + px as f64 * t,
+                    sp.offset_m[1] + py as f64 * t,
+                ];
+                let (Some((cx0, cx1)), Some((cy0, cy1))) = (
+                    cell_range(lo[0], hi[0], base[0]),
+                    cell_range(lo[1], hi[1], base[1]),
+                ) else {
+                    continue;
+                };
+                let period = hash3(sp.seed, px, py);
+                for cy in cy0..=cy1 {
+                    for cx in cx0..=cx1 {
+                        for &(k, u) in &self.tile.slots[cy * cells + cx] {
+                            if k >= k_end {
+                                break;
+                            }
+                            let kk = i64::from(k);
+                            let angle = std::f64::consts::TAU * unit3(period, kk, 0);
+                            let radius = jitter * unit3(period, kk, 1).sqrt();
+                            let x = base[0] + u[0] * t + radius * angle.cos();
+                            let y = base[1] + u[1] * t + radius * angle.sin();
+                            if x >= rect.min[0]
+                                && x < rect.max[0]
+                                && y >= rect.min[1]
+                                && y < rect.max[1]
+                            {
+                                f(k, period, x, y);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Positions only: the jittered tile points of species `s` in `rect` with normalised rank
+    /// below `fraction` (a uniform density of `fraction * tile_density_per_m2`). The bare tile
+    /// lookup, without density maps, heights or exclusions (what `nodebench` compares with
+    /// Bridson sampling).
+    pub fn positions(&self, s: usize, rect: Rect, fraction: f64, out: &mut Vec<[f64; 2]>) {
+        let n = self.tile.len as f64;
+        let k_end = ((n * fraction).ceil().max(0.0) as u32).min(self.tile.len as u32);
+        self.visit(s, rect, k_end, |k, _, x, y| {
+            if (f64::from(k) + 0.5) / n < fraction {
+                out.push([x, y]);
+            }
+        });
+    }
+
+    /// Appends the items of species `s` whose position lies in `rect` (half-open:
+    /// `min <= p < max`), at density multiplied by `scale` (1 = the map's density).
+    pub fn place(&self, world: &World, s: usize, rect: Rect, scale: f64, out: &mut Vec<Item>) {
+        if s >= self.large_tree_base {
+            self.place_large_trees(world, s, rect, out);
+            return;
+        }
+        let sp = &self.species[s];
+        let dmax = self.density_max(world, s, rect) * scale;
+        if dmax <= 0.0 || self.tile.len == 0 {
+            return;
+        }
+        let n = self.tile.len as f64;
+        // Ranks at or beyond this cannot be kept anywhere in the rectangle.
+        let k_end = ((n * (dmax / sp.tile_density_per_m2)).ceil() as u32).min(self.tile.len as u32);
+        self.visit(s, rect, k_end, |k, period, x, y| {
+            let rank = (f64::from(k) + 0.5) / n;
+            let d = scale * self.density(world, s, x, y);
+            if rank >= d / sp.tile_density_per_m2 || self.excluded(world, x, y) {
+                return;
+            }
+            let kk = i64::from(k);
+            let size = 0.75 + 0.5 * unit3(period, kk, 2);
+            out.push(Item {
+                species: s as u16,
+                x_m: x,
+                y_m: y,
+                z_m: world.height_m(x, y),
+                height_m: (sp.height_m * size) as f32,
+                radius_m: (sp.radius_m * size) as f32,
+                yaw_rad: (std::f64::consts::TAU * unit3(period, kk, 3)) as f32,
+            });
+        });
+    }
+
+    fn place_large_trees(&self, world: &World, s: usize, rect: Rect, out: &mut Vec<Item>) {
+        let ti = &self.trees;
+        if ti.slots.is_empty() {
+            return;
+        }
+        let species = (s - self.large_tree_base) as u16;
+        let c =
+            |v: f64, o: f64, n: usize| (((v - o) / ti.cell_m).floor().max(0.0) as usize).min(n - 1);
+        for cy in c(rect.min[1], ti.origin_m[1], ti.rows)..=c(rect.max[1], ti.origin_m[1], ti.rows)
+        {
+            for cx in
+                c(rect.min[0], ti.origin_m[0], ti.cols)..=c(rect.max[0], ti.origin_m[0], ti.cols)
+            {
+                for &i in &ti.slots[cy * ti.cols + cx] {
+                    let t = &world.map.trees[i as usize];
+                    if t.species != species
+                        || !(t.x_m >= rect.min[0]
+                            && t.x_m < rect.max[0]
+                            && t.y_m >= rect.min[1]
+                            && t.y_m < rect.max[1])
+                        || self.excluded(world, t.x_m, t.y_m)
+                    {
+                        continue;
+                    }
+                    out.push(Item {
+                        species: s as u16,
+                        x_m: t.x_m,
+                        y_m: t.y_m,
+                        z_m: world.height_m(t.x_m, t.y_m),
+                        height_m: t.height_m,
+                        radius_m: t.crown_radius_m,
+                        yaw_rad: (std::f64::consts::TAU * unit3(17, i64::from(i), 0)) as f32,
+                    });
+                }
+            }
+        }
+    }
+
+    /// All items of every species in `rect` (density scale 1), species by species.
+    pub fn place_all(&self, world: &World, rect: Rect, out: &mut Vec<Item>) {
+        for s in 0..self.species.len() {
+            self.place(world, s, rect, 1.0, out);
+        }
+    }
+}
+
+/// Largest sample of density layer `layer` over the cells `rect` touches (bilinear
+/// interpolation never exceeds it).
+pub(super) fn layer_max(world: &World, layer: usize, rect: Rect) -> u8 {
+    let l = &world.map.densities[layer];
+    let o = world.origin_m();
+    let (w, h) = (l.density.width(), l.density.height());
+    let idx = |v: f64, o: f64, n: usize, f: fn(f64) -> f64| {
+        f((v - o) / l.spec.spacing_m).clamp(0.0, (n - 1) as f64) as usize
+    };
+    let (x0, x1) = (
+        idx(rect.min[0], o[0], w, f64::floor),
+        idx(rect.max[0], o[0], w, f64::ceil),
+    );
+    let (y0, y1) = (
+        idx(rect.min[1], o[1], h, f64::floor),
+        idx(rect.max[1], o[1], h, f64::ceil),
+    );
+    let mut m = 0u8;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            m = m.max(l.density.get(x, y));
+        }
+    }
+    m
+}

@@ -1,0 +1,222 @@
+//! The frame loop shared by the windowed and headless viewer and the GPU tests: streaming
+//! update, GPU phases (uploads through the registered node renderers), draw list, rendering.
+
+use crate::camera::Camera;
+use crate::render::frame::{DrawStats, ViewOptions};
+use crate::render::scene::{DrawnNode, FrameDraws, Scene};
+use crate::render::sky::{BoundsLines, SkyRenderer};
+use crate::render::{Gpu, GpuTimer};
+use crate::stream::{StreamSettings, Streamer};
+use crate::surface::World;
+use crate::terrain::quadtree::NodeKey;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Timings of one frame (ms) and what it drew.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FrameStats {
+    pub frame: u64,
+    pub t_s: f64,
+    /// Streaming update: selection, cancellation, requests, dispatch, fades.
+    pub update_ms: f64,
+    /// GPU phases (node buffer uploads) under their budget.
+    pub upload_ms: f64,
+    /// Building the draw list and recording the command buffer.
+    pub encode_ms: f64,
+    /// Waiting for the GPU to finish the frame (headless; windowed, the present waits).
+    pub gpu_wait_ms: f64,
+    /// GPU time of the terrain pass from timestamp queries (a recent frame's), when supported.
+    pub gpu_terrain_ms: Option<f64>,
+    /// Of `update_ms`: the selection of wanted nodes.
+    pub selection_ms: f64,
+    pub cpu_frame_ms: f64,
+    pub draw_calls: u32,
+    pub triangles: u64,
+    /// Vegetation instances drawn (meshes and billboards), their draw calls, mesh triangles.
+    pub plant_instances: u64,
+    pub plant_draw_calls: u32,
+    pub plant_triangles: u64,
+    /// Of the vegetation instances: group-billboard quads (one per cluster of items).
+    pub group_billboards: u64,
+    pub drawn_nodes: usize,
+    pub nodes_per_level: Vec<usize>,
+    pub jobs_queued: usize,
+    pub jobs_running: usize,
+    pub jobs_waiting_gpu: usize,
+    pub jobs_cancelled_total: u64,
+    pub tiles_bytes: usize,
+    pub node_buffers_bytes: usize,
+    pub cache_bytes: usize,
+    /// Wanted nodes not yet shown (a coarser ancestor stands in for them).
+    pub pop_debt_nodes: usize,
+}
+
+/// Streaming + rendering for one world: what one frame of the viewer does.
+pub struct Viewer {
+    pub streamer: Streamer,
+    pub scene: Scene,
+    pub view: ViewOptions,
+    /// Debug: when set, selection uses this camera while rendering follows the live one.
+    pub frozen: Option<Camera>,
+    timer: Option<GpuTimer>,
+    frame: u64,
+}
+
+impl std::fmt::Debug for Viewer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Viewer(frame {})", self.frame)
+    }
+}
+
+impl Viewer {
+    /// Streams `world` with every registered content kind and draws it with their renderers
+    /// (sky first, node-bounds lines last) into `color_format`.
+    pub fn new(
+        gpu: &Gpu,
+        color_format: wgpu::TextureFormat,
+        world: World,
+        settings: StreamSettings,
+    ) -> Self {
+        let registered = crate::kinds::registered(&world);
+        let kinds = registered.iter().map(|r| Arc::clone(&r.kind)).collect();
+        let streamer = Streamer::new(world, settings, kinds);
+        let mut scene = Scene::new(gpu, color_format);
+        scene.push(Box::new(SkyRenderer::new(gpu, &scene.frame)));
+        for r in &registered {
+            let renderer = (r.renderer)(gpu, &scene.frame, &streamer.shared);
+            scene.push(renderer);
+        }
+        scene.push(Box::new(BoundsLines::new(gpu, &scene.frame)));
+        Self {
+            streamer,
+            scene,
+            view: ViewOptions::default(),
+            frozen: None,
+            timer: GpuTimer::new(gpu),
+            frame: 0,
+        }
+    }
+
+    /// Runs the streaming update and GPU uploads, then records the frame into `encoder`.
+    /// Returns the frame's statistics (GPU wait not included).
+    pub fn frame(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        cam: &Camera,
+        dt_s: f64,
+    ) -> FrameStats {
+        let t0 = Instant::now();
+        let select_cam = self.frozen.unwrap_or(*cam);
+        self.streamer.update(&select_cam, dt_s);
+        let t1 = Instant::now();
+        let scene = &mut self.scene;
+        self.streamer.run_gpu_phases_with(&mut |shared, work| {
+            work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
+        });
+        let t2 = Instant::now();
+        let drawn: Vec<DrawnNode<'_>> = self
+            .streamer
+            .draw_list()
+            .iter()
+            .filter_map(|d| {
+                Some(DrawnNode {
+                    key: d.key,
+                    work: &self.streamer.resident(d.key)?.work,
+                    dither: [d.dither_lo, d.dither_hi],
+                })
+            })
+            .collect();
+        // Ancestors of drawn nodes draw what they keep through splits (they are resident: the
+        // draw list is walked down from the root through them).
+        let mut ancestor_keys: Vec<NodeKey> =
+            drawn.iter().flat_map(|d| d.key.ancestors()).collect();
+        ancestor_keys.sort_unstable();
+        ancestor_keys.dedup();
+        let ancestors: Vec<DrawnNode<'_>> = ancestor_keys
+            .iter()
+            .filter_map(|&key| {
+                Some(DrawnNode {
+                    key,
+                    work: &self.streamer.resident(key)?.work,
+                    dither: [0.0, 1.0],
+                })
+            })
+            .collect();
+        if let Some(t) = self.timer.as_mut() {
+            t.harvest(gpu);
+        }
+        let timed = self.timer.as_ref().is_some_and(|t| t.begin(encoder));
+        let frustum = cam.frustum();
+        let draws = FrameDraws {
+            camera: cam,
+            frustum: &frustum,
+            view: &self.view,
+            tree: self.streamer.tree(),
+            drawn: &drawn,
+            ancestors: &ancestors,
+        };
+        let stats: DrawStats = self.scene.render(gpu, encoder, color, depth, &draws);
+        if timed && let Some(t) = &self.timer {
+            t.end(encoder);
+        }
+        let mut per_level = vec![0usize; usize::from(self.streamer.tree().max_level) + 1];
+        for d in &drawn {
+            per_level[usize::from(d.key.level)] += 1;
+        }
+        let node_bytes: usize = drawn.iter().map(|d| d.work.uploaded_bytes).sum();
+        let t3 = Instant::now();
+        let st = &self.streamer.stats;
+        let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+        let drawn_set: rustc_hash::FxHashSet<NodeKey> = drawn.iter().map(|d| d.key).collect();
+        let wanted_missing = self
+            .streamer
+            .wanted()
+            .iter()
+            .filter(|k| !drawn_set.contains(k))
+            .count();
+        self.frame += 1;
+        FrameStats {
+            frame: self.frame,
+            t_s: 0.0,
+            update_ms: ms(t0, t1),
+            upload_ms: ms(t1, t2),
+            encode_ms: ms(t2, t3),
+            gpu_wait_ms: 0.0,
+            gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
+            selection_ms: st.last_selection_s * 1e3,
+            cpu_frame_ms: ms(t0, t3),
+            draw_calls: stats.draw_calls,
+            triangles: stats.triangles,
+            plant_instances: stats.plant_instances,
+            plant_draw_calls: stats.plant_draw_calls,
+            plant_triangles: stats.plant_triangles,
+            group_billboards: stats.group_billboards,
+            drawn_nodes: drawn.len(),
+            nodes_per_level: per_level,
+            jobs_queued: st.queued,
+            jobs_running: st.running,
+            jobs_waiting_gpu: st.waiting_gpu,
+            jobs_cancelled_total: st.cancelled_queued + st.cancelled_running + st.cancelled_gpu,
+            tiles_bytes: self.streamer.shared.tiles.lock().map_or(0, |t| t.bytes()),
+            node_buffers_bytes: node_bytes,
+            cache_bytes: st.resident_bytes,
+            pop_debt_nodes: wanted_missing,
+        }
+    }
+
+    /// Call after submitting the encoder given to [`Self::frame`] (starts the timestamp
+    /// readback).
+    pub fn after_submit(&self) {
+        if let Some(t) = &self.timer {
+            t.after_submit();
+        }
+    }
+
+    /// Keys of the nodes drawn last frame.
+    pub fn drawn_keys(&self) -> Vec<NodeKey> {
+        self.streamer.draw_list().iter().map(|d| d.key).collect()
+    }
+}

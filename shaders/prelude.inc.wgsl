@@ -1,0 +1,99 @@
+// Shared by every renderer's shader (assembled in front of it by `engine::render::shader`):
+// the frame and node bindings, the mesh vertex, dither cross-fades, fog and sun/sky shading.
+// `Frame`, `Node` and `VertexIn` mirror `engine::render::gpu_data`.
+
+struct Frame {
+    // Clip space from camera-relative world space (world axes, camera at the origin).
+    clip_from_rel: mat4x4<f32>,
+    // Inverse of `clip_from_rel` (for sky directions).
+    rel_from_clip: mat4x4<f32>,
+    // xyz: unit direction towards the sun; w: unused.
+    sun_dir: vec4<f32>,
+    // rgb: sun colour (linear); w: unused.
+    sun_color: vec4<f32>,
+    sky_zenith: vec4<f32>,
+    sky_horizon: vec4<f32>,
+    // x: fog density per metre, y: largest fog amount, z: debug mode, w: unused.
+    fog: vec4<f32>,
+};
+
+struct Node {
+    // xyz: node origin minus camera (m); w: dither interval start.
+    offset_lo: vec4<f32>,
+    // x: dither interval end, y: quad-tree level, z: 1 for skirts-as-surface debug, w: unused.
+    hi_level: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(1) @binding(0) var<uniform> node: Node;
+
+// A mesh vertex (terrain nodes and plant shapes): `tag` is the ground type of a terrain vertex
+// and the part (0 trunk, 1 foliage) of a plant-shape vertex.
+struct VertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tag: u32,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    // Colour looked up per vertex and interpolated, so ground-type borders blend.
+    @location(2) albedo: vec3<f32>,
+};
+
+// 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
+fn bayer8(p: vec2<u32>) -> f32 {
+    var v = 0u;
+    var x = p.x;
+    var y = p.y;
+    for (var bit = 0u; bit < 3u; bit = bit + 1u) {
+        let bx = x & 1u;
+        let by = y & 1u;
+        v = (v << 2u) | ((bx ^ by) << 1u) | by;
+        x = x >> 1u;
+        y = y >> 1u;
+    }
+    // The lowest coordinate bits end up as the most significant digit (classic Bayer order).
+    return (f32(v) + 0.5) / 64.0;
+}
+
+// Whether this node draws the pixel at `xy` (its dither interval holds the pixel's threshold).
+fn in_dither(xy: vec2<f32>) -> bool {
+    let t = bayer8(vec2<u32>(xy));
+    return t >= node.offset_lo.w && t < node.hi_level.x;
+}
+
+fn sky_color(dir: vec3<f32>) -> vec3<f32> {
+    let up = clamp(dir.z, 0.0, 1.0);
+    return mix(frame.sky_horizon.rgb, frame.sky_zenith.rgb, pow(up, 0.6));
+}
+
+// Distance fog towards the sky colour (depth cue, capped).
+fn fogged(color: vec3<f32>, rel: vec3<f32>) -> vec4<f32> {
+    let fog = min(1.0 - exp(-length(rel) * frame.fog.x), frame.fog.y);
+    return vec4<f32>(mix(color, sky_color(normalize(rel)), fog), 1.0);
+}
+
+fn level_color(level: f32) -> vec3<f32> {
+    let t = level * 0.61803;
+    return 0.5 + 0.45 * cos(6.28318 * (vec3<f32>(t) + vec3<f32>(0.0, 0.33, 0.67)));
+}
+
+// A lit, fogged, dithered surface pixel (terrain and plant meshes); debug mode 1 colours it by
+// the node's level.
+fn lit_pixel(in: VertexOut) -> vec4<f32> {
+    if (!in_dither(in.clip.xy)) {
+        discard;
+    }
+    let mode = u32(frame.fog.z + 0.5);
+    var albedo = in.albedo;
+    if (mode == 1u) {
+        albedo = level_color(node.hi_level.y);
+    }
+    let n = normalize(in.normal);
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
+    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
+    return fogged(albedo * (frame.sun_color.rgb * sun + ambient), in.rel);
+}

@@ -1,0 +1,183 @@
+// Vegetation: instanced plant meshes, billboards sampling the species atlas, and group
+// billboards (per-node impostors); the two bakes that make the atlas and the impostors.
+// `MAX_LOOKS`, `ATLAS_TILES`, `CLUSTERS_PER_SIDE` and `CLUSTER_COUNT` come from the renderer
+// (`engine::render::vegetation`), so Rust and WGSL share one definition.
+
+// Per-species looks: rgb foliage colour (linear), w: shape (0 conifer, 1 broadleaf,
+// 2 bush, 3 grass). Instances carry the position relative to the node's south-west corner (z
+// absolute), height, crown radius, yaw and look index.
+@group(2) @binding(2) var<uniform> plant_looks: array<vec4<f32>, MAX_LOOKS>;
+
+struct PlantInstanceIn {
+    @location(3) position: vec3<f32>,
+    @location(4) height: f32,
+    @location(5) radius: f32,
+    @location(6) yaw: f32,
+    @location(7) look: u32,
+};
+
+const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
+
+// Instanced unit-shape meshes (height 1, radius 1), scaled, turned and placed per instance.
+@vertex
+fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
+    let c = cos(inst.yaw);
+    let s = sin(inst.yaw);
+    let local = vec3<f32>(v.position.xy * inst.radius, v.position.z * inst.height);
+    let turned = vec3<f32>(c * local.x - s * local.y, s * local.x + c * local.y, local.z);
+    let n = vec3<f32>(v.normal.xy / inst.radius, v.normal.z / inst.height);
+    var out: VertexOut;
+    let rel = inst.position + turned + node.offset_lo.xyz;
+    out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.rel = rel;
+    out.normal = normalize(vec3<f32>(c * n.x - s * n.y, s * n.x + c * n.y, n.z));
+    let look = plant_looks[min(inst.look, MAX_LOOKS - 1u)];
+    out.albedo = select(look.rgb, TRUNK, v.tag == 0u);
+    return out;
+}
+
+struct BillboardOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel: vec3<f32>,
+    // x in [-1, 1] across, y in [0, 1] up.
+    @location(1) uv: vec2<f32>,
+    @location(2) @interpolate(flat) look: u32,
+};
+
+@fragment
+fn fs_plant(in: VertexOut) -> @location(0) vec4<f32> {
+    return lit_pixel(in);
+}
+
+// Billboard images: one tile per look (species), baked at start-up from the plant meshes
+// (`vs_bake` / `fs_bake`): linear colour lit from the front, alpha = coverage. The impostor
+// pipeline binds a node's impostor texture here instead.
+@group(2) @binding(0) var atlas: texture_2d<f32>;
+@group(2) @binding(1) var atlas_sampler: sampler;
+
+// Camera-facing (about the vertical axis) quads: 6 vertices per instance, no vertex buffer.
+@vertex
+fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> BillboardOut {
+    let corner = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    )[i % 6u];
+    let base = inst.position + node.offset_lo.xyz;
+    let flat_dir = vec2<f32>(base.x, base.y);
+    let len = max(length(flat_dir), 1e-3);
+    let right = vec3<f32>(-flat_dir.y / len, flat_dir.x / len, 0.0);
+    let rel = base + right * (corner.x * inst.radius) + vec3<f32>(0.0, 0.0, corner.y * inst.height);
+    var out: BillboardOut;
+    out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.rel = rel;
+    out.uv = corner;
+    out.look = min(inst.look, MAX_LOOKS - 1u);
+    return out;
+}
+
+@fragment
+fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
+    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / f32(ATLAS_TILES), 1.0 - in.uv.y);
+    return billboard_pixel(in, uv);
+}
+
+// A billboard or impostor pixel: dither test, atlas texel at `uv` with an alpha test, fog.
+fn billboard_pixel(in: BillboardOut, uv: vec2<f32>) -> vec4<f32> {
+    if (!in_dither(in.clip.xy)) {
+        discard;
+    }
+    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
+    if (texel.a < 0.5) {
+        discard;
+    }
+    return fogged(texel.rgb, in.rel);
+}
+
+// Baking the billboard images: the unit shape of look `inst.look` seen from the south (-y),
+// orthographic, x in [-1, 1] and z in [0, 1] filling the tile (the viewport picks the tile).
+struct BakeOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    @location(1) albedo: vec3<f32>,
+};
+
+@vertex
+fn vs_bake(v: VertexIn, inst: PlantInstanceIn) -> BakeOut {
+    var out: BakeOut;
+    // Depth: nearer to the viewer (smaller y) is larger, as in the reversed-Z main pass.
+    out.clip = vec4<f32>(v.position.x, v.position.z * 2.0 - 1.0, 0.5 - 0.5 * v.position.y, 1.0);
+    out.normal = v.normal;
+    let look = plant_looks[min(inst.look, MAX_LOOKS - 1u)];
+    out.albedo = select(look.rgb, TRUNK, v.tag == 0u);
+    return out;
+}
+
+@fragment
+fn fs_bake(in: BakeOut) -> @location(0) vec4<f32> {
+    let n = normalize(in.normal);
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
+    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
+    return vec4<f32>(in.albedo * (frame.sun_color.rgb * sun + ambient), 1.0);
+}
+
+// Group billboards: per node, the group members of each cluster (an 8 x 8 grid over the node)
+// are baked into one tile of the node's 8 x 8 impostor texture, seen from the south; the
+// clusters are then drawn as camera-facing quads sampling their tile.
+struct Cluster {
+    // x, y: centre relative to the node's south-west corner; z: bottom (absolute); w: half width.
+    centre_bottom_half: vec4<f32>,
+    // x: height; yzw: unused.
+    height: vec4<f32>,
+};
+@group(1) @binding(1) var<uniform> clusters: array<Cluster, CLUSTER_COUNT>;
+
+struct GroupBakeOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) @interpolate(flat) look: u32,
+};
+
+// One member billboard (species `look`, cluster index in `cluster`) into its cluster's tile.
+@vertex
+fn vs_group_bake(
+    @builtin(vertex_index) i: u32,
+    inst: PlantInstanceIn,
+    @location(8) cluster: u32,
+) -> GroupBakeOut {
+    let corner = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    )[i % 6u];
+    let c = clusters[min(cluster, CLUSTER_COUNT - 1u)];
+    let cb = c.centre_bottom_half;
+    let u = (inst.position.x + corner.x * inst.radius - cb.x) / cb.w;
+    let h = (inst.position.z + corner.y * inst.height - cb.z) / max(c.height.x, 1e-3);
+    let n = f32(CLUSTERS_PER_SIDE);
+    let tile = vec2<f32>(f32(cluster % CLUSTERS_PER_SIDE), f32(cluster / CLUSTERS_PER_SIDE));
+    let x = ((tile.x + 0.5 + 0.5 * u) / n) * 2.0 - 1.0;
+    let y = 1.0 - ((tile.y + 1.0 - h) / n) * 2.0;
+    let depth = 0.5 - 0.5 * clamp((inst.position.y - cb.y) / cb.w, -1.0, 1.0);
+    var out: GroupBakeOut;
+    out.clip = vec4<f32>(x, y, depth, 1.0);
+    out.uv = corner;
+    out.look = min(inst.look, MAX_LOOKS - 1u);
+    return out;
+}
+
+@fragment
+fn fs_group_bake(in: GroupBakeOut) -> @location(0) vec4<f32> {
+    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / f32(ATLAS_TILES), 1.0 - in.uv.y);
+    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
+    if (texel.a < 0.5) {
+        discard;
+    }
+    return vec4<f32>(texel.rgb, 1.0);
+}
+
+// Drawing the clusters: `look` holds the cluster's tile index.
+@fragment
+fn fs_impostor(in: BillboardOut) -> @location(0) vec4<f32> {
+    let tile = vec2<f32>(f32(in.look % CLUSTERS_PER_SIDE), f32(in.look / CLUSTERS_PER_SIDE));
+    let uv = (tile + vec2<f32>(0.5 + 0.5 * in.uv.x, 1.0 - in.uv.y)) / f32(CLUSTERS_PER_SIDE);
+    return billboard_pixel(in, uv);
+}

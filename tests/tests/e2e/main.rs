@@ -1,0 +1,10 @@
+//! The end-to-end tests (worldgen -> map folder -> engine -> pixels), one module per area, in
+//! one test binary (one link of the engine and wgpu instead of seven).
+
+mod dem_import;
+mod map_format;
+mod render;
+mod streaming;
+mod terrain;
+mod vegetation;
+mod viewer_xvfb;

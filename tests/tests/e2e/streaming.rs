@@ -1,0 +1,363 @@
+//! Streaming: determinism across worker counts and request orders, cancellation under a burst
+//! of teleports, late results discarded, and a draw list that always covers the map exactly
+//! once per pixel (complementary cross-fades, nothing missing).
+
+use engine::camera::Camera;
+use engine::kinds::content_kinds;
+use engine::stream::{NodeWork, Phase, PhaseKind, Shared, StreamSettings, Streamer, node_phases};
+use engine::terrain::bounds::BoundsCache;
+use engine::terrain::mesh::NodeMesh;
+use engine::terrain::quadtree::NodeKey;
+use engine::terrain::tiles::TileCache;
+use glam::DVec3;
+use std::collections::HashMap;
+use std::sync::{Arc, Condvar, Mutex};
+use tests::terrain::{build_mesh, tiny_world, tree_of};
+use worldgen::noise::unit3;
+
+/// A streamer of the tiny map with every registered content kind.
+fn streamer(settings: StreamSettings) -> Streamer {
+    let world = tiny_world();
+    let kinds = content_kinds(&world);
+    Streamer::new(world, settings, kinds)
+}
+
+fn settings(workers: usize) -> StreamSettings {
+    StreamSettings {
+        workers,
+        max_in_flight: workers * 2 + 1,
+        fade_s: 0.1,
+        tau_px: 0.5,
+        ..StreamSettings::default()
+    }
+}
+
+/// A camera `above` metres over the tiny map's ground at (x, y), looking along `yaw` and down.
+fn cam_at(x: f64, y: f64, above: f64, yaw: f64) -> Camera {
+    thread_local! {
+        static WORLD: engine::surface::world::World = tiny_world();
+    }
+    let ground = WORLD.with(|w| w.height_m(x, y));
+    let p = DVec3::new(x, y, ground + above);
+    let dir = DVec3::new(yaw.cos() * 0.8, yaw.sin() * 0.8, -0.6);
+    Camera::look_at(p, p + dir, 60f64.to_radians(), [640, 360])
+}
+
+fn flight(i: usize) -> Camera {
+    let t = i as f64 / 40.0;
+    cam_at(60.0 + 390.0 * t, 80.0 + 300.0 * t, 40.0 - 25.0 * t, 0.6 + t)
+}
+
+/// Checks that at `n` points of the map the drawn nodes' dither intervals tile [0, 1).
+fn assert_draw_list_partitions(s: &Streamer, seed: u64, n: i64) {
+    let tree = *s.tree();
+    let list = s.draw_list();
+    assert!(!list.is_empty());
+    for i in 0..n {
+        let x = tree.origin_m[0] + tree.map_size_m[0] * unit3(seed, i, 0);
+        let y = tree.origin_m[1] + tree.map_size_m[1] * unit3(seed, i, 1);
+        let mut iv: Vec<(f32, f32)> = list
+            .iter()
+            .filter(|d| {
+                let r = tree.rect(d.key);
+                x >= r.min[0] && x < r.max[0] && y >= r.min[1] && y < r.max[1]
+            })
+            .map(|d| (d.dither_lo, d.dither_hi))
+            .collect();
+        iv.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert!(!iv.is_empty(), "point ({x}, {y}) is drawn by no node");
+        assert_eq!(
+            iv[0].0, 0.0,
+            "point ({x}, {y}): coverage starts at {}",
+            iv[0].0
+        );
+        for w in iv.windows(2) {
+            assert!(
+                (w[0].1 - w[1].0).abs() < 1e-6,
+                "point ({x}, {y}): intervals {iv:?} overlap or leave a gap"
+            );
+        }
+        assert!(
+            (iv[iv.len() - 1].1 - 1.0).abs() < 1e-6,
+            "point ({x}, {y}): coverage ends at {iv:?}"
+        );
+    }
+}
+
+fn hashes(s: &Streamer) -> HashMap<NodeKey, u64> {
+    s.resident_keys()
+        .into_iter()
+        .filter_map(|k| {
+            s.resident(k)
+                .and_then(|r| r.work.get::<NodeMesh>())
+                .map(|m| (k, m.content_hash()))
+        })
+        .collect()
+}
+
+#[test]
+fn node_contents_do_not_depend_on_worker_count_or_request_order() {
+    let mut results = Vec::new();
+    for workers in [1, 4] {
+        let mut s = streamer(settings(workers));
+        for i in 0..40 {
+            s.update(&flight(i), 1.0 / 60.0);
+            s.run_gpu_phases();
+        }
+        assert!(
+            s.settle(&flight(40), 120.0),
+            "{workers} workers did not settle"
+        );
+        results.push(hashes(&s));
+    }
+    let common: Vec<NodeKey> = results[0]
+        .keys()
+        .filter(|k| results[1].contains_key(k))
+        .copied()
+        .collect();
+    assert!(common.len() > 30, "only {} nodes in common", common.len());
+    for k in &common {
+        assert_eq!(
+            results[0][k], results[1][k],
+            "{k:?} differs between 1 and 4 workers"
+        );
+    }
+    // Direct builds in a shuffled order give the same bytes.
+    let world = tiny_world();
+    let tree = tree_of(&world);
+    let mut order = common.clone();
+    order.sort_by_key(|k| {
+        worldgen::noise::hash3(
+            99,
+            i64::from(k.ix) * 64 + i64::from(k.iy),
+            i64::from(k.level),
+        )
+    });
+    let mut cache = BoundsCache::new();
+    let mut tiles = TileCache::new();
+    for k in order {
+        assert_eq!(
+            build_mesh(&world, &tree, &mut cache, &mut tiles, k).content_hash(),
+            results[0][&k],
+            "{k:?}"
+        );
+    }
+}
+
+#[test]
+fn a_burst_of_teleports_settles_with_nothing_leaked() {
+    let budget = 24 << 20;
+    let mut s = streamer(StreamSettings {
+        cache_budget_bytes: budget,
+        ..settings(3)
+    });
+    // Start from a settled view, so the burst has a known tree to request and cancel from.
+    assert!(s.settle(&cam_at(256.0, 256.0, 20.0, 0.0), 120.0));
+    for i in 0..10_000i64 {
+        let cam = if i % 500 < 250 {
+            // Random teleports.
+            cam_at(
+                512.0 * unit3(1, i, 0),
+                512.0 * unit3(1, i, 1),
+                5.0 + 300.0 * unit3(1, i, 2),
+                6.3 * unit3(1, i, 3),
+            )
+        } else {
+            // A fast flight (about 2 km/s) back and forth.
+            let t = (i % 250) as f64 / 250.0;
+            cam_at(
+                20.0 + 470.0 * t,
+                256.0 + 200.0 * (t * 12.0).sin(),
+                15.0,
+                0.3,
+            )
+        };
+        s.update(&cam, 1.0 / 60.0);
+        if i % 3 == 0 {
+            s.run_gpu_phases();
+        }
+        if i % 97 == 0 && s.is_ready(NodeKey::ROOT) {
+            assert_draw_list_partitions(&s, i as u64, 50);
+        }
+    }
+    let stats = s.stats.clone();
+    assert!(
+        stats.cancelled_queued + stats.cancelled_running + stats.cancelled_gpu > 100,
+        "{stats:?}"
+    );
+    // A slower tour fills the cache past its budget.
+    for k in 0..6 {
+        let c = cam_at(
+            60.0 + 80.0 * f64::from(k),
+            450.0 - 70.0 * f64::from(k),
+            6.0,
+            0.4 * f64::from(k),
+        );
+        assert!(s.settle(&c, 120.0), "tour stop {k} did not settle");
+    }
+    let last = cam_at(250.0, 250.0, 30.0, 1.0);
+    assert!(
+        s.settle(&last, 120.0),
+        "did not settle after the burst: {:?}",
+        s.stats
+    );
+    for k in s.wanted() {
+        assert!(
+            s.is_ready(*k),
+            "wanted {k:?} is not resident after settling"
+        );
+    }
+    assert_eq!(s.in_flight(), 0);
+    // Every cancelled running job reported back: stopped at a phase boundary or discarded late.
+    assert_eq!(s.cancelled_outstanding(), 0);
+    assert_eq!(
+        s.stats.cancelled_running,
+        s.stats.cancels_acknowledged + s.stats.late_results_discarded
+    );
+    assert_eq!(
+        s.tiles_resident(),
+        0,
+        "tiles still held after every job ended"
+    );
+    // Within budget, except for nodes that cannot go (needed, drawn, fading).
+    assert!(
+        s.stats.pinned_bytes <= budget,
+        "this view alone needs {} bytes; pick a larger budget",
+        s.stats.pinned_bytes
+    );
+    assert!(
+        s.stats.resident_bytes <= budget,
+        "resident {} bytes over the budget {budget}",
+        s.stats.resident_bytes
+    );
+    assert!(
+        s.stats.evicted > 0,
+        "the budget never forced an eviction: {:?}",
+        s.stats
+    );
+    assert_draw_list_partitions(&s, 7, 400);
+}
+
+/// A gate the test opens and closes: a phase that waits while it is closed, and counts the
+/// jobs that reached it.
+#[derive(Default)]
+struct Gate {
+    state: Mutex<(bool, usize)>,
+    changed: Condvar,
+}
+
+impl Gate {
+    fn set_open(&self, open: bool) {
+        self.state.lock().expect("gate lock").0 = open;
+        self.changed.notify_all();
+    }
+
+    /// The phase: counts the arrival, then waits until the gate is open.
+    fn pass(&self) {
+        let mut st = self.state.lock().expect("gate lock");
+        st.1 += 1;
+        self.changed.notify_all();
+        while !st.0 {
+            st = self.changed.wait(st).expect("gate lock");
+        }
+    }
+
+    /// Waits (event-driven, no sleeps) until `n` jobs in total have reached the gate.
+    fn wait_for_arrivals(&self, n: usize) {
+        let st = self.state.lock().expect("gate lock");
+        let (st, timeout) = self
+            .changed
+            .wait_timeout_while(st, std::time::Duration::from_mins(2), |st| st.1 < n)
+            .expect("gate lock");
+        assert!(!timeout.timed_out(), "only {} jobs reached the gate", st.1);
+    }
+}
+
+/// A job held in its last CPU phase while it is cancelled still delivers its result, late; the
+/// result is discarded. The test holds jobs in a gate phase (inserted before the GPU phase)
+/// until they are cancelled, so the order of events is fixed, not raced with sleeps.
+#[test]
+fn late_results_of_cancelled_jobs_are_discarded() {
+    let world = tiny_world();
+    let kinds = content_kinds(&world);
+    let mut phases = node_phases(&kinds);
+    let upload = phases.pop().expect("the GPU phase");
+    assert_eq!(upload.kind, PhaseKind::Gpu);
+    let gate = Arc::new(Gate::default());
+    gate.set_open(true);
+    let g = Arc::clone(&gate);
+    phases.push(Phase::cpu("gate", move |_: &Shared, _: &mut NodeWork| {
+        g.pass();
+    }));
+    phases.push(upload);
+    let mut s = Streamer::with_phases(world, settings(2), kinds, phases);
+    let a = cam_at(100.0, 100.0, 20.0, 0.5);
+    let b = cam_at(450.0, 450.0, 20.0, 3.5);
+    assert!(s.settle(&a, 120.0));
+    let mut arrived = gate.state.lock().expect("gate lock").1;
+    for _ in 0..3 {
+        // Start B's jobs and hold them in the gate, turn back to A (B's jobs are cancelled while
+        // held), then let them finish.
+        gate.set_open(false);
+        s.update(&b, 1.0 / 60.0);
+        arrived += 1;
+        gate.wait_for_arrivals(arrived);
+        s.update(&a, 1.0 / 60.0);
+        assert!(s.stats.cancelled_running > 0, "no held job was cancelled");
+        gate.set_open(true);
+        assert!(s.settle(&a, 120.0));
+        arrived = gate.state.lock().expect("gate lock").1;
+    }
+    assert!(s.settle(&a, 120.0));
+    assert!(
+        s.stats.late_results_discarded > 0,
+        "no late result was produced: {:?}",
+        s.stats
+    );
+    // Nothing drawn is stale: every drawn node is resident and matches a fresh build.
+    let world = tiny_world();
+    let tree = tree_of(&world);
+    let mut cache = BoundsCache::new();
+    let mut tiles = TileCache::new();
+    for d in s.draw_list() {
+        let r = s.resident(d.key).expect("drawn nodes are resident");
+        let m = r.work.get::<NodeMesh>().expect("terrain");
+        assert_eq!(
+            m.content_hash(),
+            build_mesh(&world, &tree, &mut cache, &mut tiles, d.key).content_hash()
+        );
+    }
+}
+
+#[test]
+fn the_screen_is_covered_exactly_once_in_every_frame_of_a_flight() {
+    let mut s = streamer(settings(2));
+    let mut checked = 0;
+    let mut saw_fade = false;
+    for i in 0..300usize {
+        let t = i as f64 / 300.0;
+        let cam = cam_at(
+            40.0 + 430.0 * t,
+            60.0 + 380.0 * t,
+            60.0 * (1.0 - t) + 8.0,
+            0.7,
+        );
+        s.update(&cam, 1.0 / 60.0);
+        s.run_gpu_phases();
+        if s.is_ready(NodeKey::ROOT) {
+            assert_draw_list_partitions(&s, i as u64, 60);
+            // At rest every drawn interval is [0, 1); a shorter one means a fade in progress.
+            saw_fade |= s
+                .draw_list()
+                .iter()
+                .any(|d| d.dither_hi - d.dither_lo < 1.0);
+            checked += 1;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    assert!(
+        checked > 200,
+        "root ready too late: {checked} frames checked"
+    );
+    assert!(saw_fade, "no cross-fade was ever in progress");
+}
