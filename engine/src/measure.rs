@@ -6,28 +6,36 @@ use crate::camera::Camera;
 use crate::surface::world::World;
 use crate::terrain::bounds::BoundsCache;
 use crate::terrain::mesh::NodeMesh;
+use crate::terrain::mesh_surface::MeshSurface;
 use crate::terrain::quadtree::{NODE_QUADS, QuadTree};
 use crate::terrain::select::{Selection, traverse};
 use glam::DVec3;
 
-/// The true largest |mesh - surface| of a node on a lattice of `per_quad` points per mesh quad
-/// (offset by half a step so it does not coincide with vertices or the check lattice), and the
-/// largest distance of the surface outside the node's height range (<= 0 when inside).
+/// Where inner samples sit inside their lattice step: not on a vertex (0), not on the check
+/// lattice (multiples of 1 / CHECK_SUBDIV of a quad, whatever the samples per quad: the
+/// fraction is not a multiple of 1/8 or of any 1/n with small n).
+pub const SAMPLE_OFFSET: f64 = 0.382;
+
+/// The true largest |mesh - surface| of a node (the mesh sampled through its own triangles) on
+/// a lattice of `per_quad` points per mesh quad, inner samples offset by [`SAMPLE_OFFSET`] of a
+/// step so they avoid vertices and the bounds' check lattice, and the largest distance of the
+/// surface outside the node's height range (<= 0 when inside).
 pub fn true_node_error(world: &World, tree: &QuadTree, m: &NodeMesh, per_quad: u32) -> (f64, f64) {
     let r = tree.rect(m.key);
     let n = (NODE_QUADS * per_quad) as usize;
     let step = (r.max[0] - r.min[0]) / n as f64;
     let (mut err, mut outside) = (0.0f64, f64::NEG_INFINITY);
+    let surface = MeshSurface::new(m, tree);
     for j in 0..=n {
         for i in 0..=n {
-            // Border samples stay on the border; inner ones are offset by half a step.
-            let off = |k: usize| if k == 0 || k == n { 0.0 } else { 0.5 };
+            // Border samples stay on the border; inner ones are offset.
+            let off = |k: usize| if k == 0 || k == n { 0.0 } else { SAMPLE_OFFSET };
             let (x, y) = (
                 r.min[0] + (i as f64 + off(i)).min(n as f64) * step,
                 r.min[1] + (j as f64 + off(j)).min(n as f64) * step,
             );
             let f = world.height_m(x, y);
-            err = err.max((m.height_at(tree, x, y) - f).abs());
+            err = err.max((surface.height_at(x, y) - f).abs());
             outside = outside.max(m.bounds.z_min_m - f).max(f - m.bounds.z_max_m);
         }
     }
@@ -35,7 +43,8 @@ pub fn true_node_error(world: &World, tree: &QuadTree, m: &NodeMesh, per_quad: u
 }
 
 /// On-screen error of a view: for points on a lattice of `per_side` x `per_side` in every drawn
-/// node that lie in front of the camera, `|mesh - surface| * K / distance`.
+/// node that lie in front of the camera, `|mesh - surface| * K / distance`, the mesh sampled
+/// through its own triangles (grid or TIN).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ViewError {
     pub max_px: f64,
@@ -56,6 +65,7 @@ pub fn view_error(
     for m in meshes {
         let r = tree.rect(m.key);
         let step = (r.max[0] - r.min[0]) / f64::from(per_side);
+        let surface = MeshSurface::new(m, tree);
         for j in 0..per_side {
             for i in 0..per_side {
                 let (x, y) = (
@@ -68,7 +78,7 @@ pub fn view_error(
                 if !frustum.intersects_aabb(p, p) {
                     continue;
                 }
-                let px = (m.height_at(tree, x, y) - f).abs() * k
+                let px = (surface.height_at(x, y) - f).abs() * k
                     / (p - cam.position_m).length().max(1e-9);
                 max_px = max_px.max(px);
                 sum += px;
@@ -128,4 +138,26 @@ pub fn default_flight(world: &World, frames: usize, viewport_px: [u32; 2]) -> Ve
             Camera::look_at(pos, pos + dir, 60f64.to_radians(), viewport_px)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SAMPLE_OFFSET;
+    use crate::terrain::bounds::CHECK_SUBDIV;
+
+    /// Inner samples of `true_node_error` never land on a check-lattice point, for any number
+    /// of samples per quad up to 64 (the old half-step offset did at 2 per quad: 0.25, 0.75).
+    #[test]
+    fn samples_avoid_the_check_lattice() {
+        for per_quad in 1..=64u32 {
+            for i in 0..per_quad {
+                let in_quads = (f64::from(i) + SAMPLE_OFFSET) / f64::from(per_quad);
+                let on_check = in_quads * f64::from(CHECK_SUBDIV);
+                assert!(
+                    (on_check - on_check.round()).abs() > 1e-6,
+                    "{per_quad} per quad: sample {i} is on the check lattice"
+                );
+            }
+        }
+    }
 }

@@ -20,6 +20,34 @@ pub fn in_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
 }
 
+/// Where skipped tests write their reason (one line each); `tests/run.sh` prints the file in
+/// its summary, since the test runner hides a passing test's output.
+pub fn skips_file() -> PathBuf {
+    std::env::var_os("TESTS_SKIPS_FILE").map_or_else(
+        || workspace_root().join("target").join("test-skips.txt"),
+        PathBuf::from,
+    )
+}
+
+/// Records that the calling test skipped its checks, and why (printed and appended to
+/// [`skips_file`]). Callers fail instead of skipping in CI.
+pub fn skip(test: &str, why: &str) {
+    use std::io::Write as _;
+    println!("skipping {test}: {why}");
+    let line = format!("{test}: {why}\n");
+    let appended = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(skips_file())
+        .and_then(|mut f| f.write_all(line.as_bytes()));
+    if let Err(e) = appended {
+        println!(
+            "(could not record the skip in {}: {e})",
+            skips_file().display()
+        );
+    }
+}
+
 /// Path of a file in `../shared/data`, or None (with a printed reason) when the folder is
 /// absent outside CI. In CI the shared folder is always present, so its absence fails the test.
 pub fn shared_data(rel: &str) -> Option<PathBuf> {
@@ -32,9 +60,9 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
         "{} is missing, but CI always has ../shared",
         p.display()
     );
-    println!(
-        "skipping: {} not found (../shared is absent outside CI)",
-        p.display()
+    skip(
+        "shared data",
+        &format!("{} not found (../shared is absent outside CI)", p.display()),
     );
     None
 }
@@ -165,6 +193,14 @@ pub mod terrain {
                 p[1] += dy;
             }
         }
+        for t in &mut map.trees {
+            t.x_m += dx;
+            t.y_m += dy;
+        }
+        for b in &mut map.buildings {
+            b.x_m += dx;
+            b.y_m += dy;
+        }
         World::new(map)
     }
 
@@ -254,7 +290,7 @@ pub mod gpu {
                     !super::in_ci(),
                     "CI must have a GPU adapter (lavapipe): {e}"
                 );
-                println!("skipping GPU test: {e}");
+                super::skip("GPU test", &e.to_string());
                 None
             }
         }

@@ -78,6 +78,11 @@ pub enum DemError {
         "{path}: cannot tell the latitude from the file name (expected e.g. N57E011.hgt); pass --latitude-deg"
     )]
     HgtLatitude { path: PathBuf },
+    #[error(
+        "{path}: latitude {latitude_deg} degrees is out of range; --latitude-deg must be a finite \
+         number between -85 and 85 (metres per degree of longitude vanish at the poles)"
+    )]
+    Latitude { path: PathBuf, latitude_deg: f64 },
     #[error("{path}: {what} needs --spacing-m (the distance between samples in metres)")]
     NeedSpacing { path: PathBuf, what: &'static str },
     #[error("{path}: {message}")]
@@ -151,6 +156,12 @@ fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
         .latitude_deg
         .or_else(|| hgt_latitude(path))
         .ok_or_else(|| DemError::HgtLatitude { path: path.clone() })?;
+    if !(lat.is_finite() && lat.abs() <= 85.0) {
+        return Err(DemError::Latitude {
+            path: path.clone(),
+            latitude_deg: lat,
+        });
+    }
     let bytes = std::fs::read(path).map_err(|e| DemError::Io {
         path: path.clone(),
         source: e,

@@ -231,7 +231,23 @@ mod tests {
         let fb = hydraulic(&mut b, 9, &p, &Silent);
         assert_eq!(a, b);
         assert_eq!(fa, fb);
-        assert_ne!(a, orig);
         assert!(a.data().iter().all(|v| v.is_finite()));
+        // It carves: many cells are lowered, some by a real amount, and sediment is deposited.
+        let diffs: Vec<f32> = a
+            .data()
+            .iter()
+            .zip(orig.data())
+            .map(|(n, o)| n - o)
+            .collect();
+        let lowered = diffs.iter().filter(|&&d| d < -1e-3).count();
+        let deepest = diffs.iter().copied().fold(0.0f32, f32::min);
+        let raised = diffs.iter().filter(|&&d| d > 1e-4).count();
+        assert!(
+            lowered * 100 >= diffs.len(),
+            "only {lowered} of {} cells lowered",
+            diffs.len()
+        );
+        assert!(deepest < -0.05, "deepest cut only {deepest} m");
+        assert!(raised > 0, "no sediment deposited");
     }
 }

@@ -86,6 +86,26 @@ impl TorusGrid {
     }
 }
 
+/// The first pair (in rank order) of points closer than `r` on the torus, with their distance;
+/// None when every pair is at least `r` apart. Linear time for any input: points are added in
+/// order to a grid of cells no smaller than `r` and each is checked against its neighbours, so
+/// the search stops at the first violation (a valid set has a few points per cell at most).
+pub fn closer_pair(points: &[[f64; 2]], r: f64) -> Option<(usize, usize, f64)> {
+    let mut grid = TorusGrid::new(r);
+    for (i, &p) in points.iter().enumerate() {
+        if grid.any_within(&points[..i], p, r) {
+            let (j, d) = points[..i]
+                .iter()
+                .enumerate()
+                .map(|(j, &q)| (j, torus_distance(p, q)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))?;
+            return Some((j, i, d));
+        }
+        grid.insert(p, i as u32);
+    }
+    None
+}
+
 impl PoissonTile {
     /// Generates a ranked tile whose points are at least `min_distance` (tile units, in
     /// `(0.001, 0.5)`) apart on the torus.

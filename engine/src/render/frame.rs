@@ -213,17 +213,12 @@ impl FrameResources {
         self.camera_m = cam.position_m;
     }
 
-    /// Adds one draw's node uniforms (node origin minus camera in f64, then f32) and returns
-    /// its dynamic offset in the node group.
+    /// Adds one draw's node uniforms (see [`node_offset_m`]) and returns its dynamic offset in
+    /// the node group.
     pub fn push_node(&mut self, origin_m: [f64; 2], level: u8, dither: [f32; 2]) -> u32 {
-        let c = self.camera_m;
+        let [x, y, z] = node_offset_m(origin_m, self.camera_m);
         self.nodes.push(NodeUniforms {
-            offset_lo: [
-                (origin_m[0] - c.x) as f32,
-                (origin_m[1] - c.y) as f32,
-                (-c.z) as f32,
-                dither[0],
-            ],
+            offset_lo: [x, y, z, dither[0]],
             hi_level: [dither[1], f32::from(level), 0.0, 0.0],
             padding: [[0.0; 4]; 14],
         });
@@ -264,6 +259,18 @@ impl FrameResources {
             immediate_size: 0,
         })
     }
+}
+
+/// Where a node's vertices are placed relative to the camera: node origin (south-west corner,
+/// z = 0) minus the camera, in f64, then f32. Vertices are f32 relative to their node, so a
+/// drawn position is `offset + vertex` with small numbers only, however far from the world
+/// origin (the renderer's only f64 -> f32 step for node geometry).
+pub fn node_offset_m(origin_m: [f64; 2], camera_m: DVec3) -> [f32; 3] {
+    [
+        (origin_m[0] - camera_m.x) as f32,
+        (origin_m[1] - camera_m.y) as f32,
+        (-camera_m.z) as f32,
+    ]
 }
 
 /// Reversed-Z depth state.

@@ -435,7 +435,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn max_pyramid_queries_match_brute_force() {
+    fn max_pyramid_queries_equal_the_max_over_their_aligned_blocks() {
         let mut g = worldgen::Grid::new(37, 23, 0.0f32);
         for y in 0..23 {
             for x in 0..37 {
@@ -457,6 +457,20 @@ mod tests {
             }
             let got = p.max_in(x0, x1, y0, y1);
             assert!(got >= brute, "pyramid max {got} below true max {brute}");
+            // Exactly the max over the aligned level-k blocks that cover the query (the
+            // documented "few more cells around"), not merely some upper bound.
+            let span = (x1 - x0 + 1).max(y1 - y0 + 1);
+            let k = ((usize::BITS - 1 - span.leading_zeros()) as usize).min(p.levels.len() - 1);
+            let (bx0, by0) = ((x0 >> k) << k, (y0 >> k) << k);
+            let bx1 = ((((x1 >> k) + 1) << k) - 1).min(36);
+            let by1 = ((((y1 >> k) + 1) << k) - 1).min(22);
+            let mut blocks = 0.0f32;
+            for y in by0..=by1 {
+                for x in bx0..=bx1 {
+                    blocks = blocks.max(g.get(x, y));
+                }
+            }
+            assert_eq!(got, blocks, "query {x0}..={x1} x {y0}..={y1} at level {k}");
         }
     }
 

@@ -55,8 +55,11 @@ impl NodeMesh {
         )
     }
 
-    /// Surface height of the mesh at a world position inside the node.
-    pub fn height_at(&self, tree: &QuadTree, x_m: f64, y_m: f64) -> f64 {
+    /// Height of the regular grid triangulation of the mesh's 33 x 33 vertices at a world
+    /// position inside the node: the drawn surface of a grid mesh (as built here), not of a
+    /// TIN. To measure any mesh through its own triangles use
+    /// [`super::mesh_surface::MeshSurface`].
+    pub fn grid_height_at(&self, tree: &QuadTree, x_m: f64, y_m: f64) -> f64 {
         let s = tree.spacing_m(self.key.level);
         let z: Vec<f32> = self.positions[..NODE_VERTS * NODE_VERTS]
             .iter()

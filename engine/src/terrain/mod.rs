@@ -5,13 +5,15 @@
 //! - [`bounds`]: proven, monotone per-node errors and height ranges.
 //! - [`select`]: split while the projected error exceeds tau; frustum culling.
 //! - [`tiles`]: 16 m tiles of the finest surface at 0.25 m, refcounted.
-//! - [`mesh`]: node meshes with skirts of proven depth.
+//! - [`mesh`]: node meshes with skirts of proven depth; [`mesh_surface`]: a mesh's drawn
+//!   surface sampled through its own triangles (for measuring any variant).
 //! - [`content`]: terrain as a node-content kind of the streaming system.
 //! - `tin` (feature `measure`): an error-bounded TIN variant, a benchmark reference.
 
 pub mod bounds;
 pub mod content;
 pub mod mesh;
+pub mod mesh_surface;
 pub mod quadtree;
 pub mod select;
 pub mod tiles;

@@ -57,6 +57,8 @@ pub struct Species {
     pub tile_side_m: f64,
     /// Items per m² with every tile point kept.
     pub tile_density_per_m2: f64,
+    /// Start of the tile period (0, 0) in world metres (the map origin plus a per-species
+    /// offset).
     pub offset_m: [f64; 2],
     /// Typical height (m) and crown radius (m); items vary by +-25%.
     pub height_m: f64,
@@ -126,6 +128,7 @@ impl Placer {
         let tile = TileIndex::new(&map.poisson.points);
         let tile_min = map.manifest.poisson.min_distance;
         let n = tile.len as f64;
+        let origin = world.origin_m();
         let mut species = Vec::new();
         for (i, layer) in map.densities.iter().enumerate() {
             let spec = &layer.spec;
@@ -140,7 +143,12 @@ impl Placer {
                 max_density_per_m2: spec.max_density_per_m2,
                 tile_side_m: side,
                 tile_density_per_m2: n / (side * side),
-                offset_m: [unit3(seed, 1, 0) * side, unit3(seed, 1, 1) * side],
+                // Periods start from the map's origin (like the procedural detail, placement is
+                // map-local: a map grows the same plants wherever it is placed in the world).
+                offset_m: [
+                    origin[0] + unit3(seed, 1, 0) * side,
+                    origin[1] + unit3(seed, 1, 1) * side,
+                ],
                 height_m,
                 radius_m,
                 seed,

@@ -102,6 +102,30 @@ fn void_samples_are_filled_and_counted() {
     assert!(err.contains("2884802"), "{err}");
 }
 
+/// A latitude outside +-85 degrees (or not finite) is refused by name, not turned into a
+/// misleading size error.
+#[test]
+fn out_of_range_latitude_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("tile.hgt");
+    std::fs::write(&p, vec![0u8; 2_884_802]).unwrap();
+    for lat in [91.0, -90.0, f64::NAN, f64::INFINITY] {
+        let mut params = params(p.clone());
+        params.latitude_deg = Some(lat);
+        let err = import(&params, &mut Vec::new()).unwrap_err().to_string();
+        assert!(
+            err.contains("latitude") && err.contains("tile.hgt"),
+            "{lat}: {err}"
+        );
+    }
+    // Control: the same file at a valid latitude gets past the check.
+    let mut ok = params(p);
+    ok.latitude_deg = Some(57.0);
+    if let Err(e) = import(&ok, &mut Vec::new()) {
+        assert!(!e.to_string().contains("latitude"), "{e}");
+    }
+}
+
 #[test]
 fn puget_sound_png_imports_with_vertical_scale() {
     let Some(path) = shared_data("dem/ps_height_1k.png") else {

@@ -257,6 +257,7 @@ fn malformed_unknown_version() {
 
 #[test]
 fn malformed_poisson_tile() {
+    use std::fmt::Write as _;
     let (_t, dir) = broken_copy();
     let good = std::fs::read_to_string(dir.join("poisson.csv")).unwrap();
     let mut lines: Vec<&str> = good.lines().collect();
@@ -269,7 +270,29 @@ fn malformed_poisson_tile() {
     let p: Vec<f64> = lines[2].split(',').map(|v| v.parse().unwrap()).collect();
     lines.push(format!("{},{}", p[0], (p[1] + 0.001) % 1.0));
     std::fs::write(dir.join("poisson.csv"), lines.join("\n")).unwrap();
-    expect_error(&dir, "poisson.csv", &["closer than poisson.min_distance"]);
+    expect_error(
+        &dir,
+        "poisson.csv",
+        &[
+            "closer than poisson.min_distance",
+            &format!("{}", lines.len() - 2),
+        ],
+    );
+    // Crafted files cannot stall the loader: far more points than fit the spacing are refused
+    // by count, and a clustered file that fits the count stops at the first close pair (the
+    // old all-pairs check in one grid cell took quadratic time).
+    let mut huge = String::from("tvs-poisson 1\nx,y\n");
+    for i in 0..2_000_000u32 {
+        let _ = writeln!(huge, "0.5,{}", 0.5 + f64::from(i) * 1e-12);
+    }
+    std::fs::write(dir.join("poisson.csv"), &huge).unwrap();
+    expect_error(&dir, "poisson.csv", &["2000000 points cannot be", "apart"]);
+    let mut clustered = String::from("tvs-poisson 1\nx,y\n");
+    for i in 0..1000u32 {
+        let _ = writeln!(clustered, "{},0.5", 0.5 + f64::from(i) * 1e-9);
+    }
+    std::fs::write(dir.join("poisson.csv"), &clustered).unwrap();
+    expect_error(&dir, "poisson.csv", &["points 1 and 2", "closer than"]);
     // Too few points, a bad header, a field that is not a number, a bad manifest field.
     std::fs::write(dir.join("poisson.csv"), "tvs-poisson 1\nx,y\n0.5,0.5\n").unwrap();
     expect_error(&dir, "poisson.csv", &["at least"]);

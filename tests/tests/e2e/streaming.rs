@@ -9,6 +9,7 @@ use engine::terrain::bounds::BoundsCache;
 use engine::terrain::mesh::NodeMesh;
 use engine::terrain::quadtree::NodeKey;
 use engine::terrain::tiles::TileCache;
+use engine::vegetation::NodeVegetation;
 use glam::DVec3;
 use std::collections::HashMap;
 use std::sync::{Arc, Condvar, Mutex};
@@ -84,13 +85,35 @@ fn assert_draw_list_partitions(s: &Streamer, seed: u64, n: i64) {
     }
 }
 
-fn hashes(s: &Streamer) -> HashMap<NodeKey, u64> {
+/// Per resident node: the mesh hash (vertices, normals, ground types, indices) and a hash of
+/// everything its jobs produced (the mesh, its bounds and skirt depths, the vegetation groups
+/// and clusters).
+fn hashes(s: &Streamer) -> HashMap<NodeKey, (u64, u64)> {
+    use std::hash::{Hash, Hasher};
     s.resident_keys()
         .into_iter()
         .filter_map(|k| {
-            s.resident(k)
-                .and_then(|r| r.work.get::<NodeMesh>())
-                .map(|m| (k, m.content_hash()))
+            let w = &s.resident(k)?.work;
+            let m = w.get::<NodeMesh>()?;
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            m.content_hash().hash(&mut h);
+            let b = w.bounds?;
+            for v in [
+                b.z_min_m,
+                b.z_max_m,
+                b.error_m,
+                b.mesh_error_m,
+                b.descendants_error_m,
+            ]
+            .into_iter()
+            .chain(m.skirt_bottom_m)
+            {
+                v.to_bits().hash(&mut h);
+            }
+            let veg = w.get::<NodeVegetation>()?;
+            format!("{:?}", veg.groups).hash(&mut h);
+            format!("{:?}", veg.clusters).hash(&mut h);
+            Some((k, (m.content_hash(), h.finish())))
         })
         .collect()
 }
@@ -138,10 +161,63 @@ fn node_contents_do_not_depend_on_worker_count_or_request_order() {
     for k in order {
         assert_eq!(
             build_mesh(&world, &tree, &mut cache, &mut tiles, k).content_hash(),
-            results[0][&k],
+            results[0][&k].0,
             "{k:?}"
         );
     }
+}
+
+/// A content kind written only here: its payload is the node's vertex count, which it reads
+/// from the terrain payload made by the kind registered before it.
+#[derive(Debug)]
+struct VertexCount;
+
+#[derive(Debug)]
+struct VertexCountPayload(usize);
+
+impl engine::stream::Payload for VertexCountPayload {
+    fn bytes(&self) -> usize {
+        1000
+    }
+}
+
+impl engine::stream::ContentKind for VertexCount {
+    fn name(&self) -> &'static str {
+        "vertex count"
+    }
+
+    fn phases(self: Arc<Self>) -> Vec<Phase> {
+        vec![Phase::cpu("count", |_: &Shared, w: &mut NodeWork| {
+            let n = w.get::<NodeMesh>().map_or(0, |m| m.positions.len());
+            w.put(VertexCountPayload(n));
+        })]
+    }
+}
+
+/// Adding a content kind is one registration: the streamer runs its phase for every node after
+/// the kinds before it, keeps its payload with the node and counts its bytes in the budget.
+#[test]
+fn a_new_content_kind_plugs_in_with_one_registration() {
+    let world = tiny_world();
+    let mut kinds = content_kinds(&world);
+    kinds.push(Arc::new(VertexCount));
+    let mut s = Streamer::new(world, settings(2), kinds);
+    assert!(s.settle(&cam_at(200.0, 200.0, 30.0, 1.0), 120.0));
+    let keys = s.resident_keys();
+    assert!(keys.len() > 10, "only {} nodes resident", keys.len());
+    for k in &keys {
+        let w = &s.resident(*k).expect("resident").work;
+        let mesh = w.get::<NodeMesh>().expect("terrain payload");
+        let count = w
+            .get::<VertexCountPayload>()
+            .expect("the new kind's payload");
+        assert_eq!(count.0, mesh.positions.len(), "{k:?}");
+        assert!(
+            w.bytes() >= mesh.gpu_bytes() + 1000,
+            "{k:?}: payload bytes not counted"
+        );
+    }
+    assert!(s.shared.kind::<VertexCount>().is_some());
 }
 
 #[test]
@@ -332,16 +408,21 @@ fn late_results_of_cancelled_jobs_are_discarded() {
 #[test]
 fn the_screen_is_covered_exactly_once_in_every_frame_of_a_flight() {
     let mut s = streamer(settings(2));
-    let mut checked = 0;
-    let mut saw_fade = false;
-    for i in 0..300usize {
+    let cam_of = |i: usize| {
         let t = i as f64 / 300.0;
-        let cam = cam_at(
+        cam_at(
             40.0 + 430.0 * t,
             60.0 + 380.0 * t,
             60.0 * (1.0 - t) + 8.0,
             0.7,
-        );
+        )
+    };
+    // Start from a settled view (an event, not a frame count), so every frame is checked.
+    assert!(s.settle(&cam_of(0), 120.0), "the first view did not settle");
+    let mut checked = 0;
+    let mut saw_fade = false;
+    for i in 0..300usize {
+        let cam = cam_of(i);
         s.update(&cam, 1.0 / 60.0);
         s.run_gpu_phases();
         if s.is_ready(NodeKey::ROOT) {
@@ -355,9 +436,6 @@ fn the_screen_is_covered_exactly_once_in_every_frame_of_a_flight() {
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    assert!(
-        checked > 200,
-        "root ready too late: {checked} frames checked"
-    );
+    assert_eq!(checked, 300, "the root was not ready in every frame");
     assert!(saw_fade, "no cross-fade was ever in progress");
 }

@@ -269,8 +269,20 @@ fn selected_height(
 ) -> Option<f64> {
     (0..=tree.max_level).rev().find_map(|l| {
         let k = tree.key_at(l, x, y)?;
-        meshes.get(&k).map(|m| m.height_at(tree, x, y))
+        meshes.get(&k).map(|m| m.grid_height_at(tree, x, y))
     })
+}
+
+/// The same meshes without their skirts (surface triangles only), for the controls.
+fn without_skirts(meshes: &Map<NodeKey, NodeMesh>) -> Map<NodeKey, NodeMesh> {
+    meshes
+        .iter()
+        .map(|(k, m)| {
+            let mut m = m.clone();
+            m.indices.truncate(m.surface_index_count as usize);
+            (*k, m)
+        })
+        .collect()
 }
 
 /// Casts a ray per pixel; wherever a ray that was above the selected surface (inside the map)
@@ -348,7 +360,10 @@ fn seam_holes(tree: &QuadTree, meshes: &Map<NodeKey, NodeMesh>, cam: &Camera) ->
                 }) else {
                     continue;
                 };
-                let (ha, hb) = (m.height_at(tree, x, y), meshes[&nb].height_at(tree, x, y));
+                let (ha, hb) = (
+                    m.grid_height_at(tree, x, y),
+                    meshes[&nb].grid_height_at(tree, x, y),
+                );
                 if (ha - hb).abs() < 1e-4 {
                     continue;
                 }
@@ -359,11 +374,17 @@ fn seam_holes(tree: &QuadTree, meshes: &Map<NodeKey, NodeMesh>, cam: &Camera) ->
                 if d.dot(cam.forward) <= 0.1 {
                     continue;
                 }
-                tested += 1;
                 let hit = meshes
                     .values()
                     .filter_map(|q| ray_mesh(cam.position_m, d, q))
                     .fold(f64::INFINITY, f64::min);
+                // A gap behind nearer terrain is not visible: it is neither open nor closed.
+                // Hits within the gap's own extent (its skirt) are at the gap.
+                let gap_extent = (ha - hb).abs() + 1e-3 * to.length();
+                if hit < to.length() - gap_extent {
+                    continue;
+                }
+                tested += 1;
                 if hit > to.length() + 1e-6 {
                     holes += 1;
                 }
@@ -435,6 +456,7 @@ fn path_partition(tree: &QuadTree, x: f64, y: f64) -> Vec<NodeKey> {
 #[test]
 fn watertight_where_neighbours_differ_by_many_levels() {
     for (name, world) in [("tiny", tiny_world()), ("cliff", cliff_world())] {
+        let mut open_without_skirts = 0;
         let tree = tree_of(&world);
         let mut cache = BoundsCache::new();
         let mut tiles = TileCache::new();
@@ -481,8 +503,17 @@ fn watertight_where_neighbours_differ_by_many_levels() {
                     gaps > 20,
                     "{name} point {k} view {i}: only {gaps} seam gaps"
                 );
+                // Control: the same views through the same meshes without skirts find open
+                // seams, so the checks above can fail.
+                let bare = without_skirts(&meshes);
+                open_without_skirts += seam_holes(&tree, &bare, &cam).1;
+                open_without_skirts += count_holes(&world, &tree, &bare, &cam).1;
             }
         }
+        assert!(
+            open_without_skirts > 0,
+            "{name}: removing the skirts opened no gap: the watertightness checks cannot fail"
+        );
     }
 }
 
@@ -517,9 +548,12 @@ fn far_from_the_origin_camera_relative_vertices_agree_to_a_millimetre() {
         ] {
             let mn = build_mesh(&near, &tn, &mut cn, &mut xn, key);
             let mf = build_mesh(&far, &tf, &mut cf, &mut xf, key);
-            let rel_n = DVec3::new(mn.origin_m[0] - cam_n[0], mn.origin_m[1] - cam_n[1], 0.0) - rel;
-            let rel_f = DVec3::new(mf.origin_m[0] - cam_f[0], mf.origin_m[1] - cam_f[1], 0.0) - rel;
-            let (rn, rf) = (rel_n.as_vec3(), rel_f.as_vec3());
+            // The renderer's own f64 -> f32 step (node origin minus camera).
+            let to_camera = |origin: [f64; 2], cam: [f64; 2]| {
+                let c = DVec3::new(cam[0], cam[1], 0.0) + rel;
+                glam::Vec3::from(engine::render::frame::node_offset_m(origin, c))
+            };
+            let (rn, rf) = (to_camera(mn.origin_m, cam_n), to_camera(mf.origin_m, cam_f));
             let mut worst = 0.0f32;
             for (a, b) in mn.positions.iter().zip(&mf.positions) {
                 let pa = rn + glam::Vec3::from(*a);
@@ -733,5 +767,52 @@ fn roads_and_paths_are_flattened_into_the_finest_surface() {
     assert!(
         moved > 0.05,
         "the decals should actually move the ground ({moved} m)"
+    );
+}
+
+/// The TIN variant is measured through its own triangles: on hilly nodes of the cliff map its
+/// drawn surface differs from the grid surface of the same vertices (so a grid stand-in would
+/// measure something else), and its true error stays within its bound (grid error + exact
+/// TIN delta).
+#[test]
+fn tin_error_is_measured_on_its_own_triangles_and_stays_within_its_bound() {
+    use engine::terrain::mesh_surface::MeshSurface;
+    let world = cliff_world();
+    let tree = tree_of(&world);
+    let mut cache = BoundsCache::new();
+    let mut tiles = TileCache::new();
+    let (mut differs, mut checked) = (0, 0);
+    for i in 0..12i64 {
+        let (o, s) = (world.origin_m(), world.size_m());
+        let (x, y) = (o[0] + s[0] * unit3(77, i, 0), o[1] + s[1] * unit3(77, i, 1));
+        let level = tree.max_level.saturating_sub(1 + (i % 3) as u8);
+        let key = tree.key_at(level, x, y).expect("inside the map");
+        let grid = build_mesh(&world, &tree, &mut cache, &mut tiles, key);
+        let (tin, _) = engine::terrain::tin::build(&grid, 0.5 * grid.bounds.error_m);
+        let surface = MeshSurface::new(&tin, &tree);
+        let r = tree.rect(key);
+        let mut largest_gap = 0.0f64;
+        for j in 0..40 {
+            for k in 0..40 {
+                let (px, py) = (
+                    r.min[0] + (r.max[0] - r.min[0]) * (f64::from(k) + 0.3) / 40.0,
+                    r.min[1] + (r.max[1] - r.min[1]) * (f64::from(j) + 0.6) / 40.0,
+                );
+                largest_gap = largest_gap
+                    .max((surface.height_at(px, py) - tin.grid_height_at(&tree, px, py)).abs());
+            }
+        }
+        differs += usize::from(largest_gap > 1e-3);
+        let (true_err, _) = measure_true_error(&world, &tree, &tin);
+        assert!(
+            true_err <= tin.bounds.error_m + 1e-6,
+            "{key:?}: TIN true error {true_err} m > its bound {} m",
+            tin.bounds.error_m
+        );
+        checked += 1;
+    }
+    assert!(
+        differs >= checked / 2,
+        "only {differs} of {checked} TINs differ from the grid surface: the control is not sharp"
     );
 }

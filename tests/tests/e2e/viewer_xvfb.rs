@@ -24,14 +24,16 @@ fn have(tool: &str) -> bool {
         .is_ok_and(|s| s.success())
 }
 
+/// The flyover binary to drive: `FLYOVER_BIN` when set (tests/run.sh sets it to the binary it
+/// has just built), else the debug build of this workspace. Never "whichever is newer": a stale
+/// release build must not stand in for the code under test.
 fn flyover_binary() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("FLYOVER_BIN") {
+        return Some(PathBuf::from(p));
+    }
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map_or_else(|| tests::workspace_root().join("target"), PathBuf::from);
-    ["debug", "release"]
-        .iter()
-        .map(|p| target.join(p).join("flyover"))
-        .filter(|p| p.exists())
-        .max_by_key(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok())
+    Some(target.join("debug").join("flyover")).filter(|p| p.exists())
 }
 
 fn read_stats(p: &Path) -> Option<serde_json::Value> {
@@ -108,7 +110,10 @@ fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
             bin.is_some()
         );
         assert!(!tests::in_ci(), "CI must run the viewer test: {why}");
-        println!("skipping: {why} (tests/run.sh installs the tools and builds the binaries)");
+        tests::skip(
+            "viewer under Xvfb",
+            &format!("{why} (tests/run.sh installs the tools and builds the binaries)"),
+        );
         return;
     }
     let bin = bin.expect("checked above");

@@ -431,18 +431,33 @@ pub fn read_poisson(
             ),
         ));
     }
-    let tile = crate::poisson::PoissonTile { points };
-    let d = tile.min_distance();
-    if d < min_distance {
+    // At most about 1.155 / d^2 points fit d apart on the unit torus (hexagonal packing):
+    // refuse more before measuring distances, so a huge file cannot stall the loader.
+    let packing = 1.2 / (min_distance * min_distance);
+    if points.len() as f64 > packing {
         return Err(line_err(
             path,
             0,
             format!(
-                "two points are {d} apart, closer than poisson.min_distance = {min_distance} in map.toml"
+                "{} points cannot be poisson.min_distance = {min_distance} apart in the unit tile \
+                 (at most about {packing:.0})",
+                points.len()
             ),
         ));
     }
-    Ok(tile)
+    if let Some((a, b, d)) = crate::poisson::closer_pair(&points, min_distance) {
+        return Err(line_err(
+            path,
+            0,
+            format!(
+                "points {} and {} (in rank order) are {d} apart, closer than poisson.min_distance \
+                 = {min_distance} in map.toml",
+                a + 1,
+                b + 1
+            ),
+        ));
+    }
+    Ok(crate::poisson::PoissonTile { points })
 }
 
 pub fn write_poisson(path: &Path, tile: &crate::poisson::PoissonTile) -> Result<(), MapError> {

@@ -94,6 +94,12 @@ fn run(cli: &Cli) -> Result<()> {
     let tree = QuadTree::new(world.origin_m(), world.size_m());
     let vh = cli.viewport_height.max(16);
     let cams = measure::default_flight(&world, if cli.quick { 8 } else { 64 }, [vh * 16 / 9, vh]);
+    if terrain::flight_nodes(&world, &tree, &cams, 1).is_empty() {
+        bail!(
+            "{}: the benchmark flight selects no node of this map, so there is nothing to measure",
+            cli.map.display()
+        );
+    }
     let mut report = Report { rows: Vec::new() };
     let t0 = Instant::now();
     if want("tiles") {

@@ -6,7 +6,6 @@ use crate::report::{Report, bar};
 use anyhow::Result;
 use engine::camera::Camera;
 use engine::surface::World;
-use engine::terrain::quadtree::NodeKey;
 use std::time::Instant;
 
 /// A closed loop over the map at a fixed height above the ground, sampled at `speed_m_s`
@@ -71,29 +70,24 @@ pub(crate) fn section_streaming(
             s.update(cam, dt);
             s.run_gpu_phases();
             frame_times.push(t.elapsed().as_secs_f64());
-            // Pop debt: a drawn node standing in for nodes that the ideal selection at tau wants
-            // (so it is visible and too coarse). Its excess is its error projected at the
-            // distance of the visible nodes it stands in for, minus tau.
-            let k = cam.k_px();
-            let tree = *s.tree();
-            let drawn: std::collections::HashSet<NodeKey> =
-                s.draw_list().iter().map(|d| d.key).collect();
+            // Pop debt: a visible drawn node whose own error, projected at its own distance,
+            // is over tau (a finer level exists but is not shown yet). Every drawn node is
+            // charged, whether or not the finer nodes' bounds are known yet.
+            let (k, tree, frustum) = (cam.k_px(), *s.tree(), cam.frustum());
             let mut excess = 0.0f64;
-            for want in s.select_wanted(cam, tau) {
-                if drawn.contains(&want) {
-                    continue;
-                }
-                let Some(wb) = s.shared.bounds.peek(want) else {
-                    continue;
+            for d in s.draw_list() {
+                let Some(b) = s.resident(d.key).and_then(|r| r.work.bounds) else {
+                    continue; // not resident: nothing drawn
                 };
-                let (wmin, wmax) = engine::terrain::select::node_aabb(&tree, want, &wb);
-                let dist =
-                    engine::camera::distance_to_aabb(cam.position_m, wmin, wmax).max(cam.near_m);
-                if let Some(n) = want.ancestors().find(|n| drawn.contains(n))
-                    && let Some(nb) = s.shared.bounds.peek(n)
+                let (lo, hi) = engine::terrain::select::node_aabb(&tree, d.key, &b);
+                if d.key.level == tree.max_level
+                    || d.dither_hi <= d.dither_lo
+                    || !frustum.intersects_aabb(lo, hi)
                 {
-                    excess = excess.max(nb.error_m * k / dist - tau);
+                    continue;
                 }
+                let dist = engine::camera::distance_to_aabb(cam.position_m, lo, hi).max(cam.near_m);
+                excess = excess.max(b.selection_error_m() * k / dist - tau);
             }
             if excess > 0.0 {
                 debt_frames += 1;
