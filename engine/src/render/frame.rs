@@ -101,6 +101,24 @@ pub fn uniform_entry(
     }
 }
 
+/// A bind group holding one uniform buffer at `binding`.
+pub fn uniform_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    binding: u32,
+    buffer: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        }],
+    })
+}
+
 impl FrameResources {
     pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Self {
         let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
@@ -118,14 +136,7 @@ impl FrameResources {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frame group"),
-            layout: &layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: buffer.as_entire_binding(),
-            }],
-        });
+        let group = uniform_group(device, "frame group", &layout, 0, &buffer);
         let node_capacity = 256;
         let (node_buffer, node_group) = Self::node_slots(device, &node_layout, node_capacity);
         Self {

@@ -128,6 +128,23 @@ impl Target {
 
 /// A reversed-Z depth view of `size`.
 pub fn depth_view(device: &wgpu::Device, size: [u32; 2], label: &str) -> wgpu::TextureView {
+    texture_view_2d(
+        device,
+        label,
+        size,
+        DEPTH_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    )
+}
+
+/// A view of a new single-mip 2D texture.
+pub fn texture_view_2d(
+    device: &wgpu::Device,
+    label: &str,
+    size: [u32; 2],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::TextureView {
     device
         .create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
@@ -139,8 +156,8 @@ pub fn depth_view(device: &wgpu::Device, size: [u32; 2], label: &str) -> wgpu::T
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            format,
+            usage,
             view_formats: &[],
         })
         .create_view(&wgpu::TextureViewDescriptor::default())

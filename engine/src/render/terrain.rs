@@ -3,7 +3,7 @@
 
 use super::Gpu;
 use super::frame::{
-    DrawStats, FrameResources, PipelineSpec, pipeline, srgb_to_linear, uniform_entry,
+    DrawStats, FrameResources, PipelineSpec, pipeline, srgb_to_linear, uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
 use super::scene::{FrameDraws, NodeRenderer};
@@ -114,14 +114,7 @@ impl TerrainRenderer {
             contents: bytemuck::cast_slice(&table),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let colors = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ground colours"),
-            layout: &colors_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: buffer.as_entire_binding(),
-            }],
-        });
+        let colors = uniform_group(device, "ground colours", &colors_layout, 0, &buffer);
         Self {
             fill,
             wire,

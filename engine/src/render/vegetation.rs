@@ -6,7 +6,7 @@
 use super::Gpu;
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, ViewOptions, bake_pass, pipeline, srgb_to_linear,
-    uniform_entry,
+    uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
 use super::scene::{FrameDraws, NodeRenderer};
@@ -232,22 +232,8 @@ fn bake_target(
     size: [u32; 2],
     format: wgpu::TextureFormat,
 ) -> wgpu::TextureView {
-    device
-        .create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: size[0],
-                height: size[1],
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        })
-        .create_view(&wgpu::TextureViewDescriptor::default())
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    super::texture_view_2d(device, label, size, format, usage)
 }
 
 /// The shared plant-shape vertex and index buffers.
@@ -400,14 +386,7 @@ impl VegetationRenderer {
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
-        let looks_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("plant looks"),
-            layout: &looks_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 2,
-                resource: looks_buffer.as_entire_binding(),
-            }],
-        });
+        let looks_group = uniform_group(device, "plant looks", &looks_layout, 2, &looks_buffer);
         let renderer = Self {
             plant_mesh,
             billboard,
@@ -638,14 +617,13 @@ impl VegetationRenderer {
             contents: bytemuck::cast_slice(clusters),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let cluster_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("impostor clusters"),
-            layout: &self.cluster_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 1,
-                resource: cluster_buffer.as_entire_binding(),
-            }],
-        });
+        let cluster_group = uniform_group(
+            device,
+            "impostor clusters",
+            &self.cluster_layout,
+            1,
+            &cluster_buffer,
+        );
         let member_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("impostor members"),
             contents: bytemuck::cast_slice(members),

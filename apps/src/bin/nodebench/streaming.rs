@@ -3,7 +3,7 @@
 
 use crate::open_world;
 use crate::report::{Report, bar};
-use anyhow::Result;
+use anyhow::{Result, bail};
 use engine::camera::Camera;
 use engine::surface::World;
 use std::time::Instant;
@@ -58,7 +58,9 @@ pub(crate) fn section_streaming(
         let kinds = engine::kinds::content_kinds(&world);
         let mut s = Streamer::new(world, settings, kinds);
         // Warm start at the first camera, as after loading.
-        s.settle(&cams[0], 300.0);
+        if !s.settle(&cams[0], 300.0) {
+            bail!("streaming at {speed} m/s: the warm start did not settle within 300 s");
+        }
         s.take_latencies();
         let c0 = s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu;
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
@@ -72,20 +74,36 @@ pub(crate) fn section_streaming(
             frame_times.push(t.elapsed().as_secs_f64());
             // Pop debt: a visible drawn node whose own error, projected at its own distance,
             // is over tau (a finer level exists but is not shown yet). Every drawn node is
-            // charged, whether or not the finer nodes' bounds are known yet.
-            let (k, tree, frustum) = (cam.k_px(), *s.tree(), cam.frustum());
+            // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
+            // traversal at tau reaches a non-culled node at or below it (a box test alone
+            // passes big boxes behind the camera; the traversal refines them).
+            let (k, tree) = (cam.k_px(), *s.tree());
+            let ideal = engine::terrain::select::traverse(
+                &tree,
+                cam,
+                true,
+                |key| s.shared.bounds.peek(key),
+                |_, _, _, px| px > tau,
+            );
+            let visible: std::collections::HashSet<_> = ideal
+                .nodes
+                .iter()
+                .map(|n| n.key)
+                .chain(ideal.unknown_bounds.iter().copied())
+                .flat_map(|key| std::iter::once(key).chain(key.ancestors()))
+                .collect();
             let mut excess = 0.0f64;
             for d in s.draw_list() {
                 let Some(b) = s.resident(d.key).and_then(|r| r.work.bounds) else {
                     continue; // not resident: nothing drawn
                 };
-                let (lo, hi) = engine::terrain::select::node_aabb(&tree, d.key, &b);
                 if d.key.level == tree.max_level
                     || d.dither_hi <= d.dither_lo
-                    || !frustum.intersects_aabb(lo, hi)
+                    || !visible.contains(&d.key)
                 {
                     continue;
                 }
+                let (lo, hi) = engine::terrain::select::node_aabb(&tree, d.key, &b);
                 let dist = engine::camera::distance_to_aabb(cam.position_m, lo, hi).max(cam.near_m);
                 excess = excess.max(b.selection_error_m() * k / dist - tau);
             }
