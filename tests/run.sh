@@ -89,10 +89,15 @@ if ./target/debug/flyover --headless --map "$smoke/does-not-exist" --frames 1 2>
   echo "flyover accepted a missing map" >&2; exit 1
 fi
 grep -q "does-not-exist" "$smoke/flyover-err.log"
-for bad in "--tau 0" "--fps 0" "--duration-s -5"; do
+for bad in "--tau=0" "--fps=0" "--duration-s=-5"; do
   # shellcheck disable=SC2086
-  if ./target/debug/flyover --headless --map maps/tiny --frames 1 $bad 2>/dev/null >/dev/null; then
+  if ./target/debug/flyover --headless --map maps/tiny --frames 1 $bad 2> "$smoke/bad-arg.log" >/dev/null; then
     echo "flyover accepted $bad" >&2; exit 1
+  fi
+  # Refused for the right reason: the message names the option and the rule.
+  if ! grep -q -- "${bad%%=*}" "$smoke/bad-arg.log" \
+     || ! grep -q "must be a finite number above 0" "$smoke/bad-arg.log"; then
+    echo "flyover refused $bad without saying why:" >&2; cat "$smoke/bad-arg.log" >&2; exit 1
   fi
 done
 

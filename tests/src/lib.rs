@@ -296,12 +296,12 @@ pub mod gpu {
         }
     }
 
-    /// A viewer of the tiny map at threshold `tau_px`, one worker.
-    pub fn tiny_viewer(g: &Gpu, tau_px: f64) -> Viewer {
+    /// A viewer of `world` at threshold `tau_px`, one worker.
+    pub fn viewer(g: &Gpu, world: engine::surface::World, tau_px: f64) -> Viewer {
         Viewer::new(
             g,
             COLOR_FORMAT,
-            super::terrain::tiny_world(),
+            world,
             StreamSettings {
                 workers: 1,
                 max_in_flight: 2,
@@ -309,6 +309,11 @@ pub mod gpu {
                 ..StreamSettings::default()
             },
         )
+    }
+
+    /// A viewer of the tiny map at threshold `tau_px`, one worker.
+    pub fn tiny_viewer(g: &Gpu, tau_px: f64) -> Viewer {
+        viewer(g, super::terrain::tiny_world(), tau_px)
     }
 
     /// Renders one frame into `target` and waits for the GPU.

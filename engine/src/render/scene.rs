@@ -18,7 +18,8 @@ pub struct DrawnNode<'a> {
 }
 
 /// What a frame draws: the camera, the view options, the drawn nodes and the resident
-/// ancestors of drawn nodes (content kept through splits is drawn via them).
+/// ancestors of drawn nodes (content kept through splits is drawn via them), `ancestors`
+/// sorted by key.
 #[derive(Debug, Clone, Copy)]
 pub struct FrameDraws<'a> {
     pub camera: &'a Camera,

@@ -21,7 +21,6 @@ use crate::vegetation::representation::{
 use crate::vegetation::{NodeVegetation, Representation};
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
-use rustc_hash::FxHashSet;
 use wgpu::util::DeviceExt;
 
 /// Species looks (shape and colour) the renderer holds; the atlas has one tile per look.
@@ -690,7 +689,6 @@ impl NodeRenderer for VegetationRenderer {
         if !draws.view.plants {
             return;
         }
-        let ancestors: FxHashSet<NodeKey> = draws.ancestors.iter().map(|a| a.key).collect();
         let visible = |p: &PlantsGpu| draws.frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1);
         // Drawn nodes with their own interval, then ancestors' kept groups in full.
         for (i, d) in draws.drawn.iter().enumerate() {
@@ -699,8 +697,11 @@ impl NodeRenderer for VegetationRenderer {
                 && visible(p)
             {
                 let offset = frame.push_node(p.origin_m, d.key.level, d.dither);
-                self.plan
-                    .push((Source::Drawn(i), offset, ancestors.contains(&d.key)));
+                let is_ancestor = draws
+                    .ancestors
+                    .binary_search_by_key(&d.key, |a| a.key)
+                    .is_ok();
+                self.plan.push((Source::Drawn(i), offset, is_ancestor));
             }
         }
         for (i, a) in draws.ancestors.iter().enumerate() {

@@ -55,6 +55,17 @@ pub struct SelectParams {
     pub cull: bool,
 }
 
+impl SelectParams {
+    /// The usual selection: threshold `tau_px`, down to the tree's finest level, culled.
+    pub fn culled(tau_px: f64, tree: &QuadTree) -> Self {
+        Self {
+            tau_px,
+            max_level: tree.max_level,
+            cull: true,
+        }
+    }
+}
+
 /// The traversal every selection shares: depth-first from the root, skipping nodes outside the
 /// map, culling by the frustum (when `cull`), and descending while `split(key, bounds, dist_m,
 /// error_px)` says so (never below the finest level). `bounds` gives each visited node's

@@ -173,17 +173,7 @@ fn a_world_ten_thousand_km_out_renders_like_the_original() {
         let mut cam = near_cam;
         cam.position_m += DVec3::new(offset, -offset, 0.0);
         let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
-        let mut v = engine::viewer::Viewer::new(
-            &g,
-            COLOR_FORMAT,
-            world,
-            engine::stream::StreamSettings {
-                workers: 1,
-                max_in_flight: 2,
-                tau_px: 1.0,
-                ..engine::stream::StreamSettings::default()
-            },
-        );
+        let mut v = tests::gpu::viewer(&g, world, 1.0);
         settle(&g, &mut v, &target, &cam);
         images.push(target.read_rgba(&g).expect("readback"));
     }

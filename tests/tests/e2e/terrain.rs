@@ -206,11 +206,7 @@ fn selected_nodes_respect_the_pixel_threshold() {
                     &tree,
                     &mut cache,
                     &cam,
-                    SelectParams {
-                        tau_px: tau,
-                        max_level: tree.max_level,
-                        cull: true,
-                    },
+                    SelectParams::culled(tau, &tree),
                 );
                 // A camera near the border looking out sees no ground; that is allowed, rarely.
                 empty += usize::from(sel.nodes.is_empty());
@@ -408,11 +404,7 @@ fn selections_are_watertight_from_random_cameras() {
                 &tree,
                 &mut cache,
                 &cam,
-                SelectParams {
-                    tau_px: 1.0,
-                    max_level: tree.max_level,
-                    cull: true,
-                },
+                SelectParams::culled(1.0, &tree),
             );
             let meshes = build_selection(&world, &tree, &mut cache, &mut tiles, &sel);
             let (below, holes) = count_holes(&world, &tree, &meshes, &cam);
@@ -674,11 +666,7 @@ fn imported_srtm_sea_is_exact_and_the_coast_is_watertight() {
         &tree,
         &mut cache,
         &cam,
-        SelectParams {
-            tau_px: 1.0,
-            max_level: tree.max_level,
-            cull: true,
-        },
+        SelectParams::culled(1.0, &tree),
     );
     let levels: std::collections::BTreeSet<u8> = sel.nodes.iter().map(|s| s.key.level).collect();
     assert!(

@@ -505,11 +505,7 @@ fn billboards_and_groups_stay_small_on_screen() {
             &tree,
             &mut cache,
             &cam,
-            SelectParams {
-                tau_px: tau,
-                max_level: tree.max_level,
-                cull: true,
-            },
+            SelectParams::culled(tau, &tree),
         );
         let k = cam.k_px();
         for n in &sel.nodes {

@@ -155,11 +155,7 @@ pub(crate) fn section_error(
                 tree,
                 &mut ctx.0,
                 cam,
-                SelectParams {
-                    tau_px: tau,
-                    max_level: tree.max_level,
-                    cull: true,
-                },
+                SelectParams::culled(tau, tree),
             );
             let (tris, e) = measure_view(world, tree, &mut ctx, cam, &sel, per_side, None);
             g_tris += tris;
@@ -305,10 +301,12 @@ fn tune_baseline(
     };
     let (mut lo, mut hi) = (0.25f64, 32.0f64);
     // The upper end must meet the target, the lower end must miss it.
-    while measure_ratio(hi, tune).1 > target_px && hi < 256.0 {
+    let mut top_px = measure_ratio(hi, tune).1;
+    while top_px > target_px && hi < 256.0 {
         hi *= 2.0;
+        top_px = measure_ratio(hi, tune).1;
     }
-    let bracketed = measure_ratio(hi, tune).1 <= target_px;
+    let bracketed = top_px <= target_px;
     while bracketed && measure_ratio(lo, tune).1 <= target_px && lo > 1.0 / 64.0 {
         hi = lo;
         lo *= 0.5;

@@ -23,11 +23,7 @@ pub(crate) fn section_selection(
     let mut cache = BoundsCache::new();
     let taus: &[f64] = if quick { &[2.0] } else { &[1.0, 2.0, 4.0] };
     for &tau in taus {
-        let p = SelectParams {
-            tau_px: tau,
-            max_level: tree.max_level,
-            cull: true,
-        };
+        let p = SelectParams::culled(tau, tree);
         let b = bar(cams.len() as u64, &format!("selection tau {tau}"));
         let t0 = Instant::now();
         let before = cache.computed;

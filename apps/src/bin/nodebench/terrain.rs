@@ -27,11 +27,7 @@ pub(crate) fn flight_nodes(
             tree,
             &mut cache,
             cam,
-            SelectParams {
-                tau_px: 2.0,
-                max_level: tree.max_level,
-                cull: true,
-            },
+            SelectParams::culled(2.0, tree),
         );
         keys.extend(s.nodes.iter().map(|n| n.key));
     }

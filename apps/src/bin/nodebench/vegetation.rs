@@ -161,11 +161,7 @@ fn instances_per_frame(
             tree,
             &mut cache,
             cam,
-            SelectParams {
-                tau_px: 2.0,
-                max_level: tree.max_level,
-                cull: true,
-            },
+            SelectParams::culled(2.0, tree),
         );
         let mut ancestors: Vec<NodeKey> = Vec::new();
         let (mut n_inst, mut n_draw) = (0usize, 0usize);
@@ -269,11 +265,7 @@ fn occlusion(
                 c
             })
             .collect();
-        let p = SelectParams {
-            tau_px: 2.0,
-            max_level: tree.max_level,
-            cull: true,
-        };
+        let p = SelectParams::culled(2.0, tree);
         let (mut plain_nodes, mut occl_nodes, mut hidden, mut t_plain, mut t_occl) =
             (0usize, 0usize, 0usize, 0.0f64, 0.0f64);
         for cam in &low {
