@@ -4,7 +4,7 @@
 
 use crate::camera::Camera;
 use crate::surface::world::World;
-use crate::terrain::bounds::BoundsCache;
+use crate::terrain::bounds::{BLOCKS, BLOCKS_PER_SIDE, BoundsCache};
 use crate::terrain::mesh::NodeMesh;
 use crate::terrain::mesh_surface::MeshSurface;
 use crate::terrain::quadtree::{NODE_QUADS, QuadTree};
@@ -21,11 +21,30 @@ pub const SAMPLE_OFFSET: f64 = 0.382;
 /// step so they avoid vertices and the bounds' check lattice, and the largest distance of the
 /// surface outside the node's height range (<= 0 when inside).
 pub fn true_node_error(world: &World, tree: &QuadTree, m: &NodeMesh, per_quad: u32) -> (f64, f64) {
+    true_block_errors(world, tree, m, per_quad)
+        .iter()
+        .fold((0.0, f64::NEG_INFINITY), |(e, o), b| {
+            (e.max(b.0), o.max(b.1))
+        })
+}
+
+/// [`true_node_error`] per bound block (`index = by * BLOCKS_PER_SIDE + bx`): the largest
+/// |mesh - surface| inside each block and the largest distance of the surface outside the
+/// block's height range. Inner samples are offset, so none lies on a border between blocks.
+pub fn true_block_errors(
+    world: &World,
+    tree: &QuadTree,
+    m: &NodeMesh,
+    per_quad: u32,
+) -> [(f64, f64); BLOCKS] {
     let r = tree.rect(m.key);
     let n = (NODE_QUADS * per_quad) as usize;
+    let per_block = n / BLOCKS_PER_SIDE;
     let step = (r.max[0] - r.min[0]) / n as f64;
-    let (mut err, mut outside) = (0.0f64, f64::NEG_INFINITY);
+    let mut out = [(0.0f64, f64::NEG_INFINITY); BLOCKS];
     let surface = MeshSurface::new(m, tree);
+    // The block a sample index lies in along one axis.
+    let block_of = |k: usize| (k / per_block).min(BLOCKS_PER_SIDE - 1);
     for j in 0..=n {
         for i in 0..=n {
             // Border samples stay on the border; inner ones are offset.
@@ -35,11 +54,14 @@ pub fn true_node_error(world: &World, tree: &QuadTree, m: &NodeMesh, per_quad: u
                 r.min[1] + (j as f64 + off(j)).min(n as f64) * step,
             );
             let f = world.height_m(x, y);
-            err = err.max((surface.height_at(x, y) - f).abs());
-            outside = outside.max(m.bounds.z_min_m - f).max(f - m.bounds.z_max_m);
+            let err = (surface.height_at(x, y) - f).abs();
+            let b = block_of(j) * BLOCKS_PER_SIDE + block_of(i);
+            let bounds = &m.bounds.blocks[b];
+            out[b].0 = out[b].0.max(err);
+            out[b].1 = out[b].1.max(bounds.z_min_m - f).max(f - bounds.z_max_m);
         }
     }
-    (err, outside)
+    out
 }
 
 /// On-screen error of a view: for points on a lattice of `per_side` x `per_side` in every drawn
@@ -95,6 +117,115 @@ pub fn view_error(
         },
         samples,
     }
+}
+
+/// A node mesh's error on a dense lattice, kept to find a view's largest on-screen error
+/// quickly: the samples are camera-independent, so they are measured once per mesh and each view
+/// only projects them (see [`view_max_error_px`]).
+#[derive(Debug, Clone)]
+pub struct ErrorSamples {
+    /// Sample box (world metres): x, y over the node, z over the sampled surface heights.
+    pub min_m: DVec3,
+    pub max_m: DVec3,
+    /// Node origin (the rectangle's minimum corner) the sample positions are relative to.
+    origin_m: [f64; 2],
+    /// (x, y relative to `origin_m`, surface z, |mesh - surface|), largest error first; samples
+    /// with zero error are left out.
+    samples: Vec<[f32; 4]>,
+}
+
+impl ErrorSamples {
+    /// The largest error of any sample (m).
+    pub fn max_error_m(&self) -> f64 {
+        self.samples.first().map_or(0.0, |s| f64::from(s[3]))
+    }
+}
+
+/// Measures `|mesh - surface|` (the mesh through its own triangles) on a lattice of `per_quad`
+/// points per quad, inner samples offset by [`SAMPLE_OFFSET`] of a step like
+/// [`true_node_error`].
+pub fn node_error_samples(
+    world: &World,
+    tree: &QuadTree,
+    m: &NodeMesh,
+    per_quad: u32,
+) -> ErrorSamples {
+    let r = tree.rect(m.key);
+    let n = (NODE_QUADS * per_quad) as usize;
+    let step = (r.max[0] - r.min[0]) / n as f64;
+    let surface = MeshSurface::new(m, tree);
+    let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut samples = Vec::with_capacity((n + 1) * (n + 1));
+    for j in 0..=n {
+        for i in 0..=n {
+            let off = |k: usize| if k == 0 || k == n { 0.0 } else { SAMPLE_OFFSET };
+            let (dx, dy) = (
+                (i as f64 + off(i)).min(n as f64) * step,
+                (j as f64 + off(j)).min(n as f64) * step,
+            );
+            let (x, y) = (r.min[0] + dx, r.min[1] + dy);
+            let f = world.height_m(x, y);
+            z_lo = z_lo.min(f);
+            z_hi = z_hi.max(f);
+            let err = (surface.height_at(x, y) - f).abs();
+            if err > 0.0 {
+                samples.push([dx as f32, dy as f32, f as f32, err as f32]);
+            }
+        }
+    }
+    samples.sort_by(|a, b| b[3].total_cmp(&a[3]));
+    ErrorSamples {
+        // f32 positions: widen the box by their rounding so it still holds every sample.
+        min_m: DVec3::new(r.min[0], r.min[1], z_lo - z_lo.abs() * 1e-6 - 1e-6),
+        max_m: DVec3::new(r.max[0], r.max[1], z_hi + z_hi.abs() * 1e-6 + 1e-6),
+        origin_m: r.min,
+        samples,
+    }
+}
+
+/// The largest on-screen error `|mesh - surface| * K / distance` over the samples of the given
+/// nodes that lie in the view frustum: exact over the samples, found by branch and bound (a node
+/// is skipped once its largest error over its box distance cannot beat the best so far).
+pub fn view_max_error_px(nodes: &[&ErrorSamples], cam: &Camera) -> f64 {
+    let k = cam.k_px();
+    let frustum = cam.frustum();
+    let eye = cam.position_m;
+    let mut order: Vec<(f64, &ErrorSamples)> = nodes
+        .iter()
+        .filter(|s| frustum.intersects_aabb(s.min_m, s.max_m))
+        .map(|s| {
+            let d = crate::camera::distance_to_aabb(eye, s.min_m, s.max_m);
+            let bound = if d > 0.0 {
+                s.max_error_m() * k / d
+            } else {
+                f64::INFINITY
+            };
+            (bound, *s)
+        })
+        .collect();
+    order.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut best = 0.0f64;
+    for (bound, s) in order {
+        if bound <= best {
+            break;
+        }
+        let d_min = crate::camera::distance_to_aabb(eye, s.min_m, s.max_m);
+        for p in &s.samples {
+            let err = f64::from(p[3]);
+            if d_min > 0.0 && err * k / d_min <= best {
+                break; // sorted by error: no later sample can beat `best`
+            }
+            let at = DVec3::new(
+                s.origin_m[0] + f64::from(p[0]),
+                s.origin_m[1] + f64::from(p[1]),
+                f64::from(p[2]),
+            );
+            if frustum.intersects_aabb(at, at) {
+                best = best.max(err * k / (at - eye).length().max(1e-9));
+            }
+        }
+    }
+    best
 }
 
 /// A CDLOD-style selection: split a node while the camera is closer than

@@ -232,6 +232,15 @@ pub mod terrain {
         engine::measure::true_node_error(world, tree, m, 10)
     }
 
+    /// [`measure_true_error`] per bound block of the node.
+    pub fn measure_true_block_errors(
+        world: &World,
+        tree: &QuadTree,
+        m: &NodeMesh,
+    ) -> [(f64, f64); engine::terrain::bounds::BLOCKS] {
+        engine::measure::true_block_errors(world, tree, m, 10)
+    }
+
     /// Ray / triangle intersection distance (two-sided, Moller-Trumbore), in f64.
     pub fn ray_triangle(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64> {
         let e1 = b - a;

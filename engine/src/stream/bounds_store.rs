@@ -27,7 +27,7 @@ impl BoundsStore {
             return b;
         }
         let parent = key.parent().map(|p| self.get(world, tree, p));
-        let b = bounds::monotone(bounds::measure(world, tree, key), parent);
+        let b = bounds::monotone(key, bounds::measure(world, tree, key), parent);
         self.map
             .lock()
             .unwrap_or_else(PoisonError::into_inner)

@@ -44,7 +44,8 @@ pub(super) struct Request {
     pub(super) generation: u64,
     pub(super) state: RequestState,
     pub(super) requested_at: Instant,
-    /// 0: needed for display; 1: prefetch.
+    /// Priority class: 0 needed for display, then prefetch by time to need (see
+    /// [`super::predict::CLASSES`]).
     pub(super) class: usize,
 }
 
@@ -131,7 +132,8 @@ impl Streamer {
         }
     }
 
-    /// Hands queued jobs to workers: coarsest level first, then nearest to the camera.
+    /// Hands queued jobs to workers: by class (time to need), then coarsest level first, then
+    /// nearest to the camera.
     pub(super) fn dispatch(&mut self) {
         let running = self
             .requests
@@ -142,7 +144,8 @@ impl Streamer {
         let cam_pos = self.camera.map(|c| c.position_m);
         let tree = self.shared.tree;
         let levels = self.buckets[0].len();
-        for (class, level) in (0..2).flat_map(|c| (0..levels).map(move |l| (c, l))) {
+        let classes = self.buckets.len();
+        for (class, level) in (0..classes).flat_map(|c| (0..levels).map(move |l| (c, l))) {
             while free > 0 && !self.buckets[class][level].is_empty() {
                 let bucket = &mut self.buckets[class][level];
                 let idx = match cam_pos {

@@ -11,9 +11,11 @@
 //! Files: [`content`] (kinds, payloads, node work), `bounds_store` (bounds known so far),
 //! `jobs` (requests, workers, cancellation, GPU phases), `display` (fades and the draw list),
 //! `residency` (LRU eviction under the budget, statistics).
-//! - **Priority** is larger nodes first, then nearer to the camera. Pending requests sit in one
-//!   bucket per level; the distance is computed when a job is dispatched, so priorities follow
-//!   the camera without rebuilding a queue.
+//! - **Priority** is time to need first ([`predict`]: needed now, then needed by the predicted
+//!   camera 0.4, 1 and 2 s ahead, then the lower-tau prefetch around the camera), then larger
+//!   nodes first, then nearer to the camera. Pending requests sit in one bucket per class and
+//!   level; the distance is computed when a job is dispatched, so priorities follow the camera
+//!   without rebuilding a queue.
 //! - **Cancellation**: a request that is no longer wanted is removed from its bucket if still
 //!   queued; if running, its flag is set and the worker stops at the next phase boundary,
 //!   releasing its tiles; if waiting for its GPU phase, it is dropped. Every result carries
@@ -33,6 +35,7 @@ pub mod bounds_store;
 pub mod content;
 mod display;
 mod jobs;
+pub mod predict;
 mod residency;
 
 pub use bounds_store::BoundsStore;
@@ -180,8 +183,8 @@ pub struct Streamer {
     from_workers: Receiver<JobResult>,
     workers: Vec<std::thread::JoinHandle<()>>,
     requests: FxHashMap<NodeKey, Request>,
-    /// Pending (queued) requests per priority class (display, prefetch) and level.
-    buckets: [Vec<Vec<NodeKey>>; 2],
+    /// Pending (queued) requests per priority class (see [`predict::CLASSES`]) and level.
+    buckets: Vec<Vec<Vec<NodeKey>>>,
     next_generation: u64,
     resident: FxHashMap<NodeKey, Resident>,
     wanted: FxHashSet<NodeKey>,
@@ -196,6 +199,8 @@ pub struct Streamer {
     split: FxHashMap<NodeKey, f32>,
     frame: u64,
     camera: Option<Camera>,
+    /// Camera velocity estimated from the last two updates (m/s).
+    velocity_m_per_s: glam::DVec3,
     pub stats: StreamStats,
 }
 
@@ -261,7 +266,7 @@ impl Streamer {
             from_workers,
             workers,
             requests: FxHashMap::default(),
-            buckets: [vec![Vec::new(); levels], vec![Vec::new(); levels]],
+            buckets: vec![vec![Vec::new(); levels]; predict::CLASSES],
             next_generation: 1,
             resident: FxHashMap::default(),
             wanted: FxHashSet::default(),
@@ -272,6 +277,7 @@ impl Streamer {
             drawn: Vec::new(),
             frame: 0,
             camera: None,
+            velocity_m_per_s: glam::DVec3::ZERO,
             stats: StreamStats::default(),
         }
     }
@@ -361,8 +367,22 @@ impl Streamer {
     }
 
     /// One frame: new wanted set from the camera, cancel what is no longer needed, request what
-    /// is missing, collect worker results, dispatch jobs by priority, advance fades.
+    /// is missing, collect worker results, dispatch jobs by priority, advance fades. Prefetch
+    /// follows the camera's current velocity (see [`predict`]).
     pub fn update(&mut self, cam: &Camera, dt_s: f64) {
+        if let Some(prev) = self.camera
+            && dt_s > 0.0
+        {
+            self.velocity_m_per_s = (cam.position_m - prev.position_m) / dt_s;
+        }
+        let future = predict::extrapolate(cam, self.velocity_m_per_s);
+        self.update_along(cam, dt_s, &future);
+    }
+
+    /// [`Self::update`] with the camera's predicted path given by the owner: `future` is
+    /// (seconds ahead, camera), sorted by time, at most [`predict::PREDICT_HORIZONS_S`]'s
+    /// length (e.g. the automatic flight or a replayed path at those times).
+    pub fn update_along(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
         self.frame += 1;
         self.camera = Some(*cam);
         self.collect_results();
@@ -373,11 +393,9 @@ impl Streamer {
         // what is shown until the wanted nodes are ready).
         self.to_split = Self::ancestors_of(&self.wanted);
         self.needed = self.needed_for(&self.wanted, &self.to_split);
-        let prefetch_wanted = self.select_wanted(cam, tau * self.settings.prefetch_factor);
+        let prefetch = self.prefetch_classes(cam, future);
         self.stats.last_selection_s = t_select.elapsed().as_secs_f64();
-        let prefetch_ancestors = Self::ancestors_of(&prefetch_wanted);
-        self.prefetch = self.needed_for(&prefetch_wanted, &prefetch_ancestors);
-        self.prefetch.retain(|k| !self.needed.contains(k));
+        self.prefetch = prefetch.keys().copied().collect();
         // Cancel requests no longer needed or prefetched.
         let stale: Vec<NodeKey> = self
             .requests
@@ -388,33 +406,29 @@ impl Streamer {
         for k in stale {
             self.cancel(k);
         }
-        // Request what is missing: display first, then prefetch; promote prefetch requests that
-        // became needed for display.
-        for class in 0..2 {
-            let set = if class == 0 {
-                &self.needed
-            } else {
-                &self.prefetch
-            };
-            let mut missing: Vec<NodeKey> = set
-                .iter()
-                .filter(|k| !self.resident.contains_key(k))
-                .copied()
-                .collect();
-            missing.sort_unstable();
-            for k in missing {
-                match self.requests.get_mut(&k) {
-                    None => self.request(k, class),
-                    Some(r) if r.class > class => {
-                        r.class = class;
-                        if matches!(r.state, RequestState::Queued) {
-                            let level = usize::from(k.level);
-                            self.buckets[1][level].retain(|&q| q != k);
-                            self.buckets[class][level].push(k);
-                        }
+        // Request what is missing, each node in its class; promote requests whose time to
+        // need came closer.
+        let mut missing: Vec<(usize, NodeKey)> = self
+            .needed
+            .iter()
+            .map(|&k| (0, k))
+            .chain(prefetch.iter().map(|(&k, &c)| (c, k)))
+            .filter(|(_, k)| !self.resident.contains_key(k))
+            .collect();
+        missing.sort_unstable();
+        for (class, k) in missing {
+            match self.requests.get_mut(&k) {
+                None => self.request(k, class),
+                Some(r) if r.class > class => {
+                    let old = r.class;
+                    r.class = class;
+                    if matches!(r.state, RequestState::Queued) {
+                        let level = usize::from(k.level);
+                        self.buckets[old][level].retain(|&q| q != k);
+                        self.buckets[class][level].push(k);
                     }
-                    Some(_) => {}
                 }
+                Some(_) => {}
             }
         }
         let frame = self.frame;

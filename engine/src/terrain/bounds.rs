@@ -42,13 +42,37 @@ const _: () = assert!(
     "children's vertices must be lattice points"
 );
 
+/// Bound blocks per node side: a node's error and height range are also kept for each of
+/// `BLOCKS_PER_SIDE^2` blocks of `NODE_QUADS / BLOCKS_PER_SIDE` quads, so the selection projects
+/// each block's error from that block's own distance (a large node seen from close by is no longer
+/// charged its worst error at its nearest point).
+pub const BLOCKS_PER_SIDE: usize = 4;
+/// Bound blocks per node.
+pub const BLOCKS: usize = BLOCKS_PER_SIDE * BLOCKS_PER_SIDE;
+const _: () = assert!(
+    (NODE_QUADS as usize).is_multiple_of(BLOCKS_PER_SIDE) && BLOCKS_PER_SIDE % 2 == 0,
+    "blocks are whole quads and a child's block lies in one block of its parent"
+);
+
+/// Height range and error bound of one block of a node (row-major from the south-west,
+/// `index = by * BLOCKS_PER_SIDE + bx`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlockBounds {
+    pub z_min_m: f64,
+    pub z_max_m: f64,
+    /// Upper bound of `|mesh - F|` inside the block for this node's mesh and every
+    /// descendant's; never larger than the parent block's that contains it.
+    pub error_m: f64,
+}
+
 /// Height range and error bound of one node.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NodeBounds {
     pub z_min_m: f64,
     pub z_max_m: f64,
     /// Upper bound of the vertical distance between the node mesh and the finest surface, and of
-    /// the same distance for every descendant's mesh; never larger than the parent's.
+    /// the same distance for every descendant's mesh; never larger than the parent's. The largest
+    /// block error.
     pub error_m: f64,
     /// The measured bound `e(N)` of this node's own mesh (before the monotone step).
     pub mesh_error_m: f64,
@@ -57,13 +81,48 @@ pub struct NodeBounds {
     /// The vegetation representation error of this level where the node has vegetation (see
     /// [`crate::vegetation::representation::ERROR_PER_SPACING`]), else 0. Monotone like `error_m`.
     pub vegetation_error_m: f64,
+    /// The same bounds per block (see [`BLOCKS_PER_SIDE`]).
+    pub blocks: [BlockBounds; BLOCKS],
 }
 
 impl NodeBounds {
-    /// The error selection projects: terrain or vegetation, whichever is larger.
-    pub fn selection_error_m(&self) -> f64 {
-        self.error_m.max(self.vegetation_error_m)
+    /// Bounds of an exactly represented flat or constant-range patch (zero error), for tests and
+    /// hand-made meshes.
+    pub fn exact(z_min_m: f64, z_max_m: f64) -> Self {
+        Self {
+            z_min_m,
+            z_max_m,
+            error_m: 0.0,
+            mesh_error_m: 0.0,
+            descendants_error_m: 0.0,
+            vegetation_error_m: 0.0,
+            blocks: [BlockBounds {
+                z_min_m,
+                z_max_m,
+                error_m: 0.0,
+            }; BLOCKS],
+        }
     }
+}
+
+/// The rectangle of block `index` of a node.
+pub fn block_rect(tree: &QuadTree, key: NodeKey, index: usize) -> crate::surface::world::Rect {
+    let r = tree.rect(key);
+    let side = (r.max[0] - r.min[0]) / BLOCKS_PER_SIDE as f64;
+    let (bx, by) = (index % BLOCKS_PER_SIDE, index / BLOCKS_PER_SIDE);
+    let min = [r.min[0] + bx as f64 * side, r.min[1] + by as f64 * side];
+    crate::surface::world::Rect {
+        min,
+        max: [min[0] + side, min[1] + side],
+    }
+}
+
+/// The index of the parent's block that contains block `index` of `key` (not the root).
+pub fn parent_block(key: NodeKey, index: usize) -> usize {
+    let (bx, by) = (index % BLOCKS_PER_SIDE, index / BLOCKS_PER_SIDE);
+    let px = ((key.ix as usize & 1) * BLOCKS_PER_SIDE + bx) / 2;
+    let py = ((key.iy as usize & 1) * BLOCKS_PER_SIDE + by) / 2;
+    py * BLOCKS_PER_SIDE + px
 }
 
 /// Linear interpolation of vertex heights `v` ((n+1)^2, row-major) at fractional grid position
@@ -102,131 +161,203 @@ pub fn between_bound(b: &crate::surface::world::RegionBounds, c: f64) -> f64 {
 }
 
 /// The stored bounds of a node from its own measurement ([`measure`]) and its parent's stored
-/// bounds (`None` at the root): `error_m = min(max(e, U), E(parent))`.
-pub fn monotone(own: NodeBounds, parent: Option<NodeBounds>) -> NodeBounds {
-    let mut error = own.mesh_error_m.max(own.descendants_error_m);
+/// bounds (`None` at the root): per block `error = min(max(e, U), E(parent block))`, and the
+/// node's error the largest block error.
+pub fn monotone(key: NodeKey, own: NodeBounds, parent: Option<NodeBounds>) -> NodeBounds {
+    let mut out = own;
     if let Some(p) = parent {
-        error = error.min(p.error_m);
+        for (i, b) in out.blocks.iter_mut().enumerate() {
+            b.error_m = b.error_m.min(p.blocks[parent_block(key, i)].error_m);
+        }
+        out.error_m = out.blocks.iter().map(|b| b.error_m).fold(0.0, f64::max);
     }
-    NodeBounds {
-        error_m: error,
-        ..own
-    }
+    out
 }
 
 /// Measures the height range, the error bound `e(N)` of one node's own mesh and the bound
-/// `U(N)` of its descendants' meshes (see the module docs; `error_m` = `mesh_error_m` here, before
-/// [`monotone`]). About 17k surface evaluations.
+/// `U(N)` of its descendants' meshes, per block and for the whole node (see the module docs).
+/// The blocks' `error_m` is `max(e, U)` here, before [`monotone`]. About 17k surface
+/// evaluations.
 pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     let r = tree.rect(key);
-    let n = NODE_QUADS as usize;
     let sub = CHECK_SUBDIV as usize;
-    let s = tree.spacing_m(key.level);
-    let c = s / f64::from(CHECK_SUBDIV);
-    let m = n * sub;
-    // F on the check lattice; mesh vertices are every `sub`-th lattice point.
-    let mut lattice = Vec::with_capacity((m + 1) * (m + 1));
+    let c = tree.spacing_m(key.level) / f64::from(CHECK_SUBDIV);
+    let m = NODE_QUADS as usize * sub;
+    let w = m + 1;
+    // F on the check lattice; the mesh's vertices are every `sub`-th lattice point, the four
+    // children's every `sub / 2`-th.
+    let mut lattice = Vec::with_capacity(w * w);
     for j in 0..=m {
+        let y = r.min[1] + j as f64 * c;
         for i in 0..=m {
-            lattice.push(world.height_m(r.min[0] + i as f64 * c, r.min[1] + j as f64 * c));
+            lattice.push(world.height_m(r.min[0] + i as f64 * c, y));
         }
     }
-    let mut verts = Vec::with_capacity((n + 1) * (n + 1));
-    for j in 0..=n {
-        for i in 0..=n {
-            verts.push(lattice[(j * sub) * (m + 1) + i * sub] as f32);
+    let own = lattice_errors(&lattice, m, sub);
+    let children = lattice_errors(&lattice, m, sub / 2);
+    let between = between_bounds(world, r, c, m);
+    let cells_per_block = m / BLOCKS_PER_SIDE;
+    let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
+    for j in 0..m {
+        for i in 0..m {
+            let between = between.at(i, j);
+            let block = &mut blocks[(j / cells_per_block) * BLOCKS_PER_SIDE + i / cells_per_block];
+            for at in [
+                j * w + i,
+                j * w + i + 1,
+                (j + 1) * w + i,
+                (j + 1) * w + i + 1,
+            ] {
+                let f = lattice[at];
+                block.lo = block.lo.min(f - between);
+                block.hi = block.hi.max(f + between);
+                block.own = block.own.max(own[at] + between);
+                block.children = block.children.max(children[at] + between);
+            }
         }
     }
-    // Per check cell: the largest |M - F| at its corners plus the local between-points bound.
-    let err_at = |i: usize, j: usize| {
-        let f = lattice[j * (m + 1) + i];
-        (interpolate_grid(&verts, n, i as f64 / sub as f64, j as f64 / sub as f64) - f).abs()
+    let has_vegetation = crate::vegetation::representation::has_vegetation(world, r);
+    finish(tree, key, &blocks, has_vegetation)
+}
+
+/// One block's measurement: height range, own-mesh error, children's-mesh error.
+#[derive(Clone, Copy)]
+struct BlockMeasure {
+    lo: f64,
+    hi: f64,
+    own: f64,
+    children: f64,
+}
+
+impl BlockMeasure {
+    const EMPTY: Self = Self {
+        lo: f64::INFINITY,
+        hi: f64::NEG_INFINITY,
+        own: 0.0,
+        children: 0.0,
     };
-    let mut e_lattice = vec![0.0f64; (m + 1) * (m + 1)];
+}
+
+/// Node bounds from the blocks' measurements: f32 vertex rounding added (relative 2^-24 of the
+/// height magnitude, twice for safety: descendant vertices lie in the same proven range); leaves
+/// have no descendants.
+fn finish(
+    tree: &QuadTree,
+    key: NodeKey,
+    m: &[BlockMeasure; BLOCKS],
+    vegetation: bool,
+) -> NodeBounds {
+    let lo = m.iter().map(|b| b.lo).fold(f64::INFINITY, f64::min);
+    let hi = m.iter().map(|b| b.hi).fold(f64::NEG_INFINITY, f64::max);
+    let rounding = 2.0 * hi.abs().max(lo.abs()) * f64::from(f32::EPSILON);
+    let leaf = key.level >= tree.max_level;
+    let descendants = |b: &BlockMeasure| if leaf { 0.0 } else { b.children + rounding };
+    let blocks = std::array::from_fn(|i| BlockBounds {
+        z_min_m: m[i].lo,
+        z_max_m: m[i].hi,
+        error_m: (m[i].own + rounding).max(descendants(&m[i])),
+    });
+    NodeBounds {
+        z_min_m: lo,
+        z_max_m: hi,
+        error_m: m
+            .iter()
+            .map(|b| (b.own + rounding).max(descendants(b)))
+            .fold(0.0, f64::max),
+        mesh_error_m: m.iter().map(|b| b.own + rounding).fold(0.0, f64::max),
+        descendants_error_m: m.iter().map(descendants).fold(0.0, f64::max),
+        vegetation_error_m: if vegetation {
+            crate::vegetation::representation::ERROR_PER_SPACING * tree.spacing_m(key.level)
+        } else {
+            0.0
+        },
+        blocks,
+    }
+}
+
+/// `|M - F|` at every point of the `(m + 1)^2` check lattice, where `M` interpolates the lattice
+/// values at every `step`-th point (stored as f32, as meshes store them) with diagonals from
+/// (i, j) to (i + 1, j + 1) ([`interpolate_grid`]'s triangulation).
+fn lattice_errors(lattice: &[f64], m: usize, step: usize) -> Vec<f64> {
+    let w = m + 1;
+    let quads = m / step;
+    let v = |qi: usize, qj: usize| f64::from(lattice[qj * step * w + qi * step] as f32);
+    let mut out = Vec::with_capacity(w * w);
     for j in 0..=m {
+        let qj = (j / step).min(quads - 1);
+        let fy = (j - qj * step) as f64 / step as f64;
         for i in 0..=m {
-            e_lattice[j * (m + 1) + i] = err_at(i, j);
+            let qi = (i / step).min(quads - 1);
+            let fx = (i - qi * step) as f64 / step as f64;
+            let (h00, h10, h01, h11) = (v(qi, qj), v(qi + 1, qj), v(qi, qj + 1), v(qi + 1, qj + 1));
+            let z = if fx >= fy {
+                h00 + fx * (h10 - h00) + fy * (h11 - h10)
+            } else {
+                h00 + fy * (h01 - h00) + fx * (h11 - h01)
+            };
+            out.push((z - lattice[j * w + i]).abs());
         }
     }
-    // The four children together mesh the node with a (2n)^2 grid whose vertices are every
-    // (sub / 2)-th lattice point: their |M_C - F| at every lattice point.
-    let half = sub / 2;
-    let nc = 2 * n;
-    let mut child_verts = Vec::with_capacity((nc + 1) * (nc + 1));
-    for j in 0..=nc {
-        for i in 0..=nc {
-            child_verts.push(lattice[(j * half) * (m + 1) + i * half] as f32);
-        }
+    out
+}
+
+/// The between-points bound of every check cell of a node, stored per group of `group^2` cells
+/// that share their region bounds.
+struct Betweens {
+    group: usize,
+    per_row: usize,
+    values: Vec<f64>,
+}
+
+impl Betweens {
+    fn at(&self, i: usize, j: usize) -> f64 {
+        self.values[(j / self.group) * self.per_row + i / self.group]
     }
-    let mut e_child = vec![0.0f64; (m + 1) * (m + 1)];
-    for j in 0..=m {
-        for i in 0..=m {
-            let f = lattice[j * (m + 1) + i];
-            let g = interpolate_grid(
-                &child_verts,
-                nc,
-                i as f64 / half as f64,
-                j as f64 / half as f64,
-            );
-            e_child[j * (m + 1) + i] = (g - f).abs();
-        }
-    }
-    // Fast path: when check cells tile the height and ground cells exactly (aligned, at most
-    // one cell in size) and the node is inside the map, each check cell's bounds are its map
-    // cells' values, read directly.
+}
+
+/// The between-points bound ([`between_bound`] with legs `c`) of the `m^2` check cells of the
+/// node `r`. Where check cells tile the height cells, ground cells and decal blocks exactly
+/// (aligned, at most one cell in size) and the node is inside the map, a cell's region bounds
+/// are its map cells' values, read directly, and they are the same for every check cell in
+/// the largest aligned group of `2^k` cells that still lies inside one map cell of each kind,
+/// so they are read once per group. Elsewhere each check cell's region is bounded on its own.
+fn between_bounds(world: &World, r: crate::surface::world::Rect, c: f64, m: usize) -> Betweens {
     let (hs, gs) = world.cell_spacings_m();
     let o = world.origin_m();
     let size = world.size_m();
-    let divides = |big: f64| c <= big && ((big / c) - (big / c).round()).abs() < 1e-9;
     let block_m = crate::surface::decals::DECAL_BLOCK_M;
+    let divides = |len: f64| {
+        [hs, gs, block_m]
+            .iter()
+            .all(|&big| len <= big && ((big / len) - (big / len).round()).abs() < 1e-9)
+    };
     let inside = r.max[0] <= o[0] + size[0] + 1e-9 && r.max[1] <= o[1] + size[1] + 1e-9;
-    let direct = divides(hs) && divides(gs) && divides(block_m) && inside;
-    let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
-    let mut descendants = 0.0f64;
-    for j in 0..m {
-        for i in 0..m {
+    let direct = divides(c) && inside;
+    let mut group = 1;
+    while direct && group * 2 <= m && divides(c * (group * 2) as f64) {
+        group *= 2;
+    }
+    let per_row = m / group;
+    let g = c * group as f64;
+    let mut values = Vec::with_capacity(per_row * per_row);
+    for j in 0..per_row {
+        for i in 0..per_row {
             let cell = crate::surface::world::Rect {
-                min: [r.min[0] + i as f64 * c, r.min[1] + j as f64 * c],
-                max: [r.min[0] + (i + 1) as f64 * c, r.min[1] + (j + 1) as f64 * c],
+                min: [r.min[0] + i as f64 * g, r.min[1] + j as f64 * g],
+                max: [r.min[0] + (i + 1) as f64 * g, r.min[1] + (j + 1) as f64 * g],
             };
             let region = if direct {
                 world.cell_region_bounds(cell)
             } else {
                 world.region_bounds(cell)
             };
-            let between = between_bound(&region, c);
-            let corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)];
-            let (mut e, mut ec) = (0.0f64, 0.0f64);
-            for (ci, cj) in corners {
-                let f = lattice[cj * (m + 1) + ci];
-                lo = lo.min(f - between);
-                hi = hi.max(f + between);
-                e = e.max(e_lattice[cj * (m + 1) + ci]);
-                ec = ec.max(e_child[cj * (m + 1) + ci]);
-            }
-            error = error.max(e + between);
-            descendants = descendants.max(ec + between);
+            values.push(between_bound(&region, c));
         }
     }
-    // f32 vertex rounding: relative 2^-24 of the height magnitude, twice for safety (descendant
-    // vertices lie in the same proven height range).
-    let rounding = 2.0 * hi.abs().max(lo.abs()) * f64::from(f32::EPSILON);
-    NodeBounds {
-        z_min_m: lo,
-        z_max_m: hi,
-        error_m: error + rounding,
-        mesh_error_m: error + rounding,
-        vegetation_error_m: if crate::vegetation::representation::has_vegetation(world, r) {
-            crate::vegetation::representation::ERROR_PER_SPACING * s
-        } else {
-            0.0
-        },
-        // Leaves have no descendants.
-        descendants_error_m: if key.level < tree.max_level {
-            descendants + rounding
-        } else {
-            0.0
-        },
+    Betweens {
+        group,
+        per_row,
+        values,
     }
 }
 
@@ -249,7 +380,7 @@ impl BoundsCache {
             return *b;
         }
         let parent = key.parent().map(|p| self.get(world, tree, p));
-        let b = monotone(measure(world, tree, key), parent);
+        let b = monotone(key, measure(world, tree, key), parent);
         self.computed += 1;
         self.map.insert(key, b);
         b

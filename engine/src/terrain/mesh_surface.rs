@@ -100,14 +100,7 @@ mod tests {
             ground: vec![0; 4],
             indices: vec![0, 1, 2, 1, 3, 2],
             surface_index_count: 6,
-            bounds: NodeBounds {
-                z_min_m: 0.0,
-                z_max_m: 10.0,
-                error_m: 0.0,
-                mesh_error_m: 0.0,
-                descendants_error_m: 0.0,
-                vegetation_error_m: 0.0,
-            },
+            bounds: NodeBounds::exact(0.0, 10.0),
             skirt_bottom_m: [0.0; 4],
         };
         (mesh, tree)

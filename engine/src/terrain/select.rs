@@ -1,13 +1,16 @@
 //! Per-frame node selection: split a node while its projected error exceeds the pixel
 //! threshold; cull by the view frustum against node AABBs.
 //!
-//! `px = error_m * K / dist_m` with `K = viewport_height_px / (2 tan(fovy / 2))` and `dist_m`
-//! the distance from the camera to the nearest point of the node's AABB (so the projected error
-//! of every point of the node is at most `px`).
+//! A node's projected error is the largest over its bound blocks of `error_m * K / dist_m`, with
+//! `K = viewport_height_px / (2 tan(fovy / 2))` and `dist_m` the distance from the camera to the
+//! nearest point of the block's box (so the projected error of every point of the block is at
+//! most that), and at least the vegetation term with the node's box distance; see
+//! [`projected_error_px`]. When culling, blocks outside the view frustum show nothing and do not
+//! count.
 
-use crate::camera::{Camera, distance_to_aabb};
+use crate::camera::{Camera, Frustum, distance_to_aabb};
 use crate::surface::world::World;
-use crate::terrain::bounds::{BoundsCache, NodeBounds};
+use crate::terrain::bounds::{BLOCKS, BoundsCache, NodeBounds, block_rect};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 
@@ -18,6 +21,50 @@ pub fn node_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> (DVec3, DVec3
         DVec3::new(r.min[0], r.min[1], b.z_min_m),
         DVec3::new(r.max[0], r.max[1], b.z_max_m),
     )
+}
+
+/// A node's projected error bound in pixels for a camera at `eye_m` with pixel factor `k_px`:
+/// the largest over its blocks (those that may be in `frustum`, when given) of the block error
+/// times `k_px` over the distance to the block's box, and the vegetation error over the node box's
+/// distance. Distances are taken as at least `near_m`; a distance of 0 (the eye inside a box
+/// that counts) gives infinity.
+pub fn projected_error_px(
+    tree: &QuadTree,
+    key: NodeKey,
+    b: &NodeBounds,
+    eye_m: DVec3,
+    k_px: f64,
+    frustum: Option<&Frustum>,
+    near_m: f64,
+) -> f64 {
+    let px = |error_m: f64, dist_m: f64| {
+        let d = dist_m.max(near_m);
+        if error_m <= 0.0 {
+            0.0
+        } else if d > 0.0 {
+            error_m * k_px / d
+        } else {
+            f64::INFINITY
+        }
+    };
+    let (lo, hi) = node_aabb(tree, key, b);
+    let mut out = px(b.vegetation_error_m, distance_to_aabb(eye_m, lo, hi));
+    for i in 0..BLOCKS {
+        let block = &b.blocks[i];
+        if block.error_m <= 0.0 {
+            continue;
+        }
+        let r = block_rect(tree, key, i);
+        let (lo, hi) = (
+            DVec3::new(r.min[0], r.min[1], block.z_min_m),
+            DVec3::new(r.max[0], r.max[1], block.z_max_m),
+        );
+        if frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
+            continue;
+        }
+        out = out.max(px(block.error_m, distance_to_aabb(eye_m, lo, hi)));
+    }
+    out
 }
 
 /// One selected node.
@@ -96,11 +143,15 @@ pub fn traverse<B: Into<Option<NodeBounds>>>(
             continue;
         }
         let dist = distance_to_aabb(cam.position_m, min, max);
-        let error_px = if dist > 0.0 {
-            b.selection_error_m() * k / dist
-        } else {
-            f64::INFINITY
-        };
+        let error_px = projected_error_px(
+            tree,
+            key,
+            &b,
+            cam.position_m,
+            k,
+            cull.then_some(&frustum),
+            0.0,
+        );
         if key.level < tree.max_level && split(key, &b, dist, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order.
             stack.extend(key.children().into_iter().rev());

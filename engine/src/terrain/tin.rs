@@ -105,6 +105,9 @@ pub fn build(grid: &NodeMesh, target_m: f64) -> (NodeMesh, TinStats) {
     mesh.indices = indices;
     mesh.surface_index_count = surface as u32;
     mesh.bounds.error_m += delta_m;
+    for b in &mut mesh.bounds.blocks {
+        b.error_m += delta_m;
+    }
     let stats = TinStats {
         vertices: tri.num_vertices(),
         surface_triangles: surface / 3,
@@ -232,14 +235,7 @@ mod tests {
             positions,
             indices: Vec::new(),
             surface_index_count: 0,
-            bounds: NodeBounds {
-                z_min_m: 0.0,
-                z_max_m: 0.0,
-                error_m: 0.0,
-                mesh_error_m: 0.0,
-                descendants_error_m: 0.0,
-                vegetation_error_m: 0.0,
-            },
+            bounds: NodeBounds::exact(0.0, 0.0),
             skirt_bottom_m: [0.0; 4],
         }
     }

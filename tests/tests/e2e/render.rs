@@ -148,14 +148,7 @@ fn quad(key: NodeKey, origin_m: [f64; 2], size_m: f32, z_m: f32, ground: u8) -> 
         ground: vec![ground; 4],
         indices: vec![0, 1, 3, 0, 3, 2],
         surface_index_count: 6,
-        bounds: NodeBounds {
-            z_min_m: f64::from(z_m),
-            z_max_m: f64::from(z_m),
-            error_m: 0.0,
-            mesh_error_m: 0.0,
-            descendants_error_m: 0.0,
-            vegetation_error_m: 0.0,
-        },
+        bounds: NodeBounds::exact(f64::from(z_m), f64::from(z_m)),
         skirt_bottom_m: [f64::from(z_m); 4],
     }
 }

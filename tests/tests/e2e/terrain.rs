@@ -2,9 +2,10 @@
 //! any level difference, cliffs / spikes / flat sea / borders, far from the origin, determinism.
 
 use engine::camera::Camera;
+use engine::camera::distance_to_aabb;
 use engine::surface::decals::FLAT_MARGIN_M;
 use engine::surface::world::World;
-use engine::terrain::bounds::BoundsCache;
+use engine::terrain::bounds::{BLOCKS, BoundsCache, block_rect, parent_block};
 use engine::terrain::mesh::NodeMesh;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
 use engine::terrain::select::{SelectParams, select};
@@ -12,13 +13,13 @@ use engine::terrain::tiles::TileCache;
 use glam::DVec3;
 use std::collections::HashMap as Map;
 use tests::terrain::{
-    build_mesh, build_selection, cliff_world, measure_true_error, random_camera, ray_mesh, shifted,
-    tiny_world, tree_of,
+    build_mesh, build_selection, cliff_world, measure_true_block_errors, measure_true_error,
+    random_camera, ray_mesh, shifted, tiny_world, tree_of,
 };
 use worldgen::noise::unit3;
 
-/// Dense true error per node, measured once.
-struct TrueErrors(Map<NodeKey, (f64, f64)>);
+/// Dense true error per block of a node, measured once.
+struct TrueErrors(Map<NodeKey, [(f64, f64); BLOCKS]>);
 
 impl TrueErrors {
     fn get(
@@ -28,15 +29,25 @@ impl TrueErrors {
         cache: &mut BoundsCache,
         tiles: &mut TileCache,
         key: NodeKey,
-    ) -> (f64, f64) {
+    ) -> [(f64, f64); BLOCKS] {
         if let Some(v) = self.0.get(&key) {
             return *v;
         }
         let m = build_mesh(world, tree, cache, tiles, key);
-        let v = measure_true_error(world, tree, &m);
+        let v = measure_true_block_errors(world, tree, &m);
         self.0.insert(key, v);
         v
     }
+}
+
+/// The block of `ancestor` that contains block `index` of `key` (a descendant of it, or itself).
+fn covering_block(key: NodeKey, index: usize, ancestor: NodeKey) -> usize {
+    let (mut k, mut i) = (key, index);
+    while k != ancestor {
+        i = parent_block(k, i);
+        k = k.parent().expect("ancestor on the chain");
+    }
+    i
 }
 
 #[test]
@@ -87,6 +98,18 @@ fn bounds_are_conservative_on_hard_surfaces() {
                 outside <= 0.0,
                 "{name} {key:?}: surface leaves the height range by {outside} m"
             );
+            // And block by block: the selection projects each block's own bound.
+            for (i, (err, out)) in measure_true_block_errors(&world, &tree, &m)
+                .into_iter()
+                .enumerate()
+            {
+                let b = m.bounds.blocks[i];
+                assert!(
+                    err <= b.error_m && out <= 0.0,
+                    "{name} {key:?} block {i}: true error {err} m (bound {} m), outside {out} m",
+                    b.error_m
+                );
+            }
             checked += 1;
         }
         assert!(checked > 40, "{name}: only {checked} nodes checked");
@@ -144,6 +167,15 @@ fn errors_are_monotone_and_bound_every_descendant() {
                     c.error_m,
                     p.error_m
                 );
+                for (i, b) in c.blocks.iter().enumerate() {
+                    let pb = p.blocks[parent_block(child, i)];
+                    assert!(
+                        b.error_m <= pb.error_m,
+                        "{name}: {child:?} block {i} error {} m > its parent block's {} m",
+                        b.error_m,
+                        pb.error_m
+                    );
+                }
                 if c.error_m < c.mesh_error_m {
                     clamped += 1;
                 }
@@ -151,14 +183,17 @@ fn errors_are_monotone_and_bound_every_descendant() {
             }
             // The true error of every node on the chain is bounded by each ancestor's error.
             for (d, &desc) in chain.iter().enumerate().step_by(3) {
-                let (true_err, _) = truth.get(&world, &tree, &mut cache, &mut tiles, desc);
+                let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, desc);
                 for &anc in &chain[d..] {
-                    let e = cache.get(&world, &tree, anc).error_m;
-                    assert!(
-                        true_err <= e,
-                        "{name}: descendant {desc:?} true error {true_err} m > ancestor {anc:?} \
-                         error {e} m"
-                    );
+                    let a = cache.get(&world, &tree, anc);
+                    for (i, &(true_err, _)) in blocks.iter().enumerate() {
+                        let e = a.blocks[covering_block(desc, i, anc)].error_m;
+                        assert!(
+                            true_err <= e && true_err <= a.error_m,
+                            "{name}: descendant {desc:?} block {i} true error {true_err} m > \
+                             ancestor {anc:?} block error {e} m"
+                        );
+                    }
                     descendants += 1;
                 }
             }
@@ -210,7 +245,7 @@ fn selected_nodes_respect_the_pixel_threshold() {
                 );
                 // A camera near the border looking out sees no ground; that is allowed, rarely.
                 empty += usize::from(sel.nodes.is_empty());
-                let k = cam.k_px();
+                let (k, frustum) = (cam.k_px(), cam.frustum());
                 let mut over = 0;
                 for s in &sel.nodes {
                     let finest = s.key.level == tree.max_level;
@@ -219,8 +254,21 @@ fn selected_nodes_respect_the_pixel_threshold() {
                         "{name}: a coarser node over tau was kept"
                     );
                     over += u32::from(s.error_px > tau);
-                    let (true_err, _) = truth.get(&world, &tree, &mut cache, &mut tiles, s.key);
-                    let px = true_err * k / s.dist_m.max(1e-9);
+                    // The true error of each block in view, projected from the block's box.
+                    let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, s.key);
+                    let mut px = 0.0f64;
+                    for (bi, &(true_err, _)) in blocks.iter().enumerate() {
+                        let b = s.bounds.blocks[bi];
+                        let r = block_rect(&tree, s.key, bi);
+                        let (lo, hi) = (
+                            DVec3::new(r.min[0], r.min[1], b.z_min_m),
+                            DVec3::new(r.max[0], r.max[1], b.z_max_m),
+                        );
+                        if frustum.intersects_aabb(lo, hi) {
+                            let d = distance_to_aabb(cam.position_m, lo, hi).max(1e-9);
+                            px = px.max(true_err * k / d);
+                        }
+                    }
                     // Never worse than the engine claims; and the claim is <= tau except at the
                     // finest level, where the engine reports the excess.
                     assert!(

@@ -6,18 +6,25 @@ use crate::report::{Report, bar};
 use engine::camera::Camera;
 use engine::measure::{self, ViewError};
 use engine::surface::World;
-use engine::terrain::bounds::BoundsCache;
+use engine::terrain::bounds::{BoundsCache, NodeBounds};
 use engine::terrain::mesh::{self, NodeMesh};
 use engine::terrain::quadtree::{NodeKey, QuadTree};
 use engine::terrain::select::{SelectParams, Selection, select};
 use engine::terrain::tiles::TileCache;
 use engine::terrain::tin;
 
-/// Node meshes (grid and TIN) built once and reused across thresholds and bisection steps.
+/// Dense error samples per quad for the measured max error: 2 per quad, offset off the vertices
+/// and the bounds' check lattice.
+const MAX_SAMPLES_PER_QUAD: u32 = 2;
+
+/// Node meshes (grid and TIN) and their dense error samples, built once and reused across
+/// thresholds and bisection steps.
 #[derive(Default)]
 struct MeshCache {
     grid: std::collections::HashMap<NodeKey, NodeMesh>,
     tin: std::collections::HashMap<NodeKey, NodeMesh>,
+    /// Keyed by node and whether the mesh is the TIN.
+    samples: std::collections::HashMap<(NodeKey, bool), measure::ErrorSamples>,
 }
 
 impl MeshCache {
@@ -52,7 +59,9 @@ impl MeshCache {
     }
 }
 
-/// Builds meshes for a selection (optionally as TINs) and measures the view's pixel error.
+/// Builds meshes for a selection (optionally as TINs) and measures the view's pixel error: the
+/// max over dense samples ([`MAX_SAMPLES_PER_QUAD`] per quad), the mean over `per_side^2`
+/// points per node.
 fn measure_view(
     world: &World,
     tree: &QuadTree,
@@ -73,12 +82,20 @@ fn measure_view(
             None => meshes_cache.grid(world, tree, cache, tiles, s.key).clone(),
         };
         tris += m.indices.len() / 3;
+        meshes_cache
+            .samples
+            .entry((s.key, tin_target.is_some()))
+            .or_insert_with(|| measure::node_error_samples(world, tree, &m, MAX_SAMPLES_PER_QUAD));
         meshes.push(m);
     }
-    (
-        tris,
-        measure::view_error(world, tree, &meshes, cam, per_side),
-    )
+    let mut e = measure::view_error(world, tree, &meshes, cam, per_side);
+    let samples: Vec<_> = sel
+        .nodes
+        .iter()
+        .map(|s| &meshes_cache.samples[&(s.key, tin_target.is_some())])
+        .collect();
+    e.max_px = e.max_px.max(measure::view_max_error_px(&samples, cam));
+    (tris, e)
 }
 
 /// Selection where each node's error bound is that of its TIN (grid error + exact TIN delta),
@@ -94,20 +111,25 @@ fn select_tin(
     // Both closures need the caches, one after the other; the TIN is built only for nodes that
     // survive culling.
     let ctx = std::cell::RefCell::new(ctx);
-    let k = cam.k_px();
+    let (k, frustum) = (cam.k_px(), cam.frustum());
     engine::terrain::select::traverse(
         tree,
         cam,
         true,
         |key| ctx.borrow_mut().0.get(world, tree, key),
-        |key, _, dist, _| {
+        |key, _, _, _| {
             let mut c = ctx.borrow_mut();
             let (cache, tiles, meshes) = &mut **c;
-            let err = meshes
-                .tin(world, tree, cache, tiles, key, target)
-                .bounds
-                .error_m;
-            dist <= 0.0 || err * k / dist > tau
+            let b = meshes.tin(world, tree, cache, tiles, key, target).bounds;
+            engine::terrain::select::projected_error_px(
+                tree,
+                key,
+                &b,
+                cam.position_m,
+                k,
+                Some(&frustum),
+                0.0,
+            ) > tau
         },
     )
 }
@@ -144,10 +166,11 @@ pub(crate) fn section_error(
     let b = bar((taus.len() * cams.len()) as u64, "speed vs error");
     for &tau in taus {
         let params = format!(
-            "tau {tau} px, {} cameras, lattice {per_side}² per node",
+            "tau {tau} px, {} cameras, max over {MAX_SAMPLES_PER_QUAD}² samples per quad, mean over {per_side}² per node",
             cams.len()
         );
         let (mut g_tris, mut g_max, mut g_mean) = (0usize, 0.0f64, 0.0f64);
+        let (mut terrain_tris, mut terrain_max) = (0usize, 0.0f64);
         let (mut t_tris, mut t_max, mut t_mean) = (0usize, 0.0f64, 0.0f64);
         for cam in &cams {
             let sel = select(
@@ -161,6 +184,21 @@ pub(crate) fn section_error(
             g_tris += tris;
             g_max = g_max.max(e.max_px);
             g_mean += e.mean_px / cams.len() as f64;
+            // The same with the vegetation term left out of the split test: what the terrain
+            // alone needs, and how close to tau its bounds let it draw.
+            let sel_terrain = engine::terrain::select::traverse(
+                tree,
+                cam,
+                true,
+                |key| NodeBounds {
+                    vegetation_error_m: 0.0,
+                    ..ctx.0.get(world, tree, key)
+                },
+                |_, _, _, px| px > tau,
+            );
+            let (tris, e) = measure_view(world, tree, &mut ctx, cam, &sel_terrain, per_side, None);
+            terrain_tris += tris;
+            terrain_max = terrain_max.max(e.max_px);
             let sel_t = select_tin(world, tree, &mut ctx, cam, tau, tin_target);
             let (tris, e) = measure_view(
                 world,
@@ -197,6 +235,20 @@ pub(crate) fn section_error(
         );
         r.add("error", "grid measured max error", g_max, "px", &params);
         r.add("error", "grid measured mean error", g_mean, "px", &params);
+        r.add(
+            "error",
+            "grid, terrain error only: triangles per frame",
+            terrain_tris as f64 / nc,
+            "triangles",
+            &params,
+        );
+        r.add(
+            "error",
+            "grid, terrain error only: measured max error",
+            terrain_max,
+            "px",
+            &params,
+        );
         r.add(
             "error",
             "TIN triangles per frame",

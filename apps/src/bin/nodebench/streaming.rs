@@ -8,32 +8,30 @@ use engine::camera::Camera;
 use engine::surface::World;
 use std::time::Instant;
 
-/// A closed loop over the map at a fixed height above the ground, sampled at `speed_m_s`
-/// for `frames` frames of `dt_s`.
-fn loop_path(
+/// A closed loop over the map at `above_m` over the ground (or the water), flown at
+/// `speed_m_s`: the camera `t_s` seconds into the flight.
+fn loop_camera(
     world: &World,
-    speed_m_s: f64,
-    frames: usize,
-    dt_s: f64,
+    (speed_m_s, above_m): (f64, f64),
+    t_s: f64,
     viewport_px: [u32; 2],
-) -> Vec<Camera> {
+) -> Camera {
     let o = world.origin_m();
     let s = world.size_m();
     let (cx, cy) = (o[0] + 0.5 * s[0], o[1] + 0.5 * s[1]);
     let (rx, ry) = (0.32 * s[0], 0.28 * s[1]);
     let circumference = std::f64::consts::TAU * f64::midpoint(rx * rx, ry * ry).sqrt();
-    (0..frames)
-        .map(|f| {
-            let a = std::f64::consts::TAU * (f as f64 * dt_s * speed_m_s / circumference);
-            let (x, y) = (cx + rx * a.cos(), cy + ry * a.sin());
-            let z = world.height_m(x, y).max(world.map.manifest.water_level_m) + 40.0;
-            let tangent = glam::DVec3::new(-rx * a.sin(), ry * a.cos(), 0.0).normalize();
-            let dir = (tangent + glam::DVec3::new(0.0, 0.0, -0.25)).normalize();
-            let pos = glam::DVec3::new(x, y, z);
-            Camera::look_at(pos, pos + dir, 60f64.to_radians(), viewport_px)
-        })
-        .collect()
+    let a = std::f64::consts::TAU * (t_s * speed_m_s / circumference);
+    let (x, y) = (cx + rx * a.cos(), cy + ry * a.sin());
+    let z = world.height_m(x, y).max(world.map.manifest.water_level_m) + above_m;
+    let tangent = glam::DVec3::new(-rx * a.sin(), ry * a.cos(), 0.0).normalize();
+    let dir = (tangent + glam::DVec3::new(0.0, 0.0, -0.25)).normalize();
+    let pos = glam::DVec3::new(x, y, z);
+    Camera::look_at(pos, pos + dir, 60f64.to_radians(), viewport_px)
 }
+
+/// Flights: (speed m/s, height above the ground m). The last is a jet.
+const FLIGHTS: [(f64, f64); 4] = [(50.0, 40.0), (150.0, 40.0), (300.0, 40.0), (1000.0, 1000.0)];
 
 pub(crate) fn section_streaming(
     world_path: &std::path::Path,
@@ -47,11 +45,36 @@ pub(crate) fn section_streaming(
     let seconds = if quick { 2.0 } else { 12.0 };
     let frames = (seconds / dt) as usize;
     let tau = 2.0;
-    for speed in [50.0, 150.0, 300.0] {
+    let worker_counts: Vec<usize> = if workers > 1 {
+        vec![1, workers]
+    } else {
+        vec![1]
+    };
+    for (flight, workers) in FLIGHTS
+        .iter()
+        .flat_map(|f| worker_counts.iter().map(move |&w| (*f, w)))
+    {
+        let (speed, above) = flight;
         let world = open_world(world_path)?;
-        let cams = loop_path(&world, speed, frames, dt, viewport_px);
+        let cams: Vec<Camera> = (0..frames)
+            .map(|f| loop_camera(&world, flight, f as f64 * dt, viewport_px))
+            .collect();
+        // The replayed path is known: prefetch follows it.
+        let future: Vec<Vec<(f64, Camera)>> = (0..frames)
+            .map(|f| {
+                engine::stream::predict::PREDICT_HORIZONS_S
+                    .iter()
+                    .map(|&h| {
+                        (
+                            h,
+                            loop_camera(&world, flight, f as f64 * dt + h, viewport_px),
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
         let settings = StreamSettings {
-            workers: workers.saturating_sub(1).max(1),
+            workers,
             tau_px: tau,
             ..StreamSettings::default()
         };
@@ -69,7 +92,7 @@ pub(crate) fn section_streaming(
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
             let t = Instant::now();
-            s.update(cam, dt);
+            s.update_along(cam, dt, &future[f]);
             s.run_gpu_phases();
             frame_times.push(t.elapsed().as_secs_f64());
             // Pop debt: a visible drawn node whose own error, projected at its own distance,
@@ -77,7 +100,7 @@ pub(crate) fn section_streaming(
             // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
             // traversal at tau reaches a non-culled node at or below it (a box test alone
             // passes big boxes behind the camera; the traversal refines them).
-            let (k, tree) = (cam.k_px(), *s.tree());
+            let (k, tree, frustum) = (cam.k_px(), *s.tree(), cam.frustum());
             let ideal = engine::terrain::select::traverse(
                 &tree,
                 cam,
@@ -103,9 +126,16 @@ pub(crate) fn section_streaming(
                 {
                     continue;
                 }
-                let (lo, hi) = engine::terrain::select::node_aabb(&tree, d.key, &b);
-                let dist = engine::camera::distance_to_aabb(cam.position_m, lo, hi).max(cam.near_m);
-                excess = excess.max(b.selection_error_m() * k / dist - tau);
+                let px = engine::terrain::select::projected_error_px(
+                    &tree,
+                    d.key,
+                    &b,
+                    cam.position_m,
+                    k,
+                    Some(&frustum),
+                    cam.near_m,
+                );
+                excess = excess.max(px - tau);
             }
             if excess > 0.0 {
                 debt_frames += 1;
@@ -124,7 +154,7 @@ pub(crate) fn section_streaming(
         lat.sort_by(f64::total_cmp);
         let q = |p: f64| apps::percentile(&lat, p);
         let params = format!(
-            "{speed} m/s, {seconds} s at 60 Hz, tau {tau} px, {} worker(s)",
+            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s)",
             s.settings.workers
         );
         r.add(
