@@ -294,6 +294,11 @@ impl Streamer {
         self.resident.contains_key(&key)
     }
 
+    /// Whether a job for the node is pending (queued, running or waiting for its GPU phase).
+    pub fn is_requested(&self, key: NodeKey) -> bool {
+        self.requests.contains_key(&key)
+    }
+
     pub fn wanted(&self) -> &FxHashSet<NodeKey> {
         &self.wanted
     }

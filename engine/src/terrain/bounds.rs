@@ -15,17 +15,24 @@
 //! The slope, curvature and amplitude bounds are local to the check cell
 //! ([`World::region_bounds`]): a cliff only widens the bound next to it. So
 //! `error <= max over check cells of (max |M - F| at its corners + between(cell))`; the height
-//! range is widened per cell by the same term. The error is measured, then made an upper bound by proof; nothing is guessed.
+//! range is widened per cell by the same term. The error is measured, then made an upper bound
+//! by proof; nothing is guessed. Where `between` makes a cell's bound loose (more than
+//! [`super::refine::SLACK`] over the error measured in its block), the cell is measured again on
+//! finer sub-cells by branch and bound ([`super::refine`]), worst first, within a budget.
+//!
+//! Blocks. All of this is kept per block of `NODE_QUADS / BLOCKS_PER_SIDE` quads (height range
+//! and error), and the node's values are the blocks' extremes: the selection projects each
+//! block's error from the block's own box ([`super::select::projected_error_px`]).
 //!
 //! Monotone errors. The four children of `N` together mesh it with a grid of spacing `s / 2`
 //! whose vertices are every `CHECK_SUBDIV / 2`-th check-lattice point, with the same diagonal
 //! direction, so the argument above applied to that grid on the same check cells bounds every
-//! child's error: `max over cells of (max |M_C - F| at its corners + between(cell))`. Every
-//! deeper descendant's triangles lie inside one check cell with legs `<= c`, where its error is
-//! at most `between(cell, c)` (its vertices are exact), and that is already inside the children's
-//! term. So `U(N)`, that children's term (computed from the same lattice, no extra surface
-//! evaluations), bounds the true error of every descendant's mesh. The stored error is
-//! `E(N) = min(max(e(N), U(N)), E(parent))` ([`monotone`]): both terms of the `min` are proven
+//! child's error: `max over cells of (max |M_C - F| at its corners + between(cell))` (refined
+//! like the node's own term). Every deeper descendant's triangles lie inside one check triangle
+//! with legs `<= c`, where its error is at most `between(cell, c)` (its vertices are exact). So
+//! `U(N)`, the larger of the children's term and that deeper term (computed from the same
+//! lattice), bounds the true error of every descendant's mesh, block by block. The stored error is
+//! `E(N) = min(max(e(N), U(N)), E(parent block))` per block ([`monotone`]): both terms of the `min` are proven
 //! bounds of `N`'s true error (the parent's `E` bounds every descendant of the parent, by
 //! induction from the root, where `E = max(e, U)`), and `E(child) <= E(parent)` by construction.
 //! So errors are monotone and still never guessed; the price is `U(N)` where it exceeds `e(N)`
@@ -50,7 +57,7 @@ pub const BLOCKS_PER_SIDE: usize = 4;
 /// Bound blocks per node.
 pub const BLOCKS: usize = BLOCKS_PER_SIDE * BLOCKS_PER_SIDE;
 const _: () = assert!(
-    (NODE_QUADS as usize).is_multiple_of(BLOCKS_PER_SIDE) && BLOCKS_PER_SIDE % 2 == 0,
+    (NODE_QUADS as usize).is_multiple_of(BLOCKS_PER_SIDE) && BLOCKS_PER_SIDE.is_multiple_of(2),
     "blocks are whole quads and a child's block lies in one block of its parent"
 );
 
@@ -120,8 +127,8 @@ pub fn block_rect(tree: &QuadTree, key: NodeKey, index: usize) -> crate::surface
 /// The index of the parent's block that contains block `index` of `key` (not the root).
 pub fn parent_block(key: NodeKey, index: usize) -> usize {
     let (bx, by) = (index % BLOCKS_PER_SIDE, index / BLOCKS_PER_SIDE);
-    let px = ((key.ix as usize & 1) * BLOCKS_PER_SIDE + bx) / 2;
-    let py = ((key.iy as usize & 1) * BLOCKS_PER_SIDE + by) / 2;
+    let px = usize::midpoint((key.ix as usize & 1) * BLOCKS_PER_SIDE, bx);
+    let py = usize::midpoint((key.iy as usize & 1) * BLOCKS_PER_SIDE, by);
     py * BLOCKS_PER_SIDE + px
 }
 
@@ -195,38 +202,97 @@ pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     }
     let own = lattice_errors(&lattice, m, sub);
     let children = lattice_errors(&lattice, m, sub / 2);
-    let between = between_bounds(world, r, c, m);
+    let regions = region_bounds_of_cells(world, r, c, m);
     let cells_per_block = m / BLOCKS_PER_SIDE;
+    let block_of =
+        |i: usize, j: usize| (j / cells_per_block) * BLOCKS_PER_SIDE + i / cells_per_block;
+    let corners = |i: usize, j: usize| {
+        [
+            j * w + i,
+            j * w + i + 1,
+            (j + 1) * w + i,
+            (j + 1) * w + i + 1,
+        ]
+    };
+    let depth_below = (tree.max_level - key.level.min(tree.max_level)).min(3);
+    // Pass 1: height ranges, and the errors measured at lattice points (true values: lower
+    // bounds of each block's error; the grandchildren's are 0 there, their vertices).
     let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
     for j in 0..m {
         for i in 0..m {
-            let between = between.at(i, j);
-            let block = &mut blocks[(j / cells_per_block) * BLOCKS_PER_SIDE + i / cells_per_block];
-            for at in [
-                j * w + i,
-                j * w + i + 1,
-                (j + 1) * w + i,
-                (j + 1) * w + i + 1,
-            ] {
-                let f = lattice[at];
-                block.lo = block.lo.min(f - between);
-                block.hi = block.hi.max(f + between);
-                block.own = block.own.max(own[at] + between);
-                block.children = block.children.max(children[at] + between);
+            let between = between_bound(regions.at(i, j), c);
+            let block = &mut blocks[block_of(i, j)];
+            for at in corners(i, j) {
+                block.lo = block.lo.min(lattice[at] - between);
+                block.hi = block.hi.max(lattice[at] + between);
+                let children_at = if depth_below >= 1 { children[at] } else { 0.0 };
+                block.measured = block.measured.max(own[at]).max(children_at);
             }
+        }
+    }
+    // Pass 2: per cell, corner errors plus the between-points bound; cells whose bound may be
+    // more than `refine::SLACK` over their block's measured error are refined by branch and
+    // bound ([`super::refine`]).
+    let refiner = super::refine::Refiner {
+        world,
+        origin_m: r.min,
+        check_m: c,
+        vertices: vertex_heights(&lattice, m, sub),
+        child_vertices: vertex_heights(&lattice, m, sub / 2),
+        lattice_vertices: vertex_heights(&lattice, m, 1),
+        depth_below,
+        splits_per_block: if c > 0.25 * world.cell_spacings_m().0 {
+            super::refine::SPLITS_PER_COARSE_BLOCK
+        } else {
+            super::refine::SPLITS_PER_BLOCK
+        },
+    };
+    let mut loose: Vec<Vec<super::refine::Cell>> = vec![Vec::new(); BLOCKS];
+    let take = |block: &mut BlockMeasure, e: super::refine::Errors| {
+        block.own = block.own.max(e[0]);
+        block.children = block.children.max(e[1]);
+        block.deeper = block.deeper.max(e[2]);
+    };
+    for j in 0..m {
+        for i in 0..m {
+            let b = block_of(i, j);
+            let cell = super::refine::Cell {
+                x0: i as f64,
+                y0: j as f64,
+                size: 1.0,
+                corners: corners(i, j).map(|k| [own[k], children[k], 0.0]),
+                check: (i, j),
+                region: *regions.at(i, j),
+            };
+            let e = refiner.cell_bounds(&cell);
+            if e.iter().copied().fold(0.0, f64::max) > blocks[b].measured * super::refine::SLACK {
+                loose[b].push(cell);
+            } else {
+                take(&mut blocks[b], e);
+            }
+        }
+    }
+    for (b, cells) in loose.into_iter().enumerate() {
+        if !cells.is_empty() {
+            let e = refiner.refine_block(cells, blocks[b].measured);
+            take(&mut blocks[b], e);
         }
     }
     let has_vegetation = crate::vegetation::representation::has_vegetation(world, r);
     finish(tree, key, &blocks, has_vegetation)
 }
 
-/// One block's measurement: height range, own-mesh error, children's-mesh error.
+/// One block's measurement: height range, own-mesh error bound, children's-mesh error bound,
+/// the bound for deeper descendants, and the largest error measured at a lattice point (own or
+/// children's).
 #[derive(Clone, Copy)]
 struct BlockMeasure {
     lo: f64,
     hi: f64,
     own: f64,
     children: f64,
+    deeper: f64,
+    measured: f64,
 }
 
 impl BlockMeasure {
@@ -235,6 +301,8 @@ impl BlockMeasure {
         hi: f64::NEG_INFINITY,
         own: 0.0,
         children: 0.0,
+        deeper: 0.0,
+        measured: 0.0,
     };
 }
 
@@ -251,7 +319,13 @@ fn finish(
     let hi = m.iter().map(|b| b.hi).fold(f64::NEG_INFINITY, f64::max);
     let rounding = 2.0 * hi.abs().max(lo.abs()) * f64::from(f32::EPSILON);
     let leaf = key.level >= tree.max_level;
-    let descendants = |b: &BlockMeasure| if leaf { 0.0 } else { b.children + rounding };
+    let descendants = |b: &BlockMeasure| {
+        if leaf {
+            0.0
+        } else {
+            b.children.max(b.deeper) + rounding
+        }
+    };
     let blocks = std::array::from_fn(|i| BlockBounds {
         z_min_m: m[i].lo,
         z_max_m: m[i].hi,
@@ -301,27 +375,41 @@ fn lattice_errors(lattice: &[f64], m: usize, step: usize) -> Vec<f64> {
     out
 }
 
-/// The between-points bound of every check cell of a node, stored per group of `group^2` cells
-/// that share their region bounds.
-struct Betweens {
-    group: usize,
-    per_row: usize,
-    values: Vec<f64>,
+/// Mesh vertex heights (as f32, as meshes store them) of the grid with vertices every `step`-th
+/// point of the `(m + 1)^2` lattice.
+fn vertex_heights(lattice: &[f64], m: usize, step: usize) -> Vec<f32> {
+    let w = m + 1;
+    (0..=m / step)
+        .flat_map(|j| (0..=m / step).map(move |i| lattice[j * step * w + i * step] as f32))
+        .collect()
 }
 
-impl Betweens {
-    fn at(&self, i: usize, j: usize) -> f64 {
-        self.values[(j / self.group) * self.per_row + i / self.group]
+/// The region bounds of every check cell of a node, stored per group of `group^2` cells that
+/// share them.
+struct CellRegions {
+    group: usize,
+    per_row: usize,
+    values: Vec<crate::surface::world::RegionBounds>,
+}
+
+impl CellRegions {
+    fn at(&self, i: usize, j: usize) -> &crate::surface::world::RegionBounds {
+        &self.values[(j / self.group) * self.per_row + i / self.group]
     }
 }
 
-/// The between-points bound ([`between_bound`] with legs `c`) of the `m^2` check cells of the
-/// node `r`. Where check cells tile the height cells, ground cells and decal blocks exactly
-/// (aligned, at most one cell in size) and the node is inside the map, a cell's region bounds
-/// are its map cells' values, read directly, and they are the same for every check cell in
-/// the largest aligned group of `2^k` cells that still lies inside one map cell of each kind,
-/// so they are read once per group. Elsewhere each check cell's region is bounded on its own.
-fn between_bounds(world: &World, r: crate::surface::world::Rect, c: f64, m: usize) -> Betweens {
+/// The region bounds of the `m^2` check cells (side `c`) of the node `r`. Where check cells
+/// tile the height cells, ground cells and decal blocks exactly (aligned, at most one cell in
+/// size) and the node is inside the map, a cell's region bounds are its map cells' values, read
+/// directly, and they are the same for every check cell in the largest aligned group of `2^k`
+/// cells that still lies inside one map cell of each kind, so they are read once per group.
+/// Elsewhere each check cell's region is bounded on its own.
+fn region_bounds_of_cells(
+    world: &World,
+    r: crate::surface::world::Rect,
+    c: f64,
+    m: usize,
+) -> CellRegions {
     let (hs, gs) = world.cell_spacings_m();
     let o = world.origin_m();
     let size = world.size_m();
@@ -346,15 +434,14 @@ fn between_bounds(world: &World, r: crate::surface::world::Rect, c: f64, m: usiz
                 min: [r.min[0] + i as f64 * g, r.min[1] + j as f64 * g],
                 max: [r.min[0] + (i + 1) as f64 * g, r.min[1] + (j + 1) as f64 * g],
             };
-            let region = if direct {
+            values.push(if direct {
                 world.cell_region_bounds(cell)
             } else {
                 world.region_bounds(cell)
-            };
-            values.push(between_bound(&region, c));
+            });
         }
     }
-    Betweens {
+    CellRegions {
         group,
         per_row,
         values,

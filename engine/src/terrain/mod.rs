@@ -15,6 +15,7 @@ pub mod content;
 pub mod mesh;
 pub mod mesh_surface;
 pub mod quadtree;
+pub mod refine;
 pub mod select;
 pub mod tiles;
 #[cfg(feature = "measure")]

@@ -241,13 +241,18 @@ impl Placer {
     /// True where nothing may grow: on a road or path decal, on water ground, below the water
     /// level, or outside the map.
     pub fn excluded(&self, world: &World, x_m: f64, y_m: f64) -> bool {
+        self.excluded_at(world, x_m, y_m, world.height_m(x_m, y_m))
+    }
+
+    /// [`Self::excluded`] where the surface height `z_m` at the point is known.
+    fn excluded_at(&self, world: &World, x_m: f64, y_m: f64, z_m: f64) -> bool {
         let o = world.origin_m();
         let s = world.size_m();
         if !(x_m >= o[0] && y_m >= o[1] && x_m <= o[0] + s[0] && y_m <= o[1] + s[1]) {
             return true;
         }
         if self.water_type == Some(world.ground_type(x_m, y_m))
-            || world.height_m(x_m, y_m) <= world.map.manifest.water_level_m
+            || z_m <= world.map.manifest.water_level_m
         {
             return true;
         }
@@ -347,7 +352,11 @@ impl Placer {
         self.visit(s, rect, k_end, |k, period, x, y| {
             let rank = (f64::from(k) + 0.5) / n;
             let d = scale * self.density(world, s, x, y);
-            if rank >= d / sp.tile_density_per_m2 || self.excluded(world, x, y) {
+            if rank >= d / sp.tile_density_per_m2 {
+                return;
+            }
+            let z = world.height_m(x, y);
+            if self.excluded_at(world, x, y, z) {
                 return;
             }
             let kk = i64::from(k);
@@ -356,7 +365,7 @@ impl Placer {
                 species: s as u16,
                 x_m: x,
                 y_m: y,
-                z_m: world.height_m(x, y),
+                z_m: z,
                 height_m: (sp.height_m * size) as f32,
                 radius_m: (sp.radius_m * size) as f32,
                 yaw_rad: (std::f64::consts::TAU * unit3(period, kk, 3)) as f32,

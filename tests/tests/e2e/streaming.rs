@@ -439,3 +439,49 @@ fn the_screen_is_covered_exactly_once_in_every_frame_of_a_flight() {
     assert_eq!(checked, 300, "the root was not ready in every frame");
     assert!(saw_fade, "no cross-fade was ever in progress");
 }
+
+/// Prefetch follows the camera: a camera flying east at 150 m/s gets every node that the
+/// camera one second ahead wants requested (or ready) at once, while a still camera at the same
+/// spot does not ask for all of them.
+#[test]
+fn a_moving_camera_prefetches_where_it_is_going() {
+    let dt = 1.0 / 60.0;
+    let start = cam_at(120.0, 250.0, 15.0, 0.0);
+    let moved = |t: f64| {
+        let mut a = start;
+        a.position_m.x += 150.0 * t;
+        a
+    };
+    let mut moving = streamer(settings(1));
+    let mut still = streamer(settings(1));
+    // The moving camera's velocity is known after its first step; its prediction 1 s ahead
+    // is the camera at 1 s + dt.
+    let ahead = moved(1.0 + dt);
+    let mut only_ahead: Vec<Vec<NodeKey>> = Vec::new();
+    for (s, second) in [(&mut moving, moved(dt)), (&mut still, start)] {
+        assert!(s.settle(&start, 120.0));
+        let split = s.settings.tau_px * s.settings.split_factor;
+        // Bounds are only ever added, so a node wanted now is still wanted after the next
+        // update, or an ancestor of wanted nodes, or a child of one: needed either way.
+        let now = s.select_wanted(&start, split);
+        only_ahead.push(
+            s.select_wanted(&ahead, split)
+                .difference(&now)
+                .copied()
+                .collect(),
+        );
+        s.update(&second, dt);
+    }
+    let covered = |s: &Streamer, keys: &[NodeKey]| {
+        keys.iter()
+            .filter(|&&k| s.is_ready(k) || s.is_requested(k))
+            .count()
+    };
+    let (a, b) = (&only_ahead[0], &only_ahead[1]);
+    assert!(a.len() > 4, "{} nodes only ahead", a.len());
+    assert_eq!(covered(&moving, a), a.len(), "moving camera");
+    assert!(
+        covered(&still, b) < b.len(),
+        "a still camera asks for everything ahead too: the test cannot tell prefetch apart"
+    );
+}

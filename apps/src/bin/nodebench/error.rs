@@ -134,6 +134,29 @@ fn select_tin(
     )
 }
 
+/// The grid selection with the vegetation term left out of the split test (what the terrain
+/// alone needs, and how close to tau its bounds let it draw), measured.
+fn terrain_only(
+    world: &World,
+    tree: &QuadTree,
+    ctx: &mut (BoundsCache, TileCache, MeshCache),
+    cam: &Camera,
+    tau: f64,
+    per_side: u32,
+) -> (usize, ViewError) {
+    let sel = engine::terrain::select::traverse(
+        tree,
+        cam,
+        true,
+        |key| NodeBounds {
+            vegetation_error_m: 0.0,
+            ..ctx.0.get(world, tree, key)
+        },
+        |_, _, _, px| px > tau,
+    );
+    measure_view(world, tree, ctx, cam, &sel, per_side, None)
+}
+
 pub(crate) fn section_error(
     world: &World,
     tree: &QuadTree,
@@ -184,19 +207,7 @@ pub(crate) fn section_error(
             g_tris += tris;
             g_max = g_max.max(e.max_px);
             g_mean += e.mean_px / cams.len() as f64;
-            // The same with the vegetation term left out of the split test: what the terrain
-            // alone needs, and how close to tau its bounds let it draw.
-            let sel_terrain = engine::terrain::select::traverse(
-                tree,
-                cam,
-                true,
-                |key| NodeBounds {
-                    vegetation_error_m: 0.0,
-                    ..ctx.0.get(world, tree, key)
-                },
-                |_, _, _, px| px > tau,
-            );
-            let (tris, e) = measure_view(world, tree, &mut ctx, cam, &sel_terrain, per_side, None);
+            let (tris, e) = terrain_only(world, tree, &mut ctx, cam, tau, per_side);
             terrain_tris += tris;
             terrain_max = terrain_max.max(e.max_px);
             let sel_t = select_tin(world, tree, &mut ctx, cam, tau, tin_target);
@@ -226,29 +237,23 @@ pub(crate) fn section_error(
         );
         let best = baseline.scored;
         let hi = baseline.ratio;
-        r.add(
-            "error",
-            "grid triangles per frame",
-            g_tris as f64 / nc,
-            "triangles",
-            &params,
-        );
-        r.add("error", "grid measured max error", g_max, "px", &params);
-        r.add("error", "grid measured mean error", g_mean, "px", &params);
-        r.add(
-            "error",
-            "grid, terrain error only: triangles per frame",
-            terrain_tris as f64 / nc,
-            "triangles",
-            &params,
-        );
-        r.add(
-            "error",
-            "grid, terrain error only: measured max error",
-            terrain_max,
-            "px",
-            &params,
-        );
+        for (what, value, unit) in [
+            ("grid triangles per frame", g_tris as f64 / nc, "triangles"),
+            ("grid measured max error", g_max, "px"),
+            ("grid measured mean error", g_mean, "px"),
+            (
+                "grid, terrain error only: triangles per frame",
+                terrain_tris as f64 / nc,
+                "triangles",
+            ),
+            (
+                "grid, terrain error only: measured max error",
+                terrain_max,
+                "px",
+            ),
+        ] {
+            r.add("error", what, value, unit, &params);
+        }
         r.add(
             "error",
             "TIN triangles per frame",

@@ -37,9 +37,10 @@ const SECTIONS: [&str; 6] = [
 /// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
 /// vegetation phase time per node, instances and draw calls per frame on the flight),
 /// `streaming` (real-time
-/// flights at 50, 150 and 300 m/s through the streaming system: request-to-ready latency,
-/// cancelled jobs, pop debt). Per-item times are on one
-/// core (p50/p95/max); throughput is given for 1 and N worker threads.
+/// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
+/// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
+/// jobs, pop debt, bookkeeping per frame). Per-item times are on one
+/// core (p50/p95/p99/max); throughput is given for 1 and N worker threads.
 #[derive(Parser)]
 #[command(name = "nodebench", version, about, long_about)]
 struct Cli {

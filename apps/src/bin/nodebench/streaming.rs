@@ -150,80 +150,91 @@ pub(crate) fn section_streaming(
             }
         }
         b.finish_and_clear();
-        let mut lat = s.take_latencies();
-        lat.sort_by(f64::total_cmp);
-        let q = |p: f64| apps::percentile(&lat, p);
+        let cancelled =
+            s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
         let params = format!(
             "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s)",
             s.settings.workers
         );
-        r.add(
-            "streaming",
-            "request-to-ready latency p50",
-            q(0.5) * 1e3,
-            "ms",
-            &params,
-        );
-        r.add(
-            "streaming",
-            "request-to-ready latency p95",
-            q(0.95) * 1e3,
-            "ms",
-            &params,
-        );
-        r.add(
-            "streaming",
-            "request-to-ready latency p99",
-            q(0.99) * 1e3,
-            "ms",
-            &params,
-        );
+        let outcome = FlightOutcome {
+            latencies_s: s.take_latencies(),
+            cancelled,
+            debt_share: debt_frames as f64 / frames as f64,
+            worst_excess_px: worst_excess,
+            frame_times_s: frame_times,
+        };
+        outcome.report(r, &params);
+    }
+    Ok(())
+}
+
+/// What one streaming flight measured.
+struct FlightOutcome {
+    latencies_s: Vec<f64>,
+    cancelled: u64,
+    /// Share of frames with pop debt.
+    debt_share: f64,
+    worst_excess_px: f64,
+    frame_times_s: Vec<f64>,
+}
+
+impl FlightOutcome {
+    fn report(mut self, r: &mut Report, params: &str) {
+        self.latencies_s.sort_by(f64::total_cmp);
+        let lat = &self.latencies_s;
+        let q = |p: f64| apps::percentile(lat, p);
+        for (name, p) in [("p50", 0.5), ("p95", 0.95), ("p99", 0.99)] {
+            r.add(
+                "streaming",
+                &format!("request-to-ready latency {name}"),
+                q(p) * 1e3,
+                "ms",
+                params,
+            );
+        }
         r.add(
             "streaming",
             "jobs completed",
             lat.len() as f64,
             "jobs",
-            &params,
+            params,
         );
-        let cancelled =
-            s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
         r.add(
             "streaming",
             "jobs cancelled",
-            cancelled as f64,
+            self.cancelled as f64,
             "jobs",
-            &params,
+            params,
         );
         r.add(
             "streaming",
             "pop debt (frames with a drawn node over tau)",
-            100.0 * debt_frames as f64 / frames as f64,
+            100.0 * self.debt_share,
             "%",
-            &params,
+            params,
         );
         r.add(
             "streaming",
             "worst excess over tau",
-            worst_excess,
+            self.worst_excess_px,
             "px",
-            &params,
+            params,
         );
-        frame_times.sort_by(f64::total_cmp);
-        let fq = |p: f64| apps::percentile(&frame_times, p);
+        self.frame_times_s.sort_by(f64::total_cmp);
+        let fq = |p: f64| apps::percentile(&self.frame_times_s, p);
         r.add(
             "streaming",
             "bookkeeping per frame p50 (update + GPU phases)",
             fq(0.5) * 1e6,
             "µs",
-            &params,
+            params,
         );
         r.add(
             "streaming",
             "bookkeeping per frame p99",
             fq(0.99) * 1e6,
             "µs",
-            &params,
+            params,
         );
     }
-    Ok(())
 }

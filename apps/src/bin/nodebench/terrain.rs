@@ -139,6 +139,7 @@ pub(crate) fn section_terrain(
     for &k in &keys {
         ancestors.remove(k);
     }
+    node_preparation(world, tree, &keys, &ancestors, r);
     for w in [1, workers] {
         let nps = throughput(w, per, &|i| {
             let mut c = ancestors.clone();
@@ -152,6 +153,43 @@ pub(crate) fn section_terrain(
             nps,
             "nodes/s",
             "cold caches per node",
+        );
+    }
+}
+
+/// Node preparation, every CPU phase of a streaming job together (bounds, tiles and grid mesh,
+/// vegetation), per node on one core, caches cold except the ancestors' bounds.
+fn node_preparation(
+    world: &World,
+    tree: &QuadTree,
+    keys: &[NodeKey],
+    ancestors: &BoundsCache,
+    r: &mut Report,
+) {
+    let placer = engine::vegetation::Placer::new(world);
+    let mut times: Vec<f64> = keys
+        .iter()
+        .map(|&k| {
+            let mut c = ancestors.clone();
+            let mut t = TileCache::new();
+            let start = Instant::now();
+            std::hint::black_box(mesh::build_with_tiles(world, tree, &mut c, &mut t, k));
+            std::hint::black_box(engine::vegetation::node_vegetation(world, &placer, tree, k));
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    let params = format!(
+        "{} nodes from the flight at tau 2, bounds + tiles + grid mesh + vegetation, 1 core",
+        keys.len()
+    );
+    for (name, q) in [("p50", 0.5), ("p99", 0.99)] {
+        r.add(
+            "terrain",
+            &format!("node preparation, all CPU phases, {name}"),
+            apps::percentile(&times, q) * 1e6,
+            "µs",
+            &params,
         );
     }
 }
