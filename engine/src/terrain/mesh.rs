@@ -7,10 +7,11 @@
 //! and a finer node `N` each interpolate the finest surface `F` linearly between their own
 //! border vertices. (1) Where `C`'s border lies above `N`'s: `N`'s border is a convex
 //! combination of `F` samples on `C`'s border, so it is at least `C.z_min`; `C`'s skirt reaches
-//! down to `C.z_min`. (2) Where `N`'s border lies above `C`'s: `C`'s border is within
-//! `C.error` of `F`, and `F >= N.z_min` there, so `C`'s border is at least
-//! `N.z_min - C.error`; `N`'s skirt on that side reaches `N.z_min - max(error of every coarser
-//! node across that side)`. Same-level neighbours share border vertices exactly.
+//! down to `C.z_min`. (2) Where `N`'s border lies above `C`'s: `C`'s border interpolates
+//! its own border vertices, samples of `F`: `N`'s skirt on that side reaches below the lowest
+//! point of every coarser neighbour's border along it, found exactly from a few samples of `F`
+//! (the neighbour's border vertices bracketing and inside the side; [`skirt_bottoms`]), so no
+//! neighbour's bounds are needed. Same-level neighbours share border vertices exactly.
 
 use crate::surface::world::World;
 use crate::terrain::bounds::{BoundsCache, NodeBounds, interpolate_grid};
@@ -157,27 +158,85 @@ fn sample_grid(
     (h, g)
 }
 
-/// The depth each side's skirt must reach (see the module docs); `bounds` gives any node's
-/// bounds (a cache, or a shared store).
-pub fn skirt_bottoms(
-    tree: &QuadTree,
-    bounds: &mut dyn FnMut(NodeKey) -> NodeBounds,
-    key: NodeKey,
-    b: &NodeBounds,
-) -> [f64; 4] {
+/// The depth each side's skirt must reach (see the module docs): below this node's height range
+/// and below every coarser neighbour's border along that side, less a margin for f32 rounding.
+pub fn skirt_bottoms(world: &World, tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> [f64; 4] {
+    let r = tree.rect(key);
     let mut out = [b.z_min_m; 4];
     for (k, side) in Side::ALL.iter().enumerate() {
-        let mut worst = 0.0f64;
+        let mut lowest = b.z_min_m;
         for level in 0..key.level {
-            if let Some(n) = tree.neighbour_across(key, *side, level)
-                && tree.overlaps_map(n)
-            {
-                worst = worst.max(bounds(n).error_m);
+            let Some(n) = tree.neighbour_across(key, *side, level) else {
+                continue;
+            };
+            let nr = tree.rect(n);
+            let contains = nr.min[0] <= r.min[0]
+                && nr.min[1] <= r.min[1]
+                && nr.max[0] >= r.max[0]
+                && nr.max[1] >= r.max[1];
+            if contains || !tree.overlaps_map(n) {
+                continue; // an ancestor, never drawn next to this node
             }
+            lowest = lowest.min(neighbour_border_min(world, tree, key, *side, n));
         }
-        out[k] = b.z_min_m - worst;
+        out[k] = lowest - (2.0 * lowest.abs() * f64::from(f32::EPSILON) + SKIRT_MARGIN_M);
     }
     out
+}
+
+/// Safety margin below the lowest neighbour border (m): vertex heights are f32 roundings of
+/// the same surface values, possibly at positions an ulp apart.
+const SKIRT_MARGIN_M: f64 = 1e-3;
+
+/// The lowest height of coarser node `n`'s border mesh along `side` of `key`: that border is the
+/// linear interpolation of `F` (as f32, like mesh vertices) at `n`'s border vertices, so its
+/// minimum over the shared segment is at a segment end or at one of `n`'s vertices inside it.
+fn neighbour_border_min(
+    world: &World,
+    tree: &QuadTree,
+    key: NodeKey,
+    side: Side,
+    n: NodeKey,
+) -> f64 {
+    let r = tree.rect(key);
+    let nr = tree.rect(n);
+    let s = tree.spacing_m(n.level);
+    // The shared line: x fixed for west / east sides, y fixed for south / north.
+    let (along, fixed) = match side {
+        Side::West => (1, r.min[0]),
+        Side::East => (1, r.max[0]),
+        Side::South => (0, r.min[1]),
+        Side::North => (0, r.max[1]),
+    };
+    let (a, b) = (r.min[along], r.max[along]);
+    let base = nr.min[along];
+    let last = NODE_QUADS as f64;
+    let k0 = ((a - base) / s).floor().clamp(0.0, last) as u32;
+    let k1 = ((b - base) / s).ceil().clamp(0.0, last) as u32;
+    let vertex = |k: u32| {
+        let t = base + f64::from(k) * s;
+        let z = if along == 1 {
+            world.height_m(fixed, t)
+        } else {
+            world.height_m(t, fixed)
+        };
+        (t, f64::from(z as f32))
+    };
+    let points: Vec<(f64, f64)> = (k0..=k1).map(vertex).collect();
+    let at = |t: f64| {
+        points
+            .windows(2)
+            .find(|w| t >= w[0].0 && t <= w[1].0)
+            .map_or(points[0].1, |w| {
+                let f = (t - w[0].0) / (w[1].0 - w[0].0);
+                w[0].1 + f * (w[1].1 - w[0].1)
+            })
+    };
+    points
+        .iter()
+        .filter(|p| p.0 > a && p.0 < b)
+        .map(|p| p.1)
+        .fold(at(a).min(at(b)), f64::min)
 }
 
 /// Builds the mesh of `key`, taking its source tile (if any) from `tiles` for the duration.
@@ -213,7 +272,7 @@ pub fn build(
     tile: Option<&Tile>,
 ) -> NodeMesh {
     let own = bounds(key);
-    let skirt_bottom_m = skirt_bottoms(tree, bounds, key, &own);
+    let skirt_bottom_m = skirt_bottoms(world, tree, key, &own);
     let r = tree.rect(key);
     let s = tree.spacing_m(key.level);
     let (h, g) = sample_grid(world, tree, key, tile);
