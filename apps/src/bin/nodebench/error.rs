@@ -251,18 +251,12 @@ pub(crate) fn section_error(
                 terrain_max,
                 "px",
             ),
+            ("TIN triangles per frame", t_tris as f64 / nc, "triangles"),
+            ("TIN measured max error", t_max, "px"),
+            ("TIN measured mean error", t_mean, "px"),
         ] {
             r.add("error", what, value, unit, &params);
         }
-        r.add(
-            "error",
-            "TIN triangles per frame",
-            t_tris as f64 / nc,
-            "triangles",
-            &params,
-        );
-        r.add("error", "TIN measured max error", t_max, "px", &params);
-        r.add("error", "TIN measured mean error", t_mean, "px", &params);
         // The baseline's rows claim "at most our measured max error" only where it holds on
         // the scored cameras; otherwise the params say that it misses.
         let verdict = if baseline.bracketed && best.1 <= g_max {
