@@ -72,6 +72,7 @@ step "smoke: nodebench --quick on the tiny map"
 ./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" > "$smoke/nodebench.md"
 grep -q '"section": "selection"' "$smoke/nodebench.json"
 grep -q '"machine"' "$smoke/nodebench.json"
+grep -q '"section": "gpu"' "$smoke/nodebench.json"
 test -s "$smoke/speed_vs_error.png"
 if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
   echo "nodebench accepted an unknown section" >&2; exit 1
@@ -82,6 +83,9 @@ step "smoke: flyover headless, and its fallback when there is no display"
   --duration-s 2 --out "$smoke/flyover" > "$smoke/flyover.md"
 test -s "$smoke/flyover/frame_00000.png" && test -s "$smoke/flyover/frame_00059.png"
 grep -q '"frames"' "$smoke/flyover/stats.json"
+./target/debug/flyover --headless --map maps/tiny --frames 40 --every 0 --size 320x180 \
+  --duration-s 2 --gpu-reference --out "$smoke/flyover-reference" > "$smoke/flyover-reference.md"
+grep -q "GPU frame pass / one-draw reference" "$smoke/flyover-reference.md"
 env -u DISPLAY -u WAYLAND_DISPLAY ./target/debug/flyover --map maps/tiny --frames 3 --size 64x36 \
   --out "$smoke/flyover-nodisplay" 2> "$smoke/flyover-nodisplay.log" >/dev/null
 grep -q "no display" "$smoke/flyover-nodisplay.log"

@@ -3,6 +3,7 @@
 
 use crate::camera::Camera;
 use crate::render::frame::{DrawStats, ViewOptions};
+use crate::render::reference::TerrainReference;
 use crate::render::scene::{DrawnNode, FrameDraws, Scene};
 use crate::render::sky::{BoundsLines, SkyRenderer};
 use crate::render::{Gpu, GpuTimer};
@@ -25,8 +26,14 @@ pub struct FrameStats {
     pub encode_ms: f64,
     /// Waiting for the GPU to finish the frame (headless; windowed, the present waits).
     pub gpu_wait_ms: f64,
-    /// GPU time of the terrain pass from timestamp queries (a recent frame's), when supported.
+    /// GPU time of the frame pass (sky, terrain, vegetation) from timestamp queries (a recent
+    /// frame's), when supported.
     pub gpu_terrain_ms: Option<f64>,
+    /// GPU time of the same-run reference (the frame's terrain triangles as one draw with a
+    /// flat shader, see `render::reference`), when enabled and supported.
+    pub gpu_reference_ms: Option<f64>,
+    /// Triangles of that reference.
+    pub reference_triangles: u64,
     /// Of `update_ms`: the selection of wanted nodes.
     pub selection_ms: f64,
     pub cpu_frame_ms: f64,
@@ -59,6 +66,8 @@ pub struct Viewer {
     /// Debug: when set, selection uses this camera while rendering follows the live one.
     pub frozen: Option<Camera>,
     timer: Option<GpuTimer>,
+    reference: Option<TerrainReference>,
+    reference_size: [u32; 2],
     frame: u64,
 }
 
@@ -93,6 +102,8 @@ impl Viewer {
             view: ViewOptions::default(),
             frozen: None,
             timer: GpuTimer::new(gpu),
+            reference: None,
+            reference_size: [1, 1],
             frame: 0,
         }
     }
@@ -162,6 +173,16 @@ impl Viewer {
         if timed && let Some(t) = &self.timer {
             t.end(encoder);
         }
+        if let Some(r) = self.reference.as_mut() {
+            record_reference(
+                r,
+                gpu,
+                &self.scene.frame,
+                encoder,
+                self.reference_size,
+                &draws,
+            );
+        }
         let mut per_level = vec![0usize; usize::from(self.streamer.tree().max_level) + 1];
         for d in &drawn {
             per_level[usize::from(d.key.level)] += 1;
@@ -186,6 +207,8 @@ impl Viewer {
             encode_ms: ms(t2, t3),
             gpu_wait_ms: 0.0,
             gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
+            gpu_reference_ms: self.reference.as_ref().and_then(TerrainReference::last_ms),
+            reference_triangles: self.reference.as_ref().map_or(0, |r| r.triangles),
             selection_ms: st.last_selection_s * 1e3,
             cpu_frame_ms: ms(t0, t3),
             draw_calls: stats.draw_calls,
@@ -213,10 +236,62 @@ impl Viewer {
         if let Some(t) = &self.timer {
             t.after_submit();
         }
+        if let Some(r) = &self.reference {
+            r.after_submit();
+        }
+    }
+
+    /// From now on every frame also records the same-run GPU reference (see
+    /// `render::reference`) at `size`; false when the adapter has no timestamp queries.
+    pub fn enable_gpu_reference(&mut self, gpu: &Gpu, size: [u32; 2]) -> bool {
+        self.reference = TerrainReference::new(gpu, &self.scene.frame);
+        self.reference_size = size;
+        self.reference.is_some()
+    }
+
+    /// The same-run GPU reference, when enabled.
+    pub fn gpu_reference(&self) -> Option<&TerrainReference> {
+        self.reference.as_ref()
+    }
+
+    /// Streaming without drawing: the update and GPU uploads of [`Self::frame`] (warm starts of
+    /// benchmarks). True when no job is in flight and every wanted node is drawn.
+    pub fn stream_only(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64) -> bool {
+        self.streamer.update(cam, dt_s);
+        let scene = &mut self.scene;
+        self.streamer.run_gpu_phases_with(&mut |shared, work| {
+            work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
+        });
+        let drawn: rustc_hash::FxHashSet<NodeKey> =
+            self.streamer.draw_list().iter().map(|d| d.key).collect();
+        self.streamer.in_flight() == 0 && self.streamer.wanted().iter().all(|k| drawn.contains(k))
     }
 
     /// Keys of the nodes drawn last frame.
     pub fn drawn_keys(&self) -> Vec<NodeKey> {
         self.streamer.draw_list().iter().map(|d| d.key).collect()
     }
+}
+
+/// The GPU reference of a frame: the terrain meshes the terrain renderer draws (in the frustum,
+/// with a non-empty dither interval), as one draw.
+fn record_reference(
+    reference: &mut TerrainReference,
+    gpu: &Gpu,
+    frame: &crate::render::frame::FrameResources,
+    encoder: &mut wgpu::CommandEncoder,
+    size: [u32; 2],
+    draws: &FrameDraws<'_>,
+) {
+    let meshes: Vec<&crate::terrain::mesh::NodeMesh> = draws
+        .drawn
+        .iter()
+        .filter(|d| d.dither[1] > d.dither[0])
+        .filter_map(|d| d.work.get::<crate::terrain::mesh::NodeMesh>())
+        .filter(|m| {
+            let (lo, hi) = m.aabb_m(draws.tree);
+            draws.frustum.intersects_aabb(lo, hi)
+        })
+        .collect();
+    reference.record(gpu, frame, encoder, size, draws.camera, &meshes);
 }

@@ -19,6 +19,7 @@
 
 pub mod frame;
 pub mod gpu_data;
+pub mod reference;
 pub mod scene;
 pub mod shader;
 pub mod sky;
@@ -134,6 +135,7 @@ impl Gpu {
 pub fn shader_sources() -> Vec<(&'static str, String)> {
     vec![
         ("sky", sky::shader_source()),
+        ("reference", reference::shader_source()),
         ("terrain", terrain::shader_source()),
         ("vegetation", vegetation::shader_source()),
     ]

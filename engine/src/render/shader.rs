@@ -8,8 +8,9 @@
 pub const PRELUDE: &str = include_str!("../../../shaders/prelude.inc.wgsl");
 
 /// The embedded renderer files, by name.
-const FILES: [(&str, &str); 3] = [
+const FILES: [(&str, &str); 4] = [
     ("sky", include_str!("../../../shaders/sky.wgsl")),
+    ("reference", include_str!("../../../shaders/reference.wgsl")),
     ("terrain", include_str!("../../../shaders/terrain.wgsl")),
     (
         "vegetation",

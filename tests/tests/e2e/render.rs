@@ -367,3 +367,58 @@ fn no_leaked_pixels_from_fifty_cameras_including_fades() {
         "only {faded_frames} frames had cross-fades under way"
     );
 }
+
+/// The GPU-timing reference draws exactly the frame's terrain: on a settled view without sky,
+/// fog or vegetation, the pixels the terrain pass covers (anything but the magenta clear colour)
+/// are the pixels the one-draw reference covers (alpha 1), so `pass / reference` compares the
+/// same triangles.
+#[test]
+fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
+    let Some(g) = device() else { return };
+    let size = [320u32, 180];
+    let mut v = tests::gpu::tiny_viewer(&g, 1.0);
+    v.view = ViewOptions {
+        sky: false,
+        fog_per_m: 0.0,
+        plants: false,
+        clear: [1.0, 0.0, 1.0, 1.0],
+        ..ViewOptions::default()
+    };
+    if !v.enable_gpu_reference(&g, size) {
+        assert!(
+            !tests::in_ci(),
+            "CI's adapter (lavapipe) has timestamp queries"
+        );
+        tests::skip("gpu reference", "no timestamp queries on this adapter");
+        return;
+    }
+    let target = Target::new(&g.device, size, COLOR_FORMAT);
+    let cam = golden_camera();
+    let cam = Camera::look_at(
+        cam.position_m,
+        cam.position_m + cam.forward,
+        cam.fovy_rad,
+        size,
+    );
+    let st = settle(&g, &mut v, &target, &cam);
+    assert!(st.triangles > 1000, "{st:?}");
+    let pass = target.read_rgba(&g).expect("frame pixels");
+    let reference = v
+        .gpu_reference()
+        .and_then(|r| r.target())
+        .expect("reference target")
+        .read_rgba(&g)
+        .expect("reference pixels");
+    let (mut covered, mut differ) = (0usize, 0usize);
+    for (p, r) in pass.chunks(4).zip(reference.chunks(4)) {
+        let by_pass = !(p[0] == 255 && p[1] == 0 && p[2] == 255);
+        let by_reference = r[3] == 255;
+        covered += usize::from(by_pass);
+        differ += usize::from(by_pass != by_reference);
+    }
+    assert!(
+        covered > 1000,
+        "the view shows too little terrain: {covered} pixels"
+    );
+    assert_eq!(differ, 0, "{differ} of {covered} covered pixels differ");
+}

@@ -18,6 +18,12 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
     let mut viewer = Viewer::new(&gpu, COLOR_FORMAT, world, settings(cli));
+    if cli.gpu_reference {
+        viewer.view.plants = false;
+        if !viewer.enable_gpu_reference(&gpu, cli.size) {
+            eprintln!("--gpu-reference: this adapter has no timestamp queries; no reference");
+        }
+    }
     let bar = indicatif::ProgressBar::new(cli.frames);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames ({eta})")
@@ -66,8 +72,38 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    println!(
+        "flyover --headless: {} frames at {}x{} on {}\n",
+        all.len(),
+        cli.size[0],
+        cli.size[1],
+        gpu.adapter_name()
+    );
+    let summary = print_table(&all, &gpu.adapter_name());
+    let json = cli.out.join("stats.json");
+    let doc = serde_json::json!({
+        "adapter": gpu.adapter_name(),
+        "size": cli.size,
+        "tau_px": cli.tau,
+        "summary": summary,
+        "frames": all,
+    });
+    std::fs::write(&json, serde_json::to_string_pretty(&doc)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    println!(
+        "\n{} PNG frames in {}, statistics in {}",
+        written.len(),
+        cli.out.display(),
+        json.display()
+    );
+    Ok(())
+}
+
+/// Prints the per-frame table (median, p95, max of every row) and the GPU ratio; returns the
+/// summary for `stats.json`.
+fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 13] = [
+    let rows: [(&str, Vec<f64>); 14] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -77,8 +113,12 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         ("encode", col(|s| s.encode_ms)),
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
-            "GPU terrain pass (timestamp queries, when supported)",
+            "GPU frame pass (timestamp queries, when supported)",
             all.iter().filter_map(|s| s.gpu_terrain_ms).collect(),
+        ),
+        (
+            "GPU reference: the terrain triangles as one draw (--gpu-reference)",
+            all.iter().filter_map(|s| s.gpu_reference_ms).collect(),
         ),
         (
             "CPU frame (update + uploads + encode)",
@@ -103,13 +143,6 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
             col(|s| s.plant_triangles as f64),
         ),
     ];
-    println!(
-        "flyover --headless: {} frames at {}x{} on {}\n",
-        all.len(),
-        cli.size[0],
-        cli.size[1],
-        gpu.adapter_name()
-    );
     println!("| per frame | median | p95 | max |\n|---|---:|---:|---:|");
     let mut summary = serde_json::Map::new();
     for (name, mut v) in rows {
@@ -125,21 +158,22 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
             serde_json::json!({"median": m, "p95": p, "max": max}),
         );
     }
-    let json = cli.out.join("stats.json");
-    let doc = serde_json::json!({
-        "adapter": gpu.adapter_name(),
-        "size": cli.size,
-        "tau_px": cli.tau,
-        "summary": summary,
-        "frames": all,
-    });
-    std::fs::write(&json, serde_json::to_string_pretty(&doc)?)
-        .with_context(|| format!("writing {}", json.display()))?;
-    println!(
-        "\n{} PNG frames in {}, statistics in {}",
-        written.len(),
-        cli.out.display(),
-        json.display()
+    // Per frame (both timers report the same earlier frame), over frames that have both.
+    let mut ratios: Vec<f64> = all
+        .iter()
+        .filter_map(|s| Some(s.gpu_terrain_ms? / s.gpu_reference_ms.filter(|&r| r > 0.0)?))
+        .collect();
+    ratios.sort_by(f64::total_cmp);
+    let ratio = (!ratios.is_empty()).then(|| percentile(&ratios, 0.5));
+    if let Some(r) = ratio {
+        println!(
+            "\nGPU frame pass / one-draw reference (median of per-frame ratios, same run, \
+             {adapter}): {r:.2}"
+        );
+    }
+    summary.insert(
+        "gpu_pass_over_reference".to_string(),
+        serde_json::json!(ratio),
     );
-    Ok(())
+    summary
 }

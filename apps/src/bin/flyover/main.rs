@@ -77,6 +77,11 @@ pub(crate) struct Cli {
     /// Window: quit after this many seconds.
     #[arg(long)]
     pub(crate) exit_after_s: Option<f64>,
+    /// Headless: also time a same-run GPU reference each frame (the frame's terrain triangles as
+    /// one indexed draw with a flat shader) and report pass / reference. Turns vegetation off
+    /// for the run, so the pass and the reference draw the same triangles.
+    #[arg(long)]
+    pub(crate) gpu_reference: bool,
 }
 
 /// A finite number above zero (thresholds, rates, durations).

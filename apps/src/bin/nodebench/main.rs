@@ -2,6 +2,7 @@
 //! JSON rows and a speed-against-error plot. See `--help`. One file per section.
 
 mod error;
+mod gpu;
 mod plot;
 mod report;
 mod selection;
@@ -19,13 +20,14 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 6] = [
+const SECTIONS: [&str; 7] = [
     "tiles",
     "terrain",
     "selection",
     "error",
     "vegetation",
     "streaming",
+    "gpu",
 ];
 
 /// Node-generation benchmark: speed of every CPU phase and speed against measured error.
@@ -39,7 +41,9 @@ const SECTIONS: [&str; 6] = [
 /// `streaming` (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
 /// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
-/// jobs, pop debt, bookkeeping per frame). Per-item times are on one
+/// jobs, pop debt, bookkeeping per frame), `gpu` (when an adapter exists: the automatic flight
+/// rendered offscreen at 720p and 1440p, the frame pass timed with timestamp queries next to a
+/// same-run one-draw terrain reference, draw calls). Per-item times are on one
 /// core (p50/p95/p99/max); throughput is given for 1 and N worker threads.
 #[derive(Parser)]
 #[command(name = "nodebench", version, about, long_about)]
@@ -48,7 +52,7 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// streaming.
+    /// streaming, gpu.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -122,6 +126,19 @@ fn run(cli: &Cli) -> Result<()> {
     if want("streaming") {
         streaming::section_streaming(&cli.map, &mut report, cli.quick, workers, [vh * 16 / 9, vh])?;
     }
+    let mut adapter_name = None;
+    if want("gpu") {
+        match gpu::adapter() {
+            Some((g, name)) => {
+                gpu::section_gpu(&g, &name, &cli.map, &mut report, cli.quick)?;
+                adapter_name = Some(name);
+            }
+            None if cli.only.iter().any(|o| o == "gpu") => {
+                bail!("section gpu: no GPU adapter (install mesa-vulkan-drivers for lavapipe)")
+            }
+            None => eprintln!("no GPU adapter: section gpu left out"),
+        }
+    }
     let summary = format!(
         "nodebench on {} ({} x {} m, {} levels), {} worker(s), {:.1} s{}",
         cli.map.display(),
@@ -139,7 +156,7 @@ fn run(cli: &Cli) -> Result<()> {
             Err(e) => eprintln!("warning: plot not written: {e:#}"),
         }
     }
-    let machine = report::machine_block(workers);
+    let machine = report::machine_block(workers, adapter_name.as_deref());
     if let Some(p) = &cli.doc {
         let command: Vec<String> = std::env::args()
             .enumerate()

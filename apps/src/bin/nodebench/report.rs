@@ -122,7 +122,7 @@ pub(crate) fn throughput(workers: usize, per_worker: usize, f: &(dyn Fn(usize) +
     (workers * per_worker) as f64 / t0.elapsed().as_secs_f64()
 }
 
-pub(crate) fn machine_block(workers: usize) -> serde_json::Value {
+pub(crate) fn machine_block(workers: usize, adapter: Option<&str>) -> serde_json::Value {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| {
@@ -135,6 +135,6 @@ pub(crate) fn machine_block(workers: usize) -> serde_json::Value {
         "cores": std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get),
         "workers": workers,
         "cpu": cpu,
-        "adapter": "none (CPU-only benchmark)",
+        "adapter": adapter.unwrap_or("none (no gpu section)"),
     })
 }

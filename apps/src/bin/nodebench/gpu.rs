@@ -1,0 +1,151 @@
+//! Section `gpu` (when an adapter exists): the automatic flight rendered offscreen through the
+//! viewer, the frame pass timed with timestamp queries next to a same-run reference (the
+//! frame's terrain triangles as one indexed draw with a flat shader). Absolute times only mean
+//! something per adapter, so the rows name it and the ratio is the figure to compare.
+
+use crate::open_world;
+use crate::report::{Report, bar};
+use anyhow::Result;
+use engine::render::{COLOR_FORMAT, Gpu, Target};
+use engine::stream::StreamSettings;
+use engine::viewer::{FrameStats, Viewer};
+
+/// The adapter's name, or None when there is none (the section is then left out).
+pub(crate) fn adapter() -> Option<(Gpu, String)> {
+    let gpu = Gpu::new_headless().ok()?;
+    let name = gpu.adapter_name();
+    Some((gpu, name))
+}
+
+pub(crate) fn section_gpu(
+    gpu: &Gpu,
+    adapter: &str,
+    world_path: &std::path::Path,
+    r: &mut Report,
+    quick: bool,
+) -> Result<()> {
+    let heights: &[u32] = if quick { &[360] } else { &[720, 1440] };
+    let frames = if quick { 6 } else { 24 };
+    for &h in heights {
+        let size = [h * 16 / 9, h];
+        for plants in [true, false] {
+            let stats = fly(gpu, world_path, size, plants, frames)?;
+            let median = |f: &dyn Fn(&FrameStats) -> Option<f64>| {
+                let mut v: Vec<f64> = stats.iter().filter_map(f).collect();
+                v.sort_by(f64::total_cmp);
+                (!v.is_empty()).then(|| apps::percentile(&v, 0.5))
+            };
+            let params = format!(
+                "{}x{}, tau 2 px, vegetation {}, {frames} frames of the automatic flight, {adapter}",
+                size[0],
+                size[1],
+                if plants { "on" } else { "off" }
+            );
+            let rows = [
+                (
+                    "frame pass (timestamp queries), median",
+                    median(&|s| s.gpu_terrain_ms),
+                    "ms",
+                ),
+                (
+                    "one-draw terrain reference, median",
+                    median(&|s| s.gpu_reference_ms),
+                    "ms",
+                ),
+                (
+                    "draw calls per frame (terrain + vegetation), median",
+                    median(&|s| Some(f64::from(s.draw_calls + s.plant_draw_calls))),
+                    "draws",
+                ),
+                (
+                    "terrain triangles per frame, median",
+                    median(&|s| Some(s.triangles as f64)),
+                    "triangles",
+                ),
+            ];
+            for (what, value, unit) in rows {
+                if let Some(v) = value {
+                    r.add("gpu", what, v, unit, &params);
+                }
+            }
+            if !plants
+                && let (Some(pass), Some(reference)) = (
+                    median(&|s| s.gpu_terrain_ms),
+                    median(&|s| s.gpu_reference_ms),
+                )
+            {
+                r.add(
+                    "gpu",
+                    "frame pass / one-draw reference",
+                    pass / reference,
+                    "ratio",
+                    &params,
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Renders `frames` frames spread over the automatic flight (after a warm start at its first
+/// camera) and returns their statistics; without vegetation the same-run reference is on.
+fn fly(
+    gpu: &Gpu,
+    world_path: &std::path::Path,
+    size: [u32; 2],
+    plants: bool,
+    frames: usize,
+) -> Result<Vec<FrameStats>> {
+    let world = open_world(world_path)?;
+    let settings = StreamSettings {
+        tau_px: 2.0,
+        ..StreamSettings::default()
+    };
+    let mut viewer = Viewer::new(gpu, COLOR_FORMAT, world, settings);
+    viewer.view.plants = plants;
+    if !plants {
+        viewer.enable_gpu_reference(gpu, size);
+    }
+    let target = Target::new(&gpu.device, size, COLOR_FORMAT);
+    let dt = 1.0 / 30.0;
+    let b = bar(frames as u64, &format!("gpu {}x{}", size[0], size[1]));
+    let mut out = Vec::with_capacity(frames);
+    // Each measured view is streamed until settled first, so the frame draws what the view
+    // needs.
+    for f in 0..frames {
+        let t = (f as f64 + 0.5) / frames as f64;
+        let cam = engine::flight::auto_flyover(&viewer.streamer.shared.world, t, size);
+        let start = std::time::Instant::now();
+        while !viewer.stream_only(gpu, &cam, 0.1) && start.elapsed().as_secs_f64() < 120.0 {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        // Three frames of the same view: timestamp results arrive a frame late, so the last
+        // frame's statistics hold a settled frame's times.
+        let mut last = None;
+        for _ in 0..3 {
+            let mut enc = gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("nodebench gpu frame"),
+                });
+            let st = viewer.frame(
+                gpu,
+                &mut enc,
+                &target.color_view,
+                &target.depth_view,
+                &cam,
+                dt,
+            );
+            gpu.queue.submit([enc.finish()]);
+            viewer.after_submit();
+            gpu.device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
+            last = Some(st);
+        }
+        out.extend(last);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    Ok(out)
+}
