@@ -393,15 +393,18 @@ impl Placer {
                             && t.x_m < rect.max[0]
                             && t.y_m >= rect.min[1]
                             && t.y_m < rect.max[1])
-                        || self.excluded(world, t.x_m, t.y_m)
                     {
+                        continue;
+                    }
+                    let z = world.height_m(t.x_m, t.y_m);
+                    if self.excluded_at(world, t.x_m, t.y_m, z) {
                         continue;
                     }
                     out.push(Item {
                         species: s as u16,
                         x_m: t.x_m,
                         y_m: t.y_m,
-                        z_m: world.height_m(t.x_m, t.y_m),
+                        z_m: z,
                         height_m: t.height_m,
                         radius_m: t.crown_radius_m,
                         yaw_rad: (std::f64::consts::TAU * unit3(17, i64::from(i), 0)) as f32,
