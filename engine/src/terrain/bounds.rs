@@ -261,7 +261,6 @@ pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
                 y0: j as f64,
                 size: 1.0,
                 corners: corners(i, j).map(|k| [own[k], children[k], 0.0]),
-                check: (i, j),
                 region: *regions.at(i, j),
             };
             let e = refiner.cell_bounds(&cell);
@@ -353,26 +352,14 @@ fn finish(
 /// values at every `step`-th point (stored as f32, as meshes store them) with diagonals from
 /// (i, j) to (i + 1, j + 1) ([`interpolate_grid`]'s triangulation).
 fn lattice_errors(lattice: &[f64], m: usize, step: usize) -> Vec<f64> {
-    let w = m + 1;
-    let quads = m / step;
-    let v = |qi: usize, qj: usize| f64::from(lattice[qj * step * w + qi * step] as f32);
-    let mut out = Vec::with_capacity(w * w);
-    for j in 0..=m {
-        let qj = (j / step).min(quads - 1);
-        let fy = (j - qj * step) as f64 / step as f64;
-        for i in 0..=m {
-            let qi = (i / step).min(quads - 1);
-            let fx = (i - qi * step) as f64 / step as f64;
-            let (h00, h10, h01, h11) = (v(qi, qj), v(qi + 1, qj), v(qi, qj + 1), v(qi + 1, qj + 1));
-            let z = if fx >= fy {
-                h00 + fx * (h10 - h00) + fy * (h11 - h10)
-            } else {
-                h00 + fy * (h01 - h00) + fx * (h11 - h01)
-            };
-            out.push((z - lattice[j * w + i]).abs());
-        }
-    }
-    out
+    let vertices = vertex_heights(lattice, m, step);
+    let (quads, w, per) = (m / step, m + 1, step as f64);
+    (0..w * w)
+        .map(|k| {
+            let (i, j) = (k % w, k / w);
+            (interpolate_grid(&vertices, quads, i as f64 / per, j as f64 / per) - lattice[k]).abs()
+        })
+        .collect()
 }
 
 /// Mesh vertex heights (as f32, as meshes store them) of the grid with vertices every `step`-th

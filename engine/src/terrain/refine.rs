@@ -42,8 +42,7 @@ pub struct Cell {
     pub size: f64,
     /// Errors at the corners (x0, y0), (x0 + size, y0), (x0, y0 + size), (x0 + size, y0 + size).
     pub corners: [Errors; 4],
-    /// The check cell it lies in: its lattice index and region bounds.
-    pub check: (usize, usize),
+    /// Region bounds of the check cell it lies in.
     pub region: RegionBounds,
 }
 
@@ -81,9 +80,8 @@ impl Refiner<'_> {
         out
     }
 
-    /// The errors of the three meshes at a point in check-lattice units inside check cell
-    /// `check`.
-    fn errors_at(&self, gx: f64, gy: f64, check: (usize, usize)) -> Errors {
+    /// The errors of the three meshes at a point in check-lattice units.
+    fn errors_at(&self, gx: f64, gy: f64) -> Errors {
         let n = NODE_QUADS as usize;
         let sub = f64::from(CHECK_SUBDIV);
         let f = self.world.height_m(
@@ -93,13 +91,7 @@ impl Refiner<'_> {
         let own = interpolate_grid(&self.vertices, n, gx / sub, gy / sub);
         let children =
             interpolate_grid(&self.child_vertices, 2 * n, 2.0 * gx / sub, 2.0 * gy / sub);
-        let grand = interpolate_cell(
-            &self.lattice_vertices,
-            n * CHECK_SUBDIV as usize,
-            check,
-            gx,
-            gy,
-        );
+        let grand = interpolate_grid(&self.lattice_vertices, n * CHECK_SUBDIV as usize, gx, gy);
         [own, children, grand].map(|m| (m - f).abs())
     }
 
@@ -108,7 +100,7 @@ impl Refiner<'_> {
         let h = c.size * 0.5;
         let (x0, y0) = (c.x0, c.y0);
         let [e00, e10, e01, e11] = c.corners;
-        let at = |x: f64, y: f64| self.errors_at(x, y, c.check);
+        let at = |x: f64, y: f64| self.errors_at(x, y);
         let (s, w, m) = (at(x0 + h, y0), at(x0, y0 + h), at(x0 + h, y0 + h));
         let (e, n) = (at(x0 + c.size, y0 + h), at(x0 + h, y0 + c.size));
         let cell = |x0: f64, y0: f64, corners| Cell {
@@ -164,40 +156,5 @@ impl Refiner<'_> {
             }
         }
         out
-    }
-}
-
-/// Linear interpolation over check cell `(i, j)` of a `(m + 1)^2` vertex grid at a point
-/// `(gx, gy)` (lattice units) inside it, with [`interpolate_grid`]'s diagonal.
-fn interpolate_cell(v: &[f32], m: usize, (i, j): (usize, usize), gx: f64, gy: f64) -> f64 {
-    let w = m + 1;
-    let (fx, fy) = (gx - i as f64, gy - j as f64);
-    let h00 = f64::from(v[j * w + i]);
-    let h10 = f64::from(v[j * w + i + 1]);
-    let h01 = f64::from(v[(j + 1) * w + i]);
-    let h11 = f64::from(v[(j + 1) * w + i + 1]);
-    if fx >= fy {
-        h00 + fx * (h10 - h00) + fy * (h11 - h10)
-    } else {
-        h00 + fy * (h01 - h00) + fx * (h11 - h01)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn cell_interpolation_matches_the_grid_interpolation() {
-        let m = 4;
-        let v: Vec<f32> = (0..(m + 1) * (m + 1))
-            .map(|k| ((k * 7919) % 13) as f32)
-            .collect();
-        for &(gx, gy) in &[(1.25f64, 2.5f64), (1.75, 2.25), (3.0, 3.0), (0.5, 0.5)] {
-            let cell = (gx.floor().min(3.0) as usize, gy.floor().min(3.0) as usize);
-            let a = interpolate_cell(&v, m, cell, gx, gy);
-            let b = interpolate_grid(&v, m, gx, gy);
-            assert!((a - b).abs() < 1e-12, "{gx} {gy}: {a} {b}");
-        }
     }
 }
