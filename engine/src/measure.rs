@@ -37,31 +37,46 @@ pub fn true_block_errors(
     m: &NodeMesh,
     per_quad: u32,
 ) -> [(f64, f64); BLOCKS] {
-    let r = tree.rect(m.key);
-    let n = (NODE_QUADS * per_quad) as usize;
-    let per_block = n / BLOCKS_PER_SIDE;
-    let step = (r.max[0] - r.min[0]) / n as f64;
+    let per_block = (NODE_QUADS * per_quad) as usize / BLOCKS_PER_SIDE;
     let mut out = [(0.0f64, f64::NEG_INFINITY); BLOCKS];
-    let surface = MeshSurface::new(m, tree);
     // The block a sample index lies in along one axis.
     let block_of = |k: usize| (k / per_block).min(BLOCKS_PER_SIDE - 1);
+    visit_samples(world, tree, m, per_quad, |[i, j], _, f, err| {
+        let b = block_of(j) * BLOCKS_PER_SIDE + block_of(i);
+        let bounds = &m.bounds.blocks[b];
+        out[b].0 = out[b].0.max(err);
+        out[b].1 = out[b].1.max(bounds.z_min_m - f).max(f - bounds.z_max_m);
+    });
+    out
+}
+
+/// Visits a node mesh's sample lattice of `per_quad` points per quad (`NODE_QUADS * per_quad`
+/// steps a side; border samples on the border, inner ones offset by [`SAMPLE_OFFSET`] of a
+/// step): `visit([i, j], [dx, dy] from the node's corner (m), surface height F, |mesh - F|)`, the
+/// mesh sampled through its own triangles.
+fn visit_samples(
+    world: &World,
+    tree: &QuadTree,
+    m: &NodeMesh,
+    per_quad: u32,
+    mut visit: impl FnMut([usize; 2], [f64; 2], f64, f64),
+) {
+    let r = tree.rect(m.key);
+    let n = (NODE_QUADS * per_quad) as usize;
+    let step = (r.max[0] - r.min[0]) / n as f64;
+    let surface = MeshSurface::new(m, tree);
+    let off = |k: usize| if k == 0 || k == n { 0.0 } else { SAMPLE_OFFSET };
     for j in 0..=n {
         for i in 0..=n {
-            // Border samples stay on the border; inner ones are offset.
-            let off = |k: usize| if k == 0 || k == n { 0.0 } else { SAMPLE_OFFSET };
-            let (x, y) = (
-                r.min[0] + (i as f64 + off(i)).min(n as f64) * step,
-                r.min[1] + (j as f64 + off(j)).min(n as f64) * step,
-            );
+            let d = [
+                (i as f64 + off(i)).min(n as f64) * step,
+                (j as f64 + off(j)).min(n as f64) * step,
+            ];
+            let (x, y) = (r.min[0] + d[0], r.min[1] + d[1]);
             let f = world.height_m(x, y);
-            let err = (surface.height_at(x, y) - f).abs();
-            let b = block_of(j) * BLOCKS_PER_SIDE + block_of(i);
-            let bounds = &m.bounds.blocks[b];
-            out[b].0 = out[b].0.max(err);
-            out[b].1 = out[b].1.max(bounds.z_min_m - f).max(f - bounds.z_max_m);
+            visit([i, j], d, f, (surface.height_at(x, y) - f).abs());
         }
     }
-    out
 }
 
 /// On-screen error of a view: for points on a lattice of `per_side` x `per_side` in every drawn
@@ -151,28 +166,15 @@ pub fn node_error_samples(
     per_quad: u32,
 ) -> ErrorSamples {
     let r = tree.rect(m.key);
-    let n = (NODE_QUADS * per_quad) as usize;
-    let step = (r.max[0] - r.min[0]) / n as f64;
-    let surface = MeshSurface::new(m, tree);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    let mut samples = Vec::with_capacity((n + 1) * (n + 1));
-    for j in 0..=n {
-        for i in 0..=n {
-            let off = |k: usize| if k == 0 || k == n { 0.0 } else { SAMPLE_OFFSET };
-            let (dx, dy) = (
-                (i as f64 + off(i)).min(n as f64) * step,
-                (j as f64 + off(j)).min(n as f64) * step,
-            );
-            let (x, y) = (r.min[0] + dx, r.min[1] + dy);
-            let f = world.height_m(x, y);
-            z_lo = z_lo.min(f);
-            z_hi = z_hi.max(f);
-            let err = (surface.height_at(x, y) - f).abs();
-            if err > 0.0 {
-                samples.push([dx as f32, dy as f32, f as f32, err as f32]);
-            }
+    let mut samples = Vec::new();
+    visit_samples(world, tree, m, per_quad, |_, [dx, dy], f, err| {
+        z_lo = z_lo.min(f);
+        z_hi = z_hi.max(f);
+        if err > 0.0 {
+            samples.push([dx as f32, dy as f32, f as f32, err as f32]);
         }
-    }
+    });
     samples.sort_by(|a, b| b[3].total_cmp(&a[3]));
     ErrorSamples {
         // f32 positions: widen the box by their rounding so it still holds every sample.

@@ -58,6 +58,14 @@ pub struct FrameStats {
     pub pop_debt_nodes: usize,
 }
 
+impl FrameStats {
+    /// GPU frame pass over the same-run reference, when both timers reported (they report the
+    /// same earlier frame).
+    pub fn pass_over_reference(&self) -> Option<f64> {
+        Some(self.gpu_terrain_ms? / self.gpu_reference_ms.filter(|&r| r > 0.0)?)
+    }
+}
+
 /// Streaming + rendering for one world: what one frame of the viewer does.
 pub struct Viewer {
     pub streamer: Streamer,
@@ -123,10 +131,7 @@ impl Viewer {
         let select_cam = self.frozen.unwrap_or(*cam);
         self.streamer.update(&select_cam, dt_s);
         let t1 = Instant::now();
-        let scene = &mut self.scene;
-        self.streamer.run_gpu_phases_with(&mut |shared, work| {
-            work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
-        });
+        self.upload(gpu);
         let t2 = Instant::now();
         let drawn: Vec<DrawnNode<'_>> = self
             .streamer
@@ -191,13 +196,7 @@ impl Viewer {
         let t3 = Instant::now();
         let st = &self.streamer.stats;
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
-        let drawn_set: rustc_hash::FxHashSet<NodeKey> = drawn.iter().map(|d| d.key).collect();
-        let wanted_missing = self
-            .streamer
-            .wanted()
-            .iter()
-            .filter(|k| !drawn_set.contains(k))
-            .count();
+        let wanted_missing = self.wanted_not_drawn();
         self.frame += 1;
         FrameStats {
             frame: self.frame,
@@ -258,13 +257,32 @@ impl Viewer {
     /// benchmarks). True when no job is in flight and every wanted node is drawn.
     pub fn stream_only(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64) -> bool {
         self.streamer.update(cam, dt_s);
+        self.upload(gpu);
+        self.streamer.in_flight() == 0 && self.wanted_not_drawn() == 0
+    }
+
+    /// The streamer's GPU phases under their budget: every renderer's upload hook.
+    fn upload(&mut self, gpu: &Gpu) {
         let scene = &mut self.scene;
         self.streamer.run_gpu_phases_with(&mut |shared, work| {
             work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
         });
-        let drawn: rustc_hash::FxHashSet<NodeKey> =
-            self.streamer.draw_list().iter().map(|d| d.key).collect();
-        self.streamer.in_flight() == 0 && self.streamer.wanted().iter().all(|k| drawn.contains(k))
+    }
+
+    /// Wanted nodes not drawn yet (a coarser ancestor stands in for them): the pop debt count.
+    fn wanted_not_drawn(&self) -> usize {
+        let drawn: rustc_hash::FxHashSet<NodeKey> = self
+            .streamer
+            .draw_list()
+            .iter()
+            .filter(|d| self.streamer.is_ready(d.key))
+            .map(|d| d.key)
+            .collect();
+        self.streamer
+            .wanted()
+            .iter()
+            .filter(|k| !drawn.contains(k))
+            .count()
     }
 
     /// Keys of the nodes drawn last frame.

@@ -112,6 +112,11 @@ impl NodeBounds {
     }
 }
 
+/// The largest error of a node's blocks: the node's error.
+fn largest_error(blocks: &[BlockBounds; BLOCKS]) -> f64 {
+    blocks.iter().map(|b| b.error_m).fold(0.0, f64::max)
+}
+
 /// The rectangle of block `index` of a node.
 pub fn block_rect(tree: &QuadTree, key: NodeKey, index: usize) -> crate::surface::world::Rect {
     let r = tree.rect(key);
@@ -176,7 +181,7 @@ pub fn monotone(key: NodeKey, own: NodeBounds, parent: Option<NodeBounds>) -> No
         for (i, b) in out.blocks.iter_mut().enumerate() {
             b.error_m = b.error_m.min(p.blocks[parent_block(key, i)].error_m);
         }
-        out.error_m = out.blocks.iter().map(|b| b.error_m).fold(0.0, f64::max);
+        out.error_m = largest_error(&out.blocks);
     }
     out
 }
@@ -325,7 +330,7 @@ fn finish(
             b.children.max(b.deeper) + rounding
         }
     };
-    let blocks = std::array::from_fn(|i| BlockBounds {
+    let blocks: [BlockBounds; BLOCKS] = std::array::from_fn(|i| BlockBounds {
         z_min_m: m[i].lo,
         z_max_m: m[i].hi,
         error_m: (m[i].own + rounding).max(descendants(&m[i])),
@@ -333,10 +338,7 @@ fn finish(
     NodeBounds {
         z_min_m: lo,
         z_max_m: hi,
-        error_m: m
-            .iter()
-            .map(|b| (b.own + rounding).max(descendants(b)))
-            .fold(0.0, f64::max),
+        error_m: largest_error(&blocks),
         mesh_error_m: m.iter().map(|b| b.own + rounding).fold(0.0, f64::max),
         descendants_error_m: m.iter().map(descendants).fold(0.0, f64::max),
         vegetation_error_m: if vegetation {

@@ -161,7 +161,6 @@ fn sample_grid(
 /// The depth each side's skirt must reach (see the module docs): below this node's height range
 /// and below every coarser neighbour's border along that side, less a margin for f32 rounding.
 pub fn skirt_bottoms(world: &World, tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> [f64; 4] {
-    let r = tree.rect(key);
     let mut out = [b.z_min_m; 4];
     for (k, side) in Side::ALL.iter().enumerate() {
         let mut lowest = b.z_min_m;
@@ -169,12 +168,7 @@ pub fn skirt_bottoms(world: &World, tree: &QuadTree, key: NodeKey, b: &NodeBound
             let Some(n) = tree.neighbour_across(key, *side, level) else {
                 continue;
             };
-            let nr = tree.rect(n);
-            let contains = nr.min[0] <= r.min[0]
-                && nr.min[1] <= r.min[1]
-                && nr.max[0] >= r.max[0]
-                && nr.max[1] >= r.max[1];
-            if contains || !tree.overlaps_map(n) {
+            if key.ancestors().any(|a| a == n) || !tree.overlaps_map(n) {
                 continue; // an ancestor, never drawn next to this node
             }
             lowest = lowest.min(neighbour_border_min(world, tree, key, *side, n));

@@ -10,7 +10,7 @@
 
 use crate::camera::{Camera, Frustum, distance_to_aabb};
 use crate::surface::world::World;
-use crate::terrain::bounds::{BLOCKS, BoundsCache, NodeBounds, block_rect};
+use crate::terrain::bounds::{BoundsCache, NodeBounds, block_rect};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 
@@ -20,6 +20,16 @@ pub fn node_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> (DVec3, DVec3
     (
         DVec3::new(r.min[0], r.min[1], b.z_min_m),
         DVec3::new(r.max[0], r.max[1], b.z_max_m),
+    )
+}
+
+/// The world-space box of block `index` of a node.
+pub fn block_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds, index: usize) -> (DVec3, DVec3) {
+    let r = block_rect(tree, key, index);
+    let block = &b.blocks[index];
+    (
+        DVec3::new(r.min[0], r.min[1], block.z_min_m),
+        DVec3::new(r.max[0], r.max[1], block.z_max_m),
     )
 }
 
@@ -49,16 +59,11 @@ pub fn projected_error_px(
     };
     let (lo, hi) = node_aabb(tree, key, b);
     let mut out = px(b.vegetation_error_m, distance_to_aabb(eye_m, lo, hi));
-    for i in 0..BLOCKS {
-        let block = &b.blocks[i];
+    for (i, block) in b.blocks.iter().enumerate() {
         if block.error_m <= 0.0 {
             continue;
         }
-        let r = block_rect(tree, key, i);
-        let (lo, hi) = (
-            DVec3::new(r.min[0], r.min[1], block.z_min_m),
-            DVec3::new(r.max[0], r.max[1], block.z_max_m),
-        );
+        let (lo, hi) = block_aabb(tree, key, b, i);
         if frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
             continue;
         }

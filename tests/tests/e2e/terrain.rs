@@ -5,10 +5,10 @@ use engine::camera::Camera;
 use engine::camera::distance_to_aabb;
 use engine::surface::decals::FLAT_MARGIN_M;
 use engine::surface::world::World;
-use engine::terrain::bounds::{BLOCKS, BoundsCache, block_rect, parent_block};
+use engine::terrain::bounds::{BLOCKS, BoundsCache, parent_block};
 use engine::terrain::mesh::NodeMesh;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
-use engine::terrain::select::{SelectParams, select};
+use engine::terrain::select::{SelectParams, block_aabb, select};
 use engine::terrain::tiles::TileCache;
 use glam::DVec3;
 use std::collections::HashMap as Map;
@@ -258,12 +258,7 @@ fn selected_nodes_respect_the_pixel_threshold() {
                     let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, s.key);
                     let mut px = 0.0f64;
                     for (bi, &(true_err, _)) in blocks.iter().enumerate() {
-                        let b = s.bounds.blocks[bi];
-                        let r = block_rect(&tree, s.key, bi);
-                        let (lo, hi) = (
-                            DVec3::new(r.min[0], r.min[1], b.z_min_m),
-                            DVec3::new(r.max[0], r.max[1], b.z_max_m),
-                        );
+                        let (lo, hi) = block_aabb(&tree, s.key, &s.bounds, bi);
                         if frustum.intersects_aabb(lo, hi) {
                             let d = distance_to_aabb(cam.position_m, lo, hi).max(1e-9);
                             px = px.max(true_err * k / d);

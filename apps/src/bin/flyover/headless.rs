@@ -161,7 +161,7 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
     // Per frame (both timers report the same earlier frame), over frames that have both.
     let mut ratios: Vec<f64> = all
         .iter()
-        .filter_map(|s| Some(s.gpu_terrain_ms? / s.gpu_reference_ms.filter(|&r| r > 0.0)?))
+        .filter_map(FrameStats::pass_over_reference)
         .collect();
     ratios.sort_by(f64::total_cmp);
     let ratio = (!ratios.is_empty()).then(|| percentile(&ratios, 0.5));
