@@ -1,6 +1,6 @@
 // Shared by every renderer's shader (assembled in front of it by `engine::render::shader`):
-// the frame and node bindings, the mesh vertex, dither cross-fades, fog and sun/sky shading.
-// `Frame`, `Node` and `VertexIn` mirror `engine::render::gpu_data`.
+// the frame binding and the renderer's node table, the mesh vertex, dither cross-fades, fog and
+// sun/sky shading. `Frame`, `Node` and `VertexIn` mirror `engine::render::gpu_data`.
 
 struct Frame {
     // Clip space from camera-relative world space (world axes, camera at the origin).
@@ -17,15 +17,21 @@ struct Frame {
     fog: vec4<f32>,
 };
 
+// One entry of the renderer's node table (`engine::render::node_table`).
 struct Node {
     // xyz: node origin minus camera (m); w: dither interval start.
     offset_lo: vec4<f32>,
-    // x: dither interval end, y: quad-tree level, z: 1 for skirts-as-surface debug, w: unused.
+    // x: dither interval end, y: quad-tree level, zw: unused.
     hi_level: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
-@group(1) @binding(0) var<uniform> node: Node;
+@group(1) @binding(0) var<storage, read> nodes: array<Node>;
+
+// What the fragment stage needs of a node: x, y its dither interval, z its level.
+fn node_fade(n: Node) -> vec3<f32> {
+    return vec3<f32>(n.offset_lo.w, n.hi_level.x, n.hi_level.y);
+}
 
 // A mesh vertex (terrain nodes and plant shapes): `tag` is the ground type of a terrain vertex
 // and the part (0 trunk, 1 foliage) of a plant-shape vertex.
@@ -41,6 +47,8 @@ struct VertexOut {
     @location(1) normal: vec3<f32>,
     // Colour looked up per vertex and interpolated, so ground-type borders blend.
     @location(2) albedo: vec3<f32>,
+    // The node's `node_fade` (one node per primitive).
+    @location(3) @interpolate(flat) fade: vec3<f32>,
 };
 
 // 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
@@ -59,10 +67,11 @@ fn bayer8(p: vec2<u32>) -> f32 {
     return (f32(v) + 0.5) / 64.0;
 }
 
-// Whether this node draws the pixel at `xy` (its dither interval holds the pixel's threshold).
-fn in_dither(xy: vec2<f32>) -> bool {
+// Whether a node of `fade` (see `node_fade`) draws the pixel at `xy` (its dither interval holds
+// the pixel's threshold).
+fn in_dither(xy: vec2<f32>, fade: vec3<f32>) -> bool {
     let t = bayer8(vec2<u32>(xy));
-    return t >= node.offset_lo.w && t < node.hi_level.x;
+    return t >= fade.x && t < fade.y;
 }
 
 fn sky_color(dir: vec3<f32>) -> vec3<f32> {
@@ -84,13 +93,13 @@ fn level_color(level: f32) -> vec3<f32> {
 // A lit, fogged, dithered surface pixel (terrain and plant meshes); debug mode 1 colours it by
 // the node's level.
 fn lit_pixel(in: VertexOut) -> vec4<f32> {
-    if (!in_dither(in.clip.xy)) {
+    if (!in_dither(in.clip.xy, in.fade)) {
         discard;
     }
     let mode = u32(frame.fog.z + 0.5);
     var albedo = in.albedo;
     if (mode == 1u) {
-        albedo = level_color(node.hi_level.y);
+        albedo = level_color(in.fade.z);
     }
     let n = normalize(in.normal);
     let sun = max(dot(n, frame.sun_dir.xyz), 0.0);

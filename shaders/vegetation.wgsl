@@ -5,7 +5,8 @@
 
 // Per-species looks: rgb foliage colour (linear), w: shape (0 conifer, 1 broadleaf,
 // 2 bush, 3 grass). Instances carry the position relative to the node's south-west corner (z
-// absolute), height, crown radius, yaw and look index.
+// absolute), height, crown radius, yaw, look index and their node-table entry (in the
+// impostor bake: their cluster).
 @group(2) @binding(2) var<uniform> plant_looks: array<vec4<f32>, MAX_LOOKS>;
 
 struct PlantInstanceIn {
@@ -14,6 +15,7 @@ struct PlantInstanceIn {
     @location(5) radius: f32,
     @location(6) yaw: f32,
     @location(7) look: u32,
+    @location(8) entry: u32,
 };
 
 const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
@@ -21,6 +23,7 @@ const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
 // Instanced unit-shape meshes (height 1, radius 1), scaled, turned and placed per instance.
 @vertex
 fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
+    let node = nodes[inst.entry];
     let c = cos(inst.yaw);
     let s = sin(inst.yaw);
     let local = vec3<f32>(v.position.xy * inst.radius, v.position.z * inst.height);
@@ -33,6 +36,7 @@ fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
     out.normal = normalize(vec3<f32>(c * n.x - s * n.y, s * n.x + c * n.y, n.z));
     let look = plant_looks[min(inst.look, MAX_LOOKS - 1u)];
     out.albedo = select(look.rgb, TRUNK, v.tag == 0u);
+    out.fade = node_fade(node);
     return out;
 }
 
@@ -42,6 +46,7 @@ struct BillboardOut {
     // x in [-1, 1] across, y in [0, 1] up.
     @location(1) uv: vec2<f32>,
     @location(2) @interpolate(flat) look: u32,
+    @location(3) @interpolate(flat) fade: vec3<f32>,
 };
 
 @fragment
@@ -62,6 +67,7 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
         vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
         vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     )[i % 6u];
+    let node = nodes[inst.entry];
     let base = inst.position + node.offset_lo.xyz;
     let flat_dir = vec2<f32>(base.x, base.y);
     let len = max(length(flat_dir), 1e-3);
@@ -71,22 +77,23 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
     out.rel = rel;
     out.uv = corner;
-    out.look = min(inst.look, MAX_LOOKS - 1u);
+    out.look = inst.look;
+    out.fade = node_fade(node);
     return out;
 }
 
 @fragment
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
-    let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / f32(ATLAS_TILES), 1.0 - in.uv.y);
-    return billboard_pixel(in, uv);
+    let look = min(in.look, MAX_LOOKS - 1u);
+    let uv = vec2<f32>((f32(look) + 0.5 + 0.5 * in.uv.x) / f32(ATLAS_TILES), 1.0 - in.uv.y);
+    return billboard_pixel(in, textureSampleLevel(atlas, atlas_sampler, uv, 0.0));
 }
 
-// A billboard or impostor pixel: dither test, atlas texel at `uv` with an alpha test, fog.
-fn billboard_pixel(in: BillboardOut, uv: vec2<f32>) -> vec4<f32> {
-    if (!in_dither(in.clip.xy)) {
+// A billboard or impostor pixel: dither test, alpha test of its `texel`, fog.
+fn billboard_pixel(in: BillboardOut, texel: vec4<f32>) -> vec4<f32> {
+    if (!in_dither(in.clip.xy, in.fade)) {
         discard;
     }
-    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
     if (texel.a < 0.5) {
         discard;
     }
@@ -137,13 +144,10 @@ struct GroupBakeOut {
     @location(1) @interpolate(flat) look: u32,
 };
 
-// One member billboard (species `look`, cluster index in `cluster`) into its cluster's tile.
+// One member billboard (species `look`, cluster index in `entry`) into its cluster's tile.
 @vertex
-fn vs_group_bake(
-    @builtin(vertex_index) i: u32,
-    inst: PlantInstanceIn,
-    @location(8) cluster: u32,
-) -> GroupBakeOut {
+fn vs_group_bake(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> GroupBakeOut {
+    let cluster = inst.entry;
     let corner = array<vec2<f32>, 6>(
         vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
         vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
@@ -174,10 +178,15 @@ fn fs_group_bake(in: GroupBakeOut) -> @location(0) vec4<f32> {
     return vec4<f32>(texel.rgb, 1.0);
 }
 
-// Drawing the clusters: `look` holds the cluster's tile index.
+// Drawing the clusters: each node's impostor texture is one layer of a texture array; `look`
+// holds layer * CLUSTER_COUNT + the cluster's tile index.
+@group(2) @binding(3) var impostors: texture_2d_array<f32>;
+
 @fragment
 fn fs_impostor(in: BillboardOut) -> @location(0) vec4<f32> {
-    let tile = vec2<f32>(f32(in.look % CLUSTERS_PER_SIDE), f32(in.look / CLUSTERS_PER_SIDE));
+    let layer = in.look / CLUSTER_COUNT;
+    let t = in.look % CLUSTER_COUNT;
+    let tile = vec2<f32>(f32(t % CLUSTERS_PER_SIDE), f32(t / CLUSTERS_PER_SIDE));
     let uv = (tile + vec2<f32>(0.5 + 0.5 * in.uv.x, 1.0 - in.uv.y)) / f32(CLUSTERS_PER_SIDE);
-    return billboard_pixel(in, uv);
+    return billboard_pixel(in, textureSampleLevel(impostors, atlas_sampler, uv, layer, 0.0));
 }

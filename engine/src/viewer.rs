@@ -37,11 +37,15 @@ pub struct FrameStats {
     /// Of `update_ms`: the selection of wanted nodes.
     pub selection_ms: f64,
     pub cpu_frame_ms: f64,
+    /// Terrain draw calls recorded (a multi-draw counts once) and the node meshes they draw.
     pub draw_calls: u32,
+    pub items: u32,
     pub triangles: u64,
-    /// Vegetation instances drawn (meshes and billboards), their draw calls, mesh triangles.
+    /// Vegetation instances drawn (meshes and billboards), draw calls recorded, the node
+    /// instance groups they draw, mesh triangles.
     pub plant_instances: u64,
     pub plant_draw_calls: u32,
+    pub plant_items: u32,
     pub plant_triangles: u64,
     /// Of the vegetation instances: group-billboard quads (one per cluster of items).
     pub group_billboards: u64,
@@ -211,9 +215,11 @@ impl Viewer {
             selection_ms: st.last_selection_s * 1e3,
             cpu_frame_ms: ms(t0, t3),
             draw_calls: stats.draw_calls,
+            items: stats.items,
             triangles: stats.triangles,
             plant_instances: stats.plant_instances,
             plant_draw_calls: stats.plant_draw_calls,
+            plant_items: stats.plant_items,
             plant_triangles: stats.plant_triangles,
             group_billboards: stats.group_billboards,
             drawn_nodes: drawn.len(),

@@ -1,10 +1,10 @@
 //! What every renderer shares: the frame uniforms (camera, sun, sky, fog, debug mode) in bind
-//! group 0, the per-draw node uniforms (camera-relative origin, dither interval, level) in bind
-//! group 1 at a dynamic offset, the view options and draw statistics, and the pipeline and pass
-//! helpers.
+//! group 0, the layout of bind group 1 (a renderer's node table: camera-relative origin, dither
+//! interval and level per node, see `node_table`), the view options and draw statistics, and the
+//! pipeline and pass helpers.
 
 use super::DEPTH_FORMAT;
-use super::gpu_data::{FrameUniforms, NODE_UNIFORM_STRIDE, NodeUniforms};
+use super::gpu_data::FrameUniforms;
 use crate::camera::Camera;
 use glam::{DVec3, Vec3};
 
@@ -27,6 +27,9 @@ pub struct ViewOptions {
     pub fog_max: f32,
     /// Draw vegetation.
     pub plants: bool,
+    /// Issue each renderer's draws as one multi-draw per batch where the adapter supports it
+    /// (off: one draw call per node item, the fallback path; the pixels are the same).
+    pub merged_draws: bool,
 }
 
 impl Default for ViewOptions {
@@ -40,6 +43,7 @@ impl Default for ViewOptions {
             fog_per_m: 1.0 / 25_000.0,
             fog_max: 0.35,
             plants: true,
+            merged_draws: true,
         }
     }
 }
@@ -47,19 +51,23 @@ impl Default for ViewOptions {
 /// What one frame drew.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct DrawStats {
-    /// Terrain draws and triangles; nodes culled (outside the frustum or an empty interval).
+    /// Terrain draw calls recorded (a multi-draw counts once) and the node items they draw
+    /// (one per node mesh); triangles; nodes culled (outside the frustum or an empty interval).
     pub draw_calls: u32,
+    pub items: u32,
     pub triangles: u64,
     pub culled: u32,
-    /// Vegetation: instances drawn (meshes and billboards), their draw calls and mesh triangles.
+    /// Vegetation: instances drawn (meshes and billboards), draw calls recorded and the items
+    /// they draw (one per node and instance group), mesh triangles.
     pub plant_instances: u64,
     pub plant_draw_calls: u32,
+    pub plant_items: u32,
     pub plant_triangles: u64,
     /// Of the instances: group-billboard quads (each stands for a cluster of items).
     pub group_billboards: u64,
 }
 
-/// The frame and node uniforms and their bind groups, shared by all renderers.
+/// The frame uniforms and bind group and the node-table layout, shared by all renderers.
 pub struct FrameResources {
     /// The colour format every renderer draws into (sRGB).
     pub color_format: wgpu::TextureFormat,
@@ -67,19 +75,14 @@ pub struct FrameResources {
     /// Group 0: the frame uniforms.
     pub layout: wgpu::BindGroupLayout,
     pub group: wgpu::BindGroup,
-    /// Group 1: one node's uniforms (dynamic offset).
+    /// Group 1: a renderer's node table (a read-only storage array, vertex stage).
     pub node_layout: wgpu::BindGroupLayout,
-    node_buffer: wgpu::Buffer,
-    node_group: wgpu::BindGroup,
-    node_capacity: u64,
-    /// This frame's node uniforms, written by [`Self::flush_nodes`].
-    nodes: Vec<NodeUniforms>,
     camera_m: DVec3,
 }
 
 impl std::fmt::Debug for FrameResources {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "FrameResources({} node slots)", self.node_capacity)
+        write!(f, "FrameResources({:?})", self.color_format)
     }
 }
 
@@ -127,8 +130,17 @@ impl FrameResources {
             entries: &[uniform_entry(0, false, vf)],
         });
         let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("node layout"),
-            entries: &[uniform_entry(0, true, vf)],
+            label: Some("node table layout"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
         });
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame uniforms"),
@@ -137,46 +149,14 @@ impl FrameResources {
             mapped_at_creation: false,
         });
         let group = uniform_group(device, "frame group", &layout, 0, &buffer);
-        let node_capacity = 256;
-        let (node_buffer, node_group) = Self::node_slots(device, &node_layout, node_capacity);
         Self {
             color_format,
             buffer,
             layout,
             group,
             node_layout,
-            node_buffer,
-            node_group,
-            node_capacity,
-            nodes: Vec::new(),
             camera_m: DVec3::ZERO,
         }
-    }
-
-    fn node_slots(
-        device: &wgpu::Device,
-        layout: &wgpu::BindGroupLayout,
-        slots: u64,
-    ) -> (wgpu::Buffer, wgpu::BindGroup) {
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("node uniforms"),
-            size: slots * NODE_UNIFORM_STRIDE,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("node uniforms"),
-            layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &buffer,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(std::mem::size_of::<NodeUniforms>() as u64),
-                }),
-            }],
-        });
-        (buffer, group)
     }
 
     /// Frame uniforms for a camera: the view rotation and an infinite reversed-Z projection.
@@ -217,41 +197,15 @@ impl FrameResources {
         );
     }
 
-    /// Starts a frame: writes the frame uniforms and empties the node slots.
+    /// Starts a frame: writes the frame uniforms and keeps the camera for [`Self::offset_m`].
     pub fn begin(&mut self, queue: &wgpu::Queue, cam: &Camera, view: &ViewOptions) {
         self.write_uniforms(queue, cam, view);
-        self.nodes.clear();
         self.camera_m = cam.position_m;
     }
 
-    /// Adds one draw's node uniforms (see [`node_offset_m`]) and returns its dynamic offset in
-    /// the node group.
-    pub fn push_node(&mut self, origin_m: [f64; 2], level: u8, dither: [f32; 2]) -> u32 {
-        let [x, y, z] = node_offset_m(origin_m, self.camera_m);
-        self.nodes.push(NodeUniforms {
-            offset_lo: [x, y, z, dither[0]],
-            hi_level: [dither[1], f32::from(level), 0.0, 0.0],
-            padding: [[0.0; 4]; 14],
-        });
-        ((self.nodes.len() as u64 - 1) * NODE_UNIFORM_STRIDE) as u32
-    }
-
-    /// Writes this frame's node uniforms (growing the buffer when needed).
-    pub fn flush_nodes(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
-        let needed = (self.nodes.len() as u64).max(1);
-        if needed > self.node_capacity {
-            self.node_capacity = needed.next_power_of_two();
-            (self.node_buffer, self.node_group) =
-                Self::node_slots(device, &self.node_layout, self.node_capacity);
-        }
-        if !self.nodes.is_empty() {
-            queue.write_buffer(&self.node_buffer, 0, bytemuck::cast_slice(&self.nodes));
-        }
-    }
-
-    /// Binds the node uniforms at `offset` (from [`Self::push_node`]) as group 1.
-    pub fn bind_node(&self, pass: &mut wgpu::RenderPass<'_>, offset: u32) {
-        pass.set_bind_group(1, &self.node_group, &[offset]);
+    /// This frame's [`node_offset_m`] of a node whose south-west corner is `origin_m`.
+    pub fn offset_m(&self, origin_m: [f64; 2]) -> [f32; 3] {
+        node_offset_m(origin_m, self.camera_m)
     }
 
     /// A pipeline layout of the frame group, the node group (or a gap) and `extra` groups.

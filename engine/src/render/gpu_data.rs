@@ -18,20 +18,16 @@ pub struct FrameUniforms {
     pub fog: [f32; 4],
 }
 
-/// Mirrors `Node`; one per draw, at a 256-byte stride (dynamic offset).
+/// Mirrors `Node`: one entry of a renderer's node table (a storage array indexed by the draw's
+/// instance index or by the instance's `entry`, see `render::node_table`).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Pod, Zeroable)]
-pub struct NodeUniforms {
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct NodeEntry {
     /// xyz: node origin minus camera (m); w: dither interval start.
     pub offset_lo: [f32; 4],
-    /// x: dither interval end, y: quad-tree level.
+    /// x: dither interval end, y: quad-tree level, zw: unused.
     pub hi_level: [f32; 4],
-    /// Fills the struct to the 256-byte stride.
-    pub padding: [[f32; 4]; 14],
 }
-
-/// Bytes between two draws' node uniforms (the largest `min_uniform_buffer_offset_alignment`).
-pub const NODE_UNIFORM_STRIDE: u64 = 256;
 
 /// Mirrors `VertexIn` (28 bytes): terrain vertices and plant-shape vertices.
 #[repr(C)]
@@ -54,6 +50,6 @@ impl MeshVertex {
     };
 }
 
-const _: () = assert!(std::mem::size_of::<NodeUniforms>() as u64 == NODE_UNIFORM_STRIDE);
+const _: () = assert!(std::mem::size_of::<NodeEntry>() == 32);
 const _: () = assert!(std::mem::size_of::<MeshVertex>() == 28);
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 5 * 16);

@@ -5,8 +5,11 @@
 //!   provide a software adapter when none is found.
 //! - [`scene`]: the [`scene::NodeRenderer`] trait (upload, prepare, draw hooks) and the
 //!   [`scene::Scene`] that holds the renderers in drawing order.
-//! - [`frame`]: what all renderers share: frame uniforms (group 0), per-draw node uniforms
-//!   (group 1, dynamic offsets), view options, draw statistics, pipeline and pass helpers.
+//! - [`frame`]: what all renderers share: frame uniforms (group 0), the node-table layout
+//!   (group 1), view options, draw statistics, pipeline and pass helpers.
+//! - Merged draws (seed 002): [`suballoc`] (node geometry suballocated from a few large
+//!   buffers), [`node_table`] (per-node data as one storage array per renderer), [`batches`]
+//!   (a frame's draws as one multi-draw per render state and page, a plain loop as fallback).
 //! - One renderer per kind of thing drawn: [`sky`] (sky, node-bounds lines), [`terrain`],
 //!   [`vegetation`] (with its atlas and impostor bakes). Each owns its pipelines, its per-node
 //!   GPU objects and its `gpu_data` structs; [`gpu_data`] holds the structs of the shared prelude.
@@ -17,12 +20,16 @@
 //! Depth is reversed-Z `Depth32Float` with an infinite far plane: clear to 0, test `Greater`.
 //! Positions reach the GPU camera-relative: node origin minus camera in f64, then f32.
 
+pub mod batches;
 pub mod frame;
 pub mod gpu_data;
+pub mod impostors;
+pub mod node_table;
 pub mod reference;
 pub mod scene;
 pub mod shader;
 pub mod sky;
+pub mod suballoc;
 mod target;
 pub mod terrain;
 mod timer;
@@ -62,6 +69,9 @@ pub struct Gpu {
     pub wireframe: bool,
     /// Whether timestamp queries inside passes are available.
     pub timestamps: bool,
+    /// Whether multi-draw indirect with a non-zero first instance is available (else merged
+    /// batches are recorded as plain loops of the same draws, see `batches`).
+    pub multi_draw: bool,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -105,6 +115,14 @@ impl Gpu {
             features |=
                 wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
         }
+        let multi_draw = available.contains(wgpu::Features::INDIRECT_FIRST_INSTANCE)
+            && adapter
+                .get_downlevel_capabilities()
+                .flags
+                .contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
+        if multi_draw {
+            features |= wgpu::Features::INDIRECT_FIRST_INSTANCE;
+        }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("engine device"),
             required_features: features,
@@ -122,6 +140,7 @@ impl Gpu {
             queue,
             wireframe,
             timestamps,
+            multi_draw,
         })
     }
 

@@ -46,8 +46,8 @@ pub trait NodeRenderer {
         0
     }
 
-    /// Before the pass: choose this frame's draws and take node-uniform slots
-    /// ([`FrameResources::push_node`]).
+    /// Before the pass: choose this frame's draws, set their node-table entries and upload the
+    /// frame's batches.
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>);
 
     /// Inside the frame's pass (group 0 bound): record the draws chosen by `prepare`.
@@ -110,7 +110,6 @@ impl Scene {
         for r in &mut self.renderers {
             r.prepare(gpu, &mut self.frame, draws);
         }
-        self.frame.flush_nodes(&gpu.device, &gpu.queue);
         let [r, g, b, a] = draws.view.clear;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("frame pass"),

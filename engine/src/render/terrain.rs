@@ -1,17 +1,29 @@
-//! The terrain renderer: node meshes (one vertex and index buffer per node), filled or as
-//! wireframe, coloured by the map's ground-type legend.
+//! The terrain renderer: node meshes suballocated from a few large vertex and index buffers
+//! (pages), drawn as one multi-draw per page (each node mesh one indirect record whose first
+//! instance is the node's slot in the node table), filled or as wireframe, coloured by the map's
+//! ground-type legend.
 
 use super::Gpu;
+use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, srgb_to_linear, uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
+use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
+use super::suballoc::{Lease, Suballocator};
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::mesh::NodeMesh;
 use crate::terrain::quadtree::QuadTree;
 use glam::DVec3;
-use wgpu::util::DeviceExt;
+use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
+
+/// Vertices and indices in one page of the mesh pool: 858 grid nodes (1,221 vertices and
+/// 6,912 indices each), 28 + 24 MiB.
+const PAGE_VERTICES: u32 = 1 << 20;
+const PAGE_INDICES: u32 = 6 << 20;
+/// Pages at most (far more than a cache budget keeps resident).
+const MAX_PAGES: usize = 64;
 
 /// Ground types the colour table holds (the map legend has at most this many).
 pub const GROUND_TYPES: usize = 256;
@@ -24,15 +36,16 @@ pub fn shader_source() -> String {
     )
 }
 
-/// One node's mesh on the GPU.
+/// One node's mesh on the GPU: its ranges in a page of the mesh pool and its node-table slot
+/// (both given back when dropped).
 pub struct TerrainNodeGpu {
     /// World position of the node's south-west corner (vertices are relative to it).
     pub origin_m: [f64; 2],
     /// World-space box of the mesh, skirts included.
     pub aabb_m: (DVec3, DVec3),
-    vertices: wgpu::Buffer,
-    indices: wgpu::Buffer,
-    index_count: u32,
+    /// Part 0: vertices, part 1: indices (relative to the node's first vertex).
+    mesh: Lease,
+    slot: Lease,
     pub bytes: usize,
 }
 
@@ -44,23 +57,39 @@ impl std::fmt::Debug for TerrainNodeGpu {
 
 impl TerrainNodeGpu {
     pub fn triangles(&self) -> u32 {
-        self.index_count / 3
+        self.mesh.len[1] / 3
     }
 }
 
-/// Terrain pipelines and this frame's visible nodes.
+/// One page of the mesh pool.
+struct MeshPage {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+}
+
+/// Terrain pipelines, the mesh pool, the node table and this frame's batches (key: page).
 pub struct TerrainRenderer {
     fill: wgpu::RenderPipeline,
     wire: Option<wgpu::RenderPipeline>,
     colors: wgpu::BindGroup,
-    /// This frame: (index into the drawn nodes, node-uniform offset).
-    visible: Vec<(usize, u32)>,
+    pool: Suballocator,
+    pages: Vec<MeshPage>,
+    table: NodeTable,
+    batches: Batches<u32>,
+    triangles: u64,
     culled: u32,
+    /// This frame's batches are recorded as multi-draws (else as plain loops).
+    merged: bool,
 }
 
 impl std::fmt::Debug for TerrainRenderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "TerrainRenderer({} visible)", self.visible.len())
+        write!(
+            f,
+            "TerrainRenderer({} pages, {:?})",
+            self.pages.len(),
+            self.table
+        )
     }
 }
 
@@ -119,8 +148,13 @@ impl TerrainRenderer {
             fill,
             wire,
             colors,
-            visible: Vec::new(),
+            pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
+            pages: Vec::new(),
+            table: NodeTable::new(device, frame, "terrain node table", 1),
+            batches: Batches::new(),
+            triangles: 0,
             culled: 0,
+            merged: false,
         }
     }
 
@@ -138,8 +172,15 @@ impl TerrainRenderer {
         Box::new(Self::new(gpu, frame, &legend))
     }
 
-    /// Uploads one node mesh (vertices relative to its south-west corner, z absolute).
-    pub fn upload_mesh(device: &wgpu::Device, tree: &QuadTree, mesh: &NodeMesh) -> TerrainNodeGpu {
+    /// Uploads one node mesh (vertices relative to its south-west corner, z absolute) into the
+    /// mesh pool. None when the pool or the node table is full (the node is then not drawn).
+    pub fn upload_mesh(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tree: &QuadTree,
+        mesh: &NodeMesh,
+    ) -> Option<TerrainNodeGpu> {
         let vertices: Vec<MeshVertex> = mesh
             .positions
             .iter()
@@ -151,25 +192,56 @@ impl TerrainRenderer {
                 tag: u32::from(*g),
             })
             .collect();
-        let label = format!("node {}/{}/{}", mesh.key.level, mesh.key.ix, mesh.key.iy);
-        let vb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(&format!("{label} vertices")),
-            contents: bytemuck::cast_slice(&vertices),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let ib = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(&format!("{label} indices")),
-            contents: bytemuck::cast_slice(&mesh.indices),
-            usage: wgpu::BufferUsages::INDEX,
-        });
-        TerrainNodeGpu {
+        let lengths = [vertices.len() as u32, mesh.indices.len() as u32];
+        let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
+            log::warn!(
+                "terrain mesh pool or node table full: node {:?} is not drawn",
+                mesh.key
+            );
+            return None;
+        };
+        while self.pages.len() < self.pool.pages() {
+            let n = self.pages.len();
+            let buffer = |what: &str, bytes: u64, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("terrain page {n} {what}")),
+                    size: bytes,
+                    usage: usage | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            self.pages.push(MeshPage {
+                vertices: buffer(
+                    "vertices",
+                    u64::from(PAGE_VERTICES) * std::mem::size_of::<MeshVertex>() as u64,
+                    wgpu::BufferUsages::VERTEX,
+                ),
+                indices: buffer(
+                    "indices",
+                    u64::from(PAGE_INDICES) * 4,
+                    wgpu::BufferUsages::INDEX,
+                ),
+            });
+        }
+        let page = &self.pages[lease.page as usize];
+        let vertex_bytes = std::mem::size_of::<MeshVertex>() as u64;
+        queue.write_buffer(
+            &page.vertices,
+            u64::from(lease.start[0]) * vertex_bytes,
+            bytemuck::cast_slice(&vertices),
+        );
+        queue.write_buffer(
+            &page.indices,
+            u64::from(lease.start[1]) * 4,
+            bytemuck::cast_slice(&mesh.indices),
+        );
+        Some(TerrainNodeGpu {
             origin_m: mesh.origin_m,
             aabb_m: mesh.aabb_m(tree),
-            vertices: vb,
-            indices: ib,
-            index_count: mesh.indices.len() as u32,
+            mesh: lease,
+            slot,
             bytes: vertices.len() * std::mem::size_of::<MeshVertex>() + mesh.indices.len() * 4,
-        }
+        })
     }
 }
 
@@ -188,32 +260,53 @@ impl NodeRenderer for TerrainRenderer {
         let Some(mesh) = work.get::<NodeMesh>() else {
             return 0;
         };
-        let node = Self::upload_mesh(&gpu.device, tree, mesh);
+        let Some(node) = self.upload_mesh(&gpu.device, &gpu.queue, tree, mesh) else {
+            return 0;
+        };
         let bytes = node.bytes;
         work.gpu.put(node);
         bytes
     }
 
-    fn prepare(&mut self, _gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        self.visible.clear();
-        for (i, d) in draws.drawn.iter().enumerate() {
+    fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+        self.batches.clear();
+        self.triangles = 0;
+        self.merged = draws.view.merged_draws && gpu.multi_draw;
+        let mut visible = 0;
+        for d in draws.drawn {
             let Some(node) = d.work.gpu.get::<TerrainNodeGpu>() else {
                 continue;
             };
             if d.dither[1] > d.dither[0]
                 && draws.frustum.intersects_aabb(node.aabb_m.0, node.aabb_m.1)
             {
-                self.visible
-                    .push((i, frame.push_node(node.origin_m, d.key.level, d.dither)));
+                let slot = self.table.first_entry(&node.slot);
+                self.table
+                    .set(frame, slot, node.origin_m, d.key.level, d.dither);
+                let m = &node.mesh;
+                self.batches.push(
+                    m.page,
+                    Item::Indexed(DrawIndexedIndirectArgs {
+                        index_count: m.len[1],
+                        instance_count: 1,
+                        first_index: m.start[1],
+                        base_vertex: m.start[0] as i32,
+                        first_instance: slot,
+                    }),
+                );
+                self.triangles += u64::from(node.triangles());
+                visible += 1;
             }
         }
-        self.culled = (draws.drawn.len() - self.visible.len()) as u32;
+        self.culled = (draws.drawn.len() - visible) as u32;
+        self.table.flush(&gpu.queue);
+        self.batches.upload(gpu);
     }
 
     fn draw(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
-        frame: &FrameResources,
+        _frame: &FrameResources,
         draws: &FrameDraws<'_>,
         stats: &mut DrawStats,
     ) {
@@ -223,17 +316,15 @@ impl NodeRenderer for TerrainRenderer {
             _ => &self.fill,
         };
         pass.set_pipeline(pipeline);
+        pass.set_bind_group(1, &self.table.group, &[]);
         pass.set_bind_group(2, &self.colors, &[]);
-        for &(i, offset) in &self.visible {
-            let Some(node) = draws.drawn[i].work.gpu.get::<TerrainNodeGpu>() else {
-                continue;
-            };
-            frame.bind_node(pass, offset);
-            pass.set_vertex_buffer(0, node.vertices.slice(..));
-            pass.set_index_buffer(node.indices.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..node.index_count, 0, 0..1);
-            stats.draw_calls += 1;
-            stats.triangles += u64::from(node.triangles());
+        for run in self.batches.runs() {
+            let page = &self.pages[run.key as usize];
+            pass.set_vertex_buffer(0, page.vertices.slice(..));
+            pass.set_index_buffer(page.indices.slice(..), wgpu::IndexFormat::Uint32);
+            stats.draw_calls += self.batches.record(pass, run, self.merged);
+            stats.items += run.items();
         }
+        stats.triangles += self.triangles;
     }
 }

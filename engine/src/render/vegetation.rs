@@ -1,15 +1,22 @@
-//! The vegetation renderer: per node one instance buffer (groups are ranges of it), drawn as
-//! instanced plant meshes, billboards sampling the species atlas, or group-billboard quads
-//! sampling the node's impostor texture. Owns the two bakes: the species atlas (at start-up,
-//! from the high-detail plant meshes) and each node's impostors (in its upload hook).
+//! The vegetation renderer: per node one range of instances in a page of the instance pool
+//! (groups are sub-ranges of it), drawn as instanced plant meshes, billboards sampling the
+//! species atlas, or group-billboard quads sampling the node's impostor layer. Each group of each
+//! drawn node is one indirect record; one multi-draw per render state and page draws them all
+//! (`batches`). An instance finds its node's entry in the node table (two per node: groups
+//! replaced on split, groups kept) through its `entry`. Owns the two bakes: the species atlas (at
+//! start-up, from the high-detail plant meshes) and each node's impostors (in its upload hook).
 
 use super::Gpu;
+use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, ViewOptions, bake_pass, pipeline, srgb_to_linear,
     uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
+use super::impostors::ImpostorPages;
+use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
+use super::suballoc::{Lease, Suballocator};
 use crate::camera::Camera;
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -21,7 +28,11 @@ use crate::vegetation::representation::{
 use crate::vegetation::{NodeVegetation, Representation};
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
-use wgpu::util::DeviceExt;
+use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs, DrawIndirectArgs};
+
+/// Instances in one page of the instance pool (32 MiB) and pages at most.
+const PAGE_INSTANCES: u32 = 1 << 20;
+const MAX_INSTANCE_PAGES: usize = 16;
 
 /// Species looks (shape and colour) the renderer holds; the atlas has one tile per look.
 pub const MAX_LOOKS: u32 = 16;
@@ -54,10 +65,12 @@ pub struct PlantInstance {
     pub height_m: f32,
     pub radius_m: f32,
     pub yaw_rad: f32,
-    /// Index into the plant looks (species); for a cluster quad, the cluster's tile.
+    /// Index into the plant looks (species); for a cluster quad, its impostor layer *
+    /// `CLUSTER_COUNT` + the cluster's tile.
     pub look: u32,
-    /// The cluster of a group member in the impostor bake (location 8); 0 elsewhere.
-    pub cluster: u32,
+    /// Drawn instances: the node-table entry (2 x node slot, + 1 in groups kept through
+    /// splits); group members in the impostor bake: their cluster.
+    pub entry: u32,
 }
 
 const _: () = assert!(
@@ -65,22 +78,16 @@ const _: () = assert!(
 );
 
 impl PlantInstance {
-    /// Per-instance attributes at locations 3..=7 (and the cluster at 8 with `with_cluster`).
+    /// Per-instance attributes at locations 3..=8.
     const ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![
         3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32, 8 => Uint32
     ];
 
-    fn layout(with_cluster: bool) -> wgpu::VertexBufferLayout<'static> {
-        wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<Self>() as u64,
-            step_mode: wgpu::VertexStepMode::Instance,
-            attributes: if with_cluster {
-                &Self::ATTRIBUTES
-            } else {
-                &Self::ATTRIBUTES[..5]
-            },
-        }
-    }
+    const LAYOUT: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Self>() as u64,
+        step_mode: wgpu::VertexStepMode::Instance,
+        attributes: &Self::ATTRIBUTES,
+    };
 }
 
 /// Mirrors `Cluster` in `vegetation.wgsl`.
@@ -111,12 +118,15 @@ struct PlantGroupGpu {
     kept: bool,
 }
 
-/// A node's vegetation on the GPU.
+/// A node's vegetation on the GPU: its instance range, node-table slot and impostor layer (all
+/// given back when dropped) and its groups.
 pub struct PlantsGpu {
     origin_m: [f64; 2],
-    instances: wgpu::Buffer,
-    /// The node's group-billboard texture (8 x 8 cluster tiles), when it has group members.
-    impostors: Option<wgpu::BindGroup>,
+    instances: Lease,
+    slot: Lease,
+    /// The node's group-billboard layer (8 x 8 cluster tiles), when it has group members.
+    impostors: Option<Lease>,
+    /// Ranges relative to the node's first instance.
     groups: Vec<PlantGroupGpu>,
     /// World-space box of the items (ground to tree tops).
     pub aabb_m: (DVec3, DVec3),
@@ -135,11 +145,21 @@ impl std::fmt::Debug for PlantsGpu {
     }
 }
 
-/// Where a planned draw's node comes from.
-#[derive(Debug, Clone, Copy)]
-enum Source {
-    Drawn(usize),
-    Ancestor(usize),
+/// What a run of the frame's draws shares: pipeline, shape, instance page, impostor page.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum BatchKey {
+    Mesh {
+        shape: usize,
+        low_detail: bool,
+        page: u32,
+    },
+    Billboard {
+        page: u32,
+    },
+    Impostor {
+        page: u32,
+        layers: u32,
+    },
 }
 
 /// Vegetation pipelines, the shared plant shapes, the species atlas, this frame's plan.
@@ -157,12 +177,16 @@ pub struct VegetationRenderer {
     atlas_group: wgpu::BindGroup,
     /// The atlas as a plain texture + sampler (sampled by the impostor bake).
     atlas_texture_group: wgpu::BindGroup,
-    texture_layout: wgpu::BindGroupLayout,
     cluster_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
-    /// This frame: (node, node-uniform offset, whether the node is also an ancestor of drawn
-    /// nodes).
-    plan: Vec<(Source, u32, bool)>,
+    pool: Suballocator,
+    instance_pages: Vec<wgpu::Buffer>,
+    impostors: ImpostorPages,
+    table: NodeTable,
+    batches: Batches<BatchKey>,
+    /// This frame's counts (set by `prepare`).
+    frame_stats: DrawStats,
+    merged: bool,
 }
 
 impl std::fmt::Debug for VegetationRenderer {
@@ -302,11 +326,16 @@ impl VegetationRenderer {
         let cluster_layout = layout("impostor cluster layout", &[cluster_entry]);
         let drawn_layout =
             frame.pipeline_layout(device, "vegetation layout", true, &[Some(&atlas_layout)]);
+        let impostors = ImpostorPages::new(
+            device,
+            CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX,
+            IMPOSTOR_FORMAT,
+        );
         let impostor_layout = frame.pipeline_layout(
             device,
             "group billboard layout",
             true,
-            &[Some(&texture_layout)],
+            &[Some(&impostors.layout)],
         );
         let bake_layout = frame.pipeline_layout(
             device,
@@ -336,8 +365,8 @@ impl VegetationRenderer {
                 &PipelineSpec::triangles(label, vs, fs, buffers, format),
             )
         };
-        let mesh_buffers = [Some(MeshVertex::LAYOUT), Some(PlantInstance::layout(false))];
-        let quads = [Some(PlantInstance::layout(false))];
+        let mesh_buffers = [Some(MeshVertex::LAYOUT), Some(PlantInstance::LAYOUT)];
+        let quads = [Some(PlantInstance::LAYOUT)];
         let plant_mesh = make(
             &drawn_layout,
             ["plant meshes", "vs_plant", "fs_plant"],
@@ -362,11 +391,10 @@ impl VegetationRenderer {
             &mesh_buffers,
             ATLAS_FORMAT,
         );
-        let members = [Some(PlantInstance::layout(true))];
         let group_bake = make(
             &group_bake_layout,
             ["impostor bake", "vs_group_bake", "fs_group_bake"],
-            &members,
+            &quads,
             IMPOSTOR_FORMAT,
         );
         let meshes = PlantMeshes::generate();
@@ -411,10 +439,15 @@ impl VegetationRenderer {
                 &sampler,
                 None,
             ),
-            texture_layout,
             cluster_layout,
             sampler,
-            plan: Vec::new(),
+            pool: Suballocator::new(&[PAGE_INSTANCES], MAX_INSTANCE_PAGES),
+            instance_pages: Vec::new(),
+            impostors,
+            table: NodeTable::new(device, frame, "vegetation node table", 2),
+            batches: Batches::new(),
+            frame_stats: DrawStats::default(),
+            merged: false,
         };
         renderer.bake_atlas(gpu, frame, &bake, &looks_group, &atlas_view, atlas_size);
         renderer
@@ -450,7 +483,7 @@ impl VegetationRenderer {
                 radius_m: 1.0,
                 yaw_rad: 0.0,
                 look: i,
-                cluster: 0,
+                entry: 0,
             })
             .collect();
         let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -480,11 +513,12 @@ impl VegetationRenderer {
         gpu.queue.submit([enc.finish()]);
     }
 
-    /// Uploads a node's vegetation (None when it has none). Group-billboard members are baked,
-    /// cluster by cluster, into the node's impostor texture (a render pass submitted here); the
-    /// node then draws one quad per cluster instead of its members.
+    /// Uploads a node's vegetation (None when it has none, or when the instance pool, the
+    /// impostor pages or the node table are full). Group-billboard members are baked, cluster
+    /// by cluster, into the node's impostor layer (a render pass submitted here); the node then
+    /// draws one quad per cluster instead of its members.
     pub fn upload_node(
-        &self,
+        &mut self,
         gpu: &Gpu,
         frame: &FrameResources,
         tree: &QuadTree,
@@ -493,7 +527,12 @@ impl VegetationRenderer {
     ) -> Option<PlantsGpu> {
         let aabb_m = veg.items_box_m?;
         let o = tree.rect(key).min;
-        let instance = |it: &crate::vegetation::Item, cluster: u32| PlantInstance {
+        let Some(slot) = self.table.lease() else {
+            log::warn!("vegetation node table full: node {key:?} has no plants drawn");
+            return None;
+        };
+        let first_entry = self.table.first_entry(&slot);
+        let instance = |it: &crate::vegetation::Item, entry: u32| PlantInstance {
             position: [
                 (it.x_m - o[0]) as f32,
                 (it.y_m - o[1]) as f32,
@@ -503,7 +542,7 @@ impl VegetationRenderer {
             radius_m: it.radius_m,
             yaw_rad: it.yaw_rad,
             look: u32::from(it.species),
-            cluster,
+            entry,
         };
         let mut data: Vec<PlantInstance> = Vec::with_capacity(veg.instances());
         let mut groups = Vec::with_capacity(veg.groups.len());
@@ -520,7 +559,8 @@ impl VegetationRenderer {
                 continue;
             }
             let first = data.len() as u32;
-            data.extend(g.items.iter().map(|it| instance(it, 0)));
+            let entry = first_entry + u32::from(!g.replaced_on_split);
+            data.extend(g.items.iter().map(|it| instance(it, entry)));
             groups.push(PlantGroupGpu {
                 first,
                 count: g.items.len() as u32,
@@ -540,9 +580,14 @@ impl VegetationRenderer {
         let mut impostors = None;
         let mut texture_bytes = 0;
         if !members.is_empty() {
-            // Cluster quads: centre, bottom, half width, height; `look` = tile index.
+            let Some((layer, layer_view)) = self.impostors.lease(&gpu.device, &self.sampler) else {
+                log::warn!("impostor pages full: node {key:?} has no plants drawn");
+                return None;
+            };
+            // Cluster quads: centre, bottom, half width, height; `look` = layer and tile.
             let mut uniforms = [ClusterUniform::zeroed(); CLUSTER_COUNT];
             let first = data.len() as u32;
+            let entry = first_entry + u32::from(veg.clusters.kept);
             for (c, b) in veg.clusters.boxes.iter().enumerate() {
                 let Some(b) = b else { continue };
                 uniforms[c] = ClusterUniform {
@@ -563,8 +608,8 @@ impl VegetationRenderer {
                     height_m: b.height_m as f32,
                     radius_m: b.half_width_m as f32,
                     yaw_rad: 0.0,
-                    look: c as u32,
-                    cluster: 0,
+                    look: layer.start[0] * CLUSTER_COUNT as u32 + c as u32,
+                    entry,
                 });
             }
             groups.push(PlantGroupGpu {
@@ -574,20 +619,33 @@ impl VegetationRenderer {
                 kind: PlantDraw::Impostor,
                 kept: veg.clusters.kept,
             });
-            let (group, bytes) = self.bake_impostors(gpu, frame, key, &uniforms, &members);
-            impostors = Some(group);
-            texture_bytes = bytes;
+            self.bake_impostors(gpu, frame, key, &uniforms, &members, &layer_view);
+            impostors = Some(layer);
+            texture_bytes = self.impostors.layer_bytes();
         }
-        let instances = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(&format!("node {}/{}/{} plants", key.level, key.ix, key.iy)),
-                contents: bytemuck::cast_slice(&data),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
+        let Some(instances) = self.pool.lease(&[data.len() as u32]) else {
+            log::warn!("plant instance pool full: node {key:?} has no plants drawn");
+            return None;
+        };
+        while self.instance_pages.len() < self.pool.pages() {
+            let n = self.instance_pages.len();
+            self.instance_pages
+                .push(gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("plant instance page {n}")),
+                    size: u64::from(PAGE_INSTANCES) * std::mem::size_of::<PlantInstance>() as u64,
+                    usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }));
+        }
+        gpu.queue.write_buffer(
+            &self.instance_pages[instances.page as usize],
+            u64::from(instances.start[0]) * std::mem::size_of::<PlantInstance>() as u64,
+            bytemuck::cast_slice(&data),
+        );
         Some(PlantsGpu {
             origin_m: o,
             instances,
+            slot,
             impostors,
             groups,
             aabb_m,
@@ -596,8 +654,8 @@ impl VegetationRenderer {
         })
     }
 
-    /// Renders a node's group members into its impostor texture (one tile per cluster, seen
-    /// from the south) and returns the texture's bind group and size in bytes.
+    /// Renders a node's group members into its impostor layer `layer_view` (one tile per
+    /// cluster, seen from the south).
     fn bake_impostors(
         &self,
         gpu: &Gpu,
@@ -605,11 +663,11 @@ impl VegetationRenderer {
         key: NodeKey,
         clusters: &[ClusterUniform; CLUSTER_COUNT],
         members: &[PlantInstance],
-    ) -> (wgpu::BindGroup, usize) {
+        layer_view: &wgpu::TextureView,
+    ) {
         let device = &gpu.device;
         let label = format!("node {}/{}/{} impostors", key.level, key.ix, key.iy);
         let px = CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX;
-        let view = bake_target(device, &label, [px, px], IMPOSTOR_FORMAT);
         let depth_view = super::depth_view(device, [px, px], "impostor bake depth");
         let cluster_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("impostor clusters"),
@@ -632,7 +690,7 @@ impl VegetationRenderer {
             label: Some(&label),
         });
         {
-            let mut pass = bake_pass(&mut enc, "impostor bake pass", &view, &depth_view);
+            let mut pass = bake_pass(&mut enc, "impostor bake pass", layer_view, &depth_view);
             pass.set_pipeline(&self.group_bake);
             pass.set_bind_group(0, &frame.group, &[]);
             pass.set_bind_group(1, &cluster_group, &[]);
@@ -641,23 +699,81 @@ impl VegetationRenderer {
             pass.draw(0..6, 0..members.len() as u32);
         }
         gpu.queue.submit([enc.finish()]);
-        let group = texture_group(
-            device,
-            &label,
-            &self.texture_layout,
-            &view,
-            &self.sampler,
-            None,
-        );
-        (group, (px * px * 4) as usize)
     }
 
-    fn plants<'a>(draws: &'a FrameDraws<'a>, source: Source) -> Option<&'a PlantsGpu> {
-        let node = match source {
-            Source::Drawn(i) => &draws.drawn[i],
-            Source::Ancestor(i) => &draws.ancestors[i],
-        };
-        node.work.gpu.get::<PlantsGpu>()
+    /// Adds the draws of node `p` (at `level`, dither interval `dither`) whose groups' dither
+    /// rule wants `wanted` (`drawn`: the node is drawn; `is_ancestor`: it is an ancestor of drawn
+    /// nodes), and sets the node-table entries they read.
+    #[allow(clippy::too_many_arguments, reason = "one node's draw context")]
+    fn plan_node(
+        &mut self,
+        frame: &FrameResources,
+        p: &PlantsGpu,
+        level: u8,
+        dither: [f32; 2],
+        drawn: bool,
+        is_ancestor: bool,
+        wanted: GroupDither,
+    ) {
+        let first_entry = self.table.first_entry(&p.slot);
+        let base = p.instances.start[0];
+        let page = p.instances.page;
+        for g in &p.groups {
+            if group_dither(!g.kept, drawn, is_ancestor) != Some(wanted) {
+                continue;
+            }
+            let entry = first_entry + u32::from(g.kept);
+            let interval = match wanted {
+                GroupDither::Own => dither,
+                GroupDither::Full => [0.0, 1.0],
+            };
+            self.table.set(frame, entry, p.origin_m, level, interval);
+            let first_instance = base + g.first;
+            let quads = |key| {
+                (
+                    key,
+                    Item::Plain(DrawIndirectArgs {
+                        vertex_count: 6,
+                        instance_count: g.count,
+                        first_vertex: 0,
+                        first_instance,
+                    }),
+                )
+            };
+            let (key, item) = match g.kind {
+                PlantDraw::Billboard => quads(BatchKey::Billboard { page }),
+                PlantDraw::Impostor => {
+                    let Some(layer) = &p.impostors else { continue };
+                    self.frame_stats.group_billboards += u64::from(g.count);
+                    quads(BatchKey::Impostor {
+                        page,
+                        layers: layer.page,
+                    })
+                }
+                PlantDraw::Mesh => {
+                    let shape = g.shape as usize;
+                    let (first, count, base_vertex) =
+                        self.meshes.ranges[shape][usize::from(p.low_detail)];
+                    self.frame_stats.plant_triangles += u64::from(count / 3) * u64::from(g.count);
+                    (
+                        BatchKey::Mesh {
+                            shape,
+                            low_detail: p.low_detail,
+                            page,
+                        },
+                        Item::Indexed(DrawIndexedIndirectArgs {
+                            index_count: count,
+                            instance_count: g.count,
+                            first_index: first,
+                            base_vertex,
+                            first_instance,
+                        }),
+                    )
+                }
+            };
+            self.frame_stats.plant_instances += u64::from(g.count);
+            self.batches.push(key, item);
+        }
     }
 }
 
@@ -684,91 +800,77 @@ impl NodeRenderer for VegetationRenderer {
         bytes
     }
 
-    fn prepare(&mut self, _gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        self.plan.clear();
-        if !draws.view.plants {
-            return;
-        }
-        let visible = |p: &PlantsGpu| draws.frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1);
-        // Drawn nodes with their own interval, then ancestors' kept groups in full.
-        for (i, d) in draws.drawn.iter().enumerate() {
-            if let Some(p) = d.work.gpu.get::<PlantsGpu>()
-                && d.dither[1] > d.dither[0]
-                && visible(p)
-            {
-                let offset = frame.push_node(p.origin_m, d.key.level, d.dither);
-                let is_ancestor = draws
-                    .ancestors
-                    .binary_search_by_key(&d.key, |a| a.key)
-                    .is_ok();
-                self.plan.push((Source::Drawn(i), offset, is_ancestor));
+    fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+        self.batches.clear();
+        self.frame_stats = DrawStats::default();
+        self.merged = draws.view.merged_draws && gpu.multi_draw;
+        if draws.view.plants {
+            let visible = |p: &PlantsGpu| draws.frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1);
+            // Drawn nodes with their own interval, then ancestors' kept groups in full.
+            for d in draws.drawn {
+                if let Some(p) = d.work.gpu.get::<PlantsGpu>()
+                    && d.dither[1] > d.dither[0]
+                    && visible(p)
+                {
+                    let is_ancestor = draws
+                        .ancestors
+                        .binary_search_by_key(&d.key, |a| a.key)
+                        .is_ok();
+                    let (level, dither) = (d.key.level, d.dither);
+                    self.plan_node(frame, p, level, dither, true, is_ancestor, GroupDither::Own);
+                }
+            }
+            for a in draws.ancestors {
+                if let Some(p) = a.work.gpu.get::<PlantsGpu>()
+                    && p.groups.iter().any(|g| g.kept)
+                    && visible(p)
+                {
+                    let level = a.key.level;
+                    self.plan_node(frame, p, level, [0.0, 1.0], false, true, GroupDither::Full);
+                }
             }
         }
-        for (i, a) in draws.ancestors.iter().enumerate() {
-            if let Some(p) = a.work.gpu.get::<PlantsGpu>()
-                && p.groups.iter().any(|g| g.kept)
-                && visible(p)
-            {
-                let offset = frame.push_node(p.origin_m, a.key.level, [0.0, 1.0]);
-                self.plan.push((Source::Ancestor(i), offset, true));
-            }
-        }
+        self.table.flush(&gpu.queue);
+        self.batches.upload(gpu);
     }
 
     fn draw(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
-        frame: &FrameResources,
-        draws: &FrameDraws<'_>,
+        _frame: &FrameResources,
+        _draws: &FrameDraws<'_>,
         stats: &mut DrawStats,
     ) {
-        for &(source, offset, is_ancestor) in &self.plan {
-            let Some(p) = Self::plants(draws, source) else {
-                continue;
-            };
-            let (drawn, wanted) = match source {
-                Source::Drawn(_) => (true, GroupDither::Own),
-                Source::Ancestor(_) => (false, GroupDither::Full),
-            };
-            frame.bind_node(pass, offset);
-            for g in &p.groups {
-                if group_dither(!g.kept, drawn, is_ancestor) != Some(wanted) {
-                    continue;
+        let fs = &self.frame_stats;
+        stats.plant_instances += fs.plant_instances;
+        stats.plant_triangles += fs.plant_triangles;
+        stats.group_billboards += fs.group_billboards;
+        if self.batches.runs().is_empty() {
+            return;
+        }
+        pass.set_bind_group(1, &self.table.group, &[]);
+        for run in self.batches.runs() {
+            match run.key {
+                BatchKey::Billboard { page } => {
+                    pass.set_pipeline(&self.billboard);
+                    pass.set_bind_group(2, &self.atlas_group, &[]);
+                    pass.set_vertex_buffer(0, self.instance_pages[page as usize].slice(..));
                 }
-                let instances = g.first..g.first + g.count;
-                match g.kind {
-                    PlantDraw::Billboard => {
-                        pass.set_pipeline(&self.billboard);
-                        pass.set_bind_group(2, &self.atlas_group, &[]);
-                        pass.set_vertex_buffer(0, p.instances.slice(..));
-                        pass.draw(0..6, instances);
-                    }
-                    PlantDraw::Impostor => {
-                        let Some(tex) = &p.impostors else { continue };
-                        pass.set_pipeline(&self.impostor);
-                        pass.set_bind_group(2, tex, &[]);
-                        pass.set_vertex_buffer(0, p.instances.slice(..));
-                        pass.draw(0..6, instances);
-                        stats.group_billboards += u64::from(g.count);
-                    }
-                    PlantDraw::Mesh => {
-                        pass.set_pipeline(&self.plant_mesh);
-                        pass.set_bind_group(2, &self.atlas_group, &[]);
-                        pass.set_vertex_buffer(0, self.shape_vertices.slice(..));
-                        pass.set_vertex_buffer(1, p.instances.slice(..));
-                        pass.set_index_buffer(
-                            self.shape_indices.slice(..),
-                            wgpu::IndexFormat::Uint32,
-                        );
-                        let (first, count, base) =
-                            self.meshes.ranges[g.shape as usize][usize::from(p.low_detail)];
-                        pass.draw_indexed(first..first + count, base, instances);
-                        stats.plant_triangles += u64::from(count / 3) * u64::from(g.count);
-                    }
+                BatchKey::Impostor { page, layers } => {
+                    pass.set_pipeline(&self.impostor);
+                    pass.set_bind_group(2, self.impostors.group(layers), &[]);
+                    pass.set_vertex_buffer(0, self.instance_pages[page as usize].slice(..));
                 }
-                stats.plant_instances += u64::from(g.count);
-                stats.plant_draw_calls += 1;
+                BatchKey::Mesh { page, .. } => {
+                    pass.set_pipeline(&self.plant_mesh);
+                    pass.set_bind_group(2, &self.atlas_group, &[]);
+                    pass.set_vertex_buffer(0, self.shape_vertices.slice(..));
+                    pass.set_vertex_buffer(1, self.instance_pages[page as usize].slice(..));
+                    pass.set_index_buffer(self.shape_indices.slice(..), wgpu::IndexFormat::Uint32);
+                }
             }
+            stats.plant_draw_calls += self.batches.record(pass, run, self.merged);
+            stats.plant_items += run.items();
         }
     }
 }

@@ -14,10 +14,21 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
-    eprintln!("headless on {}", gpu.adapter_name());
+    eprintln!(
+        "headless on {} ({} draws)",
+        gpu.adapter_name(),
+        if cli.per_item_draws {
+            "per-item"
+        } else if gpu.multi_draw {
+            "merged, multi-draw indirect"
+        } else {
+            "merged batches as plain loops: no multi-draw indirect on this adapter"
+        }
+    );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
     let mut viewer = Viewer::new(&gpu, COLOR_FORMAT, world, settings(cli));
+    viewer.view.merged_draws = !cli.per_item_draws;
     if cli.gpu_reference {
         viewer.view.plants = false;
         if !viewer.enable_gpu_reference(&gpu, cli.size) {
@@ -103,7 +114,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 14] = [
+    let rows: [(&str, Vec<f64>); 16] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -125,7 +136,11 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
             col(|s| s.cpu_frame_ms),
         ),
         ("triangles", col(|s| s.triangles as f64)),
-        ("draw calls", col(|s| f64::from(s.draw_calls))),
+        (
+            "terrain draw calls (a multi-draw counts once)",
+            col(|s| f64::from(s.draw_calls)),
+        ),
+        ("terrain items (node meshes)", col(|s| f64::from(s.items))),
         (
             "vegetation instances (meshes + billboards)",
             col(|s| s.plant_instances as f64),
@@ -137,6 +152,10 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "vegetation draw calls",
             col(|s| f64::from(s.plant_draw_calls)),
+        ),
+        (
+            "vegetation items (node instance groups)",
+            col(|s| f64::from(s.plant_items)),
         ),
         (
             "vegetation mesh triangles",

@@ -27,6 +27,10 @@ use std::path::PathBuf;
         a short run (240 frames of 640x360 covering the whole automatic flight, about a minute \
         on 2 cores with a software adapter) unless --frames, --size or --fps are given."
 )]
+#[allow(
+    clippy::struct_excessive_bools,
+    reason = "independent command-line switches"
+)]
 pub(crate) struct Cli {
     /// Map folder. The default map is generated there on first run when missing.
     #[arg(long, default_value = DEFAULT_MAP)]
@@ -82,6 +86,11 @@ pub(crate) struct Cli {
     /// for the run, so the pass and the reference draw the same triangles.
     #[arg(long)]
     pub(crate) gpu_reference: bool,
+    /// Draw item by item (one draw call per node mesh and node instance group, the fallback
+    /// path) instead of one multi-draw per render state and pool page: same pixels, for
+    /// comparing the cost of draw calls.
+    #[arg(long)]
+    pub(crate) per_item_draws: bool,
 }
 
 /// A finite number above zero (thresholds, rates, durations).

@@ -44,6 +44,10 @@ pub(crate) fn panel(
     ui.checkbox(&mut view.color_by_level, "colour by level");
     ui.checkbox(&mut view.show_bounds, "node bounds");
     ui.checkbox(&mut view.plants, "vegetation");
+    ui.checkbox(
+        &mut view.merged_draws,
+        "merged draws (off: one draw per item)",
+    );
     ui.checkbox(&mut st_ui.occlusion, "split less behind dense vegetation");
     ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
     ui.checkbox(&mut fixed, "fixed level");
@@ -69,12 +73,12 @@ pub(crate) fn panel(
         (false, _) => "GPU time: timestamps not supported by this adapter".to_string(),
     });
     ui.label(format!(
-        "triangles {}  draw calls {}  nodes {}",
-        s.triangles, s.draw_calls, s.drawn_nodes
+        "triangles {}  draw calls {} ({} node meshes)  nodes {}",
+        s.triangles, s.draw_calls, s.items, s.drawn_nodes
     ));
     ui.label(format!(
-        "vegetation: {} instances, {} draw calls, {} mesh triangles",
-        s.plant_instances, s.plant_draw_calls, s.plant_triangles
+        "vegetation: {} instances, {} draw calls ({} groups), {} mesh triangles",
+        s.plant_instances, s.plant_draw_calls, s.plant_items, s.plant_triangles
     ));
     ui.label(format!("nodes per level {:?}", s.nodes_per_level));
     ui.label(format!(

@@ -58,6 +58,11 @@ pub(crate) fn section_gpu(
                     "draws",
                 ),
                 (
+                    "items per frame (node meshes + node instance groups), median",
+                    median(&|s| Some(f64::from(s.items + s.plant_items))),
+                    "items",
+                ),
+                (
                     "terrain triangles per frame, median",
                     median(&|s| Some(s.triangles as f64)),
                     "triangles",

@@ -1,0 +1,138 @@
+//! Group-billboard impostor textures, suballocated: each node's impostor image (8 x 8 cluster
+//! tiles) is one layer of a texture array page, so the cluster quads of every node in a page
+//! are drawn by one multi-draw with one bind group (`vegetation.wgsl`, `fs_impostor`).
+
+use super::suballoc::{Lease, Suballocator};
+
+/// Layers in one page (256 x 256 RGBA8 each: 16 MiB a page).
+pub const LAYERS_PER_PAGE: u32 = 64;
+/// Pages at most.
+const MAX_PAGES: usize = 64;
+
+struct Page {
+    texture: wgpu::Texture,
+    group: wgpu::BindGroup,
+}
+
+/// The pages, their layer allocator and the bind-group layout (array texture at binding 3,
+/// sampler at binding 1) that the impostor pipeline uses as group 2.
+pub struct ImpostorPages {
+    pool: Suballocator,
+    pages: Vec<Page>,
+    pub layout: wgpu::BindGroupLayout,
+    side_px: u32,
+    format: wgpu::TextureFormat,
+}
+
+impl std::fmt::Debug for ImpostorPages {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "ImpostorPages({} pages, {} layers used)",
+            self.pages.len(),
+            self.pool.used(0)
+        )
+    }
+}
+
+impl ImpostorPages {
+    /// Layers of `side_px` x `side_px` texels in `format`.
+    pub fn new(device: &wgpu::Device, side_px: u32, format: wgpu::TextureFormat) -> Self {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("impostor pages layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        Self {
+            pool: Suballocator::new(&[LAYERS_PER_PAGE], MAX_PAGES),
+            pages: Vec::new(),
+            layout,
+            side_px,
+            format,
+        }
+    }
+
+    /// A layer for a node's impostors and a view of it to bake into (None when all pages are
+    /// full). The lease gives the layer back when dropped.
+    pub fn lease(
+        &mut self,
+        device: &wgpu::Device,
+        sampler: &wgpu::Sampler,
+    ) -> Option<(Lease, wgpu::TextureView)> {
+        let lease = self.pool.lease(&[1])?;
+        while self.pages.len() < self.pool.pages() {
+            let label = format!("impostor page {}", self.pages.len());
+            let texture = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(&label),
+                size: wgpu::Extent3d {
+                    width: self.side_px,
+                    height: self.side_px,
+                    depth_or_array_layers: LAYERS_PER_PAGE,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: self.format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            });
+            let view = texture.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            });
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&label),
+                layout: &self.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::TextureView(&view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::Sampler(sampler),
+                    },
+                ],
+            });
+            self.pages.push(Page { texture, group });
+        }
+        let layer_view =
+            self.pages[lease.page as usize]
+                .texture
+                .create_view(&wgpu::TextureViewDescriptor {
+                    label: Some("impostor layer"),
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: lease.start[0],
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                });
+        Some((lease, layer_view))
+    }
+
+    /// The bind group of page `page`.
+    pub fn group(&self, page: u32) -> &wgpu::BindGroup {
+        &self.pages[page as usize].group
+    }
+
+    /// Bytes of one layer.
+    pub fn layer_bytes(&self) -> usize {
+        (self.side_px * self.side_px * 4) as usize
+    }
+}
