@@ -1,6 +1,7 @@
 // Sky and debug lines: drawn with the frame bindings only.
 
-// Sky: one full-screen triangle at the far plane (depth 0 in reversed-Z), drawn first.
+// Sky: one full-screen triangle at the far plane (depth 0 in reversed-Z, the cleared depth),
+// drawn after the opaque geometry with an Equal depth test: it shades only uncovered pixels.
 struct SkyOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) ndc: vec2<f32>,

@@ -102,11 +102,12 @@ impl Viewer {
         let kinds = registered.iter().map(|r| Arc::clone(&r.kind)).collect();
         let streamer = Streamer::new(world, settings, kinds);
         let mut scene = Scene::new(gpu, color_format);
-        scene.push(Box::new(SkyRenderer::new(gpu, &scene.frame)));
         for r in &registered {
             let renderer = (r.renderer)(gpu, &scene.frame, &streamer.shared);
             scene.push(renderer);
         }
+        // After the opaque node content: the sky shades only the pixels nothing covered.
+        scene.push(Box::new(SkyRenderer::new(gpu, &scene.frame)));
         scene.push(Box::new(BoundsLines::new(gpu, &scene.frame)));
         Self {
             streamer,

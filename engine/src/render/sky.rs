@@ -1,5 +1,6 @@
-//! The sky (a full-screen gradient with a sun disc, drawn first) and the node-bounds debug lines
-//! (drawn last): frame-level renderers that hold no per-node objects.
+//! The sky (a full-screen gradient with a sun disc at the far plane, drawn after the opaque node
+//! content with an `Equal` depth test, so it shades only the pixels nothing covered) and the
+//! node-bounds debug lines (drawn last): frame-level renderers that hold no per-node objects.
 
 use super::Gpu;
 use super::frame::{DrawStats, FrameResources, PipelineSpec, depth_state, pipeline};
@@ -32,7 +33,8 @@ impl SkyRenderer {
             gpu,
             frame,
             &PipelineSpec {
-                depth: depth_state(false, wgpu::CompareFunction::Always),
+                // Depth 0 is the cleared far plane: only pixels no geometry wrote pass.
+                depth: depth_state(false, wgpu::CompareFunction::Equal),
                 ..PipelineSpec::triangles("sky", "vs_sky", "fs_sky", &[], frame.color_format)
             },
         );
