@@ -54,6 +54,9 @@ pub struct DecalField {
     bounds: Vec<FxHashMap<u64, [f32; 2]>>,
     /// Largest road/path weight per sample (for suppressing procedural detail on roads).
     road_weight: FxHashMap<(i64, i64), f32>,
+    /// Per coarse cell: whether any road/path sample lies in it (samples outside the coarse
+    /// grid are always looked up), so most lookups away from roads skip the hash map.
+    road_cells: Vec<bool>,
     /// Coarse occupancy over the map: false where no stored block can reach (fast zero).
     coarse: Vec<bool>,
     coarse_dims: [usize; 2],
@@ -198,6 +201,7 @@ impl DecalField {
             blocks: FxHashMap::default(),
             bounds: Vec::new(),
             road_weight,
+            road_cells: Vec::new(),
             coarse: Vec::new(),
             coarse_dims: [0, 0],
             coarse_cell_m: 1.0,
@@ -248,9 +252,25 @@ impl DecalField {
                 }
             }
         }
+        let mut road_cells = vec![false; dims[0] * dims[1]];
+        for &(ix, iy) in self.road_weight.keys() {
+            if let Some(c) = Self::cell_of(dims, cell, ix, iy) {
+                road_cells[c] = true;
+            }
+        }
         self.coarse = coarse;
+        self.road_cells = road_cells;
         self.coarse_dims = dims;
         self.coarse_cell_m = cell;
+    }
+
+    /// The coarse cell holding lattice sample (ix, iy), None outside the coarse grid.
+    fn cell_of(dims: [usize; 2], cell_m: f64, ix: i64, iy: i64) -> Option<usize> {
+        let c = |i: i64, n: usize| {
+            let v = (i as f64 * DECAL_SPACING_M / cell_m).floor();
+            (v >= 0.0 && v < n as f64).then_some(v as usize)
+        };
+        Some(c(iy, dims[1])? * dims[0] + c(ix, dims[0])?)
     }
 
     pub fn is_empty(&self) -> bool {
@@ -312,10 +332,35 @@ impl DecalField {
         sum
     }
 
+    /// False only when no road/path sample lies within `margin_m` (plus one lattice spacing)
+    /// of the position: then every [`Self::road_weight`] within `margin_m` is 0. A cheap test
+    /// on the coarse road cells (true where unsure: outside the coarse grid).
+    pub fn road_near(&self, x_m: f64, y_m: f64, margin_m: f64) -> bool {
+        let r = margin_m + DECAL_SPACING_M;
+        let (x0, y0) = (x_m - r - self.origin_m[0], y_m - r - self.origin_m[1]);
+        if self.road_cells.is_empty() || x0 < 0.0 || y0 < 0.0 {
+            return !self.road_weight.is_empty();
+        }
+        let c = self.coarse_cell_m;
+        // Non-negative: truncation is the floor.
+        let (cx0, cy0) = ((x0 / c) as usize, (y0 / c) as usize);
+        let (cx1, cy1) = (((x0 + 2.0 * r) / c) as usize, ((y0 + 2.0 * r) / c) as usize);
+        let [w, h] = self.coarse_dims;
+        if cx1 >= w || cy1 >= h {
+            return !self.road_weight.is_empty();
+        }
+        (cy0..=cy1).any(|cy| (cx0..=cx1).any(|cx| self.road_cells[cy * w + cx]))
+    }
+
     /// Largest road or path weight at the lattice sample nearest to a world position.
     pub fn road_weight(&self, x_m: f64, y_m: f64) -> f64 {
         let ix = ((x_m - self.origin_m[0]) / DECAL_SPACING_M).round() as i64;
         let iy = ((y_m - self.origin_m[1]) / DECAL_SPACING_M).round() as i64;
+        if let Some(c) = Self::cell_of(self.coarse_dims, self.coarse_cell_m, ix, iy)
+            && !self.road_cells[c]
+        {
+            return 0.0;
+        }
         self.road_weight
             .get(&(ix, iy))
             .map_or(0.0, |&w| f64::from(w))
@@ -459,6 +504,52 @@ mod tests {
         // Far away: untouched.
         assert_eq!(f.offset_m(50.0, 80.0), 0.0);
         assert!(f.road_weight(50.0, 50.0) > 0.99 && f.road_weight(50.0, 70.0) == 0.0);
+    }
+
+    /// The coarse road-cell skip changes no answer: at every lattice point of a 300 m map
+    /// with a winding road (and beyond its edges), `road_weight` equals the stored samples, and
+    /// where `road_near` says no road, every weight within its margin is 0.
+    #[test]
+    fn road_weight_with_the_coarse_skip_equals_the_stored_samples() {
+        let f = DecalField::new(
+            &[road(vec![
+                [-5.0, 20.0, 3.0],
+                [120.0, 140.0, 3.0],
+                [150.0, 290.0, 3.0],
+                [305.0, 250.0, 3.0],
+            ])],
+            [0.0; 2],
+            [300.0; 2],
+            |_, _| 0.0,
+        );
+        let stored: FxHashMap<(i64, i64), f64> = f
+            .road_samples()
+            .map(|(p, w)| {
+                let i = |v: f64| (v / DECAL_SPACING_M).round() as i64;
+                ((i(p[0]), i(p[1])), w)
+            })
+            .collect();
+        assert!(stored.len() > 500, "{} road samples", stored.len());
+        let (mut on_road, mut off_road, mut far) = (0, 0, 0);
+        for iy in -20..=620 {
+            for ix in -20..=620 {
+                let (x, y) = (ix as f64 * DECAL_SPACING_M, iy as f64 * DECAL_SPACING_M);
+                let want = stored.get(&(ix, iy)).copied().unwrap_or(0.0);
+                assert_eq!(f.road_weight(x + 0.1, y - 0.2), want, "({x}, {y})");
+                if !f.road_near(x, y, 1.0) {
+                    for (dx, dy) in [(1.0, 1.0), (-1.0, 0.3), (0.2, -1.0), (0.0, 0.0)] {
+                        assert_eq!(f.road_weight(x + dx, y + dy), 0.0, "({x}, {y}) near");
+                    }
+                    far += 1;
+                }
+                if want > 0.0 {
+                    on_road += 1;
+                } else {
+                    off_road += 1;
+                }
+            }
+        }
+        assert!(on_road > 500 && off_road > 100_000 && far > 50_000, "{far}");
     }
 
     #[test]

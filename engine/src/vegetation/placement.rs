@@ -258,14 +258,25 @@ impl Placer {
         }
         // The road weight is stored on a 0.5 m lattice: look at the lattice points around.
         let d = crate::surface::decals::DECAL_SPACING_M;
+        if !world.decals.road_near(x_m, y_m, d) {
+            return false;
+        }
         [(0.0, 0.0), (d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)]
             .iter()
             .any(|&(dx, dy)| world.decals.road_weight(x_m + dx, y_m + dy) > 0.0)
     }
 
     /// Calls `f(rank, period_seed, x, y)` for every jittered tile point of species `s` in `rect`
-    /// (half-open) whose rank is below `k_end`.
-    fn visit(&self, s: usize, rect: Rect, k_end: u32, mut f: impl FnMut(u32, u64, f64, f64)) {
+    /// (half-open) whose rank is below `k_end` and for which `pre(rank, period_seed)` holds
+    /// (`pre` sees the point before its jittered position is computed: a cheap early filter).
+    fn visit(
+        &self,
+        s: usize,
+        rect: Rect,
+        k_end: u32,
+        mut pre: impl FnMut(u32, u64) -> bool,
+        mut f: impl FnMut(u32, u64, f64, f64),
+    ) {
         let sp = &self.species[s];
         let t = sp.tile_side_m;
         let jitter = JITTER_FRACTION * sp.min_distance_m;
@@ -301,6 +312,9 @@ impl Placer {
                             if k >= k_end {
                                 break;
                             }
+                            if !pre(k, period) {
+                                continue;
+                            }
                             let kk = i64::from(k);
                             let angle = std::f64::consts::TAU * unit3(period, kk, 0);
                             let radius = jitter * unit3(period, kk, 1).sqrt();
@@ -327,18 +341,39 @@ impl Placer {
     pub fn positions(&self, s: usize, rect: Rect, fraction: f64, out: &mut Vec<[f64; 2]>) {
         let n = self.tile.len as f64;
         let k_end = ((n * fraction).ceil().max(0.0) as u32).min(self.tile.len as u32);
-        self.visit(s, rect, k_end, |k, _, x, y| {
-            if (f64::from(k) + 0.5) / n < fraction {
-                out.push([x, y]);
-            }
-        });
+        self.visit(
+            s,
+            rect,
+            k_end,
+            |_, _| true,
+            |k, _, x, y| {
+                if (f64::from(k) + 0.5) / n < fraction {
+                    out.push([x, y]);
+                }
+            },
+        );
     }
 
     /// Appends the items of species `s` whose position lies in `rect` (half-open:
     /// `min <= p < max`), at density multiplied by `scale` (1 = the map's density).
     pub fn place(&self, world: &World, s: usize, rect: Rect, scale: f64, out: &mut Vec<Item>) {
+        self.place_where(world, s, rect, scale, |_| true, out);
+    }
+
+    /// [`Self::place`] for the items whose height `keep` accepts: the same items as `place`
+    /// followed by a filter on `height_m`, but the surface height and the exclusions are only
+    /// evaluated for items that pass (a node keeps only the heights it draws).
+    pub fn place_where(
+        &self,
+        world: &World,
+        s: usize,
+        rect: Rect,
+        scale: f64,
+        keep: impl Fn(f32) -> bool,
+        out: &mut Vec<Item>,
+    ) {
         if s >= self.large_tree_base {
-            self.place_large_trees(world, s, rect, out);
+            self.place_large_trees(world, s, rect, &keep, out);
             return;
         }
         let sp = &self.species[s];
@@ -349,31 +384,43 @@ impl Placer {
         let n = self.tile.len as f64;
         // Ranks at or beyond this cannot be kept anywhere in the rectangle.
         let k_end = ((n * (dmax / sp.tile_density_per_m2)).ceil() as u32).min(self.tile.len as u32);
-        self.visit(s, rect, k_end, |k, period, x, y| {
+        // Size factor (+-25%) of the item of rank k in a period, and its height.
+        let size_of = |k: u32, period: u64| 0.75 + 0.5 * unit3(period, i64::from(k), 2);
+        let height_of = |size: f64| (sp.height_m * size) as f32;
+        let pre = |k: u32, period: u64| keep(height_of(size_of(k, period)));
+        self.visit(s, rect, k_end, pre, |k, period, x, y| {
             let rank = (f64::from(k) + 0.5) / n;
             let d = scale * self.density(world, s, x, y);
             if rank >= d / sp.tile_density_per_m2 {
                 return;
             }
+            let kk = i64::from(k);
+            let size = size_of(k, period);
+            let height_m = height_of(size);
             let z = world.height_m(x, y);
             if self.excluded_at(world, x, y, z) {
                 return;
             }
-            let kk = i64::from(k);
-            let size = 0.75 + 0.5 * unit3(period, kk, 2);
             out.push(Item {
                 species: s as u16,
                 x_m: x,
                 y_m: y,
                 z_m: z,
-                height_m: (sp.height_m * size) as f32,
+                height_m,
                 radius_m: (sp.radius_m * size) as f32,
                 yaw_rad: (std::f64::consts::TAU * unit3(period, kk, 3)) as f32,
             });
         });
     }
 
-    fn place_large_trees(&self, world: &World, s: usize, rect: Rect, out: &mut Vec<Item>) {
+    fn place_large_trees(
+        &self,
+        world: &World,
+        s: usize,
+        rect: Rect,
+        keep: impl Fn(f32) -> bool,
+        out: &mut Vec<Item>,
+    ) {
         let ti = &self.trees;
         if ti.slots.is_empty() {
             return;
@@ -389,6 +436,7 @@ impl Placer {
                 for &i in &ti.slots[cy * ti.cols + cx] {
                     let t = &world.map.trees[i as usize];
                     if t.species != species
+                        || !keep(t.height_m)
                         || !(t.x_m >= rect.min[0]
                             && t.x_m < rect.max[0]
                             && t.y_m >= rect.min[1]

@@ -258,21 +258,31 @@ pub fn node_vegetation(
         if representation(kind, tallest, s_m, finest).is_none() {
             continue;
         }
+        // How this node draws an item of height `h`: None when it is left out here or when an
+        // ancestor draws it. Final: drawn the same way at every finer level (the ladder only
+        // moves towards more detail), so the coarsest level showing it that way keeps it for
+        // all of them (an ancestor draws it, always). Else (representation, replaced on split).
+        let drawn_here = |h: f64| {
+            let here = representation(kind, h, s_m, finest)?;
+            let fin = representation(kind, h, s_finest, true) == Some(here);
+            if key.level > 0 && fin && representation(kind, h, 2.0 * s_m, false) == Some(here) {
+                return None;
+            }
+            Some((here, !fin))
+        };
         items.clear();
-        placer.place(world, sp, r, 1.0, &mut items);
+        placer.place_where(
+            world,
+            sp,
+            r,
+            1.0,
+            |h| drawn_here(f64::from(h)).is_some(),
+            &mut items,
+        );
         for it in &items {
-            let h = f64::from(it.height_m);
-            let Some(here) = representation(kind, h, s_m, finest) else {
+            let Some((here, replaced)) = drawn_here(f64::from(it.height_m)) else {
                 continue;
             };
-            // Final: drawn the same way at every finer level (the ladder only moves towards
-            // more detail), so the coarsest level showing it that way keeps it for all of them.
-            let fin = |r: Representation| representation(kind, h, s_finest, true) == Some(r);
-            if key.level > 0 && fin(here) && representation(kind, h, 2.0 * s_m, false) == Some(here)
-            {
-                continue; // an ancestor draws it, always
-            }
-            let replaced = !fin(here);
             let at = groups.iter().position(|g| {
                 g.species == it.species
                     && g.representation == here

@@ -235,6 +235,47 @@ fn counts_match_the_integral_of_the_density_map() {
     }
 }
 
+/// `place_where` (the early height filter a node's vegetation phase uses) places exactly the
+/// items of `place` whose height passes the filter, for every species including the map's
+/// large trees, on the tiny map and the cliff map.
+#[test]
+fn the_early_height_filter_keeps_exactly_the_filtered_items() {
+    for world in [tiny_world(), cliff_world()] {
+        let p = Placer::new(&world);
+        let o = world.origin_m();
+        let size = world.size_m();
+        let area = rect(o[0], o[1], o[0] + size[0], o[1] + size[1]);
+        let mut checked = 0;
+        for s in 0..p.species.len() {
+            let mut all = Vec::new();
+            p.place(&world, s, area, 1.0, &mut all);
+            if all.len() < 4 {
+                continue;
+            }
+            // Keep the taller half (by the median height): both sides non-empty.
+            let mut heights: Vec<f32> = all.iter().map(|it| it.height_m).collect();
+            heights.sort_by(f32::total_cmp);
+            let median = heights[heights.len() / 2];
+            let keep = |h: f32| h >= median;
+            let want: Vec<Item> = all.iter().copied().filter(|it| keep(it.height_m)).collect();
+            let mut got = Vec::new();
+            p.place_where(&world, s, area, 1.0, keep, &mut got);
+            assert!(!want.is_empty() && want.len() < all.len() || heights[0] == median);
+            assert_eq!(got.len(), want.len(), "{}", p.species[s].name);
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(
+                    (g.x_m, g.y_m, g.z_m, g.height_m, g.radius_m, g.yaw_rad),
+                    (w.x_m, w.y_m, w.z_m, w.height_m, w.radius_m, w.yaw_rad),
+                    "{}",
+                    p.species[s].name
+                );
+            }
+            checked += 1;
+        }
+        assert!(checked >= 2, "only {checked} species with items");
+    }
+}
+
 #[test]
 fn thinning_is_monotone() {
     let world = tiny_world();
