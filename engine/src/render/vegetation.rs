@@ -179,6 +179,8 @@ pub struct VegetationRenderer {
     atlas_texture_group: wgpu::BindGroup,
     cluster_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
+    /// The impostor bakes' depth buffer (one layer's size, reused by every bake).
+    bake_depth: wgpu::TextureView,
     pool: Suballocator,
     instance_pages: Vec<wgpu::Buffer>,
     impostors: ImpostorPages,
@@ -441,6 +443,10 @@ impl VegetationRenderer {
             ),
             cluster_layout,
             sampler,
+            bake_depth: {
+                let px = CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX;
+                super::depth_view(device, [px, px], "impostor bake depth")
+            },
             pool: Suballocator::new(&[PAGE_INSTANCES], MAX_INSTANCE_PAGES),
             instance_pages: Vec::new(),
             impostors,
@@ -667,8 +673,6 @@ impl VegetationRenderer {
     ) {
         let device = &gpu.device;
         let label = format!("node {}/{}/{} impostors", key.level, key.ix, key.iy);
-        let px = CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX;
-        let depth_view = super::depth_view(device, [px, px], "impostor bake depth");
         let cluster_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("impostor clusters"),
             contents: bytemuck::cast_slice(clusters),
@@ -690,7 +694,7 @@ impl VegetationRenderer {
             label: Some(&label),
         });
         {
-            let mut pass = bake_pass(&mut enc, "impostor bake pass", layer_view, &depth_view);
+            let mut pass = bake_pass(&mut enc, "impostor bake pass", layer_view, &self.bake_depth);
             pass.set_pipeline(&self.group_bake);
             pass.set_bind_group(0, &frame.group, &[]);
             pass.set_bind_group(1, &cluster_group, &[]);
