@@ -20,6 +20,8 @@ pub struct ImpostorPages {
     pool: Suballocator,
     pages: Vec<Page>,
     pub layout: wgpu::BindGroupLayout,
+    /// The bakes' depth buffer (one layer's size, reused by every bake).
+    pub bake_depth: wgpu::TextureView,
     side_px: u32,
     format: wgpu::TextureFormat,
 }
@@ -63,6 +65,7 @@ impl ImpostorPages {
             pool: Suballocator::new(&[LAYERS_PER_PAGE], MAX_PAGES),
             pages: Vec::new(),
             layout,
+            bake_depth: super::depth_view(device, [side_px; 2], "impostor bake depth"),
             side_px,
             format,
         }

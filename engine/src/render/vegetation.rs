@@ -179,8 +179,6 @@ pub struct VegetationRenderer {
     atlas_texture_group: wgpu::BindGroup,
     cluster_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
-    /// The impostor bakes' depth buffer (one layer's size, reused by every bake).
-    bake_depth: wgpu::TextureView,
     pool: Suballocator,
     instance_pages: Vec<wgpu::Buffer>,
     impostors: ImpostorPages,
@@ -443,10 +441,6 @@ impl VegetationRenderer {
             ),
             cluster_layout,
             sampler,
-            bake_depth: {
-                let px = CLUSTERS_PER_SIDE * IMPOSTOR_TILE_PX;
-                super::depth_view(device, [px, px], "impostor bake depth")
-            },
             pool: Suballocator::new(&[PAGE_INSTANCES], MAX_INSTANCE_PAGES),
             instance_pages: Vec::new(),
             impostors,
@@ -694,7 +688,12 @@ impl VegetationRenderer {
             label: Some(&label),
         });
         {
-            let mut pass = bake_pass(&mut enc, "impostor bake pass", layer_view, &self.bake_depth);
+            let mut pass = bake_pass(
+                &mut enc,
+                "impostor bake pass",
+                layer_view,
+                &self.impostors.bake_depth,
+            );
             pass.set_pipeline(&self.group_bake);
             pass.set_bind_group(0, &frame.group, &[]);
             pass.set_bind_group(1, &cluster_group, &[]);
