@@ -234,6 +234,7 @@ impl Streamer {
         self.resident.insert(
             key,
             Resident {
+                bytes: work.bytes(),
                 work,
                 last_used_frame: self.frame,
             },

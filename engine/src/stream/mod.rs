@@ -145,6 +145,8 @@ impl Default for StreamSettings {
 pub struct Resident {
     pub work: NodeWork,
     pub last_used_frame: u64,
+    /// `work.bytes()`, taken when the node became resident (payloads do not change after).
+    pub bytes: usize,
 }
 
 /// Counters and per-frame statistics.

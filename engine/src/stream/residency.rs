@@ -22,7 +22,7 @@ impl Streamer {
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
     /// budget. Pinned nodes alone may exceed it; then nothing else is kept.
     pub(super) fn evict(&mut self) {
-        let mut bytes: usize = self.resident.values().map(|r| r.work.bytes()).sum();
+        let mut bytes: usize = self.resident.values().map(|r| r.bytes).sum();
         if bytes <= self.settings.cache_budget_bytes {
             return;
         }
@@ -39,7 +39,7 @@ impl Streamer {
                 break;
             }
             if let Some(r) = self.resident.remove(&k) {
-                bytes -= r.work.bytes();
+                bytes -= r.bytes;
                 self.stats.evicted += 1;
             }
         }
@@ -58,13 +58,13 @@ impl Streamer {
         self.stats.running = r;
         self.stats.waiting_gpu = g;
         self.stats.resident = self.resident.len();
-        self.stats.resident_bytes = self.resident.values().map(|r| r.work.bytes()).sum();
+        self.stats.resident_bytes = self.resident.values().map(|r| r.bytes).sum();
         let pinned = self.pinned();
         self.stats.pinned_bytes = self
             .resident
             .iter()
             .filter(|(k, _)| pinned.contains(k))
-            .map(|(_, r)| r.work.bytes())
+            .map(|(_, r)| r.bytes)
             .sum();
         self.stats.wanted = self.wanted.len();
         self.stats.drawn = self.drawn.len();

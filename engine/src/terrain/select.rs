@@ -64,10 +64,12 @@ pub fn projected_error_px(
             continue;
         }
         let (lo, hi) = block_aabb(tree, key, b, i);
-        if frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
+        let block_px = px(block.error_m, distance_to_aabb(eye_m, lo, hi));
+        // The frustum test (the costlier part) only for blocks that would raise the result.
+        if block_px <= out || frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
             continue;
         }
-        out = out.max(px(block.error_m, distance_to_aabb(eye_m, lo, hi)));
+        out = block_px;
     }
     out
 }
