@@ -3,7 +3,8 @@
 // Sky: one full-screen triangle at the far plane (depth 0 in reversed-Z, the cleared depth),
 // drawn after the opaque geometry with an Equal depth test: it shades only uncovered pixels.
 struct SkyOut {
-    @builtin(position) clip: vec4<f32>,
+    // Invariant: the Equal depth test compares this depth (exactly 0) with the cleared buffer.
+    @builtin(position) @invariant clip: vec4<f32>,
     @location(0) ndc: vec2<f32>,
 };
 

@@ -6,8 +6,9 @@ use super::suballoc::{Lease, Suballocator};
 
 /// Layers in one page (256 x 256 RGBA8 each: 16 MiB a page).
 pub const LAYERS_PER_PAGE: u32 = 64;
-/// Pages at most.
-const MAX_PAGES: usize = 64;
+/// Pages at most (created when needed; the cache budget, which counts every layer, is what
+/// bounds them in practice: 1024 pages would be 16 GiB).
+const MAX_PAGES: usize = 1024;
 
 struct Page {
     texture: wgpu::Texture,
