@@ -37,6 +37,8 @@ pub struct Batches<K> {
     indexed: Vec<DrawIndexedIndirectArgs>,
     plain: Vec<DrawIndirectArgs>,
     runs: Vec<Run<K>>,
+    /// The records as bytes (kept between frames to reuse its allocation).
+    staging: Vec<u8>,
     buffer: Option<wgpu::Buffer>,
     /// Bytes before the plain records in `buffer`.
     plain_offset: u64,
@@ -58,6 +60,7 @@ impl<K: Ord + Copy> Batches<K> {
             indexed: Vec::new(),
             plain: Vec::new(),
             runs: Vec::new(),
+            staging: Vec::new(),
             buffer: None,
             plain_offset: 0,
         }
@@ -113,14 +116,14 @@ impl<K: Ord + Copy> Batches<K> {
             }));
         }
         let Some(buffer) = &self.buffer else { return };
-        let mut data = Vec::with_capacity(bytes as usize);
+        self.staging.clear();
         for a in &self.indexed {
-            data.extend_from_slice(a.as_bytes());
+            self.staging.extend_from_slice(a.as_bytes());
         }
         for a in &self.plain {
-            data.extend_from_slice(a.as_bytes());
+            self.staging.extend_from_slice(a.as_bytes());
         }
-        gpu.queue.write_buffer(buffer, 0, &data);
+        gpu.queue.write_buffer(buffer, 0, &self.staging);
     }
 
     /// This frame's runs, in key order.

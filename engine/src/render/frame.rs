@@ -32,6 +32,13 @@ pub struct ViewOptions {
     pub merged_draws: bool,
 }
 
+impl ViewOptions {
+    /// Whether this frame's batches are recorded as multi-draws on `gpu` (else as plain loops).
+    pub fn multi_draw(&self, gpu: &super::Gpu) -> bool {
+        self.merged_draws && gpu.multi_draw
+    }
+}
+
 impl Default for ViewOptions {
     fn default() -> Self {
         Self {
@@ -100,6 +107,33 @@ pub fn uniform_entry(
             has_dynamic_offset: dynamic,
             min_binding_size: None,
         },
+        count: None,
+    }
+}
+
+/// A filterable float texture layout entry (fragment stage) of `dimension`.
+pub fn texture_entry(
+    binding: u32,
+    dimension: wgpu::TextureViewDimension,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: dimension,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// A filtering sampler layout entry (fragment stage).
+pub fn sampler_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
         count: None,
     }
 }

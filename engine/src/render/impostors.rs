@@ -2,6 +2,7 @@
 //! tiles) is one layer of a texture array page, so the cluster quads of every node in a page
 //! are drawn by one multi-draw with one bind group (`vegetation.wgsl`, `fs_impostor`).
 
+use super::frame::{sampler_entry, texture_entry};
 use super::suballoc::{Lease, Suballocator};
 
 /// Layers in one page (256 x 256 RGBA8 each: 16 MiB a page).
@@ -44,22 +45,8 @@ impl ImpostorPages {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("impostor pages layout"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
+                texture_entry(3, wgpu::TextureViewDimension::D2Array),
+                sampler_entry(1),
             ],
         });
         Self {

@@ -271,7 +271,7 @@ impl NodeRenderer for TerrainRenderer {
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.batches.clear();
         self.triangles = 0;
-        self.merged = draws.view.merged_draws && gpu.multi_draw;
+        self.merged = draws.view.multi_draw(gpu);
         let mut visible = 0;
         for d in draws.drawn {
             let Some(node) = d.work.gpu.get::<TerrainNodeGpu>() else {

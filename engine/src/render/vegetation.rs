@@ -9,8 +9,8 @@
 use super::Gpu;
 use super::batches::{Batches, Item};
 use super::frame::{
-    DrawStats, FrameResources, PipelineSpec, ViewOptions, bake_pass, pipeline, srgb_to_linear,
-    uniform_entry, uniform_group,
+    DrawStats, FrameResources, PipelineSpec, ViewOptions, bake_pass, pipeline, sampler_entry,
+    srgb_to_linear, texture_entry, uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
 use super::impostors::ImpostorPages;
@@ -195,28 +195,6 @@ impl std::fmt::Debug for VegetationRenderer {
     }
 }
 
-fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-fn sampler_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-        count: None,
-    }
-}
-
 fn texture_group(
     device: &wgpu::Device,
     label: &str,
@@ -313,14 +291,15 @@ impl VegetationRenderer {
             })
         };
         let looks_entry = uniform_entry(2, false, wgpu::ShaderStages::VERTEX);
+        let atlas = [
+            texture_entry(0, wgpu::TextureViewDimension::D2),
+            sampler_entry(1),
+        ];
         let atlas_layout = layout(
             "vegetation atlas + looks layout",
-            &[texture_entry(0), sampler_entry(1), looks_entry],
+            &[atlas[0], atlas[1], looks_entry],
         );
-        let texture_layout = layout(
-            "vegetation texture layout",
-            &[texture_entry(0), sampler_entry(1)],
-        );
+        let texture_layout = layout("vegetation texture layout", &atlas);
         let looks_layout = layout("vegetation looks layout", &[looks_entry]);
         let cluster_entry = uniform_entry(1, false, wgpu::ShaderStages::VERTEX);
         let cluster_layout = layout("impostor cluster layout", &[cluster_entry]);
@@ -806,7 +785,7 @@ impl NodeRenderer for VegetationRenderer {
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.batches.clear();
         self.frame_stats = DrawStats::default();
-        self.merged = draws.view.merged_draws && gpu.multi_draw;
+        self.merged = draws.view.multi_draw(gpu);
         if draws.view.plants {
             let visible = |p: &PlantsGpu| draws.frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1);
             // Drawn nodes with their own interval, then ancestors' kept groups in full.

@@ -67,6 +67,17 @@ fn golden_camera() -> Camera {
     )
 }
 
+/// The golden camera's view at another viewport size.
+fn golden_view(size: [u32; 2]) -> Camera {
+    let cam = golden_camera();
+    Camera::look_at(
+        cam.position_m,
+        cam.position_m + cam.forward,
+        cam.fovy_rad,
+        size,
+    )
+}
+
 fn load_png(path: &std::path::Path) -> Option<(Vec<u8>, [u32; 2])> {
     let f = std::fs::File::open(path).ok()?;
     let mut r = png::Decoder::new(std::io::BufReader::new(f))
@@ -393,13 +404,7 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
         return;
     }
     let target = Target::new(&g.device, size, COLOR_FORMAT);
-    let cam = golden_camera();
-    let cam = Camera::look_at(
-        cam.position_m,
-        cam.position_m + cam.forward,
-        cam.fovy_rad,
-        size,
-    );
+    let cam = golden_view(size);
     let st = settle(&g, &mut v, &target, &cam);
     assert!(st.triangles > 1000, "{st:?}");
     let pass = target.read_rgba(&g).expect("frame pixels");
@@ -439,13 +444,7 @@ fn merged_draws_draw_exactly_the_pixels_of_per_item_draws() {
         return;
     }
     let size = [320u32, 180];
-    let golden = golden_camera();
-    let near = Camera::look_at(
-        golden.position_m,
-        golden.position_m + golden.forward,
-        golden.fovy_rad,
-        size,
-    );
+    let near = golden_view(size);
     let low = Camera::look_at(
         near.position_m - DVec3::new(0.0, 0.0, 45.0),
         near.position_m + near.forward * 100.0 - DVec3::new(0.0, 0.0, 45.0),
