@@ -74,8 +74,8 @@ fn fade(t: f64) -> f64 {
 
 /// Gradient noise in about [-1, 1] with unit lattice spacing; C2 (quintic fade).
 pub fn gradient(seed: u64, x: f64, y: f64) -> f64 {
-    let x0 = x.floor();
-    let y0 = y.floor();
+    let x0 = crate::sample::floor_small(x);
+    let y0 = crate::sample::floor_small(y);
     let (ix, iy) = (x0 as i64, y0 as i64);
     let (fx, fy) = (x - x0, y - y0);
     let dot = |cx: i64, cy: i64, dx: f64, dy: f64| {

@@ -29,10 +29,20 @@ impl GridPlacement {
     }
 }
 
+/// `x.floor()` without a library call: on baseline x86-64 (no SSE4.1 `roundsd`) `f64::floor` is
+/// a call into libm, which profiling showed at 6 % of node bounds time. Exact for `|x| < 2^52`
+/// (where every f64 with a fraction converts to i64 exactly); the surface's grid and noise
+/// coordinates are far smaller. NaN gives 0.
+#[inline]
+pub fn floor_small(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
 /// Bilinear interpolation (C0) at a world position.
 pub fn bilinear(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     let (gx, gy) = at.grid_coords(grid.width(), grid.height(), x_m, y_m);
-    let (x0, y0) = (gx.floor(), gy.floor());
+    let (x0, y0) = (floor_small(gx), floor_small(gy));
     let (fx, fy) = (gx - x0, gy - y0);
     let (ix, iy) = (x0 as i64, y0 as i64);
     let (w, h) = (grid.width() as i64, grid.height() as i64);
@@ -73,7 +83,7 @@ pub fn catmull_rom_weights(t: f64) -> [f64; 4] {
 /// it may overshoot between samples by a fraction of the neighbouring differences.
 pub fn bicubic(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     let (gx, gy) = at.grid_coords(grid.width(), grid.height(), x_m, y_m);
-    let (x0, y0) = (gx.floor(), gy.floor());
+    let (x0, y0) = (floor_small(gx), floor_small(gy));
     let (wx, wy) = (catmull_rom_weights(gx - x0), catmull_rom_weights(gy - y0));
     let (ix, iy) = (x0 as i64, y0 as i64);
     let (w, h) = (grid.width() as i64, grid.height() as i64);
@@ -118,6 +128,37 @@ pub fn bicubic_limited(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_small_equals_floor() {
+        for k in -200_000..200_000 {
+            let x = f64::from(k) * 0.013_7;
+            let whole = f64::from(k);
+            for v in [
+                x,
+                x.next_up(),
+                x.next_down(),
+                whole,
+                whole.next_up(),
+                whole.next_down(),
+            ] {
+                assert_eq!(floor_small(v), v.floor(), "at {v}");
+            }
+        }
+        for v in [
+            0.0,
+            -0.0,
+            -0.5,
+            0.5,
+            -1.0,
+            1.0,
+            4.0e15,
+            -4.0e15,
+            0.999_999_999_999,
+        ] {
+            assert_eq!(floor_small(v), v.floor(), "at {v}");
+        }
+    }
 
     fn ramp() -> (Grid<f32>, GridPlacement) {
         // h = 2x + 3y on a 5x4 grid with 10 m spacing, origin far from zero.

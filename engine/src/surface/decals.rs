@@ -37,21 +37,22 @@ fn key(bx: i64, by: i64) -> u64 {
     ((bx as u32 as u64) << 32) | u64::from(by as u32)
 }
 
-/// Slope and curvature bounds (|grad E|, Hessian norm of E) per block.
+/// Slope, curvature and magnitude bounds (|grad E|, Hessian norm of E, |E|) per block.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DecalBounds {
     pub slope: f64,
     pub curvature: f64,
+    pub magnitude_m: f64,
 }
 
 /// The decal displacement field of a map (see the module docs).
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub struct DecalField {
     origin_m: [f64; 2],
     /// Block key -> samples, row-major from the block's south-west sample.
     blocks: FxHashMap<u64, Box<[f32; (BLOCK * BLOCK) as usize]>>,
     /// Level k: bounds over 2^k x 2^k blocks; absent = zero.
-    bounds: Vec<FxHashMap<u64, [f32; 2]>>,
+    bounds: Vec<FxHashMap<u64, [f32; 3]>>,
     /// Largest road/path weight per sample (for suppressing procedural detail on roads).
     road_weight: FxHashMap<(i64, i64), f32>,
     /// Per coarse cell: whether any road/path sample lies in it (samples outside the coarse
@@ -382,7 +383,7 @@ impl DecalField {
     /// Per-block bounds from the samples: a cell (ix, iy) reads samples ix-1..ix+2, so a stored
     /// block affects cells of its own block and of its eight neighbours.
     fn build_bounds(&mut self) {
-        let mut level0: FxHashMap<u64, [f32; 2]> = FxHashMap::default();
+        let mut level0: FxHashMap<u64, [f32; 3]> = FxHashMap::default();
         let mut candidates: Vec<(i64, i64)> = Vec::new();
         for &k in self.blocks.keys() {
             let (bx, by) = (
@@ -410,26 +411,33 @@ impl DecalField {
                         &p,
                         DECAL_SPACING_M,
                     ));
+                    b.magnitude_m = b
+                        .magnitude_m
+                        .max(super::spline::catmull_rom_cell_magnitude(&p));
                 }
             }
-            if b.slope > 0.0 || b.curvature > 0.0 {
+            if b.slope > 0.0 || b.curvature > 0.0 || b.magnitude_m > 0.0 {
                 // Rounded up so the f32 value stays an upper bound.
                 let up = |v: f64| (v * (1.0 + 1e-6)) as f32;
-                level0.insert(key(bx, by), [up(b.slope), up(b.curvature)]);
+                level0.insert(
+                    key(bx, by),
+                    [up(b.slope), up(b.curvature), up(b.magnitude_m)],
+                );
             }
         }
         let mut levels = vec![level0];
         while levels.last().is_some_and(|l| l.len() > 1) && levels.len() < 40 {
             let prev = levels.last().expect("non-empty");
-            let mut next: FxHashMap<u64, [f32; 2]> = FxHashMap::default();
+            let mut next: FxHashMap<u64, [f32; 3]> = FxHashMap::default();
             for (&k, v) in prev {
                 let (bx, by) = (
                     i64::from((k >> 32) as u32 as i32),
                     i64::from(k as u32 as i32),
                 );
-                let e = next.entry(key(bx >> 1, by >> 1)).or_insert([0.0; 2]);
-                e[0] = e[0].max(v[0]);
-                e[1] = e[1].max(v[1]);
+                let e = next.entry(key(bx >> 1, by >> 1)).or_insert([0.0; 3]);
+                for (a, b) in e.iter_mut().zip(v) {
+                    *a = a.max(*b);
+                }
             }
             levels.push(next);
         }
@@ -456,18 +464,20 @@ impl DecalField {
         let span = (x1 - x0 + 1).max(y1 - y0 + 1) as u64;
         let k = ((u64::BITS - 1 - span.leading_zeros()) as usize).min(self.bounds.len() - 1);
         let level = &self.bounds[k];
-        let mut m = [0.0f32; 2];
+        let mut m = [0.0f32; 3];
         for by in (y0 >> k)..=(y1 >> k) {
             for bx in (x0 >> k)..=(x1 >> k) {
                 if let Some(v) = level.get(&key(bx, by)) {
-                    m[0] = m[0].max(v[0]);
-                    m[1] = m[1].max(v[1]);
+                    for (a, b) in m.iter_mut().zip(v) {
+                        *a = a.max(*b);
+                    }
                 }
             }
         }
         DecalBounds {
             slope: f64::from(m[0]),
             curvature: f64::from(m[1]),
+            magnitude_m: f64::from(m[2]),
         }
     }
 }
@@ -589,9 +599,19 @@ mod tests {
             let fxx = (e(x + hh, y) - 2.0 * f0 + e(x - hh, y)) / (hh * hh);
             let fyy = (e(x, y + hh) - 2.0 * f0 + e(x, y - hh)) / (hh * hh);
             assert!(fxx.abs().max(fyy.abs()) <= b.curvature * 1.01 + 1e-3);
+            assert!(
+                f0.abs() <= b.magnitude_m,
+                "|E| {} > {}",
+                f0.abs(),
+                b.magnitude_m
+            );
             // A big region's bound covers a small one's.
             let big = f.region_bounds([0.0, 0.0], [100.0, 100.0]);
-            assert!(big.slope >= b.slope && big.curvature >= b.curvature);
+            assert!(
+                big.slope >= b.slope
+                    && big.curvature >= b.curvature
+                    && big.magnitude_m >= b.magnitude_m
+            );
         }
     }
 }

@@ -4,8 +4,11 @@
 //! - [`world`]: [`World`] wraps a loaded map and defines `F = G + H + E`.
 //! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised).
 //! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
+//! - [`map_error`]: the map part's interpolation error per block of the coarse grids, computed
+//!   once at load.
 
 pub mod decals;
+pub mod map_error;
 pub mod spline;
 pub mod world;
 

@@ -13,6 +13,22 @@ pub const BICUBIC_TWIST_FACTOR: f64 = 1.5 * 1.5;
 /// differences along the axis) x 1.25 (largest sum of |weights| across it).
 pub const BICUBIC_SLOPE_FACTOR: f64 = 1.5 * 1.25;
 
+/// Upper bound of |G| per unit of the largest |sample| of the 4 x 4 stencil: the Catmull-Rom
+/// weights' absolute values sum to at most 1.25 per axis (at t = 1/2).
+pub const BICUBIC_RANGE_FACTOR: f64 = 1.25 * 1.25;
+
+/// A bound of |G| over the Catmull-Rom patch of one cell (stencil as in
+/// [`catmull_rom_cell_slope`]).
+pub fn catmull_rom_cell_magnitude(p: &impl Fn(i64, i64) -> f64) -> f64 {
+    let mut m = 0.0f64;
+    for j in -1..=2i64 {
+        for i in -1..=2i64 {
+            m = m.max(p(i, j).abs());
+        }
+    }
+    BICUBIC_RANGE_FACTOR * m
+}
+
 /// A bound of |grad| of the Catmull-Rom patch of one cell whose 4 x 4 stencil is `p(-1..=2,
 /// -1..=2)` (sample offsets from the cell's south-west sample).
 pub fn catmull_rom_cell_slope(p: &impl Fn(i64, i64) -> f64, spacing_m: f64) -> f64 {

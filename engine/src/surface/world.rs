@@ -26,7 +26,7 @@ pub const GRADIENT_NOISE_LIPSCHITZ: f64 = 3.5;
 pub const GRADIENT_NOISE_HESSIAN: f64 = 18.0;
 
 /// A map opened for the runtime.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct World {
     pub map: Map,
     /// Detail amplitude (m) at each ground sample, from the legend.
@@ -45,6 +45,8 @@ pub struct World {
     amp_max: MaxPyramid,
     /// Decal shaping E.
     pub decals: DecalField,
+    /// Interpolation error of F per block of the grids of spacing `hs 2^k` (computed at load).
+    pub map_error: super::map_error::MapErrorPyramid,
 }
 
 /// How far the finest surface can stray from its linear interpolation over a small region,
@@ -63,6 +65,26 @@ pub struct RegionBounds {
     pub amplitude_max_m: f64,
     /// Bounds of the decal shaping E (C1 everywhere, so both always hold).
     pub decal: DecalBounds,
+}
+
+impl RegionBounds {
+    /// A bound of `|Lin F(p) - F(p)|` inside a right triangle with legs `c` whose vertices lie in
+    /// the region, where `F = G + H + E` and the parts' bounds add. Each part takes the smallest
+    /// of its valid bounds: first order `slope c / sqrt(2)`, second order `curvature c^2 / 4`
+    /// (see `terrain::bounds`), and for the detail and the decal shaping also zero order
+    /// `2 max |part|` (the interpolant stays within the part's range over the triangle).
+    pub fn between_m(&self, c: f64) -> f64 {
+        let reach = c * std::f64::consts::FRAC_1_SQRT_2;
+        let second = |m2: Option<f64>| m2.map_or(f64::INFINITY, |m| m * c * c * 0.25);
+        let g = (self.slope_g * reach).min(second(self.curvature_g));
+        let h = (self.slope_h * reach)
+            .min(second(self.curvature_h))
+            .min(2.0 * self.amplitude_max_m);
+        let e = (self.decal.slope * reach)
+            .min(second(Some(self.decal.curvature)))
+            .min(2.0 * self.decal.magnitude_m);
+        g + h + e
+    }
 }
 
 /// A rectangle in world metres.
@@ -107,7 +129,7 @@ impl World {
             map.manifest.ground.spacing_m,
         ));
         let amp_max = MaxPyramid::new(cell_corner_max(&amplitude_m));
-        Self {
+        let mut world = Self {
             map,
             amplitude_m,
             detail_seed,
@@ -117,7 +139,16 @@ impl World {
             curv_detail,
             amp_max,
             decals,
-        }
+            map_error: super::map_error::MapErrorPyramid::default(),
+        };
+        let t0 = std::time::Instant::now();
+        world.map_error = super::map_error::MapErrorPyramid::new(&world);
+        log::info!(
+            "surface error of {} coarse grids computed in {:.2} s",
+            world.map_error.level_count(),
+            t0.elapsed().as_secs_f64()
+        );
+        world
     }
 
     pub fn origin_m(&self) -> [f64; 2] {
@@ -376,7 +407,7 @@ fn detail_cell_slopes(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid
 }
 
 /// A max-mipmap over a grid: level k holds the max over 2^k x 2^k blocks.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct MaxPyramid {
     levels: Vec<worldgen::Grid<f32>>,
 }

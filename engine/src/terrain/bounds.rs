@@ -11,7 +11,8 @@
 //! (the last sum is largest at the circumcentre of the right triangle, radius `c / sqrt(2)`),
 //! or, where a part of `F` is C1 with a bounded piecewise-continuous Hessian over the cell, by
 //! Taylor's theorem with integral remainder `|Lin F(p) - F(p)| <= (M2 / 2) sum l_i |p - v_i|^2
-//! <= M2 c^2 / 4`, or for the detail part `H` (|H| <= A) simply `2 A`; see [`between_bound`].
+//! <= M2 c^2 / 4`, or for the detail part `H` (|H| <= A) simply `2 A`; see
+//! [`crate::surface::world::RegionBounds::between_m`].
 //! The slope, curvature and amplitude bounds are local to the check cell
 //! ([`World::region_bounds`]): a cliff only widens the bound next to it. So
 //! `error <= max over check cells of (max |M - F| at its corners + between(cell))`; the height
@@ -59,6 +60,11 @@ pub const BLOCKS: usize = BLOCKS_PER_SIDE * BLOCKS_PER_SIDE;
 const _: () = assert!(
     (NODE_QUADS as usize).is_multiple_of(BLOCKS_PER_SIDE) && BLOCKS_PER_SIDE.is_multiple_of(2),
     "blocks are whole quads and a child's block lies in one block of its parent"
+);
+
+const _: () = assert!(
+    NODE_QUADS as usize / BLOCKS_PER_SIDE == crate::surface::map_error::BLOCK_QUADS,
+    "a node's blocks are the map-error grids' blocks"
 );
 
 /// Height range and error bound of one block of a node (row-major from the south-west,
@@ -140,8 +146,10 @@ pub fn parent_block(key: NodeKey, index: usize) -> usize {
 /// Linear interpolation of vertex heights `v` ((n+1)^2, row-major) at fractional grid position
 /// (gx, gy), using the triangulation with diagonals from (i, j) to (i+1, j+1).
 pub fn interpolate_grid(v: &[f32], n: usize, gx: f64, gy: f64) -> f64 {
-    let i = (gx.floor() as usize).min(n - 1);
-    let j = (gy.floor() as usize).min(n - 1);
+    // `as usize` truncates: the floor for the non-negative grid positions callers pass (and no
+    // libm call).
+    let i = (gx as usize).min(n - 1);
+    let j = (gy as usize).min(n - 1);
     let (fx, fy) = (gx - i as f64, gy - j as f64);
     let w = n + 1;
     let h00 = f64::from(v[j * w + i]);
@@ -155,21 +163,6 @@ pub fn interpolate_grid(v: &[f32], n: usize, gx: f64, gy: f64) -> f64 {
         // Upper-left triangle (00, 11, 01).
         h00 + fy * (h01 - h00) + fx * (h11 - h01)
     }
-}
-
-/// A bound of `|Lin F(p) - F(p)|` inside a right check triangle with legs `c`, where `F = G + H + E`
-/// (map surface + detail + decal shaping E) and the parts' bounds add. Each part takes the
-/// smallest of its valid bounds: first order `slope c / sqrt(2)`, second order
-/// `curvature c^2 / 4`, and for the detail also zero order `2 max |H|`.
-pub fn between_bound(b: &crate::surface::world::RegionBounds, c: f64) -> f64 {
-    let reach = c * std::f64::consts::FRAC_1_SQRT_2;
-    let second = |m2: Option<f64>| m2.map_or(f64::INFINITY, |m| m * c * c * 0.25);
-    let g = (b.slope_g * reach).min(second(b.curvature_g));
-    let e = (b.decal.slope * reach).min(second(Some(b.decal.curvature)));
-    let h = (b.slope_h * reach)
-        .min(second(b.curvature_h))
-        .min(2.0 * b.amplitude_max_m);
-    g + h + e
 }
 
 /// The stored bounds of a node from its own measurement ([`measure`]) and its parent's stored
@@ -186,11 +179,45 @@ pub fn monotone(key: NodeKey, own: NodeBounds, parent: Option<NodeBounds>) -> No
     out
 }
 
-/// Measures the height range, the error bound `e(N)` of one node's own mesh and the bound
-/// `U(N)` of its descendants' meshes, per block and for the whole node (see the module docs).
-/// The blocks' `error_m` is `max(e, U)` here, before [`monotone`]. About 17k surface
-/// evaluations.
+/// Bounds of a node whose vertex spacing is one of the map-error grids
+/// ([`crate::surface::map_error`], computed once at load): per block, the stored bound of the
+/// grid's own error and of every finer grid's, and the stored height range; no surface
+/// evaluation. `None` where the node's spacing is not such a grid or a block is not a whole
+/// block of the map.
+pub fn from_map_error(world: &World, tree: &QuadTree, key: NodeKey) -> Option<NodeBounds> {
+    let k = world
+        .map_error
+        .level_of_spacing(tree.spacing_m(key.level))?;
+    let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
+    for (i, b) in blocks.iter_mut().enumerate() {
+        let stored = world.map_error.block_at(k, block_rect(tree, key, i).min)?;
+        *b = BlockMeasure {
+            lo: stored.z_min_m,
+            hi: stored.z_max_m,
+            own: stored.error_m,
+            children: stored.finer_error_m,
+            deeper: 0.0,
+            measured: 0.0,
+        };
+    }
+    let has_vegetation = crate::vegetation::representation::has_vegetation(world, tree.rect(key));
+    Some(finish(tree, key, &blocks, has_vegetation))
+}
+
+/// The height range, the error bound `e(N)` of one node's own mesh and the bound `U(N)` of its
+/// descendants' meshes, per block and for the whole node: from the map-error grids where the
+/// node's spacing is one ([`from_map_error`], no surface evaluation), else measured
+/// ([`measure_surface`], about 17k surface evaluations; see the module docs). The blocks'
+/// `error_m` is `max(e, U)` here, before [`monotone`].
 pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
+    if let Some(b) = from_map_error(world, tree, key) {
+        return b;
+    }
+    measure_surface(world, tree, key)
+}
+
+/// [`measure`] by evaluating the surface on the node's check lattice (the module docs).
+pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     let r = tree.rect(key);
     let sub = CHECK_SUBDIV as usize;
     let c = tree.spacing_m(key.level) / f64::from(CHECK_SUBDIV);
@@ -225,7 +252,7 @@ pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
     for j in 0..m {
         for i in 0..m {
-            let between = between_bound(regions.at(i, j), c);
+            let between = regions.at(i, j).between_m(c);
             let block = &mut blocks[block_of(i, j)];
             for at in corners(i, j) {
                 block.lo = block.lo.min(lattice[at] - between);

@@ -16,7 +16,7 @@
 //! `size` and the check cell's region bounds (valid on any part of it). A block's bound is the
 //! largest bound over the cells left (split or not), never a guess.
 
-use super::bounds::{CHECK_SUBDIV, between_bound, interpolate_grid};
+use super::bounds::{CHECK_SUBDIV, interpolate_grid};
 use super::quadtree::NODE_QUADS;
 use crate::surface::world::{RegionBounds, World};
 use std::collections::BinaryHeap;
@@ -67,7 +67,7 @@ pub struct Refiner<'a> {
 impl Refiner<'_> {
     /// Error bounds over a cell, each 0 where that mesh does not exist.
     pub fn cell_bounds(&self, c: &Cell) -> Errors {
-        let between = between_bound(&c.region, c.size * self.check_m);
+        let between = c.region.between_m(c.size * self.check_m);
         let mut out = [0.0f64; 3];
         for (t, o) in out.iter_mut().enumerate() {
             if self.depth_below as usize >= t {
@@ -75,7 +75,7 @@ impl Refiner<'_> {
             }
         }
         if self.depth_below >= 3 {
-            out[2] = out[2].max(between_bound(&c.region, 0.5 * self.check_m));
+            out[2] = out[2].max(c.region.between_m(0.5 * self.check_m));
         }
         out
     }

@@ -208,6 +208,53 @@ fn errors_are_monotone_and_bound_every_descendant() {
     }
 }
 
+/// Every node of random leaf chains on the hard maps, whether its bounds come from the
+/// precomputed map-error grids (nodes whose spacing is a multiple of the height spacing) or are
+/// measured at run time: the bound of each block covers the densely measured error, and the
+/// surface stays in the block's height range. The precomputed path is really taken.
+#[test]
+fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
+    for (name, world) in [("tiny", tiny_world()), ("cliff", cliff_world())] {
+        let tree = tree_of(&world);
+        let mut cache = BoundsCache::new();
+        let mut tiles = TileCache::new();
+        let (o, s) = (world.origin_m(), world.size_m());
+        let (mut precomputed, mut measured) = (0usize, 0usize);
+        for i in 0..8i64 {
+            // Half of the chains end on the cliff band (x = 160 m) of the cliff world.
+            let x = if i % 2 == 0 {
+                o[0] + s[0] * unit3(131, i, 0)
+            } else {
+                o[0] + 158.0 + 4.0 * unit3(131, i, 0)
+            };
+            let y = o[1] + s[1] * unit3(131, i, 1);
+            let leaf = tree.key_at(tree.max_level, x, y).unwrap();
+            for key in std::iter::once(leaf).chain(leaf.ancestors()) {
+                match engine::terrain::bounds::from_map_error(&world, &tree, key) {
+                    Some(_) => precomputed += 1,
+                    None => measured += 1,
+                }
+                let m = build_mesh(&world, &tree, &mut cache, &mut tiles, key);
+                for (b, (err, out)) in measure_true_block_errors(&world, &tree, &m)
+                    .into_iter()
+                    .enumerate()
+                {
+                    let bound = m.bounds.blocks[b].error_m;
+                    assert!(
+                        err <= bound && out <= 0.0,
+                        "{name} {key:?} block {b}: dense error {err} m, bound {bound} m, \
+                         outside the height range by {out} m"
+                    );
+                }
+            }
+        }
+        assert!(
+            precomputed >= 8 * 3 && measured >= 8 * 3,
+            "{name}: {precomputed} precomputed, {measured} measured"
+        );
+    }
+}
+
 #[test]
 fn flat_sea_node_has_zero_error_and_a_flat_box() {
     let world = cliff_world();

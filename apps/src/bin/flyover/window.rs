@@ -320,9 +320,9 @@ fn apply_panel(st: &mut State) {
         let mut s = st.viewer.streamer.settings;
         s.workers = st.ui.workers;
         s.max_in_flight = s.workers + 1;
-        // Same map and content kinds, new worker threads.
+        // Same world (cloned, not recomputed) and content kinds, new worker threads.
         let shared = &st.viewer.streamer.shared;
-        let world = engine::surface::World::new(shared.world.map.clone());
+        let world = shared.world.clone();
         let kinds = shared.kinds.clone();
         st.viewer.streamer = engine::stream::Streamer::new(world, s, kinds);
     }
