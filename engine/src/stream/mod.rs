@@ -98,7 +98,8 @@ pub struct StreamSettings {
     pub vegetation_occlusion: bool,
     /// Worker threads (at least 1).
     pub workers: usize,
-    /// Most jobs handed to workers at once (queued there or running).
+    /// Most jobs handed to workers at once (queued there or running); see
+    /// [`StreamSettings::in_flight_for`].
     pub max_in_flight: usize,
     /// Memory budget for prepared nodes kept resident (bytes).
     pub cache_budget_bytes: usize,
@@ -119,14 +120,31 @@ pub struct StreamSettings {
     pub fixed_level: Option<u8>,
 }
 
+impl StreamSettings {
+    /// Jobs in flight for `workers` worker threads. Jobs are handed over once per frame and
+    /// run in FIFO order: the hand-off must hold about one 60 Hz frame of node jobs per worker
+    /// (a few milliseconds each), or workers idle until the next frame (with `workers + 1`,
+    /// throughput was capped at two jobs a frame for any worker count), and no more, or urgent
+    /// display jobs wait behind a deep backlog of prefetch. Four jobs per worker, plus one.
+    pub fn in_flight_for(workers: usize) -> usize {
+        4 * workers.max(1) + 1
+    }
+
+    /// These settings with `workers` worker threads and the matching hand-off.
+    #[must_use]
+    pub fn with_workers(mut self, workers: usize) -> Self {
+        self.workers = workers.max(1);
+        self.max_in_flight = Self::in_flight_for(self.workers);
+        self
+    }
+}
+
 impl Default for StreamSettings {
     fn default() -> Self {
         let cores = std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get);
         Self {
             workers: (cores - 1).max(1),
-            // A shallow hand-off: jobs handed to workers run in FIFO order, so a deep backlog
-            // would make urgent display jobs wait behind prefetch.
-            max_in_flight: (cores - 1).max(1) + 1,
+            max_in_flight: Self::in_flight_for((cores - 1).max(1)),
             cache_budget_bytes: 512 << 20,
             gpu_budget_s: 0.004,
             gpu_budget_bytes: 32 << 20,

@@ -116,17 +116,16 @@ fn parse_size(s: &str) -> Result<[u32; 2], String> {
 }
 
 pub(crate) fn settings(cli: &Cli) -> StreamSettings {
-    let mut s = StreamSettings {
+    let s = StreamSettings {
         tau_px: cli.tau,
         cache_budget_bytes: cli.budget_mib << 20,
         vegetation_occlusion: !cli.no_vegetation_occlusion,
         ..StreamSettings::default()
     };
-    if let Some(w) = cli.workers {
-        s.workers = w.max(1);
-        s.max_in_flight = s.workers + 1;
+    match cli.workers {
+        Some(w) => s.with_workers(w),
+        None => s,
     }
-    s
 }
 
 /// The camera at time `t_s`: the replayed path, or the automatic flyover.

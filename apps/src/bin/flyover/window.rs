@@ -317,9 +317,7 @@ fn apply_panel(st: &mut State) {
         s.vegetation_occlusion = st.ui.occlusion;
     }
     if st.ui.workers != st.viewer.streamer.settings.workers {
-        let mut s = st.viewer.streamer.settings;
-        s.workers = st.ui.workers;
-        s.max_in_flight = s.workers + 1;
+        let s = st.viewer.streamer.settings.with_workers(st.ui.workers);
         // Same world (cloned, not recomputed) and content kinds, new worker threads.
         let shared = &st.viewer.streamer.shared;
         let world = shared.world.clone();

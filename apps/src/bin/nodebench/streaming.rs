@@ -74,10 +74,10 @@ pub(crate) fn section_streaming(
             })
             .collect();
         let settings = StreamSettings {
-            workers,
             tau_px: tau,
             ..StreamSettings::default()
-        };
+        }
+        .with_workers(workers);
         let kinds = engine::kinds::content_kinds(&world);
         let mut s = Streamer::new(world, settings, kinds);
         // Warm start at the first camera, as after loading.
