@@ -43,9 +43,27 @@ pub fn open_world(
             found, supported, ..
         }) if is_default && found < i64::from(supported) => {
             generate("is from an older map format")?;
-            Ok(World::new(worldgen::Map::load(dir)?))
+            Ok(world_of(worldgen::Map::load(dir)?, dir))
         }
-        r => Ok(World::new(r?)),
+        r => Ok(world_of(r?, dir)),
+    }
+}
+
+/// The file in a map folder that keeps the surface error grids between runs (derived data:
+/// checked against the map on every load, rewritten when it does not match).
+pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
+
+/// Maps with at least this many height cells keep their surface error grids in
+/// [`SURFACE_ERROR_CACHE`] (the 8 km default map has 4 M and computes them in seconds; small
+/// maps compute them in milliseconds and are left untouched).
+pub const CACHE_MIN_CELLS: usize = 1 << 20;
+
+fn world_of(map: worldgen::Map, dir: &Path) -> World {
+    let cells = (map.heights.width() - 1) * (map.heights.height() - 1);
+    if cells >= CACHE_MIN_CELLS {
+        World::with_error_cache(map, &dir.join(SURFACE_ERROR_CACHE))
+    } else {
+        World::new(map)
     }
 }
 

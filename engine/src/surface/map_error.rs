@@ -130,6 +130,63 @@ impl MapErrorPyramid {
         p
     }
 
+    /// The pyramid as bytes (little-endian; see [`super::map_error_cache`]).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        for v in [self.origin_m[0], self.origin_m[1], self.spacing_m] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&(self.levels.len() as u32).to_le_bytes());
+        for l in &self.levels {
+            out.extend_from_slice(&(l.per_row as u32).to_le_bytes());
+            out.extend_from_slice(&(l.rows as u32).to_le_bytes());
+            for b in &l.blocks {
+                for v in b {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+        }
+        out
+    }
+
+    /// The pyramid from [`Self::to_bytes`]' layout; `None` if the bytes do not hold one.
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        let mut at = 0usize;
+        let mut take = |n: usize| {
+            let s = bytes.get(at..at + n)?;
+            at += n;
+            Some(s)
+        };
+        let f64_at = |s: &[u8]| f64::from_le_bytes(s.try_into().expect("8 bytes"));
+        let u32_at = |s: &[u8]| u32::from_le_bytes(s.try_into().expect("4 bytes")) as usize;
+        let origin_m = [f64_at(take(8)?), f64_at(take(8)?)];
+        let spacing_m = f64_at(take(8)?);
+        let count = u32_at(take(4)?);
+        let mut levels = Vec::new();
+        for _ in 0..count.min(64) {
+            let (per_row, rows) = (u32_at(take(4)?), u32_at(take(4)?));
+            let data = take(per_row.checked_mul(rows)?.checked_mul(16)?)?;
+            let blocks = data
+                .chunks_exact(16)
+                .map(|c| {
+                    std::array::from_fn(|i| {
+                        f32::from_le_bytes(c[4 * i..4 * i + 4].try_into().expect("4 bytes"))
+                    })
+                })
+                .collect();
+            levels.push(Level {
+                per_row,
+                rows,
+                blocks,
+            });
+        }
+        (levels.len() == count && at == bytes.len()).then_some(Self {
+            origin_m,
+            spacing_m,
+            levels,
+        })
+    }
+
     /// Height-sample spacing (m): grid `k` has vertex spacing `spacing_m * 2^k`.
     pub fn spacing_m(&self) -> f64 {
         self.spacing_m

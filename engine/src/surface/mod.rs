@@ -5,10 +5,11 @@
 //! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised).
 //! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
 //! - [`map_error`]: the map part's interpolation error per block of the coarse grids, computed
-//!   once at load.
+//!   once at load; [`map_error_cache`] keeps it in a file between runs.
 
 pub mod decals;
 pub mod map_error;
+pub mod map_error_cache;
 pub mod spline;
 pub mod world;
 

@@ -1,0 +1,212 @@
+//! A file that keeps a map's [`MapErrorPyramid`] between runs: computing it costs seconds on a
+//! large map (the finest surface on a 1 m lattice over the whole map), reading it milliseconds.
+//!
+//! The file is derived data, never trusted blindly: it is used only when its key matches the
+//! surface it was computed from and its payload matches its checksum; otherwise the pyramid is
+//! computed again (and the file rewritten). The key hashes everything `F` and its region bounds
+//! are made of (heights, ground types, amplitudes, seed, placement, decals) and a fingerprint of
+//! the surface function itself (`F` and its between-points bound at fixed points), so a changed
+//! map or a changed surface definition in the engine both invalidate the file.
+//!
+//! Layout (little-endian): magic `TVS-SERR`, format version u32, key u64, payload checksum u64,
+//! then the payload: origin (2 f64), height spacing (f64), grid count (u32), and per grid its
+//! blocks per row and rows (2 u32) and its blocks (4 f32 each).
+
+use super::map_error::MapErrorPyramid;
+use super::world::{Rect, World};
+use std::hash::{Hash, Hasher};
+use std::path::Path;
+
+const MAGIC: &[u8; 8] = b"TVS-SERR";
+const FORMAT_VERSION: u32 = 1;
+
+/// Why a cache file was not used.
+#[derive(Debug, thiserror::Error)]
+pub enum CacheMiss {
+    #[error("no cache file yet")]
+    Missing,
+    #[error("cannot read the cache file: {0}")]
+    Io(std::io::Error),
+    #[error("not a surface-error cache file of this version")]
+    Format,
+    #[error("computed from another map or another surface definition")]
+    Stale,
+    #[error("its content does not match its checksum (damaged or edited)")]
+    Damaged,
+}
+
+/// The key of `world`'s surface: see the module docs.
+pub fn surface_key(world: &World) -> u64 {
+    let mut h = std::hash::DefaultHasher::new();
+    FORMAT_VERSION.hash(&mut h);
+    let map = &world.map;
+    for v in map.heights.data() {
+        v.to_bits().hash(&mut h);
+    }
+    map.ground.data().hash(&mut h);
+    for t in &map.manifest.ground.legend {
+        t.detail_amplitude_m.to_bits().hash(&mut h);
+    }
+    map.manifest.seed.hash(&mut h);
+    for v in map.manifest.origin_m.iter().chain(&map.manifest.size_m) {
+        v.to_bits().hash(&mut h);
+    }
+    let (hs, gs) = world.cell_spacings_m();
+    hs.to_bits().hash(&mut h);
+    gs.to_bits().hash(&mut h);
+    format!("{:?}", map.decals).hash(&mut h);
+    // The surface function: F and the between-points bound at fixed points of the map.
+    let (o, s) = (world.origin_m(), world.size_m());
+    for i in 0..256i64 {
+        let x = o[0] + s[0] * worldgen::noise::unit3(0x5E77, i, 0);
+        let y = o[1] + s[1] * worldgen::noise::unit3(0x5E77, i, 1);
+        world.height_m(x, y).to_bits().hash(&mut h);
+        let cell = Rect {
+            min: [x, y],
+            max: [x + 0.5, y + 0.5],
+        };
+        world
+            .region_bounds(cell)
+            .between_m(0.5)
+            .to_bits()
+            .hash(&mut h);
+    }
+    h.finish()
+}
+
+fn checksum(payload: &[u8]) -> u64 {
+    let mut h = std::hash::DefaultHasher::new();
+    payload.hash(&mut h);
+    h.finish()
+}
+
+/// Reads the pyramid cached for `key` from `path`.
+pub fn read(path: &Path, key: u64) -> Result<MapErrorPyramid, CacheMiss> {
+    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => CacheMiss::Missing,
+        _ => CacheMiss::Io(e),
+    })?;
+    let header = 8 + 4 + 8 + 8;
+    if bytes.len() < header
+        || &bytes[..8] != MAGIC
+        || u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes")) != FORMAT_VERSION
+    {
+        return Err(CacheMiss::Format);
+    }
+    if u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes")) != key {
+        return Err(CacheMiss::Stale);
+    }
+    let payload = &bytes[header..];
+    if u64::from_le_bytes(bytes[20..28].try_into().expect("8 bytes")) != checksum(payload) {
+        return Err(CacheMiss::Damaged);
+    }
+    MapErrorPyramid::from_bytes(payload).ok_or(CacheMiss::Format)
+}
+
+/// Writes the pyramid for `key` to `path` (through a temporary file, so a reader never sees a
+/// half-written one).
+pub fn write(path: &Path, key: u64, pyramid: &MapErrorPyramid) -> std::io::Result<()> {
+    let payload = pyramid.to_bytes();
+    let mut bytes = Vec::with_capacity(28 + payload.len());
+    bytes.extend_from_slice(MAGIC);
+    bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    bytes.extend_from_slice(&key.to_le_bytes());
+    bytes.extend_from_slice(&checksum(&payload).to_le_bytes());
+    bytes.extend_from_slice(&payload);
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, &bytes)?;
+    std::fs::rename(&tmp, path)
+}
+
+impl World {
+    /// [`World::new`], with the map-error grids read from `cache_file` when it holds them for
+    /// this surface, else computed and written there (a write failure is logged, not fatal).
+    pub fn with_error_cache(map: worldgen::Map, cache_file: &Path) -> Self {
+        let mut world = Self::without_error_grids(map);
+        let key = surface_key(&world);
+        match read(cache_file, key) {
+            Ok(p) => world.map_error = p,
+            Err(why) => {
+                if !matches!(why, CacheMiss::Missing) {
+                    log::warn!(
+                        "{}: not used ({why}); computing the surface error grids again",
+                        cache_file.display()
+                    );
+                }
+                world.compute_error_grids();
+                if let Err(e) = write(cache_file, key, &world.map_error) {
+                    log::warn!("{}: cannot write ({e})", cache_file.display());
+                }
+            }
+        }
+        world
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tiny_map() -> worldgen::Map {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        worldgen::Map::load(&dir).expect("tiny map loads")
+    }
+
+    fn temp_file(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("tvs-serr-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        dir.join("cache.bin")
+    }
+
+    #[test]
+    fn the_cache_is_written_read_back_and_equals_a_fresh_computation() {
+        let path = temp_file("roundtrip");
+        let fresh = World::new(tiny_map());
+        let first = World::with_error_cache(tiny_map(), &path);
+        assert_eq!(first.map_error.to_bytes(), fresh.map_error.to_bytes());
+        let read_back = read(&path, surface_key(&fresh)).expect("valid cache file");
+        assert_eq!(read_back.to_bytes(), fresh.map_error.to_bytes());
+        assert!(read_back.level_count() > 0);
+        let _ = std::fs::remove_dir_all(path.parent().expect("dir"));
+    }
+
+    /// A file edited after writing (a stored bound lowered) is refused, recomputed and
+    /// rewritten; a file computed from other heights is refused as stale.
+    #[test]
+    fn tampered_or_stale_cache_files_are_refused_and_recomputed() {
+        let path = temp_file("tamper");
+        let fresh = World::new(tiny_map());
+        let key = surface_key(&fresh);
+        write(&path, key, &fresh.map_error).expect("write");
+        // Lower one stored error bound (the last f32 of the file, a finer-grid error).
+        let mut bytes = std::fs::read(&path).expect("read");
+        let n = bytes.len();
+        let v = f32::from_le_bytes(bytes[n - 4..].try_into().expect("4 bytes")) * 0.5;
+        bytes[n - 4..].copy_from_slice(&v.to_le_bytes());
+        std::fs::write(&path, &bytes).expect("write tampered");
+        assert!(matches!(read(&path, key), Err(CacheMiss::Damaged)));
+        let reopened = World::with_error_cache(tiny_map(), &path);
+        assert_eq!(reopened.map_error.to_bytes(), fresh.map_error.to_bytes());
+        assert!(read(&path, key).is_ok(), "the file was rewritten");
+        // Other heights: the key differs, the file is stale for that map.
+        let mut changed = tiny_map();
+        changed
+            .heights
+            .set(10, 10, changed.heights.get(10, 10) + 1.0);
+        let changed_world = World::new(changed.clone());
+        assert_ne!(surface_key(&changed_world), key);
+        assert!(matches!(
+            read(&path, surface_key(&changed_world)),
+            Err(CacheMiss::Stale)
+        ));
+        let reopened = World::with_error_cache(changed, &path);
+        assert_eq!(
+            reopened.map_error.to_bytes(),
+            changed_world.map_error.to_bytes()
+        );
+        // Truncated and foreign files are refused too.
+        std::fs::write(&path, b"TVS-SERR").expect("write short");
+        assert!(matches!(read(&path, key), Err(CacheMiss::Format)));
+        let _ = std::fs::remove_dir_all(path.parent().expect("dir"));
+    }
+}
