@@ -29,6 +29,8 @@ pub const DECAL_SPACING_M: f64 = 0.5;
 pub const FLAT_MARGIN_M: f64 = 2.0 * std::f64::consts::SQRT_2 * DECAL_SPACING_M;
 /// Samples per block side.
 const BLOCK: i64 = 8;
+/// Samples per side of the stencils of one block's cells (one before, two after).
+const STENCIL_SIDE: i64 = BLOCK + 3;
 /// Block side (m): bounds are kept per block.
 pub const DECAL_BLOCK_M: f64 = DECAL_SPACING_M * BLOCK as f64;
 
@@ -398,12 +400,18 @@ impl DecalField {
         }
         candidates.sort_unstable();
         candidates.dedup();
+        // The block's cells read samples -1..=BLOCK + 1 around it: gathered once per block.
+        let mut local = [0.0f64; (STENCIL_SIDE * STENCIL_SIDE) as usize];
         for (bx, by) in candidates {
             let mut b = DecalBounds::default();
+            for (k, v) in local.iter_mut().enumerate() {
+                let (i, j) = (k as i64 % STENCIL_SIDE - 1, k as i64 / STENCIL_SIDE - 1);
+                *v = self.sample(bx * BLOCK + i, by * BLOCK + j);
+            }
             for cy in 0..BLOCK {
                 for cx in 0..BLOCK {
-                    let (ix, iy) = (bx * BLOCK + cx, by * BLOCK + cy);
-                    let p = |a: i64, c: i64| self.sample(ix + a, iy + c);
+                    let p =
+                        |a: i64, c: i64| local[((cy + c + 1) * STENCIL_SIDE + cx + a + 1) as usize];
                     b.slope = b
                         .slope
                         .max(super::spline::catmull_rom_cell_slope(&p, DECAL_SPACING_M));
