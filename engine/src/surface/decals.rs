@@ -315,7 +315,10 @@ impl DecalField {
         }
         let gx = (x_m - self.origin_m[0]) / DECAL_SPACING_M;
         let gy = (y_m - self.origin_m[1]) / DECAL_SPACING_M;
-        let (x0, y0) = (gx.floor(), gy.floor());
+        let (x0, y0) = (
+            worldgen::sample::floor_small(gx),
+            worldgen::sample::floor_small(gy),
+        );
         let (ix, iy) = (x0 as i64, y0 as i64);
         // The 4 x 4 stencil touches at most 2 x 2 blocks; none stored means zero.
         let (bx0, bx1) = ((ix - 1).div_euclid(BLOCK), (ix + 2).div_euclid(BLOCK));
