@@ -187,11 +187,6 @@ impl MapErrorPyramid {
         })
     }
 
-    /// Height-sample spacing (m): grid `k` has vertex spacing `spacing_m * 2^k`.
-    pub fn spacing_m(&self) -> f64 {
-        self.spacing_m
-    }
-
     /// Number of grids kept.
     pub fn level_count(&self) -> usize {
         self.levels.len()
@@ -262,8 +257,9 @@ fn grid_error_at(f: &[f64], sub: usize, v: [f64; 4], dx: usize, dy: usize, per: 
 }
 
 /// Linear interpolation on the quad with corners `v = [v00, v10, v01, v11]` at fractions
-/// (fx, fy), diagonal (0, 0) - (1, 1).
-fn lin(v: [f64; 4], fx: f64, fy: f64) -> f64 {
+/// (fx, fy) in [0, 1], triangulated by the diagonal (0, 0) - (1, 1): the triangulation of every
+/// terrain mesh (also [`crate::terrain::bounds::interpolate_grid`]).
+pub fn lin(v: [f64; 4], fx: f64, fy: f64) -> f64 {
     if fx >= fy {
         v[0] + fx * (v[1] - v[0]) + fy * (v[3] - v[1])
     } else {

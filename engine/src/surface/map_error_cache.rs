@@ -181,8 +181,9 @@ mod tests {
         // Lower one stored error bound (the last f32 of the file, a finer-grid error).
         let mut bytes = std::fs::read(&path).expect("read");
         let n = bytes.len();
-        let v = f32::from_le_bytes(bytes[n - 4..].try_into().expect("4 bytes")) * 0.5;
-        bytes[n - 4..].copy_from_slice(&v.to_le_bytes());
+        let v = f32::from_le_bytes(bytes[n - 4..].try_into().expect("4 bytes"));
+        assert!(v > 0.0, "the edited bound must change: {v}");
+        bytes[n - 4..].copy_from_slice(&(v * 0.5).to_le_bytes());
         std::fs::write(&path, &bytes).expect("write tampered");
         assert!(matches!(read(&path, key), Err(CacheMiss::Damaged)));
         let reopened = World::with_error_cache(tiny_map(), &path);

@@ -21,6 +21,11 @@
 //! [`super::refine::SLACK`] over the error measured in its block), the cell is measured again on
 //! finer sub-cells by branch and bound ([`super::refine`]), worst first, within a budget.
 //!
+//! Precomputed. Nodes whose vertex spacing is the map's height spacing times a power of two
+//! (the large nodes) do not measure at run time: the same argument was applied once per map on
+//! a 1 m check lattice ([`crate::surface::map_error`]) and [`measure`] reads its blocks
+//! ([`from_map_error`]).
+//!
 //! Blocks. All of this is kept per block of `NODE_QUADS / BLOCKS_PER_SIDE` quads (height range
 //! and error), and the node's values are the blocks' extremes: the selection projects each
 //! block's error from the block's own box ([`super::select::projected_error_px`]).
@@ -150,19 +155,18 @@ pub fn interpolate_grid(v: &[f32], n: usize, gx: f64, gy: f64) -> f64 {
     // libm call).
     let i = (gx as usize).min(n - 1);
     let j = (gy as usize).min(n - 1);
-    let (fx, fy) = (gx - i as f64, gy - j as f64);
     let w = n + 1;
-    let h00 = f64::from(v[j * w + i]);
-    let h10 = f64::from(v[j * w + i + 1]);
-    let h01 = f64::from(v[(j + 1) * w + i]);
-    let h11 = f64::from(v[(j + 1) * w + i + 1]);
-    if fx >= fy {
-        // Lower-right triangle (00, 10, 11).
-        h00 + fx * (h10 - h00) + fy * (h11 - h10)
-    } else {
-        // Upper-left triangle (00, 11, 01).
-        h00 + fy * (h01 - h00) + fx * (h11 - h01)
-    }
+    let corners = [
+        j * w + i,
+        j * w + i + 1,
+        (j + 1) * w + i,
+        (j + 1) * w + i + 1,
+    ];
+    crate::surface::map_error::lin(
+        corners.map(|k| f64::from(v[k])),
+        gx - i as f64,
+        gy - j as f64,
+    )
 }
 
 /// The stored bounds of a node from its own measurement ([`measure`]) and its parent's stored
