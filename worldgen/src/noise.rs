@@ -77,20 +77,58 @@ pub fn gradient(seed: u64, x: f64, y: f64) -> f64 {
     let x0 = crate::sample::floor_small(x);
     let y0 = crate::sample::floor_small(y);
     let (ix, iy) = (x0 as i64, y0 as i64);
+    let g = |cx: i64, cy: i64| DIRECTIONS_16[(corner_hash(seed, cx, cy) >> 60) as usize];
+    let corners = [g(ix, iy), g(ix + 1, iy), g(ix, iy + 1), g(ix + 1, iy + 1)];
     let (fx, fy) = (x - x0, y - y0);
-    let dot = |cx: i64, cy: i64, dx: f64, dy: f64| {
-        let g = DIRECTIONS_16[(corner_hash(seed, cx, cy) >> 60) as usize];
-        g.0 * dx + g.1 * dy
-    };
-    let n00 = dot(ix, iy, fx, fy);
-    let n10 = dot(ix + 1, iy, fx - 1.0, fy);
-    let n01 = dot(ix, iy + 1, fx, fy - 1.0);
-    let n11 = dot(ix + 1, iy + 1, fx - 1.0, fy - 1.0);
-    let (u, v) = (fade(fx), fade(fy));
+    blend(corners, fx, fy, fade(fx), fade(fy))
+}
+
+/// The noise value inside one lattice cell from its corner gradients (south-west, south-east,
+/// north-west, north-east), the position's fractions and their fades.
+#[inline]
+fn blend(g: [(f64, f64); 4], fx: f64, fy: f64, u: f64, v: f64) -> f64 {
+    let n00 = g[0].0 * fx + g[0].1 * fy;
+    let n10 = g[1].0 * (fx - 1.0) + g[1].1 * fy;
+    let n01 = g[2].0 * fx + g[2].1 * (fy - 1.0);
+    let n11 = g[3].0 * (fx - 1.0) + g[3].1 * (fy - 1.0);
     let a = n00 + u * (n10 - n00);
     let b = n01 + u * (n11 - n01);
     // sqrt(2) scales the theoretical range of 2-D gradient noise to about [-1, 1].
     (a + v * (b - a)) * std::f64::consts::SQRT_2
+}
+
+/// [`gradient`] at every point of the lattice `xs` x `ys` (row-major, one row per `ys` entry),
+/// equal to it point by point: fractions and fades are computed once per column and row, and
+/// each noise-lattice corner's gradient once.
+pub fn gradient_lattice(seed: u64, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+    let axis = |v: &[f64]| -> Vec<(i64, f64, f64)> {
+        v.iter()
+            .map(|&t| {
+                let t0 = crate::sample::floor_small(t);
+                (t0 as i64, t - t0, fade(t - t0))
+            })
+            .collect()
+    };
+    let (cols, rows) = (axis(xs), axis(ys));
+    let corners = |a: &[(i64, f64, f64)]| {
+        crate::sample::stencil_indices(&a.iter().map(|c| c.0).collect::<Vec<_>>(), 2)
+    };
+    let ((cx, first_x), (cy, first_y)) = (corners(&cols), corners(&rows));
+    let cw = cx.len();
+    let corner: Vec<(f64, f64)> = cy
+        .iter()
+        .flat_map(|&y| cx.iter().map(move |&x| (x, y)))
+        .map(|(x, y)| DIRECTIONS_16[(corner_hash(seed, x, y) >> 60) as usize])
+        .collect();
+    let mut out = Vec::with_capacity(xs.len() * ys.len());
+    for (&(_, fy, v), &r) in rows.iter().zip(&first_y) {
+        for (&(_, fx, u), &c) in cols.iter().zip(&first_x) {
+            let k = r * cw + c;
+            let g = [corner[k], corner[k + 1], corner[k + cw], corner[k + cw + 1]];
+            out.push(blend(g, fx, fy, u, v));
+        }
+    }
+    out
 }
 
 /// Fractional Brownian motion: `octaves` layers of gradient noise, frequency x2 and amplitude
@@ -135,6 +173,26 @@ pub fn ridged(seed: u64, x: f64, y: f64, octaves: u32) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gradient_lattice_equals_gradient_point_by_point() {
+        // Irregular, unsorted coordinates across cell borders and the origin, both signs.
+        let xs: Vec<f64> = (0..57).map(|i| f64::from(i) * 0.37 - 9.1).collect();
+        let ys: Vec<f64> = (0..23)
+            .map(|j| 4.2 - f64::from(j * j % 17) * 0.61)
+            .collect();
+        // And a sparse one: a few points millions of noise cells apart.
+        let far: Vec<f64> = (0..5).map(|i| f64::from(i) * 3.7e6 - 5.0e6).collect();
+        for (xs, ys) in [(&xs, &ys), (&far, &far)] {
+            let got = gradient_lattice(11, xs, ys);
+            assert_eq!(got.len(), xs.len() * ys.len());
+            for (j, &y) in ys.iter().enumerate() {
+                for (i, &x) in xs.iter().enumerate() {
+                    assert_eq!(got[j * xs.len() + i], gradient(11, x, y), "at ({x}, {y})");
+                }
+            }
+        }
+    }
 
     #[test]
     fn gradient_noise_is_bounded_and_continuous() {

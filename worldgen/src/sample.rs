@@ -19,13 +19,31 @@ impl GridPlacement {
     /// Continuous grid coordinates of a world position, clamped into [0, w-1] x [0, h-1].
     #[inline]
     fn grid_coords(&self, width: usize, height: usize, x_m: f64, y_m: f64) -> (f64, f64) {
-        let gx = ((x_m - self.origin_m[0]) / self.spacing_m).clamp(0.0, (width - 1) as f64);
-        let gy = ((y_m - self.origin_m[1]) / self.spacing_m).clamp(0.0, (height - 1) as f64);
-        // A NaN position (never produced by valid callers) samples the corner rather than panicking.
         (
-            if gx.is_nan() { 0.0 } else { gx },
-            if gy.is_nan() { 0.0 } else { gy },
+            self.axis_coord(0, width, x_m),
+            self.axis_coord(1, height, y_m),
         )
+    }
+
+    /// One axis of [`Self::grid_coords`]: the continuous coordinate along `axis` (0 = x,
+    /// 1 = y) of a world coordinate, clamped into [0, len - 1].
+    #[inline]
+    fn axis_coord(&self, axis: usize, len: usize, v_m: f64) -> f64 {
+        let g = ((v_m - self.origin_m[axis]) / self.spacing_m).clamp(0.0, (len - 1) as f64);
+        // A NaN position (never produced by valid callers) samples the corner rather than panicking.
+        if g.is_nan() { 0.0 } else { g }
+    }
+
+    /// Per world coordinate along `axis`: the sample index below it and the fraction past it.
+    fn axis_cells(&self, axis: usize, len: usize, coords_m: &[f64]) -> Vec<(i64, f64)> {
+        coords_m
+            .iter()
+            .map(|&v| {
+                let g = self.axis_coord(axis, len, v);
+                let g0 = floor_small(g);
+                (g0 as i64, g - g0)
+            })
+            .collect()
     }
 }
 
@@ -125,9 +143,123 @@ pub fn bicubic_limited(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) 
     bicubic(grid, at, x_m, y_m).clamp(lo, hi)
 }
 
+/// The distinct indices that stencils of `len` consecutive indices starting at `starts` read,
+/// sorted, and per stencil the position of its first index there (the others follow it:
+/// consecutive integers stay neighbours in the sorted list). Lattice evaluations work on these
+/// compact lists, so a sparse lattice (a coarse node over a fine grid) costs what it reads.
+pub fn stencil_indices(starts: &[i64], len: i64) -> (Vec<i64>, Vec<usize>) {
+    let mut all: Vec<i64> = starts
+        .iter()
+        .flat_map(|&s| (0..len).map(move |d| s + d))
+        .collect();
+    all.sort_unstable();
+    all.dedup();
+    let at = starts
+        .iter()
+        .map(|s| all.binary_search(s).unwrap_or_default())
+        .collect();
+    (all, at)
+}
+
+/// [`bilinear`] at every point of the lattice `xs` x `ys` (row-major, one row per `ys` entry),
+/// equal to it point by point: each grid row the lattice touches is interpolated along x once
+/// per column, then each point blends two such values (the same operations in the same order).
+pub fn bilinear_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+    let cols = at.axis_cells(0, grid.width(), xs);
+    let rows = at.axis_cells(1, grid.height(), ys);
+    let starts: Vec<i64> = rows.iter().map(|r| r.0).collect();
+    let (grid_rows, first) = stencil_indices(&starts, 2);
+    let n = xs.len();
+    let mut along_x = Vec::with_capacity(grid_rows.len() * n);
+    for &gy in &grid_rows {
+        along_x.extend(cols.iter().map(|&(ix, fx)| {
+            let (s0, s1) = (
+                f64::from(grid.get_clamped(ix, gy)),
+                f64::from(grid.get_clamped(ix + 1, gy)),
+            );
+            s0 + fx * (s1 - s0)
+        }));
+    }
+    let mut out = Vec::with_capacity(n * ys.len());
+    for (&(_, fy), &r) in rows.iter().zip(&first) {
+        let (below, above) = (&along_x[r * n..][..n], &along_x[(r + 1) * n..][..n]);
+        out.extend(below.iter().zip(above).map(|(&a, &b)| a + fy * (b - a)));
+    }
+    out
+}
+
+/// [`bicubic`] at every point of the lattice `xs` x `ys` (row-major), equal to it point by
+/// point: each grid row the stencils touch is filtered along x once per column (the column's
+/// weights computed once), then each point sums four such values with its row's weights.
+pub fn bicubic_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+    let weights = |cells: Vec<(i64, f64)>| -> Vec<(i64, [f64; 4])> {
+        cells
+            .into_iter()
+            .map(|(i, f)| (i, catmull_rom_weights(f)))
+            .collect()
+    };
+    let cols = weights(at.axis_cells(0, grid.width(), xs));
+    let rows = weights(at.axis_cells(1, grid.height(), ys));
+    let starts: Vec<i64> = rows.iter().map(|r| r.0 - 1).collect();
+    let (grid_rows, first) = stencil_indices(&starts, 4);
+    let n = xs.len();
+    let mut along_x = Vec::with_capacity(grid_rows.len() * n);
+    for &gy in &grid_rows {
+        along_x.extend(cols.iter().map(|(ix, wx)| {
+            let s = |d: i64| f64::from(grid.get_clamped(ix + d - 1, gy));
+            wx[0] * s(0) + wx[1] * s(1) + wx[2] * s(2) + wx[3] * s(3)
+        }));
+    }
+    let mut out = Vec::with_capacity(n * ys.len());
+    for ((_, wy), &r) in rows.iter().zip(&first) {
+        for i in 0..n {
+            let mut sum = 0.0;
+            for (j, wyj) in wy.iter().enumerate() {
+                sum += wyj * along_x[(r + j) * n + i];
+            }
+            out.push(sum);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lattice_sampling_equals_point_sampling_inside_and_outside_the_grid() {
+        let mut g = Grid::new(13, 9, 0.0f32);
+        for y in 0..9 {
+            for x in 0..13 {
+                g.set(
+                    x,
+                    y,
+                    (crate::noise::unit3(3, x as i64, y as i64) * 50.0 - 10.0) as f32,
+                );
+            }
+        }
+        let at = GridPlacement {
+            origin_m: [100.0, -20.0],
+            spacing_m: 4.0,
+        };
+        // Beyond every border, on sample positions and between them, unsorted rows.
+        let xs: Vec<f64> = (0..71).map(|i| 91.0 + f64::from(i) * 0.93).collect();
+        let ys: Vec<f64> = (0..31)
+            .map(|j| 25.0 - f64::from(j * 7 % 31) * 1.75)
+            .collect();
+        let (lin, cub) = (
+            bilinear_lattice(&g, at, &xs, &ys),
+            bicubic_lattice(&g, at, &xs, &ys),
+        );
+        for (j, &y) in ys.iter().enumerate() {
+            for (i, &x) in xs.iter().enumerate() {
+                let k = j * xs.len() + i;
+                assert_eq!(lin[k], bilinear(&g, at, x, y), "bilinear at ({x}, {y})");
+                assert_eq!(cub[k], bicubic(&g, at, x, y), "bicubic at ({x}, {y})");
+            }
+        }
+    }
 
     #[test]
     fn floor_small_equals_floor() {

@@ -66,6 +66,62 @@ pub struct DecalField {
     coarse_cell_m: f64,
 }
 
+/// One lattice coordinate's share of [`DecalField::offset_m`], relative to the field's origin:
+/// its coarse cell (`None` where the fast-zero test does not apply), the sample index below it
+/// and its Catmull-Rom weights.
+struct LatticeAxis {
+    coarse: Option<usize>,
+    index: i64,
+    weights: [f64; 4],
+}
+
+impl LatticeAxis {
+    fn new(local_m: f64, coarse_cell_m: f64, coarse_len: usize) -> Self {
+        let c = local_m / coarse_cell_m;
+        let g = local_m / DECAL_SPACING_M;
+        let g0 = worldgen::sample::floor_small(g);
+        Self {
+            coarse: (c >= 0.0 && (c as usize) < coarse_len).then_some(c as usize),
+            index: g0 as i64,
+            weights: catmull_rom_weights(g - g0),
+        }
+    }
+}
+
+/// Sorted sample indices along one axis grouped in runs of the same block: the block of each
+/// run and the run of each index.
+struct BlockRuns {
+    blocks: Vec<i64>,
+    run: Vec<usize>,
+    /// First index of each run, and one past the last index.
+    starts: Vec<usize>,
+}
+
+impl BlockRuns {
+    fn new(samples: &[i64]) -> Self {
+        let (mut blocks, mut run, mut starts) = (Vec::new(), Vec::new(), Vec::new());
+        for (k, s) in samples.iter().enumerate() {
+            let b = s.div_euclid(BLOCK);
+            if blocks.last() != Some(&b) {
+                blocks.push(b);
+                starts.push(k);
+            }
+            run.push(blocks.len() - 1);
+        }
+        starts.push(samples.len());
+        Self {
+            blocks,
+            run,
+            starts,
+        }
+    }
+
+    /// The indices (positions in the sample list) of run `r`.
+    fn entries(&self, r: usize) -> std::ops::Range<usize> {
+        self.starts[r]..self.starts[r + 1]
+    }
+}
+
 /// Even-odd point-in-polygon test.
 fn inside_polygon(p: [f64; 2], pts: &[[f64; 3]]) -> bool {
     let mut inside = false;
@@ -336,6 +392,91 @@ impl DecalField {
             sum += wyj * row;
         }
         sum
+    }
+
+    /// [`Self::offset_m`] at every point of the lattice `xs` x `ys` (row-major, one row per
+    /// `ys` entry), equal to it point by point. The blocks the lattice's stencils reach are read
+    /// once into a dense patch, each sample row is filtered along x once per column, and each
+    /// point sums four such values (the same operations in the same order); the fast-zero tests
+    /// are the point version's, per column and row.
+    pub fn offsets_on_lattice(&self, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; xs.len() * ys.len()];
+        if self.blocks.is_empty() || xs.is_empty() || ys.is_empty() {
+            return out;
+        }
+        let axis = |v: &[f64], a: usize| -> Vec<LatticeAxis> {
+            v.iter()
+                .map(|&t| {
+                    LatticeAxis::new(
+                        t - self.origin_m[a],
+                        self.coarse_cell_m,
+                        self.coarse_dims[a],
+                    )
+                })
+                .collect()
+        };
+        let (cols, rows) = (axis(xs, 0), axis(ys, 1));
+        // The distinct samples the stencils read along each axis, in runs by block.
+        let stencils = |a: &[LatticeAxis]| {
+            let starts: Vec<i64> = a.iter().map(|c| c.index - 1).collect();
+            let (samples, first) = worldgen::sample::stencil_indices(&starts, 4);
+            let runs = BlockRuns::new(&samples);
+            (samples, first, runs)
+        };
+        let (sx, first_x, runs_x) = stencils(&cols);
+        let (sy, first_y, runs_y) = stencils(&rows);
+        let (pw, ph) = (sx.len(), sy.len());
+        let mut present = vec![false; runs_x.blocks.len() * runs_y.blocks.len()];
+        let mut patch = vec![0.0f64; pw * ph];
+        for (ry, &by) in runs_y.blocks.iter().enumerate() {
+            for (rx, &bx) in runs_x.blocks.iter().enumerate() {
+                let Some(b) = self.blocks.get(&key(bx, by)) else {
+                    continue;
+                };
+                present[ry * runs_x.blocks.len() + rx] = true;
+                for y in runs_y.entries(ry) {
+                    for x in runs_x.entries(rx) {
+                        let t = sy[y].rem_euclid(BLOCK) * BLOCK + sx[x].rem_euclid(BLOCK);
+                        patch[y * pw + x] = f64::from(b[t as usize]);
+                    }
+                }
+            }
+        }
+        if !present.contains(&true) {
+            return out;
+        }
+        // Whether a stored block lies under the stencil of the point in column i, row j.
+        let stored = |i: usize, j: usize| {
+            let (x0, x1) = (runs_x.run[first_x[i]], runs_x.run[first_x[i] + 3]);
+            let (y0, y1) = (runs_y.run[first_y[j]], runs_y.run[first_y[j] + 3]);
+            (y0..=y1).any(|ry| (x0..=x1).any(|rx| present[ry * runs_x.blocks.len() + rx]))
+        };
+        let mut along_x = vec![0.0f64; ph * xs.len()];
+        for r in 0..ph {
+            for (i, c) in cols.iter().enumerate() {
+                let samples = &patch[r * pw + first_x[i]..][..4];
+                let mut row = 0.0;
+                for (w, v) in c.weights.iter().zip(samples) {
+                    row += w * v;
+                }
+                along_x[r * xs.len() + i] = row;
+            }
+        }
+        for (j, y) in rows.iter().enumerate() {
+            for (i, x) in cols.iter().enumerate() {
+                let fast_zero = matches!((x.coarse, y.coarse), (Some(cx), Some(cy))
+                    if !self.coarse[cy * self.coarse_dims[0] + cx]);
+                if fast_zero || !stored(i, j) {
+                    continue;
+                }
+                let mut sum = 0.0;
+                for (k, wy) in y.weights.iter().enumerate() {
+                    sum += wy * along_x[(first_y[j] + k) * xs.len() + i];
+                }
+                out[j * xs.len() + i] = sum;
+            }
+        }
+        out
     }
 
     /// False only when no road/path sample lies within `margin_m` (plus one lattice spacing)

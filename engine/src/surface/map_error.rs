@@ -292,13 +292,9 @@ fn band(world: &World, vertices: &[f64], band: usize, k_count: usize) -> Band {
     // F on the band's check lattice: (BLOCK_QUADS sub + 1) rows of (cw sub + 1) points.
     let (lw, lh) = (cw * sub + 1, BLOCK_QUADS * sub + 1);
     let y0 = band * BLOCK_QUADS;
-    let mut lattice = Vec::with_capacity(lw * lh);
-    for j in 0..lh {
-        let y = o[1] + (y0 * sub + j) as f64 * c;
-        for i in 0..lw {
-            lattice.push(world.height_m(o[0] + i as f64 * c, y));
-        }
-    }
+    let xs: Vec<f64> = (0..lw).map(|i| o[0] + i as f64 * c).collect();
+    let ys: Vec<f64> = (0..lh).map(|j| o[1] + (y0 * sub + j) as f64 * c).collect();
+    let lattice = world.heights_on_lattice(&xs, &ys);
     let mut out: Band = (0..k_count)
         .map(|k| vec![[f64::INFINITY, f64::NEG_INFINITY, 0.0, 0.0]; cw / (BLOCK_QUADS << k)])
         .collect();

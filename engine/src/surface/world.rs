@@ -208,6 +208,50 @@ impl World {
         self.map.height_bicubic_m(x_m, y_m) + d + self.decals.offset_m(x_m, y_m)
     }
 
+    /// [`Self::height_m`] at every point of the lattice `xs` x `ys` (row-major, one row per
+    /// `ys` entry), equal to it point by point and several times cheaper per point on dense
+    /// lattices: each part (`G`, the detail amplitude and noise octaves, `E`) does its per-column
+    /// and per-row work once ([`worldgen::sample::bicubic_lattice`],
+    /// [`worldgen::noise::gradient_lattice`], [`DecalField::offsets_on_lattice`]).
+    pub fn heights_on_lattice(&self, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+        let o = self.origin_m();
+        let ground = worldgen::sample::GridPlacement {
+            origin_m: o,
+            spacing_m: self.map.manifest.ground.spacing_m,
+        };
+        let amplitude = worldgen::sample::bilinear_lattice(&self.amplitude_m, ground, xs, ys);
+        let g = worldgen::sample::bicubic_lattice(
+            &self.map.heights,
+            self.map.height_placement(),
+            xs,
+            ys,
+        );
+        let e = self.decals.offsets_on_lattice(xs, ys);
+        let octaves: Vec<(f64, Vec<f64>)> = DETAIL_OCTAVES
+            .iter()
+            .enumerate()
+            .map(|(i, &(wavelength, weight))| {
+                let local = |v: &[f64], o: f64| -> Vec<f64> {
+                    v.iter().map(|t| (t - o) / wavelength).collect()
+                };
+                let seed = self.detail_seed.wrapping_add(i as u64);
+                let n = noise::gradient_lattice(seed, &local(xs, o[0]), &local(ys, o[1]));
+                (weight, n)
+            })
+            .collect();
+        (0..xs.len() * ys.len())
+            .map(|k| {
+                let a = amplitude[k];
+                let d = if a > 0.0 {
+                    a * octaves.iter().map(|(w, n)| w * n[k]).sum::<f64>()
+                } else {
+                    0.0
+                };
+                g[k] + d + e[k]
+            })
+            .collect()
+    }
+
     /// Ground type index at a world position (nearest ground sample).
     pub fn ground_type(&self, x_m: f64, y_m: f64) -> u8 {
         self.map.ground_type_at(x_m, y_m)
@@ -476,6 +520,64 @@ impl MaxPyramid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The lattice evaluation equals the point evaluation exactly: on a road (decals active),
+    /// across the map's corners (clamped samples, positions outside), with uneven spacing.
+    #[test]
+    fn heights_on_lattice_equal_height_m_point_by_point() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        let w = World::without_error_grids(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let (o, size) = (w.origin_m(), w.size_m());
+        let road = (0..256 * 256)
+            .map(|k| {
+                [
+                    o[0] + f64::from(k % 256) * 2.0,
+                    o[1] + f64::from(k / 256) * 2.0,
+                ]
+            })
+            .find(|p| w.decals.offset_m(p[0], p[1]).abs() > 0.05)
+            .expect("the tiny map has roads");
+        let even = |from: f64, step: f64, n: u32| -> Vec<f64> {
+            (0..n).map(|i| from + f64::from(i) * step).collect()
+        };
+        let lattices = [
+            (
+                even(road[0] - 6.0, 0.0625, 193),
+                even(road[1] - 6.0, 0.0625, 193),
+            ),
+            (even(o[0] - 9.0, 0.37, 60), even(o[1] - 5.0, 0.5, 40)),
+            (
+                even(o[0] + size[0] - 7.0, 0.25, 80),
+                even(o[1] + size[1] - 3.0, 1.5, 9),
+            ),
+            (
+                (0..50).map(|i| road[0] + f64::from(i * i) * 0.01).collect(),
+                (0..30)
+                    .map(|j| road[1] - f64::from(j * 7 % 30) * 0.3)
+                    .collect(),
+            ),
+            // Sparse: a coarse node of a far larger quad tree (lattice steps of hundreds of
+            // noise and decal cells, most points far outside the map).
+            (
+                even(o[0] - 3.0e5, 4096.5, 129),
+                even(o[1] - 1.0e5, 2048.25, 129),
+            ),
+        ];
+        let mut on_decals = 0;
+        for (xs, ys) in &lattices {
+            let got = w.heights_on_lattice(xs, ys);
+            for (j, &y) in ys.iter().enumerate() {
+                for (i, &x) in xs.iter().enumerate() {
+                    assert_eq!(got[j * xs.len() + i], w.height_m(x, y), "at ({x}, {y})");
+                    on_decals += usize::from(w.decals.offset_m(x, y) != 0.0);
+                }
+            }
+        }
+        assert!(
+            on_decals > 1000,
+            "only {on_decals} points had a decal offset"
+        );
+    }
 
     #[test]
     fn max_pyramid_queries_equal_the_max_over_their_aligned_blocks() {

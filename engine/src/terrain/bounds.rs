@@ -229,13 +229,8 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
     let w = m + 1;
     // F on the check lattice; the mesh's vertices are every `sub`-th lattice point, the four
     // children's every `sub / 2`-th.
-    let mut lattice = Vec::with_capacity(w * w);
-    for j in 0..=m {
-        let y = r.min[1] + j as f64 * c;
-        for i in 0..=m {
-            lattice.push(world.height_m(r.min[0] + i as f64 * c, y));
-        }
-    }
+    let axis = |from: f64| -> Vec<f64> { (0..=m).map(|i| from + i as f64 * c).collect() };
+    let lattice = world.heights_on_lattice(&axis(r.min[0]), &axis(r.min[1]));
     let own = lattice_errors(&lattice, m, sub);
     let children = lattice_errors(&lattice, m, sub / 2);
     let regions = region_bounds_of_cells(world, r, c, m);
@@ -251,12 +246,18 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
         ]
     };
     let depth_below = (tree.max_level - key.level.min(tree.max_level)).min(3);
+    // The between-points bounds of a whole check cell and of half a one, per region group.
+    let between: Vec<[f64; 2]> = regions
+        .values
+        .iter()
+        .map(|r| [r.between_m(c), r.between_m(0.5 * c)])
+        .collect();
     // Pass 1: height ranges, and the errors measured at lattice points (true values: lower
     // bounds of each block's error; the grandchildren's are 0 there, their vertices).
     let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
     for j in 0..m {
         for i in 0..m {
-            let between = regions.at(i, j).between_m(c);
+            let [between, _] = between[regions.index(i, j)];
             let block = &mut blocks[block_of(i, j)];
             for at in corners(i, j) {
                 block.lo = block.lo.min(lattice[at] - between);
@@ -292,16 +293,20 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
     for j in 0..m {
         for i in 0..m {
             let b = block_of(i, j);
-            let cell = super::refine::Cell {
-                x0: i as f64,
-                y0: j as f64,
-                size: 1.0,
-                corners: corners(i, j).map(|k| [own[k], children[k], 0.0]),
-                region: *regions.at(i, j),
-            };
-            let e = refiner.cell_bounds(&cell);
+            let ks = corners(i, j);
+            let (own_max, children_max) = ks.iter().fold((0.0f64, 0.0f64), |(o, ch), &k| {
+                (o.max(own[k]), ch.max(children[k]))
+            });
+            let [whole, half] = between[regions.index(i, j)];
+            let e = refiner.bounds([own_max, children_max, 0.0], whole, half);
             if e.iter().copied().fold(0.0, f64::max) > blocks[b].measured * super::refine::SLACK {
-                loose[b].push(cell);
+                loose[b].push(super::refine::Cell {
+                    x0: i as f64,
+                    y0: j as f64,
+                    size: 1.0,
+                    corners: ks.map(|k| [own[k], children[k], 0.0]),
+                    region: *regions.at(i, j),
+                });
             } else {
                 take(&mut blocks[b], e);
             }
@@ -387,21 +392,43 @@ fn finish(
 fn lattice_errors(lattice: &[f64], m: usize, step: usize) -> Vec<f64> {
     let vertices = vertex_heights(lattice, m, step);
     let (quads, w, per) = (m / step, m + 1, step as f64);
-    (0..w * w)
-        .map(|k| {
-            let (i, j) = (k % w, k / w);
-            (interpolate_grid(&vertices, quads, i as f64 / per, j as f64 / per) - lattice[k]).abs()
+    // [`interpolate_grid`]'s quad and fraction per lattice column (the same per row).
+    let axis: Vec<(usize, f64)> = (0..w)
+        .map(|i| {
+            let g = i as f64 / per;
+            let q = (g as usize).min(quads - 1);
+            (q, g - q as f64)
         })
-        .collect()
+        .collect();
+    let mut out = Vec::with_capacity(w * w);
+    for (j, &(qj, fy)) in axis.iter().enumerate() {
+        let (below, above) = (
+            &vertices[qj * (quads + 1)..],
+            &vertices[(qj + 1) * (quads + 1)..],
+        );
+        let row = &lattice[j * w..][..w];
+        out.extend(axis.iter().zip(row).map(|(&(qi, fx), &f)| {
+            let v = [below[qi], below[qi + 1], above[qi], above[qi + 1]].map(f64::from);
+            (crate::surface::map_error::lin(v, fx, fy) - f).abs()
+        }));
+    }
+    out
 }
 
 /// Mesh vertex heights (as f32, as meshes store them) of the grid with vertices every `step`-th
 /// point of the `(m + 1)^2` lattice.
 fn vertex_heights(lattice: &[f64], m: usize, step: usize) -> Vec<f32> {
     let w = m + 1;
-    (0..=m / step)
-        .flat_map(|j| (0..=m / step).map(move |i| lattice[j * step * w + i * step] as f32))
-        .collect()
+    let mut out = Vec::with_capacity((m / step + 1) * (m / step + 1));
+    for j in (0..=m).step_by(step) {
+        out.extend(
+            lattice[j * w..][..w]
+                .iter()
+                .step_by(step)
+                .map(|&z| z as f32),
+        );
+    }
+    out
 }
 
 /// The region bounds of every check cell of a node, stored per group of `group^2` cells that
@@ -413,8 +440,13 @@ struct CellRegions {
 }
 
 impl CellRegions {
+    /// Index in `values` of check cell (i, j)'s group.
+    fn index(&self, i: usize, j: usize) -> usize {
+        (j / self.group) * self.per_row + i / self.group
+    }
+
     fn at(&self, i: usize, j: usize) -> &crate::surface::world::RegionBounds {
-        &self.values[(j / self.group) * self.per_row + i / self.group]
+        &self.values[self.index(i, j)]
     }
 }
 

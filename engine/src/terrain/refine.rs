@@ -67,15 +67,32 @@ pub struct Refiner<'a> {
 impl Refiner<'_> {
     /// Error bounds over a cell, each 0 where that mesh does not exist.
     pub fn cell_bounds(&self, c: &Cell) -> Errors {
-        let between = c.region.between_m(c.size * self.check_m);
+        let mut corner_max = [0.0f64; 3];
+        for e in &c.corners {
+            for t in 0..3 {
+                corner_max[t] = corner_max[t].max(e[t]);
+            }
+        }
+        let half = if self.depth_below >= 3 {
+            c.region.between_m(0.5 * self.check_m)
+        } else {
+            0.0
+        };
+        self.bounds(corner_max, c.region.between_m(c.size * self.check_m), half)
+    }
+
+    /// Error bounds over a cell from its corners' largest errors per mesh, its between-points
+    /// bound `between`, and `between_half`, the between-points bound for half a check cell
+    /// (deeper descendants; read only where they exist).
+    pub fn bounds(&self, corner_max: Errors, between: f64, between_half: f64) -> Errors {
         let mut out = [0.0f64; 3];
         for (t, o) in out.iter_mut().enumerate() {
             if self.depth_below as usize >= t {
-                *o = c.corners.iter().map(|e| e[t]).fold(0.0, f64::max) + between;
+                *o = corner_max[t] + between;
             }
         }
         if self.depth_below >= 3 {
-            out[2] = out[2].max(c.region.between_m(0.5 * self.check_m));
+            out[2] = out[2].max(between_half);
         }
         out
     }
