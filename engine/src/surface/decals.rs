@@ -416,6 +416,20 @@ impl DecalField {
                 .collect()
         };
         let (cols, rows) = (axis(xs, 0), axis(ys, 1));
+        // The points that pass the fast-zero test (the point version's, per column and row).
+        let mut live: Vec<(usize, usize)> = Vec::new();
+        for (j, y) in rows.iter().enumerate() {
+            for (i, x) in cols.iter().enumerate() {
+                let fast_zero = matches!((x.coarse, y.coarse), (Some(cx), Some(cy))
+                    if !self.coarse[cy * self.coarse_dims[0] + cx]);
+                if !fast_zero {
+                    live.push((i, j));
+                }
+            }
+        }
+        if live.is_empty() {
+            return out;
+        }
         // The distinct samples the stencils read along each axis, in runs by block.
         let stencils = |a: &[LatticeAxis]| {
             let starts: Vec<i64> = a.iter().map(|c| c.index - 1).collect();
@@ -425,56 +439,63 @@ impl DecalField {
         };
         let (sx, first_x, runs_x) = stencils(&cols);
         let (sy, first_y, runs_y) = stencils(&rows);
-        let (pw, ph) = (sx.len(), sy.len());
-        let mut present = vec![false; runs_x.blocks.len() * runs_y.blocks.len()];
+        let (pw, ph, nrx) = (sx.len(), sy.len(), runs_x.blocks.len());
+        // Blocks looked up on first use (0 unknown, 1 absent, 2 present); a present block's
+        // samples are copied into the patch then (absent samples are 0, as `sample` says).
+        let mut state = vec![0u8; nrx * runs_y.blocks.len()];
         let mut patch = vec![0.0f64; pw * ph];
-        for (ry, &by) in runs_y.blocks.iter().enumerate() {
-            for (rx, &bx) in runs_x.blocks.iter().enumerate() {
-                let Some(b) = self.blocks.get(&key(bx, by)) else {
-                    continue;
-                };
-                present[ry * runs_x.blocks.len() + rx] = true;
-                for y in runs_y.entries(ry) {
-                    for x in runs_x.entries(rx) {
-                        let t = sy[y].rem_euclid(BLOCK) * BLOCK + sx[x].rem_euclid(BLOCK);
-                        patch[y * pw + x] = f64::from(b[t as usize]);
+        let mut present = |rx: usize, ry: usize| -> bool {
+            let k = ry * nrx + rx;
+            if state[k] == 0 {
+                state[k] = 1;
+                if let Some(b) = self.blocks.get(&key(runs_x.blocks[rx], runs_y.blocks[ry])) {
+                    state[k] = 2;
+                    for y in runs_y.entries(ry) {
+                        for x in runs_x.entries(rx) {
+                            let t = sy[y].rem_euclid(BLOCK) * BLOCK + sx[x].rem_euclid(BLOCK);
+                            patch[y * pw + x] = f64::from(b[t as usize]);
+                        }
                     }
                 }
             }
-        }
-        if !present.contains(&true) {
-            return out;
-        }
-        // Whether a stored block lies under the stencil of the point in column i, row j.
-        let stored = |i: usize, j: usize| {
+            state[k] == 2
+        };
+        // Keep the points with a stored block under their stencil.
+        live.retain(|&(i, j)| {
             let (x0, x1) = (runs_x.run[first_x[i]], runs_x.run[first_x[i] + 3]);
             let (y0, y1) = (runs_y.run[first_y[j]], runs_y.run[first_y[j] + 3]);
-            (y0..=y1).any(|ry| (x0..=x1).any(|rx| present[ry * runs_x.blocks.len() + rx]))
-        };
-        let mut along_x = vec![0.0f64; ph * xs.len()];
-        for r in 0..ph {
+            let mut any = false;
+            for ry in y0..=y1 {
+                for rx in x0..=x1 {
+                    any |= present(rx, ry);
+                }
+            }
+            any
+        });
+        // Each patch row the kept points read, filtered along x per column (`row` of the point
+        // version); then each point sums four of them.
+        let n = xs.len();
+        let mut row_needed = vec![false; ph];
+        for &(_, j) in &live {
+            row_needed[first_y[j]..first_y[j] + 4].fill(true);
+        }
+        let mut along_x = vec![0.0f64; ph * n];
+        for r in (0..ph).filter(|&r| row_needed[r]) {
             for (i, c) in cols.iter().enumerate() {
                 let samples = &patch[r * pw + first_x[i]..][..4];
                 let mut row = 0.0;
                 for (w, v) in c.weights.iter().zip(samples) {
                     row += w * v;
                 }
-                along_x[r * xs.len() + i] = row;
+                along_x[r * n + i] = row;
             }
         }
-        for (j, y) in rows.iter().enumerate() {
-            for (i, x) in cols.iter().enumerate() {
-                let fast_zero = matches!((x.coarse, y.coarse), (Some(cx), Some(cy))
-                    if !self.coarse[cy * self.coarse_dims[0] + cx]);
-                if fast_zero || !stored(i, j) {
-                    continue;
-                }
-                let mut sum = 0.0;
-                for (k, wy) in y.weights.iter().enumerate() {
-                    sum += wy * along_x[(first_y[j] + k) * xs.len() + i];
-                }
-                out[j * xs.len() + i] = sum;
+        for (i, j) in live {
+            let mut sum = 0.0;
+            for (k, wy) in rows[j].weights.iter().enumerate() {
+                sum += wy * along_x[(first_y[j] + k) * n + i];
             }
+            out[j * n + i] = sum;
         }
         out
     }

@@ -213,7 +213,24 @@ impl World {
     /// lattices: each part (`G`, the detail amplitude and noise octaves, `E`) does its per-column
     /// and per-row work once ([`worldgen::sample::bicubic_lattice`],
     /// [`worldgen::noise::gradient_lattice`], [`DecalField::offsets_on_lattice`]).
+    /// Lattices coarser than the height grid share no work between points; they are evaluated
+    /// point by point.
     pub fn heights_on_lattice(&self, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+        let hs = self.map.manifest.heights.spacing_m;
+        let sparse = |v: &[f64]| {
+            let (lo, hi) = v
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| {
+                    (a.min(t), b.max(t))
+                });
+            hi - lo > hs * v.len() as f64
+        };
+        if sparse(xs) || sparse(ys) {
+            return ys
+                .iter()
+                .flat_map(|&y| xs.iter().map(move |&x| self.height_m(x, y)))
+                .collect();
+        }
         let o = self.origin_m();
         let ground = worldgen::sample::GridPlacement {
             origin_m: o,
@@ -522,7 +539,8 @@ mod tests {
     use super::*;
 
     /// The lattice evaluation equals the point evaluation exactly: on a road (decals active),
-    /// across the map's corners (clamped samples, positions outside), with uneven spacing.
+    /// across the map's corners (clamped samples, positions outside), with uneven spacing, and
+    /// just dense enough to take the lattice path with steps of several noise and decal cells.
     #[test]
     fn heights_on_lattice_equal_height_m_point_by_point() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
@@ -556,11 +574,14 @@ mod tests {
                     .map(|j| road[1] - f64::from(j * 7 % 30) * 0.3)
                     .collect(),
             ),
-            // Sparse: a coarse node of a far larger quad tree (lattice steps of hundreds of
-            // noise and decal cells, most points far outside the map).
+            // Sparse (evaluated point by point): a coarse node of a far larger quad tree.
             (
                 even(o[0] - 3.0e5, 4096.5, 129),
                 even(o[1] - 1.0e5, 2048.25, 129),
+            ),
+            (
+                even(road[0] - 100.0, 3.9, 60),
+                even(road[1] - 50.0, 3.3, 30),
             ),
         ];
         let mut on_decals = 0;

@@ -146,12 +146,15 @@ fn sample_grid(
             }
         }
         None => {
-            for j in -1..=(NODE_VERTS as i64) {
-                for i in -1..=(NODE_VERTS as i64) {
-                    let (x, y) = (r.min[0] + i as f64 * s, r.min[1] + j as f64 * s);
-                    h.push(world.height_m(x, y) as f32);
-                    g.push(world.ground_type(x, y));
-                }
+            let axis = |from: f64| -> Vec<f64> {
+                (-1..=(NODE_VERTS as i64))
+                    .map(|i| from + i as f64 * s)
+                    .collect()
+            };
+            let (xs, ys) = (axis(r.min[0]), axis(r.min[1]));
+            h.extend(world.heights_on_lattice(&xs, &ys).iter().map(|&z| z as f32));
+            for &y in &ys {
+                g.extend(xs.iter().map(|&x| world.ground_type(x, y)));
             }
         }
     }

@@ -45,21 +45,21 @@ impl Tile {
         ]
     }
 
-    /// Generates a tile: `TILE_SAMPLES^2` evaluations of the finest surface.
+    /// Generates a tile: the finest surface on its `TILE_SAMPLES^2` lattice.
     pub fn generate(world: &World, key: TileKey) -> Self {
         let o = Self::sample_origin_m(world, key);
         let n = TILE_SAMPLES;
-        let mut heights_m = Vec::with_capacity(n * n);
+        let axis =
+            |from: f64| -> Vec<f64> { (0..n).map(|i| from + i as f64 * TILE_SPACING_M).collect() };
+        let (xs, ys) = (axis(o[0]), axis(o[1]));
+        let heights_m: Vec<f32> = world
+            .heights_on_lattice(&xs, &ys)
+            .iter()
+            .map(|&z| z as f32)
+            .collect();
         let mut ground = Vec::with_capacity(n * n);
-        for j in 0..n {
-            for i in 0..n {
-                let (x, y) = (
-                    o[0] + i as f64 * TILE_SPACING_M,
-                    o[1] + j as f64 * TILE_SPACING_M,
-                );
-                heights_m.push(world.height_m(x, y) as f32);
-                ground.push(world.ground_type(x, y));
-            }
+        for &y in &ys {
+            ground.extend(xs.iter().map(|&x| world.ground_type(x, y)));
         }
         Self {
             key,
