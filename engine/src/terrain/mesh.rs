@@ -127,35 +127,37 @@ fn sample_grid(
 ) -> (Vec<f32>, Vec<u8>) {
     let r = tree.rect(key);
     let s = tree.spacing_m(key.level);
+    let Some(t) = tile else {
+        let axis = |from: f64| -> Vec<f64> {
+            (-1..=(NODE_VERTS as i64))
+                .map(|i| from + i as f64 * s)
+                .collect()
+        };
+        let (xs, ys) = (axis(r.min[0]), axis(r.min[1]));
+        let h = world
+            .heights_on_lattice(&xs, &ys)
+            .iter()
+            .map(|&z| z as f32)
+            .collect();
+        let g = ys
+            .iter()
+            .flat_map(|&y| xs.iter().map(move |&x| world.ground_type(x, y)))
+            .collect();
+        return (h, g);
+    };
     let w = NODE_VERTS + 2;
     let mut h = Vec::with_capacity(w * w);
     let mut g = Vec::with_capacity(w * w);
-    match tile {
-        Some(t) => {
-            let step = (s / TILE_SPACING_M).round() as i64;
-            let o = world.origin_m();
-            let base_i = ((r.min[0] - o[0] - f64::from(t.key.tx) * TILE_SIZE_M) / TILE_SPACING_M)
-                .round() as i64;
-            let base_j = ((r.min[1] - o[1] - f64::from(t.key.ty) * TILE_SIZE_M) / TILE_SPACING_M)
-                .round() as i64;
-            for j in -1..=(NODE_VERTS as i64) {
-                for i in -1..=(NODE_VERTS as i64) {
-                    h.push(t.height_at(base_i + i * step, base_j + j * step));
-                    g.push(t.ground_at(base_i + i * step, base_j + j * step));
-                }
-            }
-        }
-        None => {
-            let axis = |from: f64| -> Vec<f64> {
-                (-1..=(NODE_VERTS as i64))
-                    .map(|i| from + i as f64 * s)
-                    .collect()
-            };
-            let (xs, ys) = (axis(r.min[0]), axis(r.min[1]));
-            h.extend(world.heights_on_lattice(&xs, &ys).iter().map(|&z| z as f32));
-            for &y in &ys {
-                g.extend(xs.iter().map(|&x| world.ground_type(x, y)));
-            }
+    let step = (s / TILE_SPACING_M).round() as i64;
+    let o = world.origin_m();
+    let base_i =
+        ((r.min[0] - o[0] - f64::from(t.key.tx) * TILE_SIZE_M) / TILE_SPACING_M).round() as i64;
+    let base_j =
+        ((r.min[1] - o[1] - f64::from(t.key.ty) * TILE_SIZE_M) / TILE_SPACING_M).round() as i64;
+    for j in -1..=(NODE_VERTS as i64) {
+        for i in -1..=(NODE_VERTS as i64) {
+            h.push(t.height_at(base_i + i * step, base_j + j * step));
+            g.push(t.ground_at(base_i + i * step, base_j + j * step));
         }
     }
     (h, g)
