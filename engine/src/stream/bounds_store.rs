@@ -4,7 +4,7 @@ use crate::surface::World;
 use crate::terrain::bounds::{self, NodeBounds};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use rustc_hash::FxHashMap;
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 /// Node bounds known so far, shared by selection (reads) and jobs (writes).
 #[derive(Debug, Default)]
@@ -19,6 +19,12 @@ impl BoundsStore {
             .unwrap_or_else(PoisonError::into_inner)
             .get(&key)
             .copied()
+    }
+
+    /// Every bound known now, locked for as long as the guard lives (one lock for a whole
+    /// selection instead of one per node; jobs wait to add theirs meanwhile).
+    pub fn known(&self) -> MutexGuard<'_, FxHashMap<NodeKey, NodeBounds>> {
+        self.map.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// The node's bounds, measured outside the lock when unknown (after its parent's).

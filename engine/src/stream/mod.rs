@@ -213,6 +213,8 @@ pub struct Streamer {
     /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
     to_split: FxHashSet<NodeKey>,
     prefetch: FxHashSet<NodeKey>,
+    /// The prefetch set's parts, each refreshed when stale (see [`predict`]).
+    prefetch_parts: Vec<predict::PrefetchPart>,
     /// This frame's draw list, computed once after the fades advance.
     drawn: Vec<DrawNode>,
     /// Split state per node: 0 = the node is drawn, 1 = its children are; in between, fading.
@@ -293,6 +295,7 @@ impl Streamer {
             needed: FxHashSet::default(),
             to_split: FxHashSet::default(),
             prefetch: FxHashSet::default(),
+            prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             split: FxHashMap::default(),
             drawn: Vec::new(),
             frame: 0,
@@ -330,11 +333,12 @@ impl Streamer {
     /// The wanted set for a camera at threshold `tau_px`, using only bounds already known (see
     /// the module docs).
     pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
+        let known = self.shared.bounds.known();
         let sel = crate::terrain::select::traverse(
             &self.shared.tree,
             cam,
             true,
-            |key| self.shared.bounds.peek(key),
+            |key| known.get(&key).copied(),
             |key: NodeKey, b: &NodeBounds, dist, px| match self.settings.fixed_level {
                 Some(level) => key.level < level,
                 None if self.settings.vegetation_occlusion && px > tau_px => {

@@ -10,7 +10,7 @@
 use super::Streamer;
 use crate::camera::Camera;
 use crate::terrain::quadtree::NodeKey;
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 /// How far ahead the camera is predicted (s). Class `1 + i` holds what the camera needs
 /// `PREDICT_HORIZONS_S[i]` from now and not sooner.
@@ -38,32 +38,80 @@ pub fn extrapolate(cam: &Camera, velocity_m_per_s: glam::DVec3) -> Vec<(f64, Cam
         .collect()
 }
 
+/// A prefetch part (one predicted camera, or the lower-tau ring around the camera) is
+/// computed again when its camera moved more than this since it was computed (m) ...
+const REFRESH_MOVED_M: f64 = 8.0;
+/// ... or turned more than this (cosine of the angle between the view directions) ...
+const REFRESH_TURNED_COS: f64 = 0.996;
+// ... and at least every `PREFETCH_PARTS` frames, one part per frame in turn.
+
+/// Prefetch parts: one per horizon, then the lower-tau ring around the camera.
+pub(super) const PREFETCH_PARTS: usize = PREDICT_HORIZONS_S.len() + 1;
+
+/// One part of the prefetch set: the nodes one camera needs, and that camera.
+#[derive(Debug, Clone, Default)]
+pub(super) struct PrefetchPart {
+    camera: Option<Camera>,
+    nodes: FxHashSet<NodeKey>,
+}
+
+impl PrefetchPart {
+    /// Whether this part, computed for its camera, is stale for `cam`.
+    fn stale_for(&self, cam: &Camera) -> bool {
+        self.camera.is_none_or(|c| {
+            c.position_m.distance(cam.position_m) > REFRESH_MOVED_M
+                || c.forward.dot(cam.forward) < REFRESH_TURNED_COS
+        })
+    }
+}
+
 impl Streamer {
     /// The prefetch classes for this frame: every node not needed now, mapped to the class of
     /// the earliest predicted camera (`future`, sorted by time) that needs it, else to the
-    /// lower-tau class around `cam`.
+    /// lower-tau class around `cam`. The parts' selections are the costliest bookkeeping of a
+    /// frame, so each is computed again only when its camera moved or turned enough, or when
+    /// its turn comes (one part per frame): a part is at most a few frames old, and never
+    /// when the camera jumps or starts moving (a part with no camera is computed at once).
     pub(super) fn prefetch_classes(
-        &self,
+        &mut self,
         cam: &Camera,
         future: &[(f64, Camera)],
     ) -> FxHashMap<NodeKey, usize> {
         let tau = self.settings.tau_px;
+        let turn = (self.frame % PREFETCH_PARTS as u64) as usize;
+        for part in 0..PREFETCH_PARTS {
+            let (camera, factor) = if part + 1 == PREFETCH_PARTS {
+                (Some(cam), self.settings.prefetch_factor)
+            } else {
+                (future.get(part).map(|(_, c)| c), self.settings.split_factor)
+            };
+            let Some(camera) = camera else {
+                self.prefetch_parts[part] = PrefetchPart::default();
+                continue;
+            };
+            if part != turn && !self.prefetch_parts[part].stale_for(camera) {
+                continue;
+            }
+            let wanted = self.select_wanted(camera, tau * factor);
+            let ancestors = Self::ancestors_of(&wanted);
+            self.prefetch_parts[part] = PrefetchPart {
+                camera: Some(*camera),
+                nodes: self.needed_for(&wanted, &ancestors),
+            };
+        }
         let mut out = FxHashMap::default();
-        let mut add = |set: rustc_hash::FxHashSet<NodeKey>, class: usize| {
-            for k in set {
+        for (part, p) in self.prefetch_parts.iter().enumerate() {
+            let class = if part + 1 == PREFETCH_PARTS {
+                CLASSES - 1
+            } else {
+                1 + part
+            };
+            for &k in &p.nodes {
                 if !self.needed.contains(&k) {
                     out.entry(k).or_insert(class);
                 }
             }
-        };
-        for (i, (_, c)) in future.iter().take(PREDICT_HORIZONS_S.len()).enumerate() {
-            let wanted = self.select_wanted(c, tau * self.settings.split_factor);
-            let ancestors = Self::ancestors_of(&wanted);
-            add(self.needed_for(&wanted, &ancestors), 1 + i);
         }
-        let wanted = self.select_wanted(cam, tau * self.settings.prefetch_factor);
-        let ancestors = Self::ancestors_of(&wanted);
-        add(self.needed_for(&wanted, &ancestors), CLASSES - 1);
         out
     }
 }
@@ -72,6 +120,35 @@ impl Streamer {
 mod tests {
     use super::*;
     use glam::DVec3;
+
+    #[test]
+    fn a_prefetch_part_is_stale_when_new_moved_or_turned() {
+        let cam = Camera::look_at(DVec3::ZERO, DVec3::X, 1.0, [64, 64]);
+        assert!(PrefetchPart::default().stale_for(&cam), "never computed");
+        let part = PrefetchPart {
+            camera: Some(cam),
+            nodes: FxHashSet::default(),
+        };
+        assert!(!part.stale_for(&cam));
+        let moved = |m: f64| {
+            let mut c = cam;
+            c.position_m.y += m;
+            c
+        };
+        assert!(!part.stale_for(&moved(0.5 * REFRESH_MOVED_M)));
+        assert!(part.stale_for(&moved(1.5 * REFRESH_MOVED_M)));
+        let turned = |deg: f64| {
+            let a = deg.to_radians();
+            Camera::look_at(
+                DVec3::ZERO,
+                DVec3::new(a.cos(), a.sin(), 0.0),
+                1.0,
+                [64, 64],
+            )
+        };
+        assert!(!part.stale_for(&turned(2.0)));
+        assert!(part.stale_for(&turned(10.0)));
+    }
 
     #[test]
     fn a_still_camera_predicts_nothing_and_a_moving_one_moves_on() {
