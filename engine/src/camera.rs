@@ -57,8 +57,14 @@ impl Camera {
 
     /// The frustum planes (inward unit normals through the camera, plus the near plane).
     pub fn frustum(&self) -> Frustum {
+        self.frustum_widened(1.0)
+    }
+
+    /// The frustum with the tangents of its half-angles scaled by `factor` (a guard band
+    /// around the view for `factor > 1`).
+    pub fn frustum_widened(&self, factor: f64) -> Frustum {
         let (f, r, u) = (self.forward, self.right(), self.up);
-        let ty = (self.fovy_rad * 0.5).tan();
+        let ty = (self.fovy_rad * 0.5).tan() * factor;
         let tx = ty * self.aspect();
         Frustum {
             apex_m: self.position_m,

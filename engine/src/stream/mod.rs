@@ -53,6 +53,10 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+/// The tangents of the wanted selection's frustum half-angles over the view's (see
+/// [`Streamer::select_wanted`]).
+pub const GUARD_BAND: f64 = 1.15;
+
 /// Everything phases may read, shared by all threads.
 #[derive(Debug)]
 pub struct Shared {
@@ -331,13 +335,15 @@ impl Streamer {
     }
 
     /// The wanted set for a camera at threshold `tau_px`, using only bounds already known (see
-    /// the module docs).
+    /// the module docs). Blocks are culled by a frustum [`GUARD_BAND`] wider than the view,
+    /// so ground about to come into view (the camera turning, or passing a hill) is split
+    /// before it shows, instead of appearing coarse and fading to its children on screen.
     pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
         let known = self.shared.bounds.known();
-        let sel = crate::terrain::select::traverse(
+        let sel = crate::terrain::select::traverse_in(
             &self.shared.tree,
             cam,
-            true,
+            Some(cam.frustum_widened(GUARD_BAND)),
             |key| known.get(&key).copied(),
             |key: NodeKey, b: &NodeBounds, dist, px| match self.settings.fixed_level {
                 Some(level) => key.level < level,

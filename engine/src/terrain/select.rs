@@ -161,11 +161,22 @@ pub fn traverse<B: Into<Option<NodeBounds>>>(
     tree: &QuadTree,
     cam: &Camera,
     cull: bool,
+    bounds: impl FnMut(NodeKey) -> B,
+    split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
+) -> Selection {
+    traverse_in(tree, cam, cull.then(|| cam.frustum()), bounds, split)
+}
+
+/// [`traverse`] culling by `frustum` (none: no culling), which may differ from the camera's
+/// own (a guard band); pixel errors are the camera's.
+pub fn traverse_in<B: Into<Option<NodeBounds>>>(
+    tree: &QuadTree,
+    cam: &Camera,
+    frustum: Option<Frustum>,
     mut bounds: impl FnMut(NodeKey) -> B,
     mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
 ) -> Selection {
     let mut out = Selection::default();
-    let frustum = cam.frustum();
     let k = cam.k_px();
     let mut stack = vec![NodeKey::ROOT];
     while let Some(key) = stack.pop() {
@@ -178,7 +189,7 @@ pub fn traverse<B: Into<Option<NodeBounds>>>(
             continue;
         };
         let (min, max) = node_aabb(tree, key, &b);
-        if cull && !frustum.intersects_aabb(min, max) {
+        if frustum.is_some_and(|f| !f.intersects_aabb(min, max)) {
             out.culled += 1;
             continue;
         }
@@ -189,7 +200,7 @@ pub fn traverse<B: Into<Option<NodeBounds>>>(
             &b,
             cam.position_m,
             k,
-            cull.then_some(&frustum),
+            frustum.as_ref(),
             0.0,
             dist,
         );

@@ -222,7 +222,7 @@ fn a_new_content_kind_plugs_in_with_one_registration() {
 
 #[test]
 fn a_burst_of_teleports_settles_with_nothing_leaked() {
-    let budget = 24 << 20;
+    let budget = 32 << 20;
     let mut s = streamer(StreamSettings {
         cache_budget_bytes: budget,
         ..settings(3)
@@ -484,4 +484,46 @@ fn a_moving_camera_prefetches_where_it_is_going() {
         covered(&still, b) < b.len(),
         "a still camera asks for everything ahead too: the test cannot tell prefetch apart"
     );
+}
+
+/// The guard band: after settling, turning the camera by less than the band's margin needs no
+/// new node: everything the new exact view's selection reaches at the split threshold has its
+/// bounds and is ready at once. (With no guard band, `GUARD_BAND = 1`, this view reaches four
+/// nodes whose bounds are not even known.)
+#[test]
+fn turning_within_the_guard_band_needs_no_new_node() {
+    // No lower-tau prefetch: only the guard band prepares ground outside the view.
+    let mut s = streamer(StreamSettings {
+        prefetch_factor: StreamSettings::default().split_factor,
+        ..settings(2)
+    });
+    // Tilted 3 degrees further down: nearer, finer ground comes into view at the bottom.
+    let tilted = |pitch_deg: f64| {
+        let c = cam_at(200.0, 250.0, 20.0, 0.5);
+        let p = pitch_deg.to_radians();
+        let dir = DVec3::new(0.5f64.cos() * p.cos(), 0.5f64.sin() * p.cos(), -p.sin());
+        Camera::look_at(c.position_m, c.position_m + dir, c.fovy_rad, c.viewport_px)
+    };
+    let (a, b) = (tilted(37.0), tilted(40.0));
+    assert!(s.settle(&a, 120.0));
+    let tree = *s.tree();
+    let split = s.settings.tau_px * s.settings.split_factor;
+    let exact = |cam: &Camera| {
+        engine::terrain::select::traverse(
+            &tree,
+            cam,
+            true,
+            |k| s.shared.bounds.peek(k),
+            |_, _, _, px| px > split,
+        )
+    };
+    let after = exact(&b);
+    assert!(
+        after.unknown_bounds.is_empty(),
+        "{:?}",
+        after.unknown_bounds
+    );
+    for n in &after.nodes {
+        assert!(s.is_ready(n.key), "{:?} came into view unprepared", n.key);
+    }
 }
