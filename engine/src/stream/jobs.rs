@@ -60,12 +60,34 @@ pub(super) fn release_tiles(s: &Shared, w: &mut NodeWork) {
     }
 }
 
+/// Runs the calling (worker) thread below the thread that owns the streamer (the render
+/// thread): at the lowest normal priority, and on Linux under the batch policy (no wakeup
+/// preemption), so that with as many workers as cores the frame's bookkeeping still gets a
+/// core when it needs one. Best effort: a refusal is logged.
+pub fn lower_priority() {
+    use thread_priority::ThreadPriority;
+    #[cfg(target_os = "linux")]
+    let result = thread_priority::unix::set_thread_priority_and_policy(
+        thread_priority::unix::thread_native_id(),
+        ThreadPriority::Min,
+        thread_priority::unix::ThreadSchedulePolicy::Normal(
+            thread_priority::unix::NormalThreadSchedulePolicy::Batch,
+        ),
+    );
+    #[cfg(not(target_os = "linux"))]
+    let result = thread_priority::set_current_thread_priority(ThreadPriority::Min);
+    if let Err(e) = result {
+        log::warn!("node worker keeps its normal priority: {e:?}");
+    }
+}
+
 pub(super) fn worker_loop(
     shared: &Shared,
     phases: &[Phase],
     rx: &Receiver<JobMsg>,
     tx: &Sender<JobResult>,
 ) {
+    lower_priority();
     while let Ok(mut job) = rx.recv() {
         let mut i = job.start_phase;
         let mut cancelled = false;

@@ -35,6 +35,7 @@ pub mod bounds_store;
 pub mod content;
 mod display;
 mod jobs;
+pub use jobs::lower_priority;
 pub mod predict;
 mod residency;
 

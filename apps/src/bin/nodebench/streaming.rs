@@ -44,13 +44,15 @@ pub(crate) fn section_streaming(
     let dt = 1.0 / 60.0;
     let seconds = if quick { 2.0 } else { 12.0 };
     let frames = (seconds / dt) as usize;
-    scheduling_noise(r, frames, dt);
     let tau = 2.0;
     let worker_counts: Vec<usize> = if workers > 1 {
         vec![1, workers]
     } else {
         vec![1]
     };
+    for busy in [0].into_iter().chain(worker_counts.iter().copied()) {
+        scheduling_noise(r, frames, dt, busy);
+    }
     for (flight, workers) in FLIGHTS
         .iter()
         .flat_map(|f| worker_counts.iter().map(move |&w| (*f, w)))
@@ -170,10 +172,11 @@ pub(crate) fn section_streaming(
 }
 
 /// The machine's own scheduling noise, next to the bookkeeping rows: a fixed amount of
-/// single-threaded work (about 1 ms, calibrated first) per 60 Hz frame, nothing else running.
-/// Its p99 over its p50 is what the operating system (and, in a virtual machine, the host) adds
-/// to any per-frame time here; bookkeeping percentiles are no better than that.
-fn scheduling_noise(r: &mut Report, frames: usize, dt: f64) {
+/// single-threaded work (about 1 ms, calibrated first) per 60 Hz frame while `busy` other
+/// threads compute without pause (as node workers do in a flight), at their lowest priority.
+/// What its p99 adds over its p50 is what the operating system (and, in a virtual machine, the
+/// host) adds to any per-frame time here; bookkeeping percentiles are no better than that.
+fn scheduling_noise(r: &mut Report, frames: usize, dt: f64, busy: usize) {
     let work = |n: u64| {
         let mut x = 0u64;
         for i in 0..n {
@@ -184,20 +187,34 @@ fn scheduling_noise(r: &mut Report, frames: usize, dt: f64) {
     let t = Instant::now();
     work(1_000_000);
     let per_ms = (1_000_000.0 / (t.elapsed().as_secs_f64() * 1e3)) as u64;
+    let stop = std::sync::atomic::AtomicBool::new(false);
     let mut times = Vec::with_capacity(frames);
-    let start = Instant::now();
-    for f in 0..frames {
-        let t = Instant::now();
-        work(per_ms);
-        times.push(t.elapsed().as_secs_f64());
-        let due = (f + 1) as f64 * dt;
-        let now = start.elapsed().as_secs_f64();
-        if now < due {
-            std::thread::sleep(std::time::Duration::from_secs_f64(due - now));
+    std::thread::scope(|scope| {
+        for _ in 0..busy {
+            scope.spawn(|| {
+                engine::stream::lower_priority();
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    work(per_ms / 10);
+                }
+            });
         }
-    }
+        let start = Instant::now();
+        for f in 0..frames {
+            let t = Instant::now();
+            work(per_ms);
+            times.push(t.elapsed().as_secs_f64());
+            let due = (f + 1) as f64 * dt;
+            let now = start.elapsed().as_secs_f64();
+            if now < due {
+                std::thread::sleep(std::time::Duration::from_secs_f64(due - now));
+            }
+        }
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    });
     times.sort_by(f64::total_cmp);
-    let params = format!("fixed ~1 ms of work per frame, {frames} frames at 60 Hz, 1 thread");
+    let params = format!(
+        "fixed ~1 ms of work per frame, {frames} frames at 60 Hz, {busy} busy low-priority thread(s)"
+    );
     for (name, q) in [("p50", 0.5), ("p99", 0.99)] {
         r.add(
             "streaming",
