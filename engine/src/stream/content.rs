@@ -87,6 +87,8 @@ pub trait ContentKind: Any + Send + Sync + std::fmt::Debug {
     /// How visible (0..=1) the top of a node at `rect` (highest point `z_max_m`, at `dist_m`) is
     /// from `camera_m` through this content; selection multiplies a node's projected error by it
     /// when `StreamSettings::vegetation_occlusion` is on. 1: this content blocks nothing.
+    /// Called while the selection holds the bounds store's lock: it must not read
+    /// `Shared::bounds`.
     fn visibility(
         &self,
         _shared: &Shared,

@@ -355,43 +355,43 @@ impl DecalField {
         if self.blocks.is_empty() {
             return 0.0;
         }
-        // Fast zero away from decals (positions outside the map take the full path).
-        let (cx, cy) = (
-            (x_m - self.origin_m[0]) / self.coarse_cell_m,
-            (y_m - self.origin_m[1]) / self.coarse_cell_m,
-        );
-        if cx >= 0.0 && cy >= 0.0 {
-            let (ix, iy) = (cx as usize, cy as usize);
-            if ix < self.coarse_dims[0]
-                && iy < self.coarse_dims[1]
-                && !self.coarse[iy * self.coarse_dims[0] + ix]
-            {
-                return 0.0;
-            }
+        let x = self.lattice_axis(x_m, 0);
+        let y = self.lattice_axis(y_m, 1);
+        if self.fast_zero(&x, &y) {
+            return 0.0;
         }
-        let gx = (x_m - self.origin_m[0]) / DECAL_SPACING_M;
-        let gy = (y_m - self.origin_m[1]) / DECAL_SPACING_M;
-        let (x0, y0) = (
-            worldgen::sample::floor_small(gx),
-            worldgen::sample::floor_small(gy),
-        );
-        let (ix, iy) = (x0 as i64, y0 as i64);
+        let (ix, iy) = (x.index, y.index);
         // The 4 x 4 stencil touches at most 2 x 2 blocks; none stored means zero.
         let (bx0, bx1) = ((ix - 1).div_euclid(BLOCK), (ix + 2).div_euclid(BLOCK));
         let (by0, by1) = ((iy - 1).div_euclid(BLOCK), (iy + 2).div_euclid(BLOCK));
         if !(by0..=by1).any(|by| (bx0..=bx1).any(|bx| self.blocks.contains_key(&key(bx, by)))) {
             return 0.0;
         }
-        let (wx, wy) = (catmull_rom_weights(gx - x0), catmull_rom_weights(gy - y0));
         let mut sum = 0.0;
-        for (j, wyj) in wy.iter().enumerate() {
+        for (j, wyj) in y.weights.iter().enumerate() {
             let mut row = 0.0;
-            for (i, wxi) in wx.iter().enumerate() {
+            for (i, wxi) in x.weights.iter().enumerate() {
                 row += wxi * self.sample(ix + i as i64 - 1, iy + j as i64 - 1);
             }
             sum += wyj * row;
         }
         sum
+    }
+
+    /// One world coordinate along `axis` (0 = x, 1 = y) as [`Self::offset_m`] reads it.
+    fn lattice_axis(&self, v_m: f64, axis: usize) -> LatticeAxis {
+        LatticeAxis::new(
+            v_m - self.origin_m[axis],
+            self.coarse_cell_m,
+            self.coarse_dims[axis],
+        )
+    }
+
+    /// Fast zero away from decals: the position's coarse cell holds no stored block (positions
+    /// outside the coarse grid take the full path).
+    fn fast_zero(&self, x: &LatticeAxis, y: &LatticeAxis) -> bool {
+        matches!((x.coarse, y.coarse), (Some(cx), Some(cy))
+            if !self.coarse[cy * self.coarse_dims[0] + cx])
     }
 
     /// [`Self::offset_m`] at every point of the lattice `xs` x `ys` (row-major, one row per
@@ -405,23 +405,14 @@ impl DecalField {
             return out;
         }
         let axis = |v: &[f64], a: usize| -> Vec<LatticeAxis> {
-            v.iter()
-                .map(|&t| {
-                    LatticeAxis::new(
-                        t - self.origin_m[a],
-                        self.coarse_cell_m,
-                        self.coarse_dims[a],
-                    )
-                })
-                .collect()
+            v.iter().map(|&t| self.lattice_axis(t, a)).collect()
         };
         let (cols, rows) = (axis(xs, 0), axis(ys, 1));
         // The points that pass the fast-zero test (the point version's, per column and row).
         let mut live: Vec<(usize, usize)> = Vec::new();
         for (j, y) in rows.iter().enumerate() {
             for (i, x) in cols.iter().enumerate() {
-                let fast_zero = matches!((x.coarse, y.coarse), (Some(cx), Some(cy))
-                    if !self.coarse[cy * self.coarse_dims[0] + cx]);
+                let fast_zero = self.fast_zero(x, y);
                 if !fast_zero {
                     live.push((i, j));
                 }

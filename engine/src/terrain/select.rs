@@ -10,7 +10,7 @@
 
 use crate::camera::{Camera, Frustum, distance_to_aabb};
 use crate::surface::world::World;
-use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
+use crate::terrain::bounds::{BoundsCache, NodeBounds, block_rect};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 
@@ -47,23 +47,6 @@ pub fn projected_error_px(
     frustum: Option<&Frustum>,
     near_m: f64,
 ) -> f64 {
-    let (lo, hi) = node_aabb(tree, key, b);
-    let node_dist_m = distance_to_aabb(eye_m, lo, hi);
-    blocks_error_px(tree, key, b, eye_m, k_px, frustum, near_m, node_dist_m)
-}
-
-/// [`projected_error_px`] given the distance from the eye to the node's box.
-#[allow(clippy::too_many_arguments)]
-fn blocks_error_px(
-    tree: &QuadTree,
-    key: NodeKey,
-    b: &NodeBounds,
-    eye_m: DVec3,
-    k_px: f64,
-    frustum: Option<&Frustum>,
-    near_m: f64,
-    node_dist_m: f64,
-) -> f64 {
     let px = |error_m: f64, dist_m: f64| {
         let d = dist_m.max(near_m);
         if error_m <= 0.0 {
@@ -74,35 +57,22 @@ fn blocks_error_px(
             f64::INFINITY
         }
     };
+    let (lo, hi) = node_aabb(tree, key, b);
+    let node_dist_m = distance_to_aabb(eye_m, lo, hi);
     let mut out = px(b.vegetation_error_m, node_dist_m);
-    let r = tree.rect(key);
-    let side = (r.max[0] - r.min[0]) / BLOCKS_PER_SIDE as f64;
-    let near_sq = near_m * near_m;
     for (i, block) in b.blocks.iter().enumerate() {
         // A block's box lies inside the node's, so it is at least as far: blocks whose error
         // over the node's distance cannot raise the result are skipped without their box.
         if block.error_m <= 0.0 || px(block.error_m, node_dist_m) <= out {
             continue;
         }
-        let (bx, by) = ((i % BLOCKS_PER_SIDE) as f64, (i / BLOCKS_PER_SIDE) as f64);
-        let lo = DVec3::new(r.min[0] + bx * side, r.min[1] + by * side, block.z_min_m);
-        let hi = DVec3::new(lo.x + side, lo.y + side, block.z_max_m);
-        // `error k / max(d, near) <= out` compared squared: no square root for blocks that
-        // do not raise the result.
-        let d_sq = (eye_m.clamp(lo, hi) - eye_m).length_squared().max(near_sq);
-        let e_k = block.error_m * k_px;
-        if d_sq > 0.0 && e_k * e_k <= out * out * d_sq {
-            continue;
-        }
+        let (lo, hi) = block_aabb(tree, key, b, i);
+        let block_px = px(block.error_m, distance_to_aabb(eye_m, lo, hi));
         // The frustum test (the costlier part) only for blocks that would raise the result.
-        if frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
+        if block_px <= out || frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
             continue;
         }
-        out = if d_sq > 0.0 {
-            e_k / d_sq.sqrt()
-        } else {
-            f64::INFINITY
-        };
+        out = block_px;
     }
     out
 }
@@ -194,16 +164,7 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
             continue;
         }
         let dist = distance_to_aabb(cam.position_m, min, max);
-        let error_px = blocks_error_px(
-            tree,
-            key,
-            &b,
-            cam.position_m,
-            k,
-            frustum.as_ref(),
-            0.0,
-            dist,
-        );
+        let error_px = projected_error_px(tree, key, &b, cam.position_m, k, frustum.as_ref(), 0.0);
         if key.level < tree.max_level && split(key, &b, dist, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order.
             stack.extend(key.children().into_iter().rev());
