@@ -313,7 +313,6 @@ pub mod gpu {
             world,
             StreamSettings {
                 workers: 1,
-                max_in_flight: 2,
                 tau_px,
                 ..StreamSettings::default()
             },

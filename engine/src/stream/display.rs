@@ -3,7 +3,7 @@
 
 use super::Streamer;
 use crate::terrain::quadtree::NodeKey;
-use rustc_hash::FxHashSet;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 /// One node to draw this frame, with its dither interval (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -13,16 +13,27 @@ pub struct DrawNode {
     pub dither_hi: f32,
 }
 
+/// A fade to children that must finish before the parent's projected error reaches tau plans
+/// on this share of the frames its error growth since the last frame leaves (the error grows
+/// faster than linearly as the camera closes in).
+const FADE_MARGIN: f64 = 0.75;
+
 impl Streamer {
     /// Moves every node's split state towards its target: split when it is an ancestor of
     /// wanted nodes and all its children are ready, merged otherwise (a node merges only once
     /// its children have merged).
+    ///
+    /// A fade to the children normally takes [`super::StreamSettings::fade_s`], but never
+    /// shows the parent over tau: a fading parent whose projected error grew since the last
+    /// frame fades fast enough to finish before it reaches tau at that growth, and one already
+    /// at tau (a fast camera, or ground coming into view) is replaced at once.
     pub(super) fn advance_fades(&mut self, dt_s: f64) {
         let step = if self.settings.fade_s > 0.0 {
             (dt_s / self.settings.fade_s) as f32
         } else {
             1.0
         };
+        let mut fade_px = FxHashMap::default();
         let mut stack = vec![NodeKey::ROOT];
         let mut seen: FxHashSet<NodeKey> = FxHashSet::default();
         while let Some(key) = stack.pop() {
@@ -44,6 +55,19 @@ impl Streamer {
             };
             // Step towards the target (and stay there once reached).
             let ns = if target > s {
+                let step = match self.error_px(key) {
+                    Some(px) => {
+                        fade_px.insert(key, px);
+                        split_step(
+                            step,
+                            s,
+                            px,
+                            self.fade_px.get(&key).copied(),
+                            self.settings.tau_px,
+                        )
+                    }
+                    None => step,
+                };
                 (s + step).min(target)
             } else {
                 (s - step).max(target)
@@ -62,6 +86,22 @@ impl Streamer {
             }
         }
         self.split.retain(|k, _| seen.contains(k));
+        self.fade_px = fade_px;
+    }
+
+    /// A resident node's projected error (px) for the current camera, inside its view.
+    fn error_px(&self, key: NodeKey) -> Option<f64> {
+        let cam = self.camera?;
+        let b = self.resident.get(&key)?.work.bounds?;
+        Some(crate::terrain::select::projected_error_px(
+            &self.shared.tree,
+            key,
+            &b,
+            cam.position_m,
+            cam.k_px(),
+            Some(&cam.frustum()),
+            cam.near_m,
+        ))
     }
 
     pub(super) fn children_drawable(&self, key: NodeKey) -> bool {
@@ -113,5 +153,63 @@ impl Streamer {
             }
         }
         out
+    }
+}
+
+/// The fade step (share of the fade per frame) for a node at split state `s` fading to its
+/// children with the normal step `step`, whose projected error is `px` now and was `px_before`
+/// in the last frame (if it was fading then), at threshold `tau_px`: at least `step`, 1 at or
+/// over tau, else large enough to finish within [`FADE_MARGIN`] of the frames left before the
+/// error reaches tau at its growth since the last frame.
+fn split_step(step: f32, s: f32, px: f64, px_before: Option<f64>, tau_px: f64) -> f32 {
+    if px >= tau_px {
+        return 1.0;
+    }
+    match px_before {
+        Some(p0) if px > p0 => {
+            let frames_left = (FADE_MARGIN * (tau_px - px) / (px - p0)).floor().max(1.0);
+            step.max(((1.0 - f64::from(s)) / frames_left) as f32)
+        }
+        _ => step,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::split_step;
+
+    #[test]
+    fn a_fade_finishes_before_the_error_reaches_tau() {
+        let (step, tau) = (1.0 / 12.0, 2.0);
+        // Slow growth, or none: the normal step.
+        assert_eq!(split_step(step, 0.0, 1.3, Some(1.299), tau), step);
+        assert_eq!(split_step(step, 0.0, 1.3, None, tau), step);
+        assert_eq!(split_step(step, 0.5, 1.3, Some(1.4), tau), step);
+        // At or over tau: at once.
+        assert_eq!(split_step(step, 0.1, 2.0, Some(1.9), tau), 1.0);
+        assert_eq!(split_step(step, 0.1, 7.0, None, tau), 1.0);
+        // 0.1 px a frame from 1.4 px (6 frames to tau): faster than the normal step, a little
+        // more each frame as the margin shrinks, done in the frame at 1.8 px, before tau.
+        let (mut s, mut px, mut before) = (0.2f32, 1.4, 1.3);
+        let mut steps = Vec::new();
+        loop {
+            let st = split_step(step, s, px, Some(before), tau);
+            steps.push(st);
+            s = (s + st).min(1.0);
+            if s >= 1.0 {
+                break;
+            }
+            before = px;
+            px += 0.1;
+        }
+        assert!(px < tau, "the fade ended at {px} px");
+        assert!(
+            (px - 1.8).abs() < 1e-9,
+            "the fade ended at {px} px, steps {steps:?}"
+        );
+        assert!(
+            steps.iter().all(|&st| st > step && st < 1.0),
+            "steps {steps:?}"
+        );
     }
 }

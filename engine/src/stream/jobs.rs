@@ -1,9 +1,10 @@
 //! Jobs: requests, the worker threads that run CPU phases, cancellation, result collection and
 //! the GPU phases on the owner thread.
 
-use super::{NodeWork, Phase, PhaseKind, Resident, Shared, Streamer};
+use super::queue::{JobQueue, Pending};
+use super::{JobLatency, NodeWork, Phase, PhaseKind, Resident, Shared, Streamer};
 use crate::terrain::quadtree::NodeKey;
-use crossbeam_channel::{Receiver, Sender};
+use crossbeam_channel::Sender;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, PoisonError};
 use std::time::Instant;
@@ -30,10 +31,9 @@ pub(super) struct JobMsg {
 
 /// A request's state on the owner thread.
 pub(super) enum RequestState {
-    Queued,
-    Running {
-        cancel: Arc<AtomicBool>,
-    },
+    /// In the shared queue or taken by a worker (the owner does not track which: a worker
+    /// takes jobs without telling it; cancelling finds out).
+    InWorkers { cancel: Arc<AtomicBool> },
     WaitingGpu {
         work: Box<NodeWork>,
         next_phase: usize,
@@ -44,6 +44,8 @@ pub(super) struct Request {
     pub(super) generation: u64,
     pub(super) state: RequestState,
     pub(super) requested_at: Instant,
+    /// When the node was first needed for display (requested in, or promoted to, class 0).
+    pub(super) needed_at: Option<Instant>,
     /// Priority class: 0 needed for display, then prefetch by time to need (see
     /// [`super::predict::CLASSES`]).
     pub(super) class: usize,
@@ -84,11 +86,11 @@ pub fn lower_priority() {
 pub(super) fn worker_loop(
     shared: &Shared,
     phases: &[Phase],
-    rx: &Receiver<JobMsg>,
+    queue: &JobQueue,
     tx: &Sender<JobResult>,
 ) {
     lower_priority();
-    while let Ok(mut job) = rx.recv() {
+    while let Some(mut job) = queue.take(&shared.tree) {
         let mut i = job.start_phase;
         let mut cancelled = false;
         while i < phases.len() && phases[i].kind == PhaseKind::Cpu {
@@ -117,99 +119,56 @@ pub(super) fn worker_loop(
 }
 
 impl Streamer {
-    pub(super) fn request(&mut self, key: NodeKey, class: usize) {
+    /// Queues a job for `key` in priority class `class` (the caller holds the queue's lock and
+    /// wakes the workers after its batch).
+    pub(super) fn request(&mut self, pending: &mut Pending, key: NodeKey, class: usize) {
         let generation = self.next_generation;
         self.next_generation += 1;
-        let state = RequestState::Queued;
+        let cancel = Arc::new(AtomicBool::new(false));
+        let now = Instant::now();
+        pending.push(
+            class,
+            JobMsg {
+                key,
+                generation,
+                cancel: Arc::clone(&cancel),
+                start_phase: 0,
+                work: Box::new(NodeWork::new(key)),
+            },
+        );
         self.requests.insert(
             key,
             Request {
                 generation,
-                state,
-                requested_at: Instant::now(),
+                state: RequestState::InWorkers { cancel },
+                requested_at: now,
+                needed_at: (class == 0).then_some(now),
                 class,
             },
         );
-        self.buckets[class][usize::from(key.level)].push(key);
         self.stats.requested += 1;
     }
 
-    pub(super) fn cancel(&mut self, key: NodeKey) {
+    /// Cancels `key`'s request (the caller holds the queue's lock): a queued job is removed, a
+    /// running one is told to stop at its next phase boundary, one waiting for its GPU phase
+    /// is dropped.
+    pub(super) fn cancel(&mut self, pending: &mut Pending, key: NodeKey) {
         let Some(req) = self.requests.remove(&key) else {
             return;
         };
         match req.state {
-            RequestState::Queued => {
-                self.buckets[req.class][usize::from(key.level)].retain(|&k| k != key);
-                self.stats.cancelled_queued += 1;
-            }
-            RequestState::Running { cancel } => {
-                cancel.store(true, Ordering::Release);
-                self.stats.cancelled_running += 1;
+            RequestState::InWorkers { cancel } => {
+                if let Some(mut job) = pending.remove(req.class, key) {
+                    release_tiles(&self.shared, &mut job.work);
+                    self.stats.cancelled_queued += 1;
+                } else {
+                    cancel.store(true, Ordering::Release);
+                    self.stats.cancelled_running += 1;
+                }
             }
             RequestState::WaitingGpu { mut work, .. } => {
                 release_tiles(&self.shared, &mut work);
                 self.stats.cancelled_gpu += 1;
-            }
-        }
-    }
-
-    /// Hands queued jobs to workers: by class (time to need), then coarsest level first, then
-    /// nearest to the camera.
-    pub(super) fn dispatch(&mut self) {
-        let running = self
-            .requests
-            .values()
-            .filter(|r| matches!(r.state, RequestState::Running { .. }))
-            .count();
-        let mut free = self.settings.max_in_flight.saturating_sub(running);
-        let cam_pos = self.camera.map(|c| c.position_m);
-        let tree = self.shared.tree;
-        let levels = self.buckets[0].len();
-        let classes = self.buckets.len();
-        for (class, level) in (0..classes).flat_map(|c| (0..levels).map(move |l| (c, l))) {
-            while free > 0 && !self.buckets[class][level].is_empty() {
-                let bucket = &mut self.buckets[class][level];
-                let idx = match cam_pos {
-                    Some(p) => {
-                        let dist = |k: &NodeKey| {
-                            let r = tree.rect(*k);
-                            let c = glam::DVec3::new(
-                                (r.min[0] + r.max[0]) * 0.5,
-                                (r.min[1] + r.max[1]) * 0.5,
-                                p.z,
-                            );
-                            (c - p).length_squared()
-                        };
-                        (0..bucket.len())
-                            .min_by(|&a, &b| {
-                                dist(&bucket[a])
-                                    .total_cmp(&dist(&bucket[b]))
-                                    .then(bucket[a].cmp(&bucket[b]))
-                            })
-                            .unwrap_or(0)
-                    }
-                    None => 0,
-                };
-                let key = bucket.swap_remove(idx);
-                let Some(req) = self.requests.get_mut(&key) else {
-                    continue;
-                };
-                let cancel = Arc::new(AtomicBool::new(false));
-                let msg = JobMsg {
-                    key,
-                    generation: req.generation,
-                    cancel: Arc::clone(&cancel),
-                    start_phase: 0,
-                    work: Box::new(NodeWork::new(key)),
-                };
-                req.state = RequestState::Running { cancel };
-                if let Some(tx) = &self.to_workers
-                    && tx.send(msg).is_err()
-                {
-                    log::error!("node workers have stopped");
-                }
-                free -= 1;
             }
         }
     }
@@ -248,9 +207,10 @@ impl Streamer {
 
     pub(super) fn finish(&mut self, key: NodeKey, work: NodeWork) {
         if let Some(req) = self.requests.remove(&key) {
-            self.stats
-                .latencies_s
-                .push(req.requested_at.elapsed().as_secs_f64());
+            self.stats.latencies.push(JobLatency {
+                request_to_ready_s: req.requested_at.elapsed().as_secs_f64(),
+                need_to_ready_s: req.needed_at.map(|t| t.elapsed().as_secs_f64()),
+            });
         }
         self.stats.completed += 1;
         self.resident.insert(
@@ -307,21 +267,23 @@ impl Streamer {
             if i >= self.phases.len() {
                 self.finish(key, *w);
             } else {
-                // More CPU phases follow: back to a worker.
+                // More CPU phases follow: back to the workers, in the request's class.
                 let cancel = Arc::new(AtomicBool::new(false));
-                let generation = req.generation;
-                req.state = RequestState::Running {
+                let (generation, class) = (req.generation, req.class);
+                req.state = RequestState::InWorkers {
                     cancel: Arc::clone(&cancel),
                 };
-                if let Some(tx) = &self.to_workers {
-                    let _ = tx.send(JobMsg {
+                self.queue.lock().push(
+                    class,
+                    JobMsg {
                         key,
                         generation,
                         cancel,
                         start_phase: i,
                         work: w,
-                    });
-                }
+                    },
+                );
+                self.queue.wake_workers();
             }
         }
         // Finished nodes change the draw list only when the root first becomes ready (splits
@@ -351,11 +313,11 @@ impl Drop for Streamer {
     fn drop(&mut self) {
         // Cancel everything, close the channel, and join the workers.
         for req in self.requests.values() {
-            if let RequestState::Running { cancel } = &req.state {
+            if let RequestState::InWorkers { cancel } = &req.state {
                 cancel.store(true, Ordering::Release);
             }
         }
-        self.to_workers = None;
+        self.queue.close();
         for w in self.workers.drain(..) {
             let _ = w.join();
         }

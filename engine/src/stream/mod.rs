@@ -9,13 +9,14 @@
 //!   ([`Streamer::run_gpu_phases`]). New content is a new kind, not a new scheduler.
 //!
 //! Files: [`content`] (kinds, payloads, node work), `bounds_store` (bounds known so far),
-//! `jobs` (requests, workers, cancellation, GPU phases), `display` (fades and the draw list),
+//! `jobs` (requests, workers, cancellation, GPU phases), `queue` (pending jobs by priority), `display` (fades and the draw list),
 //! `residency` (LRU eviction under the budget, statistics).
 //! - **Priority** is time to need first ([`predict`]: needed now, then needed by the predicted
 //!   camera 0.4, 1 and 2 s ahead, then the lower-tau prefetch around the camera), then larger
-//!   nodes first, then nearer to the camera. Pending requests sit in one bucket per class and
-//!   level; the distance is computed when a job is dispatched, so priorities follow the camera
-//!   without rebuilding a queue.
+//!   nodes first, then nearer to the camera. Pending jobs sit in a queue shared with the
+//!   workers (`queue`), one bucket per class and level; a free worker takes the best job, the
+//!   distance computed at that moment, so priorities follow the camera without rebuilding a
+//!   queue and workers never wait for a hand-off.
 //! - **Cancellation**: a request that is no longer wanted is removed from its bucket if still
 //!   queued; if running, its flag is set and the worker stops at the next phase boundary,
 //!   releasing its tiles; if waiting for its GPU phase, it is dropped. Every result carries
@@ -37,6 +38,7 @@ mod display;
 mod jobs;
 pub use jobs::lower_priority;
 pub mod predict;
+mod queue;
 mod residency;
 
 pub use bounds_store::BoundsStore;
@@ -48,8 +50,9 @@ use crate::surface::World;
 use crate::terrain::bounds::NodeBounds;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use crate::terrain::tiles::TileCache;
-use crossbeam_channel::{Receiver, Sender};
-use jobs::{JobMsg, JobResult, Request, RequestState};
+use crossbeam_channel::Receiver;
+use jobs::{JobResult, Request, RequestState};
+use queue::JobQueue;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -103,9 +106,6 @@ pub struct StreamSettings {
     pub vegetation_occlusion: bool,
     /// Worker threads (at least 1).
     pub workers: usize,
-    /// Most jobs handed to workers at once (queued there or running); see
-    /// [`StreamSettings::in_flight_for`].
-    pub max_in_flight: usize,
     /// Memory budget for prepared nodes kept resident (bytes).
     pub cache_budget_bytes: usize,
     /// GPU phases per frame: time and bytes budgets (at least one phase runs per frame).
@@ -126,20 +126,10 @@ pub struct StreamSettings {
 }
 
 impl StreamSettings {
-    /// Jobs in flight for `workers` worker threads. Jobs are handed over once per frame and
-    /// run in FIFO order: the hand-off must hold about one 60 Hz frame of node jobs per worker
-    /// (a few milliseconds each), or workers idle until the next frame (with `workers + 1`,
-    /// throughput was capped at two jobs a frame for any worker count), and no more, or urgent
-    /// display jobs wait behind a deep backlog of prefetch. Four jobs per worker, plus one.
-    pub fn in_flight_for(workers: usize) -> usize {
-        4 * workers.max(1) + 1
-    }
-
-    /// These settings with `workers` worker threads and the matching hand-off.
+    /// These settings with `workers` worker threads.
     #[must_use]
     pub fn with_workers(mut self, workers: usize) -> Self {
         self.workers = workers.max(1);
-        self.max_in_flight = Self::in_flight_for(self.workers);
         self
     }
 }
@@ -149,7 +139,6 @@ impl Default for StreamSettings {
         let cores = std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get);
         Self {
             workers: (cores - 1).max(1),
-            max_in_flight: Self::in_flight_for((cores - 1).max(1)),
             cache_budget_bytes: 512 << 20,
             gpu_budget_s: 0.004,
             gpu_budget_bytes: 32 << 20,
@@ -193,10 +182,20 @@ pub struct StreamStats {
     pub pinned_bytes: usize,
     pub wanted: usize,
     pub drawn: usize,
-    /// Request-to-ready latencies (s) of jobs completed since the last `take_latencies`.
-    pub latencies_s: Vec<f64>,
+    /// Latencies of the jobs completed since the last `take_latencies`.
+    pub latencies: Vec<JobLatency>,
     /// Time of the last update's two selections (display and prefetch sets).
     pub last_selection_s: f64,
+}
+
+/// How long a completed job took.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JobLatency {
+    /// From the request (for display or for prefetch) to ready (s).
+    pub request_to_ready_s: f64,
+    /// From the moment the node was first needed for display (requested or promoted to the
+    /// display class) to ready (s); `None` for a prefetched node ready before it was needed.
+    pub need_to_ready_s: Option<f64>,
 }
 
 /// The streaming system. Owned by one thread (the render thread); workers run CPU phases.
@@ -204,12 +203,12 @@ pub struct Streamer {
     pub shared: Arc<Shared>,
     pub settings: StreamSettings,
     phases: Arc<Vec<Phase>>,
-    to_workers: Option<Sender<JobMsg>>,
+    /// Pending jobs per priority class (see [`predict::CLASSES`]) and level; workers take
+    /// from it.
+    queue: Arc<JobQueue>,
     from_workers: Receiver<JobResult>,
     workers: Vec<std::thread::JoinHandle<()>>,
     requests: FxHashMap<NodeKey, Request>,
-    /// Pending (queued) requests per priority class (see [`predict::CLASSES`]) and level.
-    buckets: Vec<Vec<Vec<NodeKey>>>,
     next_generation: u64,
     resident: FxHashMap<NodeKey, Resident>,
     wanted: FxHashSet<NodeKey>,
@@ -224,6 +223,8 @@ pub struct Streamer {
     drawn: Vec<DrawNode>,
     /// Split state per node: 0 = the node is drawn, 1 = its children are; in between, fading.
     split: FxHashMap<NodeKey, f32>,
+    /// Projected error (px) in the last frame of the nodes then fading to their children.
+    fade_px: FxHashMap<NodeKey, f64>,
     frame: u64,
     camera: Option<Camera>,
     /// Camera velocity estimated from the last two updates (m/s).
@@ -264,14 +265,15 @@ impl Streamer {
             kinds,
         });
         let phases = Arc::new(phases);
-        let (to_workers, rx) = crossbeam_channel::unbounded::<JobMsg>();
+        let levels = usize::from(tree.max_level) + 1;
+        let queue = Arc::new(JobQueue::new(predict::CLASSES, levels));
         let (tx, from_workers) = crossbeam_channel::unbounded::<JobResult>();
         let workers = (0..settings.workers.max(1))
             .map(|i| {
                 let (s, p, r, t) = (
                     Arc::clone(&shared),
                     Arc::clone(&phases),
-                    rx.clone(),
+                    Arc::clone(&queue),
                     tx.clone(),
                 );
                 std::thread::Builder::new()
@@ -284,16 +286,14 @@ impl Streamer {
             .into_iter()
             .flatten()
             .collect();
-        let levels = usize::from(tree.max_level) + 1;
         Self {
             shared,
             settings,
             phases,
-            to_workers: Some(to_workers),
+            queue,
             from_workers,
             workers,
             requests: FxHashMap::default(),
-            buckets: vec![vec![Vec::new(); levels]; predict::CLASSES],
             next_generation: 1,
             resident: FxHashMap::default(),
             wanted: FxHashSet::default(),
@@ -302,6 +302,7 @@ impl Streamer {
             prefetch: FxHashSet::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             split: FxHashMap::default(),
+            fade_px: FxHashMap::default(),
             drawn: Vec::new(),
             frame: 0,
             camera: None,
@@ -439,8 +440,11 @@ impl Streamer {
             .filter(|k| !self.needed.contains(k) && !self.prefetch.contains(k))
             .copied()
             .collect();
+        let queue = Arc::clone(&self.queue);
+        let mut pending = queue.lock();
+        pending.set_camera(cam.position_m);
         for k in stale {
-            self.cancel(k);
+            self.cancel(&mut pending, k);
         }
         // Request what is missing, each node in its class; promote requests whose time to
         // need came closer.
@@ -454,26 +458,28 @@ impl Streamer {
         missing.sort_unstable();
         for (class, k) in missing {
             match self.requests.get_mut(&k) {
-                None => self.request(k, class),
+                None => self.request(&mut pending, k, class),
                 Some(r) if r.class > class => {
                     let old = r.class;
                     r.class = class;
-                    if matches!(r.state, RequestState::Queued) {
-                        let level = usize::from(k.level);
-                        self.buckets[old][level].retain(|&q| q != k);
-                        self.buckets[class][level].push(k);
+                    if class == 0 {
+                        r.needed_at = Some(Instant::now());
+                    }
+                    if matches!(r.state, RequestState::InWorkers { .. }) {
+                        pending.promote(k, old, class);
                     }
                 }
                 Some(_) => {}
             }
         }
+        drop(pending);
+        self.queue.wake_workers();
         let frame = self.frame;
         for k in self.needed.iter().chain(&self.prefetch) {
             if let Some(r) = self.resident.get_mut(k) {
                 r.last_used_frame = frame;
             }
         }
-        self.dispatch();
         self.advance_fades(dt_s);
         self.drawn = self.compute_draw_list();
         self.evict();

@@ -38,12 +38,13 @@ pub fn extrapolate(cam: &Camera, velocity_m_per_s: glam::DVec3) -> Vec<(f64, Cam
         .collect()
 }
 
-/// A prefetch part (one predicted camera, or the lower-tau ring around the camera) is
-/// computed again when its camera moved more than this since it was computed (m) ...
+/// A prefetch part (one predicted camera, or the lower-tau ring around the camera) is stale
+/// when its camera moved more than this since it was computed (m) ...
 const REFRESH_MOVED_M: f64 = 8.0;
-/// ... or turned more than this (cosine of the angle between the view directions) ...
+/// ... or turned more than this (cosine of the angle between the view directions). One part
+/// is computed again per frame: the first stale one in turn, else the next in turn (so each
+/// is at most `PREFETCH_PARTS` frames old).
 const REFRESH_TURNED_COS: f64 = 0.996;
-// ... and at least every `PREFETCH_PARTS` frames, one part per frame in turn.
 
 /// Prefetch parts: one per horizon, then the lower-tau ring around the camera.
 pub(super) const PREFETCH_PARTS: usize = PREDICT_HORIZONS_S.len() + 1;
@@ -69,9 +70,10 @@ impl Streamer {
     /// The prefetch classes for this frame: every node not needed now, mapped to the class of
     /// the earliest predicted camera (`future`, sorted by time) that needs it, else to the
     /// lower-tau class around `cam`. The parts' selections are the costliest bookkeeping of a
-    /// frame, so each is computed again only when its camera moved or turned enough, or when
-    /// its turn comes (one part per frame): a part is at most a few frames old, and never
-    /// when the camera jumps or starts moving (a part with no camera is computed at once).
+    /// frame, so one part is computed again per frame (the first stale one in turn, else the
+    /// next in turn): a part is at most `PREFETCH_PARTS` frames old; a part with no selection
+    /// yet (the camera starts moving) is computed at once. The display set is computed every
+    /// frame, so a stale part delays prefetch only.
     pub(super) fn prefetch_classes(
         &mut self,
         cam: &Camera,
@@ -79,17 +81,29 @@ impl Streamer {
     ) -> FxHashMap<NodeKey, usize> {
         let tau = self.settings.tau_px;
         let turn = (self.frame % PREFETCH_PARTS as u64) as usize;
-        for part in 0..PREFETCH_PARTS {
-            let (camera, factor) = if part + 1 == PREFETCH_PARTS {
-                (Some(cam), self.settings.prefetch_factor)
+        let part_camera = |part: usize| {
+            if part + 1 == PREFETCH_PARTS {
+                Some((cam, self.settings.prefetch_factor))
             } else {
-                (future.get(part).map(|(_, c)| c), self.settings.split_factor)
-            };
-            let Some(camera) = camera else {
+                future
+                    .get(part)
+                    .map(|(_, c)| (c, self.settings.split_factor))
+            }
+        };
+        // One part a frame: the first stale one from this frame's turn on, else the turn's;
+        // and every part that has no selection yet.
+        let refresh_in_turn = (0..PREFETCH_PARTS)
+            .map(|i| (turn + i) % PREFETCH_PARTS)
+            .find(|&part| {
+                part_camera(part).is_some_and(|(c, _)| self.prefetch_parts[part].stale_for(c))
+            })
+            .unwrap_or(turn);
+        for part in 0..PREFETCH_PARTS {
+            let Some((camera, factor)) = part_camera(part) else {
                 self.prefetch_parts[part] = PrefetchPart::default();
                 continue;
             };
-            if part != turn && !self.prefetch_parts[part].stale_for(camera) {
+            if part != refresh_in_turn && self.prefetch_parts[part].camera.is_some() {
                 continue;
             }
             let wanted = self.select_wanted(camera, tau * factor);

@@ -46,16 +46,18 @@ impl Streamer {
     }
 
     pub(super) fn refresh_stats(&mut self) {
-        let (mut q, mut r, mut g) = (0, 0, 0);
+        let (mut in_workers, mut g) = (0, 0);
         for req in self.requests.values() {
             match req.state {
-                RequestState::Queued => q += 1,
-                RequestState::Running { .. } => r += 1,
+                RequestState::InWorkers { .. } => in_workers += 1,
                 RequestState::WaitingGpu { .. } => g += 1,
             }
         }
+        // Jobs a worker took and has not reported yet count as running (cancelled ones are no
+        // longer requests).
+        let q = self.queue.lock().len().min(in_workers);
         self.stats.queued = q;
-        self.stats.running = r;
+        self.stats.running = in_workers - q;
         self.stats.waiting_gpu = g;
         self.stats.resident = self.resident.len();
         self.stats.resident_bytes = self.resident.values().map(|r| r.bytes).sum();
@@ -70,9 +72,9 @@ impl Streamer {
         self.stats.drawn = self.drawn.len();
     }
 
-    /// Takes the request-to-ready latencies recorded since the last call.
-    pub fn take_latencies(&mut self) -> Vec<f64> {
-        std::mem::take(&mut self.stats.latencies_s)
+    /// Takes the latencies of the jobs completed since the last call.
+    pub fn take_latencies(&mut self) -> Vec<super::JobLatency> {
+        std::mem::take(&mut self.stats.latencies)
     }
 
     /// Keys of all resident nodes.

@@ -26,7 +26,6 @@ fn streamer(settings: StreamSettings) -> Streamer {
 fn settings(workers: usize) -> StreamSettings {
     StreamSettings {
         workers,
-        max_in_flight: workers * 2 + 1,
         fade_s: 0.1,
         tau_px: 0.5,
         ..StreamSettings::default()
