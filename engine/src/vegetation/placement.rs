@@ -267,13 +267,16 @@ impl Placer {
     }
 
     /// Calls `f(rank, period_seed, x, y)` for every jittered tile point of species `s` in `rect`
-    /// (half-open) whose rank is below `k_end` and for which `pre(rank, period_seed)` holds
-    /// (`pre` sees the point before its jittered position is computed: a cheap early filter).
+    /// (half-open) whose rank is below `k_end` and below `cell_k_end(area)`, where `area` holds
+    /// every jittered position of the points of the point's tile cell, and for which
+    /// `pre(rank, period_seed)` holds (`pre` sees the point before its jittered position is
+    /// computed: a cheap early filter).
     fn visit(
         &self,
         s: usize,
         rect: Rect,
         k_end: u32,
+        mut cell_k_end: impl FnMut(Rect) -> u32,
         mut pre: impl FnMut(u32, u64) -> bool,
         mut f: impl FnMut(u32, u64, f64, f64),
     ) {
@@ -306,9 +309,23 @@ impl Placer {
                     continue;
                 };
                 let period = hash3(sp.seed, px, py);
+                let cell_m = t / cells as f64;
                 for cy in cy0..=cy1 {
                     for cx in cx0..=cx1 {
-                        for &(k, u) in &self.tile.slots[cy * cells + cx] {
+                        let slots = &self.tile.slots[cy * cells + cx];
+                        if slots.first().is_none_or(|&(k, _)| k >= k_end) {
+                            continue;
+                        }
+                        let (x0, y0) = (
+                            base[0] + cx as f64 * cell_m,
+                            base[1] + cy as f64 * cell_m,
+                        );
+                        let area = Rect {
+                            min: [x0 - jitter, y0 - jitter],
+                            max: [x0 + cell_m + jitter, y0 + cell_m + jitter],
+                        };
+                        let k_end = k_end.min(cell_k_end(area));
+                        for &(k, u) in slots {
                             if k >= k_end {
                                 break;
                             }
@@ -345,6 +362,7 @@ impl Placer {
             s,
             rect,
             k_end,
+            |_| u32::MAX,
             |_, _| true,
             |k, _, x, y| {
                 if (f64::from(k) + 0.5) / n < fraction {
@@ -382,13 +400,20 @@ impl Placer {
             return;
         }
         let n = self.tile.len as f64;
-        // Ranks at or beyond this cannot be kept anywhere in the rectangle.
-        let k_end = ((n * (dmax / sp.tile_density_per_m2)).ceil() as u32).min(self.tile.len as u32);
+        // Ranks at or beyond this cannot be kept where the density is at most `d`: a point of
+        // rank k is kept where (k + 1/2) / n < density / tile density.
+        let k_end_for =
+            |d: f64| ((n * (d / sp.tile_density_per_m2)).ceil() as u32).min(self.tile.len as u32);
+        let k_end = k_end_for(dmax);
+        // The same bound per tile cell, from the density samples around it (most points of a
+        // large node fail the density test; this skips them before their jitter and density
+        // are computed).
+        let cell_k_end = |area: Rect| k_end_for(self.density_max(world, s, area) * scale);
         // Size factor (+-25%) of the item of rank k in a period, and its height.
         let size_of = |k: u32, period: u64| 0.75 + 0.5 * unit3(period, i64::from(k), 2);
         let height_of = |size: f64| (sp.height_m * size) as f32;
         let pre = |k: u32, period: u64| keep(height_of(size_of(k, period)));
-        self.visit(s, rect, k_end, pre, |k, period, x, y| {
+        self.visit(s, rect, k_end, cell_k_end, pre, |k, period, x, y| {
             let rank = (f64::from(k) + 0.5) / n;
             let d = scale * self.density(world, s, x, y);
             if rank >= d / sp.tile_density_per_m2 {
