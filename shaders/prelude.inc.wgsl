@@ -96,6 +96,12 @@ fn lit_pixel(in: VertexOut) -> vec4<f32> {
     if (!in_dither(in.clip.xy, in.fade)) {
         discard;
     }
+    return lit_color(in);
+}
+
+// `lit_pixel` without the dither test, for nodes that are not fading (their interval is
+// [0, 1): every pixel is theirs). A shader without `discard` keeps the early depth test.
+fn lit_color(in: VertexOut) -> vec4<f32> {
     let mode = u32(frame.fog.z + 0.5);
     var albedo = in.albedo;
     if (mode == 1u) {

@@ -18,7 +18,14 @@ fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> VertexOut {
     return out;
 }
 
+// Nodes in a cross-fade: dithered.
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     return lit_pixel(in);
+}
+
+// Nodes drawn alone at their place (dither interval [0, 1)): no `discard`, same pixels.
+@fragment
+fn fs_solid(in: VertexOut) -> @location(0) vec4<f32> {
+    return lit_color(in);
 }

@@ -67,15 +67,24 @@ struct MeshPage {
     indices: wgpu::Buffer,
 }
 
-/// Terrain pipelines, the mesh pool, the node table and this frame's batches (key: page).
+/// A terrain batch: whether its nodes are in a cross-fade (drawn dithered, after the others),
+/// and their mesh page.
+type BatchKey = (bool, u32);
+
+/// Terrain pipelines, the mesh pool, the node table and this frame's batches.
 pub struct TerrainRenderer {
+    /// Nodes in a cross-fade: the fragment shader discards the pixels outside their dither
+    /// interval.
     fill: wgpu::RenderPipeline,
+    /// Nodes not fading: the same pixels without the dither test, so the shader has no
+    /// `discard` and hidden fragments fail the depth test before shading.
+    solid: wgpu::RenderPipeline,
     wire: Option<wgpu::RenderPipeline>,
     colors: wgpu::BindGroup,
     pool: Suballocator,
     pages: Vec<MeshPage>,
     table: NodeTable,
-    batches: Batches<u32>,
+    batches: Batches<BatchKey>,
     triangles: u64,
     culled: u32,
     /// This frame's batches are recorded as multi-draws (else as plain loops).
@@ -117,6 +126,16 @@ impl TerrainRenderer {
             frame.color_format,
         );
         let fill = pipeline(device, &module, &layout, &spec);
+        let solid = pipeline(
+            device,
+            &module,
+            &layout,
+            &PipelineSpec {
+                label: "terrain solid",
+                fs: "fs_solid",
+                ..spec.clone()
+            },
+        );
         let wire = gpu.wireframe.then(|| {
             pipeline(
                 device,
@@ -146,6 +165,7 @@ impl TerrainRenderer {
         let colors = uniform_group(device, "ground colours", &colors_layout, 0, &buffer);
         Self {
             fill,
+            solid,
             wire,
             colors,
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
@@ -284,8 +304,9 @@ impl NodeRenderer for TerrainRenderer {
                 self.table
                     .set(frame, slot, node.origin_m, d.key.level, d.dither);
                 let m = &node.mesh;
+                let fading = d.dither[0] > 0.0 || d.dither[1] < 1.0;
                 self.batches.push(
-                    m.page,
+                    (fading, m.page),
                     Item::Indexed(DrawIndexedIndirectArgs {
                         index_count: m.len[1],
                         instance_count: 1,
@@ -311,15 +332,21 @@ impl NodeRenderer for TerrainRenderer {
         stats: &mut DrawStats,
     ) {
         stats.culled += self.culled;
-        let pipeline = match (&self.wire, draws.view.wireframe) {
-            (Some(w), true) => w,
-            _ => &self.fill,
-        };
-        pass.set_pipeline(pipeline);
+        let wire = self.wire.as_ref().filter(|_| draws.view.wireframe);
         pass.set_bind_group(1, &self.table.group, &[]);
         pass.set_bind_group(2, &self.colors, &[]);
+        let mut bound: Option<bool> = None;
         for run in self.batches.runs() {
-            let page = &self.pages[run.key as usize];
+            let (fading, page) = run.key;
+            if bound != Some(fading) {
+                pass.set_pipeline(match (wire, fading) {
+                    (Some(w), _) => w,
+                    (None, true) => &self.fill,
+                    (None, false) => &self.solid,
+                });
+                bound = Some(fading);
+            }
+            let page = &self.pages[page as usize];
             pass.set_vertex_buffer(0, page.vertices.slice(..));
             pass.set_index_buffer(page.indices.slice(..), wgpu::IndexFormat::Uint32);
             stats.draw_calls += self.batches.record(pass, run, self.merged);

@@ -316,10 +316,7 @@ impl Placer {
                         if slots.first().is_none_or(|&(k, _)| k >= k_end) {
                             continue;
                         }
-                        let (x0, y0) = (
-                            base[0] + cx as f64 * cell_m,
-                            base[1] + cy as f64 * cell_m,
-                        );
+                        let (x0, y0) = (base[0] + cx as f64 * cell_m, base[1] + cy as f64 * cell_m);
                         let area = Rect {
                             min: [x0 - jitter, y0 - jitter],
                             max: [x0 + cell_m + jitter, y0 + cell_m + jitter],
