@@ -46,6 +46,10 @@ pub trait NodeRenderer {
         0
     }
 
+    /// After a frame's uploads: submit what the upload hooks recorded (one submission per
+    /// frame instead of one per node).
+    fn finish_uploads(&mut self, _gpu: &Gpu) {}
+
     /// Before the pass: choose this frame's draws, set their node-table entries and upload the
     /// frame's batches.
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>);
@@ -94,6 +98,13 @@ impl Scene {
             .iter_mut()
             .map(|r| r.upload(gpu, frame, tree, work))
             .sum()
+    }
+
+    /// Every renderer's [`NodeRenderer::finish_uploads`], after a frame's uploads.
+    pub fn finish_uploads(&mut self, gpu: &Gpu) {
+        for r in &mut self.renderers {
+            r.finish_uploads(gpu);
+        }
     }
 
     /// Records the frame into `encoder`: one pass cleared to the view's colour and far depth,

@@ -187,6 +187,9 @@ pub struct VegetationRenderer {
     /// This frame's counts (set by `prepare`).
     frame_stats: DrawStats,
     merged: bool,
+    /// Impostor bakes recorded by this frame's uploads, submitted together before the frame is
+    /// drawn (one submission per frame instead of one per node).
+    bakes: Option<wgpu::CommandEncoder>,
 }
 
 impl std::fmt::Debug for VegetationRenderer {
@@ -427,6 +430,7 @@ impl VegetationRenderer {
             batches: Batches::new(),
             frame_stats: DrawStats::default(),
             merged: false,
+            bakes: None,
         };
         renderer.bake_atlas(gpu, frame, &bake, &looks_group, &atlas_view, atlas_size);
         renderer
@@ -636,7 +640,7 @@ impl VegetationRenderer {
     /// Renders a node's group members into its impostor layer `layer_view` (one tile per
     /// cluster, seen from the south).
     fn bake_impostors(
-        &self,
+        &mut self,
         gpu: &Gpu,
         frame: &FrameResources,
         key: NodeKey,
@@ -663,16 +667,13 @@ impl VegetationRenderer {
             contents: bytemuck::cast_slice(members),
             usage: wgpu::BufferUsages::VERTEX,
         });
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some(&label),
+        let enc = self.bakes.get_or_insert_with(|| {
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("impostor bakes"),
+            })
         });
         {
-            let mut pass = bake_pass(
-                &mut enc,
-                "impostor bake pass",
-                layer_view,
-                &self.impostors.bake_depth,
-            );
+            let mut pass = bake_pass(enc, &label, layer_view, &self.impostors.bake_depth);
             pass.set_pipeline(&self.group_bake);
             pass.set_bind_group(0, &frame.group, &[]);
             pass.set_bind_group(1, &cluster_group, &[]);
@@ -680,7 +681,14 @@ impl VegetationRenderer {
             pass.set_vertex_buffer(0, member_buffer.slice(..));
             pass.draw(0..6, 0..members.len() as u32);
         }
-        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Submits the impostor bakes recorded since the last call (after the frame's uploads, and
+    /// again in `prepare`, before anything that samples them is submitted).
+    fn submit_bakes(&mut self, gpu: &Gpu) {
+        if let Some(enc) = self.bakes.take() {
+            gpu.queue.submit([enc.finish()]);
+        }
     }
 
     /// Adds the draws of node `p` (at `level`, dither interval `dither`) whose groups' dither
@@ -782,7 +790,12 @@ impl NodeRenderer for VegetationRenderer {
         bytes
     }
 
+    fn finish_uploads(&mut self, gpu: &Gpu) {
+        self.submit_bakes(gpu);
+    }
+
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+        self.submit_bakes(gpu);
         self.batches.clear();
         self.frame_stats = DrawStats::default();
         self.merged = draws.view.multi_draw(gpu);

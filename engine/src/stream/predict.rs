@@ -45,6 +45,10 @@ const REFRESH_MOVED_M: f64 = 8.0;
 /// is computed again per frame: the first stale one in turn, else the next in turn (so each
 /// is at most `PREFETCH_PARTS` frames old).
 const REFRESH_TURNED_COS: f64 = 0.996;
+/// A part whose camera moved more than this (m) jumped (a teleport, or a prediction thrown far
+/// by a change of velocity): it is computed again at once, not in turn, so the jobs of the old
+/// place are cancelled in the same frame.
+const REFRESH_JUMP_M: f64 = 200.0;
 
 /// Prefetch parts: one per horizon, then the lower-tau ring around the camera.
 pub(super) const PREFETCH_PARTS: usize = PREDICT_HORIZONS_S.len() + 1;
@@ -57,6 +61,13 @@ pub(super) struct PrefetchPart {
 }
 
 impl PrefetchPart {
+    /// Whether this part must be computed again in this frame for `cam`: never computed, or
+    /// its camera jumped.
+    fn needs_now(&self, cam: &Camera) -> bool {
+        self.camera
+            .is_none_or(|c| c.position_m.distance(cam.position_m) > REFRESH_JUMP_M)
+    }
+
     /// Whether this part, computed for its camera, is stale for `cam`.
     fn stale_for(&self, cam: &Camera) -> bool {
         self.camera.is_none_or(|c| {
@@ -72,8 +83,8 @@ impl Streamer {
     /// lower-tau class around `cam`. The parts' selections are the costliest bookkeeping of a
     /// frame, so one part is computed again per frame (the first stale one in turn, else the
     /// next in turn): a part is at most `PREFETCH_PARTS` frames old; a part with no selection
-    /// yet (the camera starts moving) is computed at once. The display set is computed every
-    /// frame, so a stale part delays prefetch only.
+    /// yet (the camera starts moving) or whose camera jumped is computed at once. The display
+    /// set is computed every frame, so a stale part delays prefetch only.
     pub(super) fn prefetch_classes(
         &mut self,
         cam: &Camera,
@@ -91,7 +102,7 @@ impl Streamer {
             }
         };
         // One part a frame: the first stale one from this frame's turn on, else the turn's;
-        // and every part that has no selection yet.
+        // and every part that has no selection yet or whose camera jumped.
         let refresh_in_turn = (0..PREFETCH_PARTS)
             .map(|i| (turn + i) % PREFETCH_PARTS)
             .find(|&part| {
@@ -103,7 +114,7 @@ impl Streamer {
                 self.prefetch_parts[part] = PrefetchPart::default();
                 continue;
             };
-            if part != refresh_in_turn && self.prefetch_parts[part].camera.is_some() {
+            if part != refresh_in_turn && !self.prefetch_parts[part].needs_now(camera) {
                 continue;
             }
             let wanted = self.select_wanted(camera, tau * factor);
@@ -162,6 +173,11 @@ mod tests {
         };
         assert!(!part.stale_for(&turned(2.0)));
         assert!(part.stale_for(&turned(10.0)));
+        // Stale parts wait for their turn; a jump is computed at once.
+        assert!(PrefetchPart::default().needs_now(&cam));
+        assert!(!part.needs_now(&moved(150.0)));
+        assert!(!part.needs_now(&turned(90.0)));
+        assert!(part.needs_now(&moved(250.0)));
     }
 
     #[test]

@@ -348,6 +348,16 @@ impl Gate {
     }
 }
 
+/// Opens the gate when dropped: a failing assertion while jobs are held must fail the test,
+/// not leave the workers (and the streamer's drop, which joins them) waiting forever.
+struct OpenOnDrop(Arc<Gate>);
+
+impl Drop for OpenOnDrop {
+    fn drop(&mut self) {
+        self.0.set_open(true);
+    }
+}
+
 /// A job held in its last CPU phase while it is cancelled still delivers its result, late; the
 /// result is discarded. The test holds jobs in a gate phase (inserted before the GPU phase)
 /// until they are cancelled, so the order of events is fixed, not raced with sleeps.
@@ -366,6 +376,8 @@ fn late_results_of_cancelled_jobs_are_discarded() {
     }));
     phases.push(upload);
     let mut s = Streamer::with_phases(world, settings(2), kinds, phases);
+    // Dropped before `s` (locals drop in reverse order).
+    let _open_on_drop = OpenOnDrop(Arc::clone(&gate));
     let a = cam_at(100.0, 100.0, 20.0, 0.5);
     let b = cam_at(450.0, 450.0, 20.0, 3.5);
     assert!(s.settle(&a, 120.0));
