@@ -1,5 +1,5 @@
 //! The finest surface's interpolation error on the coarse grids, computed once per map at
-//! load: for every grid of spacing `hs 2^k` (`hs` the height-sample spacing, `k >= 0`) anchored
+//! load: for every grid of spacing `hs 2^k` (`hs` the height-sample spacing, `k >= -1`) anchored
 //! at the map origin and triangulated with diagonals from (i, j) to (i + 1, j + 1), per square
 //! block of [`BLOCK_QUADS`] quads: a proven range of `F` over the block, a proven bound of
 //! `|Lin F - F|` (the grid's linear interpolation of `F` at its vertices, against `F`) over the
@@ -9,7 +9,7 @@
 //! Terrain nodes whose vertex spacing is one of these grids take their bounds from here
 //! ([`crate::terrain::bounds::from_map_error`]) instead of measuring the surface at run time: the
 //! blocks of a node of spacing `hs 2^k` are exactly these blocks. On the default map that is
-//! every node of 128 m and more.
+//! every node of 64 m and more.
 //!
 //! Why it is a proof: the argument of [`crate::terrain::bounds`]. `F` is evaluated on a check
 //! lattice of [`CHECK_PER_CELL`] points per height-cell side (spacing `c`); every grid's vertices
@@ -18,8 +18,9 @@
 //! `|Lin F - F| <= max over its corners of |Lin F - F| + between(c)`, with `between` from the
 //! region bounds of the height cell that contains the check cell
 //! ([`super::world::RegionBounds::between_m`]), and `F` lies within its corners' range widened by
-//! `between(c)`. The grid of spacing `hs / 2` is measured the same way; the grid of spacing `c`
-//! has zero error at lattice points, so its bound is `between(c)`, and every finer grid's
+//! `between(c)`. The grid of spacing `hs / 2` (grid index 0, `k = -1`) is measured the same way;
+//! the grid of spacing `c` has zero error at lattice points, so its bound is `between(c)`, and
+//! every finer grid's
 //! triangles lie inside check triangles with legs `t <= c / 2`, bounded by `between(t) <=
 //! between(c)` (it grows with `t`). f32 storage rounds every bound outwards, and a margin of
 //! `1e-9 (1 + |F|)` covers the f64 evaluation and vertex positions an ulp apart.
@@ -50,17 +51,24 @@ struct Level {
     blocks: Vec<[f32; 4]>,
 }
 
-/// The per-block bounds of `F` for the grids of spacing `hs 2^k`.
+/// The per-block bounds of `F` for the grids of spacing `hs 2^k`, `k >= -1`: grid index
+/// `k + 1`, so grid 0 has spacing `hs / 2`.
 #[derive(Debug, Clone, Default)]
 pub struct MapErrorPyramid {
     origin_m: [f64; 2],
+    /// The vertex spacing of grid 0 (`hs / 2`).
     spacing_m: f64,
     levels: Vec<Level>,
 }
 
-/// Per band of `BLOCK_QUADS` height-cell rows: per grid, the band's partial block values
+/// Per band of `BLOCK_QUADS` height-cell rows, the band's partial block values
 /// `[z_min, z_max, error, finer error]` (min, max, max, max) for each block column.
-type Band = Vec<Vec<[f64; 4]>>;
+struct Band {
+    /// Per grid of spacing `hs 2^k`, `k >= 0`: one row of blocks.
+    coarse: Vec<Vec<[f64; 4]>>,
+    /// The grid of spacing `hs / 2`, whose blocks are half as high as the band: two rows.
+    half: [Vec<[f64; 4]>; 2],
+}
 
 impl MapErrorPyramid {
     /// Computes the pyramid of `world`'s surface, on all cores. Grids are kept while the map
@@ -88,15 +96,34 @@ impl MapErrorPyramid {
             },
             &|_| {},
         );
-        let mut bands: Vec<Band> = vec![Vec::new(); ch / BLOCK_QUADS];
+        let mut bands: Vec<Option<Band>> = (0..ch / BLOCK_QUADS).map(|_| None).collect();
         worldgen::par::for_each_row(
             &mut bands,
             1,
             threads,
-            |b, out| out[0] = band(world, &vertices, b, k_count),
+            |b, out| out[0] = Some(band(world, &vertices, b, k_count)),
             &|_| {},
         );
-        let levels = (0..k_count)
+        let bands: Vec<Band> = bands.into_iter().map(|b| b.expect("every band computed")).collect();
+        let half_side = BLOCK_QUADS / 2;
+        let half = {
+            // Only the bands computed (whole bands of the map).
+            let (per_row, rows) = (cw / half_side, 2 * bands.len());
+            let blocks = (0..rows)
+                .flat_map(|row| {
+                    bands[row / 2].half[row % 2]
+                        .iter()
+                        .take(per_row)
+                        .map(|v| round_outwards(*v))
+                })
+                .collect();
+            Level {
+                per_row,
+                rows,
+                blocks,
+            }
+        };
+        let coarse = (0..k_count)
             .map(|k| {
                 let side = BLOCK_QUADS << k;
                 let (per_row, rows) = (cw / side, ch / side);
@@ -106,7 +133,7 @@ impl MapErrorPyramid {
                     if row >= rows {
                         continue;
                     }
-                    for (col, v) in band[k].iter().enumerate().take(per_row) {
+                    for (col, v) in band.coarse[k].iter().enumerate().take(per_row) {
                         let a = &mut acc[row * per_row + col];
                         a[0] = a[0].min(v[0]);
                         a[1] = a[1].max(v[1]);
@@ -119,12 +146,11 @@ impl MapErrorPyramid {
                     rows,
                     blocks: acc.iter().map(|a| round_outwards(*a)).collect(),
                 }
-            })
-            .collect();
+            });
         let mut p = Self {
             origin_m: o,
-            spacing_m: hs,
-            levels,
+            spacing_m: 0.5 * hs,
+            levels: std::iter::once(half).chain(coarse).collect(),
         };
         p.spread_finer_errors();
         p
@@ -195,6 +221,11 @@ impl MapErrorPyramid {
     /// The grid index whose vertex spacing is `vertex_spacing_m`, if one is kept.
     pub fn level_of_spacing(&self, vertex_spacing_m: f64) -> Option<usize> {
         (0..self.levels.len()).find(|&k| self.spacing_m * f64::from(1u32 << k) == vertex_spacing_m)
+    }
+
+    /// The vertex spacing of grid `k` (`hs 2^(k - 1)`).
+    pub fn spacing_of_level_m(&self, k: usize) -> f64 {
+        self.spacing_m * f64::from(1u32 << k)
     }
 
     /// The block of grid `k` whose south-west corner is at world `min_m`, if it is a whole block
@@ -280,9 +311,11 @@ fn round_outwards(v: [f64; 4]) -> [f32; 4] {
     [down(v[0]), up(v[1]), up(v[2]), up(v[3])]
 }
 
-/// The partial block values of one band of `BLOCK_QUADS` height-cell rows for grids
-/// `0..k_count`, from `F` at the height-sample positions (`vertices`) and on the band's check
-/// lattice. The finer-grid value here is the bound for grids of spacing at most `hs / 2`.
+/// The partial block values of one band of `BLOCK_QUADS` height-cell rows for the grids of
+/// spacing `hs 2^k`, `k` in `0..k_count`, and for the grid of spacing `hs / 2`, from `F` at the
+/// height-sample positions (`vertices`) and on the band's check lattice. The finer-grid value
+/// of the coarse grids is the bound for grids of spacing at most `hs / 2`; that of the `hs / 2`
+/// grid, for grids of spacing at most `c`.
 fn band(world: &World, vertices: &[f64], band: usize, k_count: usize) -> Band {
     let heights = &world.map.heights;
     let (hs, o) = (world.cell_spacings_m().0, world.origin_m());
@@ -295,9 +328,13 @@ fn band(world: &World, vertices: &[f64], band: usize, k_count: usize) -> Band {
     let xs: Vec<f64> = (0..lw).map(|i| o[0] + i as f64 * c).collect();
     let ys: Vec<f64> = (0..lh).map(|j| o[1] + (y0 * sub + j) as f64 * c).collect();
     let lattice = world.heights_on_lattice(&xs, &ys);
-    let mut out: Band = (0..k_count)
-        .map(|k| vec![[f64::INFINITY, f64::NEG_INFINITY, 0.0, 0.0]; cw / (BLOCK_QUADS << k)])
-        .collect();
+    let empty = [f64::INFINITY, f64::NEG_INFINITY, 0.0, 0.0];
+    let mut out = Band {
+        coarse: (0..k_count)
+            .map(|k| vec![empty; cw / (BLOCK_QUADS << k)])
+            .collect(),
+        half: std::array::from_fn(|_| vec![empty; cw / (BLOCK_QUADS / 2)]),
+    };
     let vertex = |x: usize, y: usize| vertices[y * (cw + 1) + x];
     let at = |i: usize, j: usize| lattice[j * lw + i];
     for y in y0..y0 + BLOCK_QUADS {
@@ -339,7 +376,14 @@ fn band(world: &World, vertices: &[f64], band: usize, k_count: usize) -> Band {
                 }
             }
             let finer = half + between + 2.0 * margin;
-            for (k, blocks) in out.iter_mut().enumerate() {
+            if let Some(v) = out.half[(y - y0) / (BLOCK_QUADS / 2)].get_mut(x / (BLOCK_QUADS / 2))
+            {
+                v[0] = v[0].min(lo - between - margin);
+                v[1] = v[1].max(hi + between + margin);
+                v[2] = v[2].max(finer);
+                v[3] = v[3].max(between + 2.0 * margin);
+            }
+            for (k, blocks) in out.coarse.iter_mut().enumerate() {
                 // Only cells of whole blocks (the quads of partial ones may leave the map).
                 if y / (BLOCK_QUADS << k) >= ch / (BLOCK_QUADS << k) {
                     continue;
@@ -402,7 +446,7 @@ mod tests {
         }
     }
 
-    /// Every stored bound holds at 60,000 random points (a third of them on the cliff band)
+    /// Every stored bound holds at 80,000 random points (a third of them on the cliff band)
     /// against the surface evaluated directly, for the block's own grid and for finer grids,
     /// and the bounds are measured, not guessed: random points come close to them.
     #[test]
@@ -412,13 +456,14 @@ mod tests {
         let p = &w.map_error;
         assert_eq!(
             p.level_count(),
-            3,
-            "128 cells: blocks of 8, 16 and 32 cells"
+            4,
+            "128 cells: blocks of 4 (the half-spacing grid), 8, 16 and 32 cells"
         );
-        let mut worst_ratio = [0.0f64; 3];
-        for i in 0..60_000i64 {
-            let k = (i % 3) as usize;
-            let side = hs * (BLOCK_QUADS << k) as f64;
+        let mut worst_ratio = [0.0f64; 4];
+        for i in 0..80_000i64 {
+            let k = (i % 4) as usize;
+            let t = p.spacing_of_level_m(k);
+            let side = t * BLOCK_QUADS as f64;
             let (x, y) = if i % 3 == 0 {
                 (
                     o[0] + 276.0 + 8.0 * unit3(1, i, 0),
@@ -439,7 +484,6 @@ mod tests {
                 b.z_min_m,
                 b.z_max_m
             );
-            let t = hs * f64::from(1u32 << k);
             let e = (lin(&w, o, t, x, y) - z).abs();
             assert!(
                 e <= b.error_m,
@@ -458,8 +502,11 @@ mod tests {
                 }
             }
         }
+        // Grid 0 (spacing hs / 2) has only two check points per quad side, so the
+        // between-points term is a larger share of its bound than of the coarser grids'.
         for (k, r) in worst_ratio.iter().enumerate() {
-            assert!(*r > 0.5, "grid {k}: largest error / bound only {r}");
+            let least = if k == 0 { 0.4 } else { 0.5 };
+            assert!(*r > least, "grid {k}: largest error / bound only {r}");
         }
     }
 
@@ -468,16 +515,19 @@ mod tests {
         let w = hard_world();
         let (p, o) = (&w.map_error, w.origin_m());
         let at = |x: f64, y: f64| [o[0] + x, o[1] + y];
-        assert!(p.block_at(0, at(0.0, 0.0)).is_some());
-        assert!(p.block_at(0, at(32.0, 480.0)).is_some());
-        assert!(p.block_at(0, at(512.0, 0.0)).is_none(), "east of the map");
-        assert!(p.block_at(0, at(-32.0, 0.0)).is_none());
+        assert!(p.block_at(1, at(0.0, 0.0)).is_some());
+        assert!(p.block_at(1, at(32.0, 480.0)).is_some());
+        assert!(p.block_at(1, at(512.0, 0.0)).is_none(), "east of the map");
+        assert!(p.block_at(1, at(-32.0, 0.0)).is_none());
         assert!(
-            p.block_at(0, at(16.0, 0.0)).is_none(),
+            p.block_at(1, at(16.0, 0.0)).is_none(),
             "not on the block grid"
         );
-        assert!(p.block_at(3, at(0.0, 0.0)).is_none(), "grid not kept");
-        assert_eq!(p.level_of_spacing(8.0), Some(1));
-        assert_eq!(p.level_of_spacing(2.0), None);
+        assert!(p.block_at(0, at(16.0, 0.0)).is_some(), "half-spacing grid");
+        assert!(p.block_at(0, at(8.0, 0.0)).is_none());
+        assert!(p.block_at(4, at(0.0, 0.0)).is_none(), "grid not kept");
+        assert_eq!(p.level_of_spacing(8.0), Some(2));
+        assert_eq!(p.level_of_spacing(2.0), Some(0));
+        assert_eq!(p.level_of_spacing(1.0), None);
     }
 }

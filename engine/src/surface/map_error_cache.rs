@@ -9,7 +9,8 @@
 //! map or a changed surface definition in the engine both invalidate the file.
 //!
 //! Layout (little-endian): magic `TVS-SERR`, format version u32, key u64, payload checksum u64,
-//! then the payload: origin (2 f64), height spacing (f64), grid count (u32), and per grid its
+//! then the payload: origin (2 f64), the finest grid's spacing (f64, half the height spacing; version
+//! 1 had no such grid), grid count (u32), and per grid its
 //! blocks per row and rows (2 u32) and its blocks (4 f32 each).
 
 use super::map_error::MapErrorPyramid;
@@ -18,7 +19,7 @@ use std::hash::{Hash, Hasher};
 use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"TVS-SERR";
-const FORMAT_VERSION: u32 = 1;
+const FORMAT_VERSION: u32 = 2;
 
 /// Why a cache file was not used.
 #[derive(Debug, thiserror::Error)]

@@ -209,7 +209,7 @@ fn errors_are_monotone_and_bound_every_descendant() {
 }
 
 /// Every node of random leaf chains on the hard maps, whether its bounds come from the
-/// precomputed map-error grids (nodes whose spacing is a multiple of the height spacing) or are
+/// precomputed map-error grids (nodes whose spacing is the height spacing times 2^k, k >= -1) or are
 /// measured at run time: the bound of each block covers the densely measured error, and the
 /// surface stays in the block's height range. The precomputed path is really taken.
 #[test]
