@@ -213,8 +213,7 @@ impl World {
     /// lattices: each part (`G`, the detail amplitude and noise octaves, `E`) does its per-column
     /// and per-row work once ([`worldgen::sample::bicubic_lattice`],
     /// [`worldgen::noise::gradient_lattice`], [`DecalField::offsets_on_lattice`]).
-    /// Lattices coarser than the height grid share no work between points; they are evaluated
-    /// point by point.
+    /// On lattices coarser than the height grid the decal part is evaluated point by point.
     pub fn heights_on_lattice(&self, xs: &[f64], ys: &[f64]) -> Vec<f64> {
         let hs = self.map.manifest.heights.spacing_m;
         let sparse = |v: &[f64]| {
@@ -225,12 +224,6 @@ impl World {
                 });
             hi - lo > hs * v.len() as f64
         };
-        if sparse(xs) || sparse(ys) {
-            return ys
-                .iter()
-                .flat_map(|&y| xs.iter().map(move |&x| self.height_m(x, y)))
-                .collect();
-        }
         let o = self.origin_m();
         let ground = worldgen::sample::GridPlacement {
             origin_m: o,
@@ -243,7 +236,15 @@ impl World {
             xs,
             ys,
         );
-        let e = self.decals.offsets_on_lattice(xs, ys);
+        // The decal part reads a dense patch of its 0.5 m samples under the lattice: on a sparse
+        // lattice that patch would be far larger than the lattice, so it is evaluated per point.
+        let e = if sparse(xs) || sparse(ys) {
+            ys.iter()
+                .flat_map(|&y| xs.iter().map(move |&x| self.decals.offset_m(x, y)))
+                .collect()
+        } else {
+            self.decals.offsets_on_lattice(xs, ys)
+        };
         let octaves: Vec<(f64, Vec<f64>)> = DETAIL_OCTAVES
             .iter()
             .enumerate()
@@ -574,11 +575,13 @@ mod tests {
                     .map(|j| road[1] - f64::from(j * 7 % 30) * 0.3)
                     .collect(),
             ),
-            // Sparse (evaluated point by point): a coarse node of a far larger quad tree.
+            // Sparse (decals point by point): a coarse node of a far larger quad tree, and one
+            // over the whole map, across its roads.
             (
                 even(o[0] - 3.0e5, 4096.5, 129),
                 even(o[1] - 1.0e5, 2048.25, 129),
             ),
+            (even(o[0] + 3.0, 9.0, 50), even(o[1] + 1.0, 7.5, 60)),
             (
                 even(road[0] - 100.0, 3.9, 60),
                 even(road[1] - 50.0, 3.3, 30),
