@@ -34,6 +34,7 @@ impl Streamer {
             1.0
         };
         let mut fade_px = FxHashMap::default();
+        let view = self.camera.map(|cam| (cam, cam.frustum()));
         let mut stack = vec![NodeKey::ROOT];
         let mut seen: FxHashSet<NodeKey> = FxHashSet::default();
         while let Some(key) = stack.pop() {
@@ -55,7 +56,7 @@ impl Streamer {
             };
             // Step towards the target (and stay there once reached).
             let ns = if target > s {
-                let step = match self.error_px(key) {
+                let step = match view.as_ref().and_then(|(cam, f)| self.error_px(key, cam, f)) {
                     Some(px) => {
                         fade_px.insert(key, px);
                         split_step(
@@ -89,9 +90,13 @@ impl Streamer {
         self.fade_px = fade_px;
     }
 
-    /// A resident node's projected error (px) for the current camera, inside its view.
-    fn error_px(&self, key: NodeKey) -> Option<f64> {
-        let cam = self.camera?;
+    /// A resident node's projected error (px) for camera `cam`, inside its view `frustum`.
+    fn error_px(
+        &self,
+        key: NodeKey,
+        cam: &crate::camera::Camera,
+        frustum: &crate::camera::Frustum,
+    ) -> Option<f64> {
         let b = self.resident.get(&key)?.work.bounds?;
         Some(crate::terrain::select::projected_error_px(
             &self.shared.tree,
@@ -99,7 +104,7 @@ impl Streamer {
             &b,
             cam.position_m,
             cam.k_px(),
-            Some(&cam.frustum()),
+            Some(frustum),
             cam.near_m,
         ))
     }
