@@ -198,14 +198,14 @@ impl Streamer {
                             r.state = RequestState::WaitingGpu { work, next_phase };
                         }
                     } else {
-                        self.finish(key, *work);
+                        self.finish(key, work);
                     }
                 }
             }
         }
     }
 
-    pub(super) fn finish(&mut self, key: NodeKey, work: NodeWork) {
+    pub(super) fn finish(&mut self, key: NodeKey, work: Box<NodeWork>) {
         if let Some(req) = self.requests.remove(&key) {
             self.stats.latencies.push(JobLatency {
                 request_to_ready_s: req.requested_at.elapsed().as_secs_f64(),
@@ -213,14 +213,19 @@ impl Streamer {
             });
         }
         self.stats.completed += 1;
-        self.resident.insert(
+        let bytes = work.bytes();
+        self.resident_bytes += bytes;
+        let old = self.resident.insert(
             key,
             Resident {
-                bytes: work.bytes(),
+                bytes,
                 work,
                 last_used_frame: self.frame,
             },
         );
+        if let Some(old) = old {
+            self.resident_bytes -= old.bytes;
+        }
     }
 
     /// Runs waiting GPU phases (coarsest, then oldest first) until the frame's time or byte
@@ -265,7 +270,7 @@ impl Streamer {
             bytes += w.uploaded_bytes;
             ran += 1;
             if i >= self.phases.len() {
-                self.finish(key, *w);
+                self.finish(key, w);
             } else {
                 // More CPU phases follow: back to the workers, in the request's class.
                 let cancel = Arc::new(AtomicBool::new(false));

@@ -155,7 +155,8 @@ impl Default for StreamSettings {
 /// A prepared node.
 #[derive(Debug)]
 pub struct Resident {
-    pub work: NodeWork,
+    /// Boxed: the resident map moves only pointers when it grows.
+    pub work: Box<NodeWork>,
     pub last_used_frame: u64,
     /// `work.bytes()`, taken when the node became resident (payloads do not change after).
     pub bytes: usize,
@@ -211,6 +212,8 @@ pub struct Streamer {
     requests: FxHashMap<NodeKey, Request>,
     next_generation: u64,
     resident: FxHashMap<NodeKey, Resident>,
+    /// The sum of `bytes` over `resident` (kept as nodes enter and leave).
+    resident_bytes: usize,
     wanted: FxHashSet<NodeKey>,
     /// Nodes needed for display (wanted, ancestors, children of ancestors) and for prefetch.
     needed: FxHashSet<NodeKey>,
@@ -296,6 +299,7 @@ impl Streamer {
             requests: FxHashMap::default(),
             next_generation: 1,
             resident: FxHashMap::default(),
+            resident_bytes: 0,
             wanted: FxHashSet::default(),
             needed: FxHashSet::default(),
             to_split: FxHashSet::default(),

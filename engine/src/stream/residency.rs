@@ -22,24 +22,23 @@ impl Streamer {
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
     /// budget. Pinned nodes alone may exceed it; then nothing else is kept.
     pub(super) fn evict(&mut self) {
-        let mut bytes: usize = self.resident.values().map(|r| r.bytes).sum();
-        if bytes <= self.settings.cache_budget_bytes {
+        if self.resident_bytes <= self.settings.cache_budget_bytes {
             return;
         }
         let pinned = self.pinned();
-        let mut candidates: Vec<(u64, NodeKey)> = self
-            .resident
-            .iter()
-            .filter(|(k, _)| !pinned.contains(k))
-            .map(|(k, r)| (r.last_used_frame, *k))
-            .collect();
-        candidates.sort_unstable();
-        for (_, k) in candidates {
-            if bytes <= self.settings.cache_budget_bytes {
+        // Least recently used first (ties by key); a heap, as a frame evicts few of many.
+        let mut candidates: std::collections::BinaryHeap<std::cmp::Reverse<(u64, NodeKey)>> =
+            self.resident
+                .iter()
+                .filter(|(k, _)| !pinned.contains(k))
+                .map(|(k, r)| std::cmp::Reverse((r.last_used_frame, *k)))
+                .collect();
+        while self.resident_bytes > self.settings.cache_budget_bytes {
+            let Some(std::cmp::Reverse((_, k))) = candidates.pop() else {
                 break;
-            }
+            };
             if let Some(r) = self.resident.remove(&k) {
-                bytes -= r.bytes;
+                self.resident_bytes -= r.bytes;
                 self.stats.evicted += 1;
             }
         }
@@ -60,13 +59,16 @@ impl Streamer {
         self.stats.running = in_workers - q;
         self.stats.waiting_gpu = g;
         self.stats.resident = self.resident.len();
-        self.stats.resident_bytes = self.resident.values().map(|r| r.bytes).sum();
-        let pinned = self.pinned();
+        debug_assert_eq!(
+            self.resident_bytes,
+            self.resident.values().map(|r| r.bytes).sum::<usize>()
+        );
+        self.stats.resident_bytes = self.resident_bytes;
         self.stats.pinned_bytes = self
-            .resident
+            .pinned()
             .iter()
-            .filter(|(k, _)| pinned.contains(k))
-            .map(|(_, r)| r.bytes)
+            .filter_map(|k| self.resident.get(k))
+            .map(|r| r.bytes)
             .sum();
         self.stats.wanted = self.wanted.len();
         self.stats.drawn = self.drawn.len();
