@@ -36,7 +36,11 @@ pub struct FrameStats {
     pub reference_triangles: u64,
     /// Of `update_ms`: the selection of wanted nodes.
     pub selection_ms: f64,
+    /// Wall-clock time of update, uploads and encode.
     pub cpu_frame_ms: f64,
+    /// The frame thread's own CPU time over the same span (the time the OS gave other threads
+    /// meanwhile left out), when the platform reports it.
+    pub cpu_frame_on_cpu_ms: Option<f64>,
     /// Terrain draw calls recorded (a multi-draw counts once) and the node meshes they draw.
     pub draw_calls: u32,
     pub items: u32,
@@ -133,6 +137,7 @@ impl Viewer {
         dt_s: f64,
     ) -> FrameStats {
         let t0 = Instant::now();
+        let on_cpu0 = cpu_time::ThreadTime::try_now().ok();
         let select_cam = self.frozen.unwrap_or(*cam);
         self.streamer.update(&select_cam, dt_s);
         let t1 = Instant::now();
@@ -199,6 +204,7 @@ impl Viewer {
         }
         let node_bytes: usize = drawn.iter().map(|d| d.work.uploaded_bytes).sum();
         let t3 = Instant::now();
+        let on_cpu = on_cpu0.and_then(|t| t.try_elapsed().ok());
         let st = &self.streamer.stats;
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
         let wanted_missing = self.wanted_not_drawn();
@@ -215,6 +221,7 @@ impl Viewer {
             reference_triangles: self.reference.as_ref().map_or(0, |r| r.triangles),
             selection_ms: st.last_selection_s * 1e3,
             cpu_frame_ms: ms(t0, t3),
+            cpu_frame_on_cpu_ms: on_cpu.map(|d| d.as_secs_f64() * 1e3),
             draw_calls: stats.draw_calls,
             items: stats.items,
             triangles: stats.triangles,

@@ -114,7 +114,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 16] = [
+    let rows: [(&str, Vec<f64>); 17] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -134,6 +134,10 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "CPU frame (update + uploads + encode)",
             col(|s| s.cpu_frame_ms),
+        ),
+        (
+            "  the same, on-CPU time of the frame thread (time given to other threads left out)",
+            all.iter().filter_map(|s| s.cpu_frame_on_cpu_ms).collect(),
         ),
         ("triangles", col(|s| s.triangles as f64)),
         (

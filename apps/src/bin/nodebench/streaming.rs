@@ -92,12 +92,17 @@ pub(crate) fn section_streaming(
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
         let (mut debt_frames, mut worst_excess, mut frame_times) =
             (0usize, 0.0f64, Vec::with_capacity(frames));
+        let mut on_cpu_times = Vec::with_capacity(frames);
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
             let t = Instant::now();
+            let on_cpu = cpu_time::ThreadTime::try_now().ok();
             s.update_along(cam, dt, &future[f]);
             s.run_gpu_phases();
             frame_times.push(t.elapsed().as_secs_f64());
+            if let Some(d) = on_cpu.and_then(|t| t.try_elapsed().ok()) {
+                on_cpu_times.push(d.as_secs_f64());
+            }
             // Pop debt: a visible drawn node whose own error, projected at its own distance,
             // is over tau (a finer level exists but is not shown yet). Every drawn node is
             // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
@@ -165,6 +170,7 @@ pub(crate) fn section_streaming(
             debt_share: debt_frames as f64 / frames as f64,
             worst_excess_px: worst_excess,
             frame_times_s: frame_times,
+            on_cpu_times_s: on_cpu_times,
         };
         outcome.report(r, &params);
     }
@@ -234,6 +240,9 @@ struct FlightOutcome {
     debt_share: f64,
     worst_excess_px: f64,
     frame_times_s: Vec<f64>,
+    /// The same spans' on-CPU time of the frame thread (empty where the platform does not
+    /// report it).
+    on_cpu_times_s: Vec<f64>,
 }
 
 impl FlightOutcome {
@@ -326,5 +335,19 @@ impl FlightOutcome {
             "µs",
             params,
         );
+        if !self.on_cpu_times_s.is_empty() {
+            self.on_cpu_times_s.sort_by(f64::total_cmp);
+            r.add(
+                "streaming",
+                "bookkeeping per frame p99, on-CPU time of the frame thread",
+                apps::percentile(&self.on_cpu_times_s, 0.99) * 1e6,
+                "µs",
+                &format!(
+                    "{params}; the wall-clock row less the time the OS gave other threads \
+                     (with as many workers as cores, a worker can hold the frame thread's core \
+                     for a scheduler tick)"
+                ),
+            );
+        }
     }
 }
