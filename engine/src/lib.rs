@@ -28,6 +28,7 @@
 
 pub mod camera;
 pub mod flight;
+pub mod ground;
 pub mod kinds;
 #[cfg(feature = "measure")]
 pub mod measure;

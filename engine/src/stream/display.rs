@@ -56,7 +56,10 @@ impl Streamer {
             };
             // Step towards the target (and stay there once reached).
             let ns = if target > s {
-                let step = match view.as_ref().and_then(|(cam, f)| self.error_px(key, cam, f)) {
+                let step = match view
+                    .as_ref()
+                    .and_then(|(cam, f)| self.error_px(key, cam, f))
+                {
                     Some(px) => {
                         fade_px.insert(key, px);
                         split_step(

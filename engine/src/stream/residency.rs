@@ -27,12 +27,12 @@ impl Streamer {
         }
         let pinned = self.pinned();
         // Least recently used first (ties by key); a heap, as a frame evicts few of many.
-        let mut candidates: std::collections::BinaryHeap<std::cmp::Reverse<(u64, NodeKey)>> =
-            self.resident
-                .iter()
-                .filter(|(k, _)| !pinned.contains(k))
-                .map(|(k, r)| std::cmp::Reverse((r.last_used_frame, *k)))
-                .collect();
+        let mut candidates: std::collections::BinaryHeap<std::cmp::Reverse<(u64, NodeKey)>> = self
+            .resident
+            .iter()
+            .filter(|(k, _)| !pinned.contains(k))
+            .map(|(k, r)| std::cmp::Reverse((r.last_used_frame, *k)))
+            .collect();
         while self.resident_bytes > self.settings.cache_budget_bytes {
             let Some(std::cmp::Reverse((_, k))) = candidates.pop() else {
                 break;

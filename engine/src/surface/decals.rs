@@ -161,6 +161,13 @@ fn flat_half_width_m(d: &Decal) -> f64 {
     }
 }
 
+/// Distance (m) from a decal's centre line (or outline) beyond which it changes nothing: its
+/// samples reach its flat half width plus its falloff, and the interpolation stencil of a point
+/// reaches samples up to `2 sqrt(2)` spacings away.
+pub fn decal_reach_m(d: &Decal) -> f64 {
+    flat_half_width_m(d) + f64::from(d.falloff_m) + 2.0 * std::f64::consts::SQRT_2 * DECAL_SPACING_M
+}
+
 /// Per lattice sample within reach of one decal: (distance m, centre-line z at the closest point).
 fn decal_footprint(d: &Decal, origin_m: [f64; 2]) -> FxHashMap<(i64, i64), (f64, f64)> {
     let reach = flat_half_width_m(d) + f64::from(d.falloff_m);

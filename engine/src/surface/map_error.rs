@@ -104,7 +104,10 @@ impl MapErrorPyramid {
             |b, out| out[0] = Some(band(world, &vertices, b, k_count)),
             &|_| {},
         );
-        let bands: Vec<Band> = bands.into_iter().map(|b| b.expect("every band computed")).collect();
+        let bands: Vec<Band> = bands
+            .into_iter()
+            .map(|b| b.expect("every band computed"))
+            .collect();
         let half_side = BLOCK_QUADS / 2;
         let half = {
             // Only the bands computed (whole bands of the map).
@@ -123,30 +126,29 @@ impl MapErrorPyramid {
                 blocks,
             }
         };
-        let coarse = (0..k_count)
-            .map(|k| {
-                let side = BLOCK_QUADS << k;
-                let (per_row, rows) = (cw / side, ch / side);
-                let mut acc = vec![[f64::INFINITY, f64::NEG_INFINITY, 0.0, 0.0]; per_row * rows];
-                for (b, band) in bands.iter().enumerate() {
-                    let row = b >> k;
-                    if row >= rows {
-                        continue;
-                    }
-                    for (col, v) in band.coarse[k].iter().enumerate().take(per_row) {
-                        let a = &mut acc[row * per_row + col];
-                        a[0] = a[0].min(v[0]);
-                        a[1] = a[1].max(v[1]);
-                        a[2] = a[2].max(v[2]);
-                        a[3] = a[3].max(v[3]);
-                    }
+        let coarse = (0..k_count).map(|k| {
+            let side = BLOCK_QUADS << k;
+            let (per_row, rows) = (cw / side, ch / side);
+            let mut acc = vec![[f64::INFINITY, f64::NEG_INFINITY, 0.0, 0.0]; per_row * rows];
+            for (b, band) in bands.iter().enumerate() {
+                let row = b >> k;
+                if row >= rows {
+                    continue;
                 }
-                Level {
-                    per_row,
-                    rows,
-                    blocks: acc.iter().map(|a| round_outwards(*a)).collect(),
+                for (col, v) in band.coarse[k].iter().enumerate().take(per_row) {
+                    let a = &mut acc[row * per_row + col];
+                    a[0] = a[0].min(v[0]);
+                    a[1] = a[1].max(v[1]);
+                    a[2] = a[2].max(v[2]);
+                    a[3] = a[3].max(v[3]);
                 }
-            });
+            }
+            Level {
+                per_row,
+                rows,
+                blocks: acc.iter().map(|a| round_outwards(*a)).collect(),
+            }
+        });
         let mut p = Self {
             origin_m: o,
             spacing_m: 0.5 * hs,
@@ -376,8 +378,7 @@ fn band(world: &World, vertices: &[f64], band: usize, k_count: usize) -> Band {
                 }
             }
             let finer = half + between + 2.0 * margin;
-            if let Some(v) = out.half[(y - y0) / (BLOCK_QUADS / 2)].get_mut(x / (BLOCK_QUADS / 2))
-            {
+            if let Some(v) = out.half[(y - y0) / (BLOCK_QUADS / 2)].get_mut(x / (BLOCK_QUADS / 2)) {
                 v[0] = v[0].min(lo - between - margin);
                 v[1] = v[1].max(hi + between + margin);
                 v[2] = v[2].max(finer);
