@@ -14,7 +14,7 @@ use worldgen::map::Decal;
 pub const BUCKET_M: f64 = 64.0;
 
 /// Axis-aligned rectangle `[min, max]` in world metres.
-type Box2 = ([f64; 2], [f64; 2]);
+pub type Box2 = ([f64; 2], [f64; 2]);
 
 /// The decals of a map in buckets (see the module docs).
 #[derive(Debug, Clone)]
@@ -41,14 +41,7 @@ impl DecalIndex {
         let mut buckets = vec![Vec::new(); cols * rows];
         let mut boxes = Vec::with_capacity(decals.len());
         for (i, d) in decals.iter().enumerate() {
-            let reach = crate::surface::decals::decal_reach_m(d);
-            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for p in &d.points {
-                for a in 0..2 {
-                    lo[a] = lo[a].min(p[a] - reach);
-                    hi[a] = hi[a].max(p[a] + reach);
-                }
-            }
+            let (lo, hi) = reach_box(d);
             boxes.push((lo, hi));
             if d.points.is_empty() {
                 continue;
@@ -111,6 +104,20 @@ impl DecalIndex {
     }
 }
 
+/// A decal's reach box: the bounding box of its points widened by its reach (empty, min above
+/// max, for a decal without points).
+pub fn reach_box(d: &Decal) -> Box2 {
+    let r = crate::surface::decals::decal_reach_m(d);
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &d.points {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k] - r);
+            hi[k] = hi[k].max(p[k] + r);
+        }
+    }
+    (lo, hi)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -137,27 +144,13 @@ mod tests {
             ];
             let max = [min[0] + size, min[1] + size * 0.5];
             let got = index.query(min, max);
-            // The scan: boxes from the decals' points directly.
+            // The scan: every decal's box.
             let want: Vec<u32> = decals
                 .iter()
                 .enumerate()
                 .filter(|(_, d)| {
-                    let r = crate::surface::decals::decal_reach_m(d);
-                    !d.points.is_empty()
-                        && d.points.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min) - r <= max[0]
-                        && d.points
-                            .iter()
-                            .map(|p| p[0])
-                            .fold(f64::NEG_INFINITY, f64::max)
-                            + r
-                            >= min[0]
-                        && d.points.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min) - r <= max[1]
-                        && d.points
-                            .iter()
-                            .map(|p| p[1])
-                            .fold(f64::NEG_INFINITY, f64::max)
-                            + r
-                            >= min[1]
+                    let (lo, hi) = reach_box(d);
+                    !d.points.is_empty() && (0..2).all(|k| lo[k] <= max[k] && hi[k] >= min[k])
                 })
                 .map(|(i, _)| i as u32)
                 .collect();

@@ -126,18 +126,8 @@ mod tests {
             for (di, d) in map.decals.iter().enumerate() {
                 let reach = crate::surface::decals::decal_reach_m(d);
                 if d.closed {
-                    let hits = d.points.iter().fold(
-                        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
-                        |(lo, hi), p| {
-                            (
-                                [lo[0].min(p[0]), lo[1].min(p[1])],
-                                [hi[0].max(p[0]), hi[1].max(p[1])],
-                            )
-                        },
-                    );
-                    if (0..2)
-                        .all(|k| hits.0[k] - reach <= rect.1[k] && hits.1[k] + reach >= rect.0[k])
-                    {
+                    let (lo, hi) = super::super::decal_index::reach_box(d);
+                    if (0..2).all(|k| lo[k] <= rect.1[k] && hi[k] >= rect.0[k]) {
                         want_areas.push(di as u32);
                     }
                     continue;
