@@ -27,6 +27,7 @@
 //! measurement and reference selections for tests and benchmarks).
 
 pub mod camera;
+pub mod color;
 pub mod flight;
 pub mod ground;
 pub mod kinds;

@@ -389,12 +389,7 @@ pub fn bake_pass<'e>(
     })
 }
 
-/// sRGB-encoded 8-bit to linear.
+/// sRGB-encoded 8-bit to linear, as the f32 uniforms hold it ([`crate::color`]).
 pub fn srgb_to_linear(c: u8) -> f32 {
-    let c = f32::from(c) / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
+    crate::color::srgb_to_linear(c) as f32
 }

@@ -1,0 +1,219 @@
+//! Ground materials: per ground type of the map's legend, an albedo texture and a detail height
+//! texture that tile seamlessly, `MATERIAL_TEXELS` texels over [`MATERIAL_TILE_M`] metres.
+//!
+//! Made by the engine at start-up, not stored in the map: they are a pure function of the
+//! legend (name and colour) and the map seed, cost about a millisecond per type, and so need no
+//! new map layer, no format version and no validation of generated files. (A map naming its own
+//! PNG materials is a later step; those would be validated on load like every layer.)
+//!
+//! Each texture is periodic value noise (corner values hashed from lattice indices modulo the
+//! lattice size, so the texture's last column continues into its first) in a few octaves whose
+//! sizes and contrast follow the type's character (grass fine and streaky, rock coarse and
+//! contrasted, snow and water nearly flat). The albedo is the legend colour scaled in linear
+//! light by a factor of mean 1, so from afar a material looks like the flat legend colour the
+//! terrain had before.
+
+use crate::color::{linear_to_srgb, srgb_to_linear};
+use worldgen::map::GroundType;
+use worldgen::noise::unit3;
+
+/// Texels per material side (a power of two: mips tile too).
+pub const MATERIAL_TEXELS: u32 = 128;
+/// Metres one material tile covers.
+pub const MATERIAL_TILE_M: f64 = 4.0;
+
+/// One ground type's material.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// sRGB albedo, row-major, `MATERIAL_TEXELS^2` texels (alpha 255).
+    pub albedo_srgb: Vec<[u8; 4]>,
+    /// Detail height in [0, 255] (0.5 = the surface), row-major.
+    pub height: Vec<u8>,
+}
+
+/// How a type's noise looks: octaves as (lattice cells per tile side, weight), and the albedo
+/// contrast (the factor ranges over `1 +- contrast`).
+struct Character {
+    octaves: &'static [(u32, f64)],
+    contrast: f64,
+}
+
+fn character(name: &str) -> Character {
+    let has = |w: &str| name.to_ascii_lowercase().contains(w);
+    if has("water") || has("snow") || has("ice") {
+        Character {
+            octaves: &[(4, 0.7), (16, 0.3)],
+            contrast: 0.06,
+        }
+    } else if has("rock") || has("stone") || has("cliff") {
+        Character {
+            octaves: &[(4, 0.5), (8, 0.3), (32, 0.2)],
+            contrast: 0.35,
+        }
+    } else if has("grass") || has("meadow") {
+        Character {
+            octaves: &[(8, 0.3), (32, 0.3), (64, 0.4)],
+            contrast: 0.25,
+        }
+    } else if has("sand") {
+        Character {
+            octaves: &[(16, 0.4), (64, 0.6)],
+            contrast: 0.12,
+        }
+    } else {
+        Character {
+            octaves: &[(4, 0.3), (16, 0.4), (64, 0.3)],
+            contrast: 0.22,
+        }
+    }
+}
+
+fn fade(t: f64) -> f64 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+/// Periodic value noise in [0, 1): `cells` lattice cells across the tile, texel (`i`, `j`) of
+/// `MATERIAL_TEXELS`, corner values hashed from indices modulo `cells`.
+fn periodic_noise(seed: u64, cells: u32, i: u32, j: u32) -> f64 {
+    let per = f64::from(MATERIAL_TEXELS) / f64::from(cells);
+    let (x, y) = ((f64::from(i) + 0.5) / per, (f64::from(j) + 0.5) / per);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (fade(x - x0), fade(y - y0));
+    let corner = |a: f64, b: f64| {
+        let wrap = |v: f64| i64::from((v as u32) % cells);
+        unit3(seed, wrap(a), wrap(b))
+    };
+    let bottom = corner(x0, y0) + fx * (corner(x0 + 1.0, y0) - corner(x0, y0));
+    let top = corner(x0, y0 + 1.0) + fx * (corner(x0 + 1.0, y0 + 1.0) - corner(x0, y0 + 1.0));
+    bottom + fy * (top - bottom)
+}
+
+/// The material of legend entry `index` (type `t`) for a map of `seed`.
+pub fn material(index: usize, t: &GroundType, seed: u64) -> Material {
+    let ch = character(&t.name);
+    let n = MATERIAL_TEXELS;
+    let base = t.color.map(srgb_to_linear);
+    let total: f64 = ch.octaves.iter().map(|o| o.1).sum();
+    let mut albedo_srgb = Vec::with_capacity((n * n) as usize);
+    let mut height = Vec::with_capacity((n * n) as usize);
+    for j in 0..n {
+        for i in 0..n {
+            let v: f64 = ch
+                .octaves
+                .iter()
+                .enumerate()
+                .map(|(k, &(cells, w))| {
+                    let s = seed ^ (index as u64) << 8 ^ k as u64;
+                    w * periodic_noise(s, cells, i, j)
+                })
+                .sum::<f64>()
+                / total;
+            // Value noise averages 1/2: the factor averages 1.
+            let factor = 1.0 + 2.0 * ch.contrast * (v - 0.5);
+            let c = base.map(|b| linear_to_srgb(b * factor));
+            albedo_srgb.push([c[0], c[1], c[2], 255]);
+            height.push((v * 255.0).round().clamp(0.0, 255.0) as u8);
+        }
+    }
+    Material {
+        name: t.name.clone(),
+        albedo_srgb,
+        height,
+    }
+}
+
+/// The materials of a legend, in legend order.
+pub fn materials(legend: &[GroundType], seed: u64) -> Vec<Material> {
+    legend
+        .iter()
+        .enumerate()
+        .map(|(i, t)| material(i, t, seed))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn legend() -> Vec<GroundType> {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        worldgen::Map::load(&dir)
+            .expect("tiny map loads")
+            .manifest
+            .ground
+            .legend
+    }
+
+    /// The same legend and seed give the same bytes; another seed or type gives others.
+    #[test]
+    fn materials_are_deterministic_and_distinct() {
+        let l = legend();
+        assert!(l.len() >= 3);
+        let a = materials(&l, 7);
+        assert_eq!(a, materials(&l, 7));
+        assert_ne!(a[0].height, materials(&l, 8)[0].height);
+        for (i, m) in a.iter().enumerate().skip(1) {
+            assert_ne!(
+                m.height,
+                a[i - 1].height,
+                "{} and {}",
+                m.name,
+                a[i - 1].name
+            );
+        }
+    }
+
+    /// Seamless: across the wrap (last column to first, last row to first) neighbouring texels
+    /// differ no more than the largest difference between neighbours inside the texture.
+    #[test]
+    fn materials_tile_without_a_seam() {
+        let n = MATERIAL_TEXELS as usize;
+        for m in materials(&legend(), 3) {
+            let h = |i: usize, j: usize| i32::from(m.height[(j % n) * n + i % n]);
+            let mut inside = 0;
+            let mut across = 0;
+            for j in 0..n {
+                for i in 0..n {
+                    let d = (h(i + 1, j) - h(i, j))
+                        .abs()
+                        .max((h(i, j + 1) - h(i, j)).abs());
+                    if i + 1 < n && j + 1 < n {
+                        inside = inside.max(d);
+                    } else {
+                        across = across.max(d);
+                    }
+                }
+            }
+            assert!(inside > 0, "{}: flat", m.name);
+            assert!(
+                across <= inside,
+                "{}: seam {across} > inside {inside}",
+                m.name
+            );
+        }
+    }
+
+    /// From afar a material looks like its legend colour: the mean linear albedo is within 2 %
+    /// of the legend colour's (plus sRGB rounding).
+    #[test]
+    fn mean_albedo_is_the_legend_colour() {
+        let l = legend();
+        for (t, m) in l.iter().zip(materials(&l, 5)) {
+            for c in 0..3 {
+                let want = srgb_to_linear(t.color[c]);
+                let mean = m
+                    .albedo_srgb
+                    .iter()
+                    .map(|p| srgb_to_linear(p[c]))
+                    .sum::<f64>()
+                    / m.albedo_srgb.len() as f64;
+                assert!(
+                    (mean - want).abs() <= 0.02 * want + 0.004,
+                    "{} channel {c}: mean {mean}, legend {want}",
+                    t.name
+                );
+            }
+        }
+    }
+}
