@@ -2,8 +2,9 @@
 //! temporary texture"). Built so far, CPU only: the spatial index that gives a node the decals
 //! it needs ([`decal_index`]), the texel layout every node texture uses ([`layout`]), the
 //! node-local decal pieces a texture draws ([`pieces`]) and the ground materials
-//! ([`materials`]). Not built yet (issue 16): the content kind and its GPU texture phase, the
-//! texture pool and the shading that samples it.
+//! ([`materials`]). The GPU pass that renders a node's texture from them is
+//! `crate::render::ground`. Not built yet (issue 16): the content kind that runs it as a node's
+//! GPU phase, the texture pool and the terrain shading that samples it.
 
 pub mod decal_index;
 pub mod layout;

@@ -12,8 +12,9 @@ use worldgen::map::{Decal, DecalKind};
 /// One segment of an open decal (road, path), node-local.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Segment {
-    /// The decal's index in the map's decal list.
+    /// The decal's index in the map's decal list, and the index of end `a` in its points.
     pub decal: u32,
+    pub point: u32,
     pub kind: DecalKind,
     /// Ends (m, relative to the node's south-west corner).
     pub a_m: [f32; 2],
@@ -77,11 +78,12 @@ pub fn node_decals(
             continue;
         }
         let mut along = 0.0f64;
-        for w in d.points.windows(2) {
+        for (k, w) in d.points.windows(2).enumerate() {
             let (a, b) = (w[0], w[1]);
             if segment_reaches(a, b, reach, &rect) {
                 out.segments.push(Segment {
                     decal: i,
+                    point: k as u32,
                     kind: d.kind,
                     a_m: local(a),
                     b_m: local(b),
@@ -144,7 +146,7 @@ mod tests {
             );
             assert_eq!(got.segments.len(), want_segments.len(), "node {key:?}");
             for (g, &(di, si)) in got.segments.iter().zip(&want_segments) {
-                assert_eq!(g.decal, di);
+                assert_eq!((g.decal, g.point as usize), (di, si));
                 let d = &map.decals[di as usize];
                 let (a, b) = (d.points[si], d.points[si + 1]);
                 let tol = |v: f64| 1e-6 * (1.0 + v.abs());

@@ -23,6 +23,7 @@
 pub mod batches;
 pub mod frame;
 pub mod gpu_data;
+pub mod ground;
 pub mod impostors;
 pub mod node_table;
 pub mod reference;
@@ -154,6 +155,7 @@ impl Gpu {
 pub fn shader_sources() -> Vec<(&'static str, String)> {
     vec![
         ("sky", sky::shader_source()),
+        ("ground", ground::shader_source()),
         ("reference", reference::shader_source()),
         ("terrain", terrain::shader_source()),
         ("vegetation", vegetation::shader_source()),

@@ -8,8 +8,9 @@
 pub const PRELUDE: &str = include_str!("../../../shaders/prelude.inc.wgsl");
 
 /// The embedded renderer files, by name.
-const FILES: [(&str, &str); 4] = [
+const FILES: [(&str, &str); 5] = [
     ("sky", include_str!("../../../shaders/sky.wgsl")),
+    ("ground", include_str!("../../../shaders/ground.wgsl")),
     ("reference", include_str!("../../../shaders/reference.wgsl")),
     ("terrain", include_str!("../../../shaders/terrain.wgsl")),
     (

@@ -3,6 +3,7 @@
 
 mod camera_path;
 mod dem_import;
+mod ground;
 mod map_format;
 mod render;
 mod streaming;

@@ -1,0 +1,386 @@
+//! The GPU part of a node's ground texture (issue 16, first slice): renders the texels of a
+//! node's layout ([`crate::ground::layout`]) into a colour target — the ground type at a
+//! noise-perturbed position of the map's ground layer, shaded with the type's material
+//! ([`crate::ground::materials`], with CPU-made mips), then the node's road and path segments
+//! ([`crate::ground::pieces`]) with soft edges. Not yet: a texture pool, the terrain shading that
+//! samples the result, closed decal areas, a content kind (see `engine::ground`).
+
+use super::Gpu;
+use super::frame::{sampler_entry, texture_entry};
+use crate::ground::layout::{SIDE, lattice_index, texel_m};
+use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M, materials};
+use crate::ground::pieces::NodeDecals;
+use crate::surface::World;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use wgpu::util::DeviceExt;
+use worldgen::map::DecalKind;
+
+/// Format of node ground textures (shaded in linear light, stored sRGB).
+pub const GROUND_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// Linear albedo of roads (asphalt) and paths (dirt).
+const ROAD_LINEAR: [f32; 3] = [0.045, 0.045, 0.05];
+const PATH_LINEAR: [f32; 3] = [0.26, 0.17, 0.09];
+
+/// The assembled shader source.
+pub fn shader_source() -> String {
+    let v = |c: [f32; 3]| format!("vec3<f32>({:?}, {:?}, {:?})", c[0], c[1], c[2]);
+    super::shader::assemble(
+        "ground",
+        &format!(
+            "const SIDE: u32 = {SIDE}u;\nconst ROAD_COLOR: vec3<f32> = {};\nconst PATH_COLOR: vec3<f32> = {};",
+            v(ROAD_LINEAR),
+            v(PATH_LINEAR)
+        ),
+    )
+}
+
+/// Per-node uniforms (mirrors `GroundNode` in `ground.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GroundNodeUniform {
+    first: [i32; 2],
+    ground_anchor: [f32; 2],
+    ground_step: f32,
+    material_step: f32,
+    material_anchor: [f32; 2],
+    material_lod: f32,
+    segment_count: u32,
+    ground_types: u32,
+    pad: u32,
+}
+
+/// One segment (mirrors `Segment` in `ground.wgsl`), in texel-lattice units of its level.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GpuSegment {
+    a: [f32; 2],
+    b: [f32; 2],
+    half_width: f32,
+    falloff: f32,
+    kind: u32,
+    pad: u32,
+}
+
+/// The ground-texture pipeline and the map data it reads.
+pub struct GroundTexturer {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    ground_types: wgpu::TextureView,
+    materials: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    types: u32,
+    map_origin_m: [f64; 2],
+    ground_spacing_m: f64,
+}
+
+impl std::fmt::Debug for GroundTexturer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "GroundTexturer({} types)", self.types)
+    }
+}
+
+/// The mip chain of a periodic `n x n` sRGB texture (2 x 2 box filter in linear light).
+fn mips(level0: &[[u8; 4]], n: u32) -> Vec<Vec<[u8; 4]>> {
+    let mut out = vec![level0.to_vec()];
+    let mut side = n as usize;
+    while side > 1 {
+        let prev = out.last().expect("level 0 is there");
+        let half = side / 2;
+        let mut next = Vec::with_capacity(half * half);
+        for y in 0..half {
+            for x in 0..half {
+                let mut c = [0u8; 4];
+                for (k, v) in c.iter_mut().enumerate() {
+                    let sum: f64 = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .iter()
+                        .map(|&(dx, dy)| {
+                            let p = prev[(2 * y + dy) * side + 2 * x + dx][k];
+                            if k < 3 {
+                                crate::color::srgb_to_linear(p)
+                            } else {
+                                f64::from(p) / 255.0
+                            }
+                        })
+                        .sum();
+                    *v = if k < 3 {
+                        crate::color::linear_to_srgb(sum / 4.0)
+                    } else {
+                        (sum / 4.0 * 255.0).round() as u8
+                    };
+                }
+                next.push(c);
+            }
+        }
+        out.push(next);
+        side = half;
+    }
+    out
+}
+
+impl GroundTexturer {
+    /// Uploads the map's ground layer and the legend's materials.
+    pub fn new(gpu: &Gpu, world: &World) -> Self {
+        let device = &gpu.device;
+        let map = &world.map;
+        let ground = &map.ground;
+        let ground_types = device
+            .create_texture_with_data(
+                &gpu.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some("ground types"),
+                    size: wgpu::Extent3d {
+                        width: ground.width() as u32,
+                        height: ground.height() as u32,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::R8Uint,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                ground.data(),
+            )
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0);
+        let mats = materials(&map.manifest.ground.legend, seed);
+        let types = mats.len().max(1) as u32;
+        let levels = MATERIAL_TEXELS.ilog2() + 1;
+        let mut bytes: Vec<u8> = Vec::new();
+        for m in &mats {
+            for level in mips(&m.albedo_srgb, MATERIAL_TEXELS) {
+                bytes.extend(level.iter().flatten());
+            }
+        }
+        if mats.is_empty() {
+            for level in mips(
+                &vec![[128, 128, 128, 255]; (MATERIAL_TEXELS * MATERIAL_TEXELS) as usize],
+                MATERIAL_TEXELS,
+            ) {
+                bytes.extend(level.iter().flatten());
+            }
+        }
+        let materials = device
+            .create_texture_with_data(
+                &gpu.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some("ground materials"),
+                    size: wgpu::Extent3d {
+                        width: MATERIAL_TEXELS,
+                        height: MATERIAL_TEXELS,
+                        depth_or_array_layers: types,
+                    },
+                    mip_level_count: levels,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                &bytes,
+            )
+            .create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("ground material sampler"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ground texture layout"),
+            entries: &[
+                super::frame::uniform_entry(0, false, wgpu::ShaderStages::FRAGMENT),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                texture_entry(2, wgpu::TextureViewDimension::D2Array),
+                sampler_entry(3),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("ground texture pipeline layout"),
+            bind_group_layouts: &[None, None, Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = super::shader::module(device, "ground", &shader_source());
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("ground texture"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_fill"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_texel"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: GROUND_TEXTURE_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self {
+            pipeline,
+            layout,
+            ground_types,
+            materials,
+            sampler,
+            types,
+            map_origin_m: map.manifest.origin_m,
+            ground_spacing_m: map.manifest.ground.spacing_m,
+        }
+    }
+
+    /// Records the texels of node `key` into `target` (a `SIDE x SIDE` view in
+    /// [`GROUND_TEXTURE_FORMAT`]), drawing `decals` (the node's pieces) from the map's
+    /// `decal_list`.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        target: &wgpu::TextureView,
+        tree: &QuadTree,
+        key: NodeKey,
+        decals: &NodeDecals,
+        decal_list: &[worldgen::map::Decal],
+    ) {
+        let t = texel_m(tree, key.level);
+        let root = tree.rect(NodeKey::ROOT).min;
+        // Lattice units of the level: (world - root) / t, in f64, then f32 (the same numbers
+        // in every node).
+        let lattice = |p: [f64; 3]| [((p[0] - root[0]) / t) as f32, ((p[1] - root[1]) / t) as f32];
+        let mut segments: Vec<GpuSegment> = decals
+            .segments
+            .iter()
+            .map(|s| {
+                let d = &decal_list[s.decal as usize];
+                let (a, b) = (d.points[s.point as usize], d.points[s.point as usize + 1]);
+                GpuSegment {
+                    a: lattice(a),
+                    b: lattice(b),
+                    half_width: (f64::from(s.half_width_m) / t) as f32,
+                    falloff: (f64::from(s.falloff_m) / t) as f32,
+                    kind: u32::from(s.kind == DecalKind::Path),
+                    pad: 0,
+                }
+            })
+            .collect();
+        let segment_count = segments.len() as u32;
+        if segments.is_empty() {
+            segments.push(bytemuck::Zeroable::zeroed());
+        }
+        let gs = self.ground_spacing_m;
+        let material_m = MATERIAL_TILE_M;
+        let corner = |o: f64, r: f64, unit: f64| (r - o) / unit;
+        let uniform = GroundNodeUniform {
+            first: lattice_index(key, 0, 0).map(|v| v as i32),
+            ground_anchor: [
+                corner(self.map_origin_m[0], root[0], gs) as f32,
+                corner(self.map_origin_m[1], root[1], gs) as f32,
+            ],
+            ground_step: (t / gs) as f32,
+            material_step: (t / material_m) as f32,
+            material_anchor: [
+                corner(self.map_origin_m[0], root[0], material_m).rem_euclid(1.0) as f32,
+                corner(self.map_origin_m[1], root[1], material_m).rem_euclid(1.0) as f32,
+            ],
+            material_lod: (t / (material_m / f64::from(MATERIAL_TEXELS)))
+                .log2()
+                .max(0.0) as f32,
+            segment_count,
+            ground_types: self.types,
+            pad: 0,
+        };
+        let device = &gpu.device;
+        let ubuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ground node"),
+            contents: bytemuck::bytes_of(&uniform),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let sbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ground segments"),
+            contents: bytemuck::cast_slice(&segments),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ground node"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: ubuf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&self.ground_types),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&self.materials),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: sbuf.as_entire_binding(),
+                },
+            ],
+        });
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("ground texture"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: target,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(2, &group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+}

@@ -1,0 +1,109 @@
+// A node's ground texture (engine::render::ground): one full-target triangle; each fragment is
+// one texel of the node's layout (engine::ground::layout). Its colour: the ground type at the
+// texel's position, read from the map's ground layer at a noise-perturbed position (natural
+// borders instead of the 4 m staircase), shaded with that type's tiled material; then the
+// node's road and path segments drawn over it with soft edges, in file order.
+//
+// The prelude's groups 0 and 1 are not used here; this file's resources are group 2.
+//
+// Positions come from the texel's integer index on its level's lattice, so a texel shared by two
+// nodes is computed from the same numbers by the same operations in both.
+
+struct GroundNode {
+    // Lattice index of texel (0, 0) (x east, y north).
+    first: vec2<i32>,
+    // Ground-grid coordinates of lattice index (0, 0)'s corner, and the texel size in ground
+    // cells.
+    ground_anchor: vec2<f32>,
+    ground_step: f32,
+    // Texel size in material tiles, and material-tile coordinates of lattice index (0, 0)'s
+    // corner (fractions).
+    material_step: f32,
+    material_anchor: vec2<f32>,
+    // Material mip level the texel size calls for.
+    material_lod: f32,
+    segment_count: u32,
+    ground_types: u32,
+    pad: u32,
+};
+
+// A road or path segment in texel-lattice units of the node's level (the same numbers in every
+// node that draws it).
+struct Segment {
+    a: vec2<f32>,
+    b: vec2<f32>,
+    half_width: f32,
+    falloff: f32,
+    kind: u32,
+    pad: u32,
+};
+
+@group(2) @binding(0) var<uniform> node: GroundNode;
+@group(2) @binding(1) var ground_types: texture_2d<u32>;
+@group(2) @binding(2) var materials: texture_2d_array<f32>;
+@group(2) @binding(3) var material_sampler: sampler;
+@group(2) @binding(4) var<storage, read> segments: array<Segment>;
+
+@vertex
+fn vs_fill(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
+    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
+}
+
+fn hash2(p: vec2<i32>) -> f32 {
+    var h = u32(p.x) * 0x8da6b343u ^ u32(p.y) * 0xd8163841u;
+    h = (h ^ (h >> 15u)) * 0x2c1b3c6du;
+    h = h ^ (h >> 12u);
+    return f32(h & 0xffffu) / 65535.0;
+}
+
+// Value noise in [0, 1] at `p` (lattice of unit cells).
+fn value_noise(p: vec2<f32>) -> f32 {
+    let c = floor(p);
+    let f = p - c;
+    let u = f * f * (3.0 - 2.0 * f);
+    let i = vec2<i32>(c);
+    let a = hash2(i);
+    let b = hash2(i + vec2<i32>(1, 0));
+    let d = hash2(i + vec2<i32>(0, 1));
+    let e = hash2(i + vec2<i32>(1, 1));
+    return mix(mix(a, b, u.x), mix(d, e, u.x), u.y);
+}
+
+fn segment_distance(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> f32 {
+    let ab = b - a;
+    let t = clamp(dot(p - a, ab) / max(dot(ab, ab), 1e-12), 0.0, 1.0);
+    return length(p - (a + t * ab));
+}
+
+@fragment
+fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    // Framebuffer rows run top down; texel rows run south to north.
+    let size = vec2<i32>(textureDimensions(ground_types));
+    let texel = vec2<i32>(i32(frag.x), i32(SIDE) - 1 - i32(frag.y));
+    let index = node.first + texel;
+    let centre = vec2<f32>(index) + 0.5;
+    // Ground type: the nearest ground sample to a position moved by two octaves of noise of
+    // up to 0.7 ground cells.
+    let g = node.ground_anchor + centre * node.ground_step;
+    let wobble = vec2<f32>(
+        value_noise(g * 1.3) + 0.5 * value_noise(g * 3.7 + 17.0),
+        value_noise(g * 1.3 + 41.0) + 0.5 * value_noise(g * 3.7 + 59.0),
+    ) / 1.5 - 0.5;
+    let at = clamp(vec2<i32>(round(g + 1.4 * wobble)), vec2<i32>(0), size - 1);
+    let t = min(textureLoad(ground_types, at, 0).r, node.ground_types - 1u);
+    let uv = fract(node.material_anchor + centre * node.material_step);
+    var albedo = textureSampleLevel(materials, material_sampler, uv, t, node.material_lod).rgb;
+    // Roads and paths, in file order, with soft edges.
+    for (var k = 0u; k < node.segment_count; k = k + 1u) {
+        let s = segments[k];
+        let d = segment_distance(centre, s.a, s.b);
+        let w = 1.0 - smoothstep(s.half_width, s.half_width + max(s.falloff, 1e-3), d);
+        var color = ROAD_COLOR;
+        if (s.kind == 1u) {
+            color = PATH_COLOR;
+        }
+        albedo = mix(albedo, color, w);
+    }
+    return vec4<f32>(albedo, 1.0);
+}

@@ -1,0 +1,180 @@
+//! Ground textures on the software adapter: a node's texels do not depend on what was rendered
+//! before, neighbours agree on their shared border texels, and roads land where the map says.
+
+use engine::ground::decal_index::DecalIndex;
+use engine::ground::layout::{BORDER, SIDE, TEXELS, texel_m};
+use engine::ground::pieces::node_decals;
+use engine::render::Target;
+use engine::render::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
+use engine::terrain::quadtree::{NodeKey, QuadTree, Side};
+use tests::gpu::device;
+use tests::terrain::{tiny_world, tree_of};
+use worldgen::map::DecalKind;
+
+/// Renders node `key`'s ground texture and reads it back (RGBA8, top texel row first).
+fn render(
+    gpu: &engine::render::Gpu,
+    t: &GroundTexturer,
+    world: &engine::surface::World,
+    index: &DecalIndex,
+    tree: &QuadTree,
+    key: NodeKey,
+) -> Vec<u8> {
+    let target = Target::new(&gpu.device, [SIDE, SIDE], GROUND_TEXTURE_FORMAT);
+    let pieces = node_decals(&world.map.decals, index, tree, key);
+    let mut enc = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    t.record(
+        gpu,
+        &mut enc,
+        &target.color_view,
+        tree,
+        key,
+        &pieces,
+        &world.map.decals,
+    );
+    gpu.queue.submit([enc.finish()]);
+    target.read_rgba(gpu).expect("readback")
+}
+
+fn texel(img: &[u8], i: u32, j: u32) -> [u8; 4] {
+    let row = (SIDE - 1 - j) as usize;
+    let k = (row * SIDE as usize + i as usize) * 4;
+    [img[k], img[k + 1], img[k + 2], img[k + 3]]
+}
+
+/// The same node's bytes after other nodes were rendered; east and north neighbours of three
+/// levels share every border texel bit for bit (the border ring of one node over the other).
+#[test]
+fn node_textures_do_not_depend_on_order_and_neighbours_share_border_texels() {
+    let Some(gpu) = device() else { return };
+    let world = tiny_world();
+    let tree = tree_of(&world);
+    let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
+    let t = GroundTexturer::new(&gpu, &world);
+    for level in [tree.max_level - 4, tree.max_level - 2, tree.max_level] {
+        // A node on a road, so decal texels are compared too.
+        let road = world
+            .map
+            .decals
+            .iter()
+            .find(|d| d.kind == DecalKind::Road)
+            .expect("the tiny map has a road");
+        let p = road.points[road.points.len() / 2];
+        let a = tree.key_at(level, p[0], p[1]).expect("on the map");
+        let first = render(&gpu, &t, &world, &index, &tree, a);
+        for side in [Side::East, Side::North] {
+            let Some(b) = tree.neighbour_across(a, side, level) else {
+                continue;
+            };
+            let other = render(&gpu, &t, &world, &index, &tree, b);
+            let mut compared = 0;
+            for k in 0..BORDER {
+                for s in 0..SIDE {
+                    // a's texel over b, and b's texel over a, at the same world position.
+                    let pairs = [(TEXELS + BORDER + k, BORDER + k), (TEXELS + k, k)];
+                    for (ia, ib) in pairs {
+                        let (ta, tb) = match side {
+                            Side::East => (texel(&first, ia, s), texel(&other, ib, s)),
+                            _ => (texel(&first, s, ia), texel(&other, s, ib)),
+                        };
+                        assert_eq!(ta, tb, "level {level} {side:?}: texel {ia}/{ib} row {s}");
+                        compared += 1;
+                    }
+                }
+            }
+            assert!(compared > 0);
+        }
+        assert_eq!(
+            render(&gpu, &t, &world, &index, &tree, a),
+            first,
+            "level {level}: the node's texture changed after rendering its neighbours"
+        );
+    }
+}
+
+/// Road texels where the map's road runs, ground texels 10 m to its side (positions from the
+/// map's decal list; colours from the texture the GPU rendered).
+#[test]
+fn a_road_centre_is_road_and_ten_metres_off_is_not() {
+    let Some(gpu) = device() else { return };
+    let world = tiny_world();
+    let tree = tree_of(&world);
+    let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
+    let t = GroundTexturer::new(&gpu, &world);
+    let decals = &world.map.decals;
+    // Distance beyond the soft edge of the nearest road or path (of the kinds in `kinds`).
+    let dist_to = |kinds: &[DecalKind], x: f64, y: f64| {
+        decals
+            .iter()
+            .filter(|d| kinds.contains(&d.kind))
+            .flat_map(|d| d.points.windows(2).map(move |w| (d, w)))
+            .map(|(d, w)| {
+                let (dist, _) = worldgen::roads::segment_closest(
+                    [x, y],
+                    [w[0][0], w[0][1]],
+                    [w[1][0], w[1][1]],
+                );
+                dist - 0.5 * f64::from(d.width_m) - f64::from(d.falloff_m)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut checked = 0;
+    for d in decals.iter().filter(|d| d.kind == DecalKind::Road) {
+        for w in d.points.windows(2).step_by(7) {
+            let (a, b) = (w[0], w[1]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            if len < 1.0 {
+                continue;
+            }
+            let mid = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])];
+            let n = [-(b[1] - a[1]) / len, (b[0] - a[0]) / len];
+            let off = [mid[0] + 10.0 * n[0], mid[1] + 10.0 * n[1]];
+            let both = [DecalKind::Road, DecalKind::Path];
+            if dist_to(&both, off[0], off[1]) < 1.0
+                || dist_to(&[DecalKind::Path], mid[0], mid[1]) < 1.0
+            {
+                continue; // another road there, or a path drawn over this one
+            }
+            let level = tree.max_level - 3;
+            let Some(key) = tree.key_at(level, mid[0], mid[1]) else {
+                continue;
+            };
+            let r = tree.rect(key);
+            let tm = texel_m(&tree, level);
+            let at = |p: [f64; 2]| {
+                let i = ((p[0] - r.min[0]) / tm).floor() as i64 + i64::from(BORDER);
+                let j = ((p[1] - r.min[1]) / tm).floor() as i64 + i64::from(BORDER);
+                (i >= 0 && j >= 0 && i < i64::from(SIDE) && j < i64::from(SIDE))
+                    .then_some((i as u32, j as u32))
+            };
+            let (Some(c), Some(o)) = (at(mid), at(off)) else {
+                continue;
+            };
+            let img = render(&gpu, &t, &world, &index, &tree, key);
+            let road = texel(&img, c.0, c.1);
+            let ground = texel(&img, o.0, o.1);
+            // Asphalt: linear 0.045 is sRGB ~60.
+            for ch in 0..3 {
+                assert!(
+                    (i32::from(road[ch]) - 61).abs() <= 6,
+                    "road centre at {mid:?}: texel {road:?} is not asphalt"
+                );
+            }
+            let diff = (0..3)
+                .map(|ch| (i32::from(road[ch]) - i32::from(ground[ch])).abs())
+                .max()
+                .unwrap_or(0);
+            assert!(
+                diff > 15,
+                "10 m off the road at {off:?}: texel {ground:?} looks like the road {road:?}"
+            );
+            checked += 1;
+            if checked >= 6 {
+                return;
+            }
+        }
+    }
+    assert!(checked >= 2, "only {checked} road points checked");
+}
