@@ -2,7 +2,8 @@
 // one texel of the node's layout (engine::ground::layout). Its colour: the ground type at the
 // texel's position, read from the map's ground layer at a noise-perturbed position (natural
 // borders instead of the 4 m staircase), shaded with that type's tiled material; then the
-// node's road and path segments drawn over it with soft edges, in file order.
+// node's road and path segments drawn over it with soft edges, in file order, each as a quad
+// around the segment (cost in proportion to the area covered, not texels x segments).
 //
 // The prelude's groups 0 and 1 are not used here; this file's resources are group 2.
 //
@@ -80,9 +81,7 @@ fn segment_distance(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> f32 {
 fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     // Framebuffer rows run top down; texel rows run south to north.
     let size = vec2<i32>(textureDimensions(ground_types));
-    let texel = vec2<i32>(i32(frag.x), i32(SIDE) - 1 - i32(frag.y));
-    let index = node.first + texel;
-    let centre = vec2<f32>(index) + 0.5;
+    let centre = texel_centre(frag);
     // Ground type: the nearest ground sample to a position moved by two octaves of noise of
     // up to 0.7 ground cells.
     let g = node.ground_anchor + centre * node.ground_step;
@@ -94,16 +93,55 @@ fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let t = min(textureLoad(ground_types, at, 0).r, node.ground_types - 1u);
     let uv = fract(node.material_anchor + centre * node.material_step);
     var albedo = textureSampleLevel(materials, material_sampler, uv, t, node.material_lod).rgb;
-    // Roads and paths, in file order, with soft edges.
-    for (var k = 0u; k < node.segment_count; k = k + 1u) {
-        let s = segments[k];
-        let d = segment_distance(centre, s.a, s.b);
-        let w = 1.0 - smoothstep(s.half_width, s.half_width + max(s.falloff, 1e-3), d);
-        var color = ROAD_COLOR;
-        if (s.kind == 1u) {
-            color = PATH_COLOR;
-        }
-        albedo = mix(albedo, color, w);
-    }
     return vec4<f32>(albedo, 1.0);
+}
+
+// The texel a fragment covers: its lattice index's centre (the same numbers in every node).
+fn texel_centre(frag: vec4<f32>) -> vec2<f32> {
+    let texel = vec2<i32>(i32(frag.x), i32(SIDE) - 1 - i32(frag.y));
+    return vec2<f32>(node.first + texel) + 0.5;
+}
+
+struct DecalOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) segment: u32,
+};
+
+// Segment `k` as a quad reaching one texel beyond its soft edge.
+@vertex
+fn vs_segment(@builtin(vertex_index) v: u32, @builtin(instance_index) k: u32) -> DecalOut {
+    let s = segments[k];
+    let r = s.half_width + s.falloff + 1.0;
+    let d = s.b - s.a;
+    let len = length(d);
+    var dir = vec2<f32>(1.0, 0.0);
+    if (len > 1e-6) {
+        dir = d / len;
+    }
+    let n = vec2<f32>(-dir.y, dir.x);
+    var corners = array<vec2<f32>, 4>(
+        s.a - dir * r - n * r,
+        s.b + dir * r - n * r,
+        s.b + dir * r + n * r,
+        s.a - dir * r + n * r,
+    );
+    var order = array<u32, 6>(0u, 1u, 2u, 0u, 2u, 3u);
+    let q = (corners[order[v]] - vec2<f32>(node.first)) / f32(SIDE);
+    var out: DecalOut;
+    out.clip = vec4<f32>(q * 2.0 - 1.0, 0.0, 1.0);
+    out.segment = k;
+    return out;
+}
+
+// The segment's colour with its soft-edge weight as alpha (blended over the texel).
+@fragment
+fn fs_segment(in: DecalOut) -> @location(0) vec4<f32> {
+    let s = segments[in.segment];
+    let d = segment_distance(texel_centre(in.clip), s.a, s.b);
+    let w = 1.0 - smoothstep(s.half_width, s.half_width + max(s.falloff, 1e-3), d);
+    var color = ROAD_COLOR;
+    if (s.kind == 1u) {
+        color = PATH_COLOR;
+    }
+    return vec4<f32>(color, w);
 }

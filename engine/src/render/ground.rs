@@ -2,7 +2,8 @@
 //! node's layout ([`crate::ground::layout`]) into a colour target — the ground type at a
 //! noise-perturbed position of the map's ground layer, shaded with the type's material
 //! ([`crate::ground::materials`], with CPU-made mips), then the node's road and path segments
-//! ([`crate::ground::pieces`]) with soft edges. Not yet: a texture pool, the terrain shading that
+//! ([`crate::ground::pieces`]) with soft edges, each a quad around its segment blended in file
+//! order. Not yet: a texture pool, the terrain shading that
 //! samples the result, closed decal areas, a content kind (see `engine::ground`).
 
 use super::Gpu;
@@ -64,6 +65,8 @@ struct GpuSegment {
 /// The ground-texture pipeline and the map data it reads.
 pub struct GroundTexturer {
     pipeline: wgpu::RenderPipeline,
+    /// Road and path segments as quads, blended over the ground in file order.
+    segments: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     ground_types: wgpu::TextureView,
     materials: wgpu::TextureView,
@@ -117,75 +120,86 @@ fn mips(level0: &[[u8; 4]], n: u32) -> Vec<Vec<[u8; 4]>> {
     out
 }
 
+/// The map's ground layer as an `R8Uint` texture (row 0 = south).
+fn ground_types_view(gpu: &Gpu, ground: &worldgen::Grid<u8>) -> wgpu::TextureView {
+    gpu.device
+        .create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("ground types"),
+                size: wgpu::Extent3d {
+                    width: ground.width() as u32,
+                    height: ground.height() as u32,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::R8Uint,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            ground.data(),
+        )
+        .create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// The legend's materials as one layer each of a mipmapped sRGB array (a grey one for an empty
+/// legend), and the layer count.
+fn materials_view(gpu: &Gpu, map: &worldgen::Map) -> (wgpu::TextureView, u32) {
+    let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0);
+    let mut mats: Vec<Vec<[u8; 4]>> = materials(&map.manifest.ground.legend, seed)
+        .into_iter()
+        .map(|m| m.albedo_srgb)
+        .collect();
+    if mats.is_empty() {
+        mats.push(vec![
+            [128, 128, 128, 255];
+            (MATERIAL_TEXELS * MATERIAL_TEXELS) as usize
+        ]);
+    }
+    let types = mats.len() as u32;
+    let bytes: Vec<u8> = mats
+        .iter()
+        .flat_map(|m| mips(m, MATERIAL_TEXELS))
+        .flat_map(|level| level.into_iter().flatten())
+        .collect();
+    let view = gpu
+        .device
+        .create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("ground materials"),
+                size: wgpu::Extent3d {
+                    width: MATERIAL_TEXELS,
+                    height: MATERIAL_TEXELS,
+                    depth_or_array_layers: types,
+                },
+                mip_level_count: MATERIAL_TEXELS.ilog2() + 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            &bytes,
+        )
+        .create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+    (view, types)
+}
+
 impl GroundTexturer {
     /// Uploads the map's ground layer and the legend's materials.
     pub fn new(gpu: &Gpu, world: &World) -> Self {
         let device = &gpu.device;
         let map = &world.map;
-        let ground = &map.ground;
-        let ground_types = device
-            .create_texture_with_data(
-                &gpu.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("ground types"),
-                    size: wgpu::Extent3d {
-                        width: ground.width() as u32,
-                        height: ground.height() as u32,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::R8Uint,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                ground.data(),
-            )
-            .create_view(&wgpu::TextureViewDescriptor::default());
-        let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0);
-        let mats = materials(&map.manifest.ground.legend, seed);
-        let types = mats.len().max(1) as u32;
-        let levels = MATERIAL_TEXELS.ilog2() + 1;
-        let mut bytes: Vec<u8> = Vec::new();
-        for m in &mats {
-            for level in mips(&m.albedo_srgb, MATERIAL_TEXELS) {
-                bytes.extend(level.iter().flatten());
-            }
-        }
-        if mats.is_empty() {
-            for level in mips(
-                &vec![[128, 128, 128, 255]; (MATERIAL_TEXELS * MATERIAL_TEXELS) as usize],
-                MATERIAL_TEXELS,
-            ) {
-                bytes.extend(level.iter().flatten());
-            }
-        }
-        let materials = device
-            .create_texture_with_data(
-                &gpu.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("ground materials"),
-                    size: wgpu::Extent3d {
-                        width: MATERIAL_TEXELS,
-                        height: MATERIAL_TEXELS,
-                        depth_or_array_layers: types,
-                    },
-                    mip_level_count: levels,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                &bytes,
-            )
-            .create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            });
+        let ground_types = ground_types_view(gpu, &map.ground);
+        let (materials, types) = materials_view(gpu, map);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("ground material sampler"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -198,7 +212,7 @@ impl GroundTexturer {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("ground texture layout"),
             entries: &[
-                super::frame::uniform_entry(0, false, wgpu::ShaderStages::FRAGMENT),
+                super::frame::uniform_entry(0, false, wgpu::ShaderStages::VERTEX_FRAGMENT),
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -213,7 +227,7 @@ impl GroundTexturer {
                 sampler_entry(3),
                 wgpu::BindGroupLayoutEntry {
                     binding: 4,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
@@ -229,33 +243,43 @@ impl GroundTexturer {
             immediate_size: 0,
         });
         let module = super::shader::module(device, "ground", &shader_source());
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("ground texture"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_fill"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_texel"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: GROUND_TEXTURE_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let make = |label: &str, vs: &str, fs: &str, blend: Option<wgpu::BlendState>| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(vs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: None,
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: GROUND_TEXTURE_FORMAT,
+                        blend,
+                        write_mask: wgpu::ColorWrites::COLOR,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pipeline = make("ground texture", "vs_fill", "fs_texel", None);
+        let segments = make(
+            "ground texture segments",
+            "vs_segment",
+            "fs_segment",
+            Some(wgpu::BlendState::ALPHA_BLENDING),
+        );
         Self {
             pipeline,
+            segments,
             layout,
             ground_types,
             materials,
@@ -382,5 +406,9 @@ impl GroundTexturer {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(2, &group, &[]);
         pass.draw(0..3, 0..1);
+        if segment_count > 0 {
+            pass.set_pipeline(&self.segments);
+            pass.draw(0..6, 0..segment_count);
+        }
     }
 }
