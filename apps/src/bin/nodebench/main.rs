@@ -8,6 +8,7 @@ mod report;
 mod selection;
 mod streaming;
 mod terrain;
+mod textures;
 mod tiles;
 mod vegetation;
 
@@ -20,7 +21,7 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 7] = [
+const SECTIONS: [&str; 8] = [
     "tiles",
     "terrain",
     "selection",
@@ -28,6 +29,7 @@ const SECTIONS: [&str; 7] = [
     "vegetation",
     "streaming",
     "gpu",
+    "textures",
 ];
 
 /// Node-generation benchmark: speed of every CPU phase and speed against measured error.
@@ -43,7 +45,8 @@ const SECTIONS: [&str; 7] = [
 /// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
 /// jobs, pop debt, bookkeeping per frame), `gpu` (when an adapter exists: the automatic flight
 /// rendered offscreen at 720p and 1440p, the frame pass timed with timestamp queries next to a
-/// same-run one-draw terrain reference, draw calls). Per-item times are on one
+/// same-run one-draw terrain reference, draw calls), `textures` (when an adapter exists: one
+/// ground texture per sampled node, CPU and GPU time, bytes). Per-item times are on one
 /// core (p50/p95/p99/max); throughput is given for 1 and N worker threads.
 #[derive(Parser)]
 #[command(name = "nodebench", version, about, long_about)]
@@ -52,7 +55,7 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// streaming, gpu.
+    /// streaming, gpu, textures.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -127,16 +130,32 @@ fn run(cli: &Cli) -> Result<()> {
         streaming::section_streaming(&cli.map, &mut report, cli.quick, workers, [vh * 16 / 9, vh])?;
     }
     let mut adapter_name = None;
-    if want("gpu") {
+    if want("gpu") || want("textures") {
         match gpu::adapter() {
             Some((g, name)) => {
-                gpu::section_gpu(&g, &name, &cli.map, &mut report, cli.quick)?;
+                if want("gpu") {
+                    gpu::section_gpu(&g, &name, &cli.map, &mut report, cli.quick)?;
+                }
+                if want("textures") {
+                    textures::section_textures(
+                        &g,
+                        &name,
+                        &world,
+                        &tree,
+                        &cams,
+                        &mut report,
+                        cli.quick,
+                    );
+                }
                 adapter_name = Some(name);
             }
-            None if cli.only.iter().any(|o| o == "gpu") => {
-                bail!("section gpu: no GPU adapter (install mesa-vulkan-drivers for lavapipe)")
+            None if cli.only.iter().any(|o| o == "gpu" || o == "textures") => {
+                bail!(
+                    "sections gpu and textures: no GPU adapter (install mesa-vulkan-drivers for \
+                     lavapipe)"
+                )
             }
-            None => eprintln!("no GPU adapter: section gpu left out"),
+            None => eprintln!("no GPU adapter: sections gpu and textures left out"),
         }
     }
     let summary = format!(
