@@ -3,8 +3,9 @@
 //! it needs ([`decal_index`]), the texel layout every node texture uses ([`layout`]), the
 //! node-local decal pieces a texture draws ([`pieces`]) and the ground materials
 //! ([`materials`]). The GPU pass that renders a node's texture from them is
-//! `crate::render::ground`. Not built yet (issue 16): the content kind that runs it as a node's
-//! GPU phase, the texture pool and the terrain shading that samples it.
+//! `crate::render::ground`, the layer pool for node textures `crate::render::ground_pool`. Not
+//! built yet (issue 16): the content kind that runs the pass as a node's GPU phase into a pool
+//! layer, and the terrain shading that samples it.
 
 pub mod decal_index;
 pub mod layout;

@@ -6,6 +6,7 @@ use engine::ground::layout::{BORDER, SIDE, TEXELS, texel_m};
 use engine::ground::pieces::node_decals;
 use engine::render::Target;
 use engine::render::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
+use engine::render::ground_pool::{GroundPool, LAYER_BYTES, LAYERS_PER_PAGE};
 use engine::terrain::quadtree::{NodeKey, QuadTree, Side};
 use tests::gpu::device;
 use tests::terrain::{tiny_world, tree_of};
@@ -177,4 +178,44 @@ fn a_road_centre_is_road_and_ten_metres_off_is_not() {
         }
     }
     assert!(checked >= 2, "only {checked} road points checked");
+}
+
+/// The pool hands out each layer once, refuses when full, takes a layer back when its slot
+/// drops (the next lease gets it), and never holds more pages than its budget allows.
+#[test]
+fn the_texture_pool_stays_in_its_budget_and_reuses_dropped_layers() {
+    let Some(gpu) = device() else { return };
+    let page = LAYERS_PER_PAGE as usize * LAYER_BYTES;
+    let mut pool = GroundPool::new(page + page / 2);
+    let mut slots: Vec<_> = (0..LAYERS_PER_PAGE)
+        .map(|_| pool.lease(&gpu.device).expect("a free layer"))
+        .collect();
+    let mut layers: Vec<u32> = slots
+        .iter()
+        .map(engine::render::ground_pool::GroundSlot::layer)
+        .collect();
+    layers.sort_unstable();
+    layers.dedup();
+    assert_eq!(
+        layers.len(),
+        LAYERS_PER_PAGE as usize,
+        "each layer leased once"
+    );
+    assert!(
+        pool.lease(&gpu.device).is_none(),
+        "a 1.5-page budget holds one page"
+    );
+    assert_eq!(pool.layers_in_use(), LAYERS_PER_PAGE as usize);
+    let freed = slots.swap_remove(17);
+    let layer = freed.layer();
+    drop(freed);
+    assert_eq!(pool.layers_in_use(), LAYERS_PER_PAGE as usize - 1);
+    let again = pool
+        .lease(&gpu.device)
+        .expect("the dropped layer is free again");
+    assert_eq!(again.layer(), layer);
+    assert!(pool.bytes() <= page + page / 2);
+    drop(slots);
+    drop(again);
+    assert_eq!(pool.layers_in_use(), 0);
 }
