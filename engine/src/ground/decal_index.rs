@@ -28,7 +28,8 @@ pub struct DecalIndex {
     boxes: Vec<Box2>,
 }
 
-fn overlaps(a: &Box2, b: &Box2) -> bool {
+/// Whether two boxes overlap (touching counts).
+pub fn overlaps(a: &Box2, b: &Box2) -> bool {
     a.0[0] <= b.1[0] && b.0[0] <= a.1[0] && a.0[1] <= b.1[1] && b.0[1] <= a.1[1]
 }
 
@@ -148,10 +149,7 @@ mod tests {
             let want: Vec<u32> = decals
                 .iter()
                 .enumerate()
-                .filter(|(_, d)| {
-                    let (lo, hi) = reach_box(d);
-                    !d.points.is_empty() && (0..2).all(|k| lo[k] <= max[k] && hi[k] >= min[k])
-                })
+                .filter(|(_, d)| !d.points.is_empty() && overlaps(&reach_box(d), &(min, max)))
                 .map(|(i, _)| i as u32)
                 .collect();
             assert_eq!(got, want, "rectangle {min:?} .. {max:?}");

@@ -3,8 +3,9 @@
 //! noise-perturbed position of the map's ground layer, shaded with the type's material
 //! ([`crate::ground::materials`], with CPU-made mips), then the node's road and path segments
 //! ([`crate::ground::pieces`]) with soft edges, each a quad around its segment blended in file
-//! order. Not yet: a texture pool, the terrain shading that
-//! samples the result, closed decal areas, a content kind (see `engine::ground`).
+//! order. Not yet: rendering into a pool layer ([`super::ground_pool`]), the terrain shading
+//! that samples the result, closed decal areas (listed in the pieces, not drawn), the
+//! materials' detail height (made, not used), a content kind (see `engine::ground`).
 
 use super::Gpu;
 use super::frame::{sampler_entry, texture_entry};
@@ -317,9 +318,9 @@ impl GroundTexturer {
                 GpuSegment {
                     a: lattice(a),
                     b: lattice(b),
-                    half_width: (f64::from(s.half_width_m) / t) as f32,
-                    falloff: (f64::from(s.falloff_m) / t) as f32,
-                    kind: u32::from(s.kind == DecalKind::Path),
+                    half_width: (0.5 * f64::from(d.width_m) / t) as f32,
+                    falloff: (f64::from(d.falloff_m) / t) as f32,
+                    kind: u32::from(d.kind == DecalKind::Path),
                     pad: 0,
                 }
             })
