@@ -20,9 +20,8 @@
 //! ([`super::world::RegionBounds::between_m`]), and `F` lies within its corners' range widened by
 //! `between(c)`. The grid of spacing `hs / 2` (grid index 0, `k = -1`) is measured the same way;
 //! the grid of spacing `c` has zero error at lattice points, so its bound is `between(c)`, and
-//! every finer grid's
-//! triangles lie inside check triangles with legs `t <= c / 2`, bounded by `between(t) <=
-//! between(c)` (it grows with `t`). f32 storage rounds every bound outwards, and a margin of
+//! every finer grid's triangles lie inside check triangles with legs `t <= c / 2`, bounded by
+//! `between(t) <= between(c)` (it grows with `t`). f32 storage rounds every bound outwards, and a margin of
 //! `1e-9 (1 + |F|)` covers the f64 evaluation and vertex positions an ulp apart.
 
 use super::world::{Rect, World};
@@ -222,7 +221,7 @@ impl MapErrorPyramid {
 
     /// The grid index whose vertex spacing is `vertex_spacing_m`, if one is kept.
     pub fn level_of_spacing(&self, vertex_spacing_m: f64) -> Option<usize> {
-        (0..self.levels.len()).find(|&k| self.spacing_m * f64::from(1u32 << k) == vertex_spacing_m)
+        (0..self.levels.len()).find(|&k| self.spacing_of_level_m(k) == vertex_spacing_m)
     }
 
     /// The vertex spacing of grid `k` (`hs 2^(k - 1)`).
@@ -234,7 +233,7 @@ impl MapErrorPyramid {
     /// of the map.
     pub fn block_at(&self, k: usize, min_m: [f64; 2]) -> Option<MapBlock> {
         let level = self.levels.get(k)?;
-        let side = self.spacing_m * (BLOCK_QUADS << k) as f64;
+        let side = self.spacing_of_level_m(k) * BLOCK_QUADS as f64;
         let whole = |v: f64| {
             let r = v.round();
             ((v - r).abs() <= 1e-9 && r >= 0.0).then_some(r as usize)
