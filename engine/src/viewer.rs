@@ -281,7 +281,6 @@ impl Viewer {
         self.streamer.run_gpu_phases_with(&mut |shared, work| {
             work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
         });
-        self.scene.finish_uploads(gpu);
     }
 
     /// Wanted nodes not drawn yet (a coarser ancestor stands in for them): the pop debt count.

@@ -46,8 +46,9 @@ pub trait NodeRenderer {
         0
     }
 
-    /// After a frame's uploads: submit what the upload hooks recorded (one submission per
-    /// frame instead of one per node).
+    /// Submit what the upload hooks recorded (one submission per frame instead of one per
+    /// node). [`Scene::render`] calls it before any renderer's `prepare`, so everything a frame
+    /// samples is submitted before the frame.
     fn finish_uploads(&mut self, _gpu: &Gpu) {}
 
     /// Before the pass: choose this frame's draws, set their node-table entries and upload the
@@ -100,13 +101,6 @@ impl Scene {
             .sum()
     }
 
-    /// Every renderer's [`NodeRenderer::finish_uploads`], after a frame's uploads.
-    pub fn finish_uploads(&mut self, gpu: &Gpu) {
-        for r in &mut self.renderers {
-            r.finish_uploads(gpu);
-        }
-    }
-
     /// Records the frame into `encoder`: one pass cleared to the view's colour and far depth,
     /// every renderer in order.
     pub fn render(
@@ -118,6 +112,9 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
+        for r in &mut self.renderers {
+            r.finish_uploads(gpu);
+        }
         for r in &mut self.renderers {
             r.prepare(gpu, &mut self.frame, draws);
         }

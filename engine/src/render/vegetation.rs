@@ -683,14 +683,6 @@ impl VegetationRenderer {
         }
     }
 
-    /// Submits the impostor bakes recorded since the last call (after the frame's uploads, and
-    /// again in `prepare`, before anything that samples them is submitted).
-    fn submit_bakes(&mut self, gpu: &Gpu) {
-        if let Some(enc) = self.bakes.take() {
-            gpu.queue.submit([enc.finish()]);
-        }
-    }
-
     /// Adds the draws of node `p` (at `level`, dither interval `dither`) whose groups' dither
     /// rule wants `wanted` (`drawn`: the node is drawn; `is_ancestor`: it is an ancestor of drawn
     /// nodes), and sets the node-table entries they read.
@@ -790,12 +782,14 @@ impl NodeRenderer for VegetationRenderer {
         bytes
     }
 
+    /// Submits the impostor bakes recorded since the last call.
     fn finish_uploads(&mut self, gpu: &Gpu) {
-        self.submit_bakes(gpu);
+        if let Some(enc) = self.bakes.take() {
+            gpu.queue.submit([enc.finish()]);
+        }
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        self.submit_bakes(gpu);
         self.batches.clear();
         self.frame_stats = DrawStats::default();
         self.merged = draws.view.multi_draw(gpu);
