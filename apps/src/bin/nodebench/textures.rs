@@ -108,7 +108,7 @@ pub(crate) fn section_textures(
         "bytes per node texture",
         f64::from(SIDE * SIDE * 4),
         "bytes",
-        &format!("{params}, RGBA8 sRGB, no mips yet"),
+        &format!("{params}, RGBA8 sRGB, no mips yet: the layout's size, not a measurement"),
     );
     segments.sort_by(f64::total_cmp);
     for (name, q) in [("p50", 0.5), ("max", 1.0)] {
