@@ -67,8 +67,10 @@ fn corner_hash(seed: u64, a: i64, b: i64) -> u64 {
     h ^ (h >> 32)
 }
 
+/// The quintic fade `6t^5 - 15t^4 + 10t^3` (C2 at lattice points), shared by the noises here
+/// and the engine's periodic material noise.
 #[inline]
-fn fade(t: f64) -> f64 {
+pub fn fade(t: f64) -> f64 {
     t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 }
 

@@ -15,7 +15,7 @@
 
 use crate::color::{linear_to_srgb, srgb_to_linear};
 use worldgen::map::GroundType;
-use worldgen::noise::unit3;
+use worldgen::noise::{fade, unit3};
 
 /// Texels per material side (a power of two: mips tile too).
 pub const MATERIAL_TEXELS: u32 = 128;
@@ -67,10 +67,6 @@ fn character(name: &str) -> Character {
             contrast: 0.22,
         }
     }
-}
-
-fn fade(t: f64) -> f64 {
-    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 }
 
 /// Periodic value noise in [0, 1): `cells` lattice cells across the tile, texel (`i`, `j`) of
