@@ -21,7 +21,8 @@ struct Frame {
 struct Node {
     // xyz: node origin minus camera (m); w: dither interval start.
     offset_lo: vec4<f32>,
-    // x: dither interval end, y: quad-tree level, zw: unused.
+    // x: dither interval end, y: quad-tree level, zw: the renderer's own (terrain: ground
+    // texture layer or -1, texture coordinates per metre).
     hi_level: vec4<f32>,
 };
 

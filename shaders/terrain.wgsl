@@ -1,31 +1,83 @@
-// Terrain nodes: camera-relative positions, reversed-Z, sun + sky ambient shading, ground-type
-// colours, distance fog, screen-door dither cross-fades between levels (see the prelude).
+// Terrain nodes: camera-relative positions, reversed-Z, sun + sky ambient shading, the node's
+// ground texture (ground-type colours per vertex where it has none), distance fog, screen-door
+// dither cross-fades between levels (see the prelude).
 
 // Linear colour per ground type (the map's legend); `GROUND_TYPES` comes from the renderer.
 @group(2) @binding(0) var<uniform> ground_colors: array<vec4<f32>, GROUND_TYPES>;
+// One page of node ground textures (engine::render::ground_pool); the node's layer is in its
+// node-table entry.
+@group(2) @binding(1) var ground_page: texture_2d_array<f32>;
+@group(2) @binding(2) var ground_sampler: sampler;
+
+struct TerrainOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) albedo: vec3<f32>,
+    @location(3) @interpolate(flat) fade: vec3<f32>,
+    // Texture coordinates in the node's ground texture.
+    @location(4) uv: vec2<f32>,
+    // The node's layer in `ground_page`, or -1 without a texture.
+    @location(5) @interpolate(flat) layer: i32,
+};
 
 // The draw's first instance is the node's slot in the node table.
 @vertex
-fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> VertexOut {
+fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
     let node = nodes[slot];
-    var out: VertexOut;
+    var out: TerrainOut;
     let rel = v.position + node.offset_lo.xyz;
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
     out.rel = rel;
     out.normal = v.normal;
     out.albedo = ground_colors[min(v.tag, GROUND_TYPES - 1u)].rgb;
     out.fade = node_fade(node);
+    // Texel columns run east from the west border, rows north from the south border; the
+    // texture's row 0 is the north border's.
+    let border = f32(GROUND_BORDER) / f32(GROUND_SIDE);
+    let t = border + v.position.xy * node.hi_level.w;
+    out.uv = vec2<f32>(t.x, 1.0 - t.y);
+    out.layer = i32(round(node.hi_level.z));
     return out;
+}
+
+// Texels per pixel as the texel-density view encodes it (engine::render::frame::GroundView).
+fn density_color(uv: vec2<f32>) -> vec3<f32> {
+    let d = uv * f32(GROUND_SIDE);
+    let texels = max(length(dpdx(d)), length(dpdy(d)));
+    let g = clamp(log2(max(texels, 1e-6)) / 8.0 + 0.5, 0.0, 1.0);
+    return vec3<f32>(1.0 - g, g, 0.0);
+}
+
+fn terrain_color(in: TerrainOut) -> vec4<f32> {
+    // Sampled and differentiated in uniform control flow, chosen after.
+    let texel = textureSample(ground_page, ground_sampler, in.uv, max(in.layer, 0)).rgb;
+    let density = density_color(in.uv);
+    let textured = in.layer >= 0;
+    let albedo = select(in.albedo, texel, textured);
+    let mode = u32(frame.fog.z + 0.5);
+    if (mode == 2u) {
+        return vec4<f32>(select(vec3<f32>(0.5), density, textured), 1.0);
+    }
+    if (mode == 3u) {
+        return vec4<f32>(albedo, 1.0);
+    }
+    return lit_color(VertexOut(in.clip, in.rel, in.normal, albedo, in.fade));
 }
 
 // Nodes in a cross-fade: dithered.
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    return lit_pixel(in);
+fn fs_main(in: TerrainOut) -> @location(0) vec4<f32> {
+    // Sampled before the dither test (derivatives in uniform control flow).
+    let color = terrain_color(in);
+    if (!in_dither(in.clip.xy, in.fade)) {
+        discard;
+    }
+    return color;
 }
 
 // Nodes drawn alone at their place (dither interval [0, 1)): no `discard`, same pixels.
 @fragment
-fn fs_solid(in: VertexOut) -> @location(0) vec4<f32> {
-    return lit_color(in);
+fn fs_solid(in: TerrainOut) -> @location(0) vec4<f32> {
+    return terrain_color(in);
 }

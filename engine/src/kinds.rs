@@ -7,6 +7,7 @@
 //! `render/ground.rs` with its `NodeRenderer`, and add one line below. The scheduler, the
 //! viewer and the other renderers stay as they are.
 
+use crate::ground::content::GroundContent;
 use crate::render::Gpu;
 use crate::render::frame::FrameResources;
 use crate::render::scene::NodeRenderer;
@@ -22,7 +23,8 @@ pub type RendererFactory = fn(&Gpu, &FrameResources, &Shared) -> Box<dyn NodeRen
 /// One registered kind.
 pub struct Registration {
     pub kind: Arc<dyn ContentKind>,
-    pub renderer: RendererFactory,
+    /// None for a kind another renderer draws with (ground textures: the terrain renderer).
+    pub renderer: Option<RendererFactory>,
 }
 
 impl std::fmt::Debug for Registration {
@@ -31,7 +33,7 @@ impl std::fmt::Debug for Registration {
     }
 }
 
-fn entry(kind: impl ContentKind, renderer: RendererFactory) -> Registration {
+fn entry(kind: impl ContentKind, renderer: Option<RendererFactory>) -> Registration {
     Registration {
         kind: Arc::new(kind),
         renderer,
@@ -43,11 +45,14 @@ pub fn registered(world: &World) -> Vec<Registration> {
     vec![
         entry(
             TerrainContent,
-            crate::render::terrain::TerrainRenderer::create,
+            Some(crate::render::terrain::TerrainRenderer::create),
         ),
+        // Drawn by the terrain renderer: its upload hook renders the texture, its shading
+        // samples it.
+        entry(GroundContent::new(world), None),
         entry(
             VegetationContent::new(world),
-            crate::render::vegetation::VegetationRenderer::create,
+            Some(crate::render::vegetation::VegetationRenderer::create),
         ),
     ]
 }

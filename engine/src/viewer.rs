@@ -2,6 +2,7 @@
 //! update, GPU phases (uploads through the registered node renderers), draw list, rendering.
 
 use crate::camera::Camera;
+use crate::kinds::Registration;
 use crate::render::frame::{DrawStats, ViewOptions};
 use crate::render::reference::TerrainReference;
 use crate::render::scene::{DrawnNode, FrameDraws, Scene};
@@ -103,12 +104,22 @@ impl Viewer {
         settings: StreamSettings,
     ) -> Self {
         let registered = crate::kinds::registered(&world);
+        Self::with_kinds(gpu, color_format, world, settings, &registered)
+    }
+
+    /// [`Viewer::new`] with these kinds only (e.g. the registered ones less ground textures).
+    pub fn with_kinds(
+        gpu: &Gpu,
+        color_format: wgpu::TextureFormat,
+        world: World,
+        settings: StreamSettings,
+        registered: &[Registration],
+    ) -> Self {
         let kinds = registered.iter().map(|r| Arc::clone(&r.kind)).collect();
         let streamer = Streamer::new(world, settings, kinds);
         let mut scene = Scene::new(gpu, color_format);
-        for r in &registered {
-            let renderer = (r.renderer)(gpu, &scene.frame, &streamer.shared);
-            scene.push(renderer);
+        for factory in registered.iter().filter_map(|r| r.renderer) {
+            scene.push(factory(gpu, &scene.frame, &streamer.shared));
         }
         // After the opaque node content: the sky shades only the pixels nothing covered.
         scene.push(Box::new(SkyRenderer::new(gpu, &scene.frame)));

@@ -30,9 +30,44 @@ pub struct ViewOptions {
     /// Issue each renderer's draws as one multi-draw per batch where the adapter supports it
     /// (off: one draw call per node item, the fallback path; the pixels are the same).
     pub merged_draws: bool,
+    /// How the ground is shown (debug views of the ground textures).
+    pub ground_view: GroundView,
+}
+
+/// Debug views of the ground.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum GroundView {
+    /// Lit and fogged, from the node's ground texture (vertex colours where it has none).
+    #[default]
+    Shaded,
+    /// Coloured by ground-texture texels per pixel ([`texels_per_pixel_of`] reads it back):
+    /// red where a texel covers several pixels (blurred), yellow at one, green where a pixel
+    /// covers several texels; nodes without a texture grey.
+    TexelDensity,
+    /// The ground texture alone: no light, no fog.
+    TextureOnly,
+}
+
+/// Texels per pixel encoded by [`GroundView::TexelDensity`]: green channel (linear) =
+/// `log2(texels per pixel) / 8 + 1/2`, red = `1 - green`, blue 0. The inverse, or None for a
+/// pixel that is not a textured ground pixel.
+pub fn texels_per_pixel_of(linear_rgb: [f32; 3]) -> Option<f32> {
+    let [r, g, b] = linear_rgb;
+    ((r + g - 1.0).abs() < 0.03 && b < 0.01).then(|| ((g - 0.5) * 8.0).exp2())
 }
 
 impl ViewOptions {
+    /// The shaders' debug mode: 1 colour by level, 2 texel density, 3 ground texture only,
+    /// 0 none.
+    pub fn debug_mode(&self) -> f32 {
+        match (self.color_by_level, self.ground_view) {
+            (true, _) => 1.0,
+            (false, GroundView::Shaded) => 0.0,
+            (false, GroundView::TexelDensity) => 2.0,
+            (false, GroundView::TextureOnly) => 3.0,
+        }
+    }
+
     /// Whether this frame's batches are recorded as multi-draws on `gpu` (else as plain loops).
     pub fn multi_draw(&self, gpu: &super::Gpu) -> bool {
         self.merged_draws && gpu.multi_draw
@@ -51,6 +86,7 @@ impl Default for ViewOptions {
             fog_max: 0.35,
             plants: true,
             merged_draws: true,
+            ground_view: GroundView::Shaded,
         }
     }
 }
@@ -213,12 +249,7 @@ impl FrameResources {
             sun_color: [1.0, 0.93, 0.82, 0.0],
             sky_zenith: [0.16, 0.32, 0.66, 1.0],
             sky_horizon: [0.62, 0.72, 0.84, 1.0],
-            fog: [
-                view.fog_per_m,
-                view.fog_max,
-                if view.color_by_level { 1.0 } else { 0.0 },
-                0.0,
-            ],
+            fog: [view.fog_per_m, view.fog_max, view.debug_mode(), 0.0],
         }
     }
 

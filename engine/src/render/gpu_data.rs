@@ -14,7 +14,7 @@ pub struct FrameUniforms {
     pub sun_color: [f32; 4],
     pub sky_zenith: [f32; 4],
     pub sky_horizon: [f32; 4],
-    /// x: fog density per metre, y: largest fog amount, z: debug mode, w: unused.
+    /// x: fog density per metre, y: largest fog amount, z: debug mode ([`super::frame::ViewOptions::debug_mode`]), w: unused.
     pub fog: [f32; 4],
 }
 
@@ -25,7 +25,8 @@ pub struct FrameUniforms {
 pub struct NodeEntry {
     /// xyz: node origin minus camera (m); w: dither interval start.
     pub offset_lo: [f32; 4],
-    /// x: dither interval end, y: quad-tree level, zw: unused.
+    /// x: dither interval end, y: quad-tree level, zw: the renderer's own (terrain: ground
+    /// texture layer or -1, texture coordinates per metre).
     pub hi_level: [f32; 4],
 }
 

@@ -1,11 +1,10 @@
-//! The GPU part of a node's ground texture (issue 16, first slice): renders the texels of a
-//! node's layout ([`crate::ground::layout`]) into a colour target — the ground type at a
-//! noise-perturbed position of the map's ground layer, shaded with the type's material
-//! ([`crate::ground::materials`], with CPU-made mips), then the node's road and path segments
-//! ([`crate::ground::pieces`]) with soft edges, each a quad around its segment blended in file
-//! order. Not yet: rendering into a pool layer ([`super::ground_pool`]), the terrain shading
-//! that samples the result, closed decal areas (listed in the pieces, not drawn), the
-//! materials' detail height (made, not used), a content kind (see `engine::ground`).
+//! The GPU part of a node's ground texture: renders the texels of a node's layout
+//! ([`crate::ground::layout`]) into a colour target (the terrain renderer's pool layer for the
+//! node) — the ground type at a noise-perturbed position of the map's ground layer, shaded with
+//! the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's road
+//! and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around its
+//! segment blended in file order. Not yet: closed decal areas (listed in the pieces, not
+//! drawn), the materials' detail height (made, not used), mip levels of the node texture.
 
 use super::Gpu;
 use super::frame::{sampler_entry, texture_entry};

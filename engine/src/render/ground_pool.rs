@@ -1,4 +1,4 @@
-//! The pool node ground textures will live in (issue 16; not yet used by a node phase): layers
+//! The pool node ground textures live in (owned by the terrain renderer): layers
 //! of a few `SIDE x SIDE` texture arrays (pages of [`LAYERS_PER_PAGE`], created as needed, at
 //! most as many as the byte budget allows), one layer leased per node and given back when the
 //! lease drops (with the node's GPU objects, on eviction).
@@ -10,7 +10,7 @@ use crate::ground::layout::SIDE;
 /// Layers per texture array (wgpu's default limit on array layers).
 pub const LAYERS_PER_PAGE: u32 = 256;
 /// Bytes of one layer (RGBA8, no mips yet).
-pub const LAYER_BYTES: usize = (SIDE * SIDE * 4) as usize;
+pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
 
 /// A node's layer: the lease (given back on drop) and the view to render into.
 pub struct GroundSlot {
@@ -97,6 +97,11 @@ impl GroundPool {
             ..Default::default()
         });
         Some(GroundSlot { lease, view })
+    }
+
+    /// Pages made so far.
+    pub fn pages(&self) -> usize {
+        self.pages.len()
     }
 
     /// The texture of page `page` (for sampling and readback).

@@ -73,7 +73,8 @@ impl NodeTable {
     }
 
     /// Sets entry `index` for this frame: the node at `origin_m` (south-west corner) drawn at
-    /// `level` with dither interval `dither`.
+    /// `level` with dither interval `dither`, and two numbers only its renderer reads (`extra`;
+    /// terrain: the node's ground-texture layer and texture coordinates per metre).
     pub fn set(
         &mut self,
         frame: &FrameResources,
@@ -81,12 +82,13 @@ impl NodeTable {
         origin_m: [f64; 2],
         level: u8,
         dither: [f32; 2],
+        extra: [f32; 2],
     ) {
         let [x, y, z] = frame.offset_m(origin_m);
         let i = index as usize;
         self.entries[i] = NodeEntry {
             offset_lo: [x, y, z, dither[0]],
-            hi_level: [dither[1], f32::from(level), 0.0, 0.0],
+            hi_level: [dither[1], f32::from(level), extra[0], extra[1]],
         };
         self.written = self.written.max(i + 1);
     }

@@ -1,18 +1,28 @@
 //! The terrain renderer: node meshes suballocated from a few large vertex and index buffers
-//! (pages), drawn as one multi-draw per page (each node mesh one indirect record whose first
-//! instance is the node's slot in the node table), filled or as wireframe, coloured by the map's
-//! ground-type legend.
+//! (pages), drawn as one multi-draw per mesh page and ground-texture page (each node mesh one
+//! indirect record whose first instance is the node's slot in the node table), filled or as
+//! wireframe. The ground's colour is the node's ground texture where the ground kind is
+//! registered: its upload hook renders the texture ([`super::ground`]) into a layer of the
+//! renderer's [`GroundPool`] (the terrain shading is the texture's only reader), and the layer
+//! is given back when the node's GPU object drops. Without one, the map's ground-type legend
+//! colours the vertices.
 
 use super::Gpu;
 use super::batches::{Batches, Item};
 use super::frame::{
-    DrawStats, FrameResources, PipelineSpec, pipeline, srgb_to_linear, uniform_entry, uniform_group,
+    DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
+    texture_entry, uniform_entry,
 };
 use super::gpu_data::MeshVertex;
+use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
+use super::ground_pool::{GroundPool, GroundSlot};
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
 use super::suballoc::{Lease, Suballocator};
+use crate::ground::content::{GroundContent, NodeGround};
+use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{NodeWork, Shared};
+use crate::surface::World;
 use crate::terrain::mesh::NodeMesh;
 use crate::terrain::quadtree::QuadTree;
 use glam::DVec3;
@@ -32,7 +42,10 @@ pub const GROUND_TYPES: usize = 256;
 pub fn shader_source() -> String {
     super::shader::assemble(
         "terrain",
-        &format!("const GROUND_TYPES: u32 = {GROUND_TYPES}u;"),
+        &format!(
+            "const GROUND_TYPES: u32 = {GROUND_TYPES}u;\nconst GROUND_SIDE: u32 = {SIDE}u;\n\
+             const GROUND_BORDER: u32 = {BORDER}u;"
+        ),
     )
 }
 
@@ -46,6 +59,8 @@ pub struct TerrainNodeGpu {
     /// Part 0: vertices, part 1: indices (relative to the node's first vertex).
     mesh: Lease,
     slot: Lease,
+    /// The node's ground texture, and its texture coordinates per metre.
+    ground: Option<(GroundSlot, f32)>,
     pub bytes: usize,
 }
 
@@ -59,6 +74,11 @@ impl TerrainNodeGpu {
     pub fn triangles(&self) -> u32 {
         self.mesh.len[1] / 3
     }
+
+    /// The node's ground-texture layer, if it has one.
+    pub fn ground_slot(&self) -> Option<&GroundSlot> {
+        self.ground.as_ref().map(|g| &g.0)
+    }
 }
 
 /// One page of the mesh pool.
@@ -68,8 +88,24 @@ struct MeshPage {
 }
 
 /// A terrain batch: whether its nodes are in a cross-fade (drawn dithered, after the others),
-/// and their mesh page.
-type BatchKey = (bool, u32);
+/// their mesh page and their ground-texture page ([`NO_TEXTURE`] for nodes without one).
+type BatchKey = (bool, u32, u32);
+
+/// The ground page of nodes without a ground texture.
+const NO_TEXTURE: u32 = u32::MAX;
+
+/// Node ground textures: the pass that renders them, the layer pool they live in, the passes
+/// recorded since the last submission, and bind group 2 per pool page.
+struct GroundTextures {
+    texturer: GroundTexturer,
+    pool: GroundPool,
+    /// The map's decals (the nodes' pieces refer to them by index).
+    decals: Vec<worldgen::map::Decal>,
+    encoder: Option<wgpu::CommandEncoder>,
+    groups: Vec<wgpu::BindGroup>,
+    /// Nodes left without a texture because the pool was full.
+    refused: u64,
+}
 
 /// Terrain pipelines, the mesh pool, the node table and this frame's batches.
 pub struct TerrainRenderer {
@@ -80,7 +116,12 @@ pub struct TerrainRenderer {
     /// `discard` and hidden fragments fail the depth test before shading.
     solid: wgpu::RenderPipeline,
     wire: Option<wgpu::RenderPipeline>,
+    /// Group 2 for nodes without a ground texture (legend colours, a one-layer dummy page).
     colors: wgpu::BindGroup,
+    group_layout: wgpu::BindGroupLayout,
+    colors_buffer: wgpu::Buffer,
+    sampler: wgpu::Sampler,
+    ground: Option<GroundTextures>,
     pool: Suballocator,
     pages: Vec<MeshPage>,
     table: NodeTable,
@@ -108,8 +149,12 @@ impl TerrainRenderer {
         let device = &gpu.device;
         let module = super::shader::module(device, "terrain", &shader_source());
         let colors_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ground colours layout"),
-            entries: &[uniform_entry(0, false, wgpu::ShaderStages::VERTEX)],
+            label: Some("terrain ground layout"),
+            entries: &[
+                uniform_entry(0, false, wgpu::ShaderStages::VERTEX),
+                texture_entry(1, wgpu::TextureViewDimension::D2Array),
+                sampler_entry(2),
+            ],
         });
         let layout = frame.pipeline_layout(
             device,
@@ -157,17 +202,41 @@ impl TerrainRenderer {
                 1.0,
             ];
         }
-        let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        let colors_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("ground colours"),
             contents: bytemuck::cast_slice(&table),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let colors = uniform_group(device, "ground colours", &colors_layout, 0, &buffer);
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("node ground texture sampler"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let dummy = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("no ground texture"),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: GROUND_TEXTURE_FORMAT,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let colors = ground_group(device, &colors_layout, &colors_buffer, &dummy, &sampler);
         Self {
             fill,
             solid,
             wire,
             colors,
+            group_layout: colors_layout,
+            colors_buffer,
+            sampler,
+            ground: None,
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
             pages: Vec::new(),
             table: NodeTable::new(device, frame, "terrain node table", 1),
@@ -178,7 +247,77 @@ impl TerrainRenderer {
         }
     }
 
-    /// The registered constructor: colours from the map's legend.
+    /// The same renderer drawing nodes with ground textures: it renders the texture of every
+    /// uploaded node that has a [`NodeGround`] payload into a layer of a pool of at most
+    /// `pool_budget_bytes`.
+    #[must_use]
+    pub fn with_ground_textures(
+        mut self,
+        gpu: &Gpu,
+        world: &World,
+        pool_budget_bytes: usize,
+    ) -> Self {
+        self.ground = Some(GroundTextures {
+            texturer: GroundTexturer::new(gpu, world),
+            pool: GroundPool::new(pool_budget_bytes),
+            decals: world.map.decals.clone(),
+            encoder: None,
+            groups: Vec::new(),
+            refused: 0,
+        });
+        self
+    }
+
+    /// Layers of the ground-texture pool in use and bytes of its pages (zeros without ground
+    /// textures).
+    pub fn ground_pool_use(&self) -> (usize, usize) {
+        self.ground
+            .as_ref()
+            .map_or((0, 0), |g| (g.pool.layers_in_use(), g.pool.bytes()))
+    }
+
+    /// Renders node `key`'s ground texture into a new pool layer (recorded; submitted by
+    /// `finish_uploads`). None without ground textures or when the pool is full.
+    fn render_ground(
+        &mut self,
+        gpu: &Gpu,
+        tree: &QuadTree,
+        key: crate::terrain::quadtree::NodeKey,
+        pieces: &NodeGround,
+    ) -> Option<(GroundSlot, f32)> {
+        let g = self.ground.as_mut()?;
+        let Some(slot) = g.pool.lease(&gpu.device) else {
+            g.refused += 1;
+            if g.refused == 1 {
+                log::warn!("ground texture pool full: nodes are drawn with legend colours");
+            }
+            return None;
+        };
+        while g.groups.len() < g.pool.pages() {
+            let page = g.pool.page(g.groups.len() as u32)?;
+            g.groups.push(ground_group(
+                &gpu.device,
+                &self.group_layout,
+                &self.colors_buffer,
+                page,
+                &self.sampler,
+            ));
+        }
+        let enc = g.encoder.get_or_insert_with(|| {
+            gpu.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("ground textures"),
+                })
+        });
+        g.texturer
+            .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
+        let uv_per_m = 1.0 / (texel_m(tree, key.level) * f64::from(SIDE));
+        Some((slot, uv_per_m as f32))
+    }
+
+    /// The registered constructor: colours from the map's legend, ground textures when the
+    /// ground kind is registered (pool budget: the node cache's default budget, which counts
+    /// every resident node's texture).
     pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
         let legend: Vec<[u8; 3]> = shared
             .world
@@ -189,7 +328,12 @@ impl TerrainRenderer {
             .iter()
             .map(|g| g.color)
             .collect();
-        Box::new(Self::new(gpu, frame, &legend))
+        let renderer = Self::new(gpu, frame, &legend);
+        if shared.kind::<GroundContent>().is_none() {
+            return Box::new(renderer);
+        }
+        let budget = crate::stream::StreamSettings::default().cache_budget_bytes;
+        Box::new(renderer.with_ground_textures(gpu, &shared.world, budget))
     }
 
     /// Uploads one node mesh (vertices relative to its south-west corner, z absolute) into the
@@ -260,6 +404,7 @@ impl TerrainRenderer {
             aabb_m: mesh.aabb_m(tree),
             mesh: lease,
             slot,
+            ground: None,
             bytes: vertices.len() * std::mem::size_of::<MeshVertex>() + mesh.indices.len() * 4,
         })
     }
@@ -280,12 +425,21 @@ impl NodeRenderer for TerrainRenderer {
         let Some(mesh) = work.get::<NodeMesh>() else {
             return 0;
         };
-        let Some(node) = self.upload_mesh(&gpu.device, &gpu.queue, tree, mesh) else {
+        let Some(mut node) = self.upload_mesh(&gpu.device, &gpu.queue, tree, mesh) else {
             return 0;
         };
+        if let Some(pieces) = work.get::<NodeGround>() {
+            node.ground = self.render_ground(gpu, tree, work.key, pieces);
+        }
         let bytes = node.bytes;
         work.gpu.put(node);
         bytes
+    }
+
+    fn finish_uploads(&mut self, gpu: &Gpu) {
+        if let Some(enc) = self.ground.as_mut().and_then(|g| g.encoder.take()) {
+            gpu.queue.submit([enc.finish()]);
+        }
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
@@ -301,12 +455,15 @@ impl NodeRenderer for TerrainRenderer {
                 && draws.frustum.intersects_aabb(node.aabb_m.0, node.aabb_m.1)
             {
                 let slot = self.table.first_entry(&node.slot);
+                let (page, extra) = node.ground.as_ref().map_or((NO_TEXTURE, [-1.0, 0.0]), |g| {
+                    (g.0.page(), [g.0.layer() as f32, g.1])
+                });
                 self.table
-                    .set(frame, slot, node.origin_m, d.key.level, d.dither);
+                    .set(frame, slot, node.origin_m, d.key.level, d.dither, extra);
                 let m = &node.mesh;
                 let fading = d.dither[0] > 0.0 || d.dither[1] < 1.0;
                 self.batches.push(
-                    (fading, m.page),
+                    (fading, m.page, page),
                     Item::Indexed(DrawIndexedIndirectArgs {
                         index_count: m.len[1],
                         instance_count: 1,
@@ -334,10 +491,19 @@ impl NodeRenderer for TerrainRenderer {
         stats.culled += self.culled;
         let wire = self.wire.as_ref().filter(|_| draws.view.wireframe);
         pass.set_bind_group(1, &self.table.group, &[]);
-        pass.set_bind_group(2, &self.colors, &[]);
         let mut bound: Option<bool> = None;
+        let mut bound_ground = None;
         for run in self.batches.runs() {
-            let (fading, page) = run.key;
+            let (fading, page, ground) = run.key;
+            if bound_ground != Some(ground) {
+                let group = self
+                    .ground
+                    .as_ref()
+                    .and_then(|g| g.groups.get(ground as usize))
+                    .unwrap_or(&self.colors);
+                pass.set_bind_group(2, group, &[]);
+                bound_ground = Some(ground);
+            }
             if bound != Some(fading) {
                 pass.set_pipeline(match (wire, fading) {
                     (Some(w), _) => w,
@@ -354,4 +520,37 @@ impl NodeRenderer for TerrainRenderer {
         }
         stats.triangles += self.triangles;
     }
+}
+
+/// Group 2 of the terrain pipelines: the legend colours, a ground-texture page, its sampler.
+fn ground_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    colors: &wgpu::Buffer,
+    page: &wgpu::Texture,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    let view = page.create_view(&wgpu::TextureViewDescriptor {
+        label: Some("ground texture page"),
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("terrain ground group"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: colors.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
 }

@@ -709,7 +709,8 @@ impl VegetationRenderer {
                 GroupDither::Own => dither,
                 GroupDither::Full => [0.0, 1.0],
             };
-            self.table.set(frame, entry, p.origin_m, level, interval);
+            self.table
+                .set(frame, entry, p.origin_m, level, interval, [0.0; 2]);
             let first_instance = base + g.first;
             let quads = |key| {
                 (

@@ -1,12 +1,12 @@
 //! Headless runs: offscreen frames along the automatic flyover (or a replayed path), PNG frames
 //! every `--every` frames, a table of per-frame times and `stats.json`.
 
-use crate::{Cli, scripted_camera, settings};
+use crate::{Cli, make_viewer, scripted_camera};
 use anyhow::{Context, Result};
 use apps::{open_world, percentile};
 use engine::flight::CameraPath;
 use engine::render::{COLOR_FORMAT, Gpu, Target, write_png};
-use engine::viewer::{FrameStats, Viewer};
+use engine::viewer::FrameStats;
 use std::time::Instant;
 
 pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
@@ -27,7 +27,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
-    let mut viewer = Viewer::new(&gpu, COLOR_FORMAT, world, settings(cli));
+    let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world);
     viewer.view.merged_draws = !cli.per_item_draws;
     if cli.gpu_reference {
         viewer.view.plants = false;

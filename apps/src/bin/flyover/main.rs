@@ -11,7 +11,12 @@ use apps::DEFAULT_MAP;
 use clap::{CommandFactory, FromArgMatches, Parser};
 use engine::camera::Camera;
 use engine::flight::{CameraPath, auto_flyover};
+use engine::ground::content::GroundContent;
+use engine::render::Gpu;
+use engine::render::frame::GroundView;
 use engine::stream::StreamSettings;
+use engine::surface::World;
+use engine::viewer::Viewer;
 use std::path::PathBuf;
 
 #[derive(Parser, Debug, Clone)]
@@ -91,6 +96,50 @@ pub(crate) struct Cli {
     /// comparing the cost of draw calls.
     #[arg(long)]
     pub(crate) per_item_draws: bool,
+    /// How the ground is shown: lit (default), coloured by ground-texture texels per pixel
+    /// (red: a texel covers several pixels, yellow: one, green: a pixel covers several texels;
+    /// grey: no texture), or the ground texture alone (no light, no fog).
+    #[arg(long, value_enum, default_value_t = GroundViewArg::Shaded)]
+    pub(crate) ground_view: GroundViewArg,
+    /// Do not make per-node ground textures (the ground is coloured per vertex from the map's
+    /// ground types, as before issue 16): for comparing cost and looks.
+    #[arg(long)]
+    pub(crate) no_ground_textures: bool,
+}
+
+/// `--ground-view` values.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum GroundViewArg {
+    Shaded,
+    TexelDensity,
+    TextureOnly,
+}
+
+impl From<GroundViewArg> for GroundView {
+    fn from(v: GroundViewArg) -> Self {
+        match v {
+            GroundViewArg::Shaded => GroundView::Shaded,
+            GroundViewArg::TexelDensity => GroundView::TexelDensity,
+            GroundViewArg::TextureOnly => GroundView::TextureOnly,
+        }
+    }
+}
+
+/// The viewer for `cli`: every registered content kind (less ground textures with
+/// `--no-ground-textures`), the ground view of `--ground-view`.
+pub(crate) fn make_viewer(
+    cli: &Cli,
+    gpu: &Gpu,
+    format: wgpu::TextureFormat,
+    world: World,
+) -> Viewer {
+    let mut kinds = engine::kinds::registered(&world);
+    if cli.no_ground_textures {
+        kinds.retain(|k| k.kind.name() != GroundContent::NAME);
+    }
+    let mut viewer = Viewer::with_kinds(gpu, format, world, settings(cli), &kinds);
+    viewer.view.ground_view = cli.ground_view.into();
+    viewer
 }
 
 /// A finite number above zero (thresholds, rates, durations).

@@ -1,7 +1,7 @@
 //! The egui panel: detail level, workers, memory budget, debug views and live statistics.
 
 use engine::render::Gpu;
-use engine::render::frame::ViewOptions;
+use engine::render::frame::{GroundView, ViewOptions};
 use engine::viewer::FrameStats;
 
 /// The panel's settings, applied to the streamer each frame.
@@ -42,6 +42,20 @@ pub(crate) fn panel(
         ui.label("wireframe: not supported by this adapter");
     }
     ui.checkbox(&mut view.color_by_level, "colour by level");
+    ui.horizontal(|ui| {
+        ui.label("ground:");
+        ui.radio_value(&mut view.ground_view, GroundView::Shaded, "lit");
+        ui.radio_value(
+            &mut view.ground_view,
+            GroundView::TexelDensity,
+            "texel density",
+        );
+        ui.radio_value(
+            &mut view.ground_view,
+            GroundView::TextureOnly,
+            "texture only",
+        );
+    });
     ui.checkbox(&mut view.show_bounds, "node bounds");
     ui.checkbox(&mut view.plants, "vegetation");
     ui.checkbox(

@@ -1,7 +1,7 @@
 //! The windowed viewer (winit 0.30 + egui 0.37): window, input, frame loop, screenshots.
 
 use crate::panel::{Ui, panel};
-use crate::{Cli, scripted_camera, settings};
+use crate::{Cli, make_viewer, scripted_camera};
 use anyhow::{Context, Result, bail};
 use apps::open_world;
 use engine::camera::Camera;
@@ -116,7 +116,7 @@ impl App {
             .context("the window was initialised twice")?;
         let vp = [config.width, config.height];
         let cam = scripted_camera(cli, self.path.as_ref(), &world, 0.0, vp);
-        let viewer = Viewer::new(&gpu, config.format.add_srgb_suffix(), world, settings(cli));
+        let viewer = make_viewer(cli, &gpu, config.format.add_srgb_suffix(), world);
         let egui_ctx = egui::Context::default();
         let egui_state = egui_winit::State::new(
             egui_ctx.clone(),
