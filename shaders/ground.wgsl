@@ -145,3 +145,16 @@ fn fs_segment(in: DecalOut) -> @location(0) vec4<f32> {
     }
     return vec4<f32>(color, w);
 }
+
+// Mip levels of a node texture (engine::render::ground::GroundTexturer::record_mips): each
+// texel the mean of the four texels above it, in linear light (the sRGB target encodes).
+@group(3) @binding(0) var mip_source: texture_2d<f32>;
+
+@fragment
+fn fs_downsample(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let p = vec2<i32>(frag.xy) * 2;
+    let sum = textureLoad(mip_source, p, 0) + textureLoad(mip_source, p + vec2<i32>(1, 0), 0)
+        + textureLoad(mip_source, p + vec2<i32>(0, 1), 0)
+        + textureLoad(mip_source, p + vec2<i32>(1, 1), 0);
+    return sum * 0.25;
+}

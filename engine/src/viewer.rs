@@ -283,6 +283,7 @@ impl Viewer {
     pub fn stream_only(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64) -> bool {
         self.streamer.update(cam, dt_s);
         self.upload(gpu);
+        self.scene.finish_uploads(gpu);
         self.streamer.in_flight() == 0 && self.wanted_not_drawn() == 0
     }
 

@@ -5,15 +5,23 @@
 //! the layer pool it lives in) and freed with the node's GPU objects.
 
 use super::decal_index::DecalIndex;
-use super::layout::SIDE;
+use super::layout::{MIP_LEVELS, SIDE};
 use super::pieces::{NodeDecals, node_decals};
 use crate::stream::{ContentKind, NodeWork, Payload, Phase, Shared};
 use crate::surface::World;
 use std::sync::Arc;
 
-/// Bytes of one node texture on the GPU (`SIDE x SIDE` RGBA8, no mips), counted in the
-/// node-cache budget.
-pub const TEXTURE_BYTES: usize = (SIDE * SIDE * 4) as usize;
+/// Bytes of one node texture on the GPU (`SIDE x SIDE` RGBA8 and its [`MIP_LEVELS`] - 1
+/// smaller levels), counted in the node-cache budget.
+pub const TEXTURE_BYTES: usize = {
+    let mut bytes = 0;
+    let mut level = 0;
+    while level < MIP_LEVELS {
+        bytes += ((SIDE >> level) * (SIDE >> level) * 4) as usize;
+        level += 1;
+    }
+    bytes
+};
 
 /// The ground kind's payload of a node: what its texture draws.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]

@@ -14,6 +14,8 @@ use crate::terrain::quadtree::{NodeKey, QuadTree};
 pub const SIDE: u32 = 256;
 /// Border texels on each side: mip levels `0..=3` keep at least one.
 pub const BORDER: u32 = 8;
+/// Mip levels of a node texture: those that keep at least one border texel.
+pub const MIP_LEVELS: u32 = BORDER.ilog2() + 1;
 /// Texels across the node itself.
 pub const TEXELS: u32 = SIDE - 2 * BORDER;
 

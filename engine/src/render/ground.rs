@@ -3,8 +3,8 @@
 //! node) — the ground type at a noise-perturbed position of the map's ground layer, shaded with
 //! the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's road
 //! and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around its
-//! segment blended in file order. Not yet: closed decal areas (listed in the pieces, not
-//! drawn), the materials' detail height (made, not used), mip levels of the node texture.
+//! segment blended in file order; then its mip levels (`record_mips`). Not yet: closed decal
+//! areas (listed in the pieces, not drawn), the materials' detail height (made, not used).
 
 use super::Gpu;
 use super::frame::{sampler_entry, texture_entry};
@@ -67,6 +67,9 @@ pub struct GroundTexturer {
     pipeline: wgpu::RenderPipeline,
     /// Road and path segments as quads, blended over the ground in file order.
     segments: wgpu::RenderPipeline,
+    /// A mip level from the one above it (2 x 2 box filter in linear light).
+    downsample: wgpu::RenderPipeline,
+    downsample_layout: wgpu::BindGroupLayout,
     layout: wgpu::BindGroupLayout,
     ground_types: wgpu::TextureView,
     materials: wgpu::TextureView,
@@ -242,11 +245,35 @@ impl GroundTexturer {
             bind_group_layouts: &[None, None, Some(&layout)],
             immediate_size: 0,
         });
+        let downsample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ground mip source layout"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            }],
+        });
+        let downsample_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("ground mip pipeline layout"),
+                bind_group_layouts: &[None, None, None, Some(&downsample_layout)],
+                immediate_size: 0,
+            });
         let module = super::shader::module(device, "ground", &shader_source());
         let make = |label: &str, vs: &str, fs: &str, blend: Option<wgpu::BlendState>| {
+            let layout = if fs == "fs_downsample" {
+                &downsample_pipeline_layout
+            } else {
+                &pipeline_layout
+            };
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
-                layout: Some(&pipeline_layout),
+                layout: Some(layout),
                 vertex: wgpu::VertexState {
                     module: &module,
                     entry_point: Some(vs),
@@ -277,9 +304,12 @@ impl GroundTexturer {
             "fs_segment",
             Some(wgpu::BlendState::ALPHA_BLENDING),
         );
+        let downsample = make("ground texture mips", "vs_fill", "fs_downsample", None);
         Self {
             pipeline,
             segments,
+            downsample,
+            downsample_layout,
             layout,
             ground_types,
             materials,
@@ -287,6 +317,47 @@ impl GroundTexturer {
             types,
             map_origin_m: map.manifest.origin_m,
             ground_spacing_m: map.manifest.ground.spacing_m,
+        }
+    }
+
+    /// Records the mip levels of a node texture: `levels[k]` (k >= 1) from `levels[k - 1]`,
+    /// each texel the mean of the four above it in linear light. Texel blocks never straddle
+    /// a node edge (node sides are `TEXELS` texels, a multiple of `2^(levels - 1)`), so
+    /// neighbours' shared border texels stay equal at every level.
+    pub fn record_mips(
+        &self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        levels: &[&wgpu::TextureView],
+    ) {
+        for pair in levels.windows(2) {
+            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("ground mip source"),
+                layout: &self.downsample_layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(pair[0]),
+                }],
+            });
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("ground texture mip"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: pair[1],
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.downsample);
+            pass.set_bind_group(3, &group, &[]);
+            pass.draw(0..3, 0..1);
         }
     }
 

@@ -5,17 +5,19 @@
 
 use super::ground::GROUND_TEXTURE_FORMAT;
 use super::suballoc::{Lease, Suballocator};
-use crate::ground::layout::SIDE;
+use crate::ground::layout::{MIP_LEVELS, SIDE};
 
 /// Layers per texture array (wgpu's default limit on array layers).
 pub const LAYERS_PER_PAGE: u32 = 256;
-/// Bytes of one layer (RGBA8, no mips yet).
+/// Bytes of one layer (RGBA8 with its mip levels).
 pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
 
-/// A node's layer: the lease (given back on drop) and the view to render into.
+/// A node's layer: the lease (given back on drop), the view of its level 0 to render into and
+/// the views of its smaller mip levels (1, 2, ...).
 pub struct GroundSlot {
     lease: Lease,
     pub view: wgpu::TextureView,
+    pub mips: Vec<wgpu::TextureView>,
 }
 
 impl std::fmt::Debug for GroundSlot {
@@ -79,7 +81,7 @@ impl GroundPool {
                         height: SIDE,
                         depth_or_array_layers: LAYERS_PER_PAGE,
                     },
-                    mip_level_count: 1,
+                    mip_level_count: MIP_LEVELS,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
                     format: GROUND_TEXTURE_FORMAT,
@@ -89,14 +91,21 @@ impl GroundPool {
                     view_formats: &[],
                 }));
         }
-        let view = self.pages[lease.page as usize].create_view(&wgpu::TextureViewDescriptor {
-            label: Some("ground texture layer"),
-            dimension: Some(wgpu::TextureViewDimension::D2),
-            base_array_layer: lease.start[0],
-            array_layer_count: Some(1),
-            ..Default::default()
-        });
-        Some(GroundSlot { lease, view })
+        let page = &self.pages[lease.page as usize];
+        let level = |mip: u32| {
+            page.create_view(&wgpu::TextureViewDescriptor {
+                label: Some("ground texture layer"),
+                dimension: Some(wgpu::TextureViewDimension::D2),
+                base_array_layer: lease.start[0],
+                array_layer_count: Some(1),
+                base_mip_level: mip,
+                mip_level_count: Some(1),
+                ..Default::default()
+            })
+        };
+        let view = level(0);
+        let mips = (1..MIP_LEVELS).map(level).collect();
+        Some(GroundSlot { lease, view, mips })
     }
 
     /// Pages made so far.

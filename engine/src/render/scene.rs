@@ -31,7 +31,7 @@ pub struct FrameDraws<'a> {
 }
 
 /// The GPU side of one kind of thing drawn.
-pub trait NodeRenderer {
+pub trait NodeRenderer: std::any::Any {
     fn name(&self) -> &'static str;
 
     /// The GPU phase of a prepared node: create this renderer's objects from the node's payload
@@ -92,6 +92,20 @@ impl Scene {
         self.renderers.push(renderer);
     }
 
+    /// The renderer of type `T`, if the scene has one (statistics and tests).
+    pub fn renderer<T: NodeRenderer>(&self) -> Option<&T> {
+        self.renderers
+            .iter()
+            .find_map(|r| (r.as_ref() as &dyn std::any::Any).downcast_ref::<T>())
+    }
+
+    /// Submits what the renderers' upload hooks recorded (also done by [`Self::render`]).
+    pub fn finish_uploads(&mut self, gpu: &Gpu) {
+        for r in &mut self.renderers {
+            r.finish_uploads(gpu);
+        }
+    }
+
     /// The GPU phase of a node: every renderer's upload hook. Returns the bytes uploaded.
     pub fn upload(&mut self, gpu: &Gpu, tree: &QuadTree, work: &mut NodeWork) -> usize {
         let frame = &self.frame;
@@ -112,9 +126,7 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
-        for r in &mut self.renderers {
-            r.finish_uploads(gpu);
-        }
+        self.finish_uploads(gpu);
         for r in &mut self.renderers {
             r.prepare(gpu, &mut self.frame, draws);
         }

@@ -35,6 +35,12 @@ const PAGE_INDICES: u32 = 6 << 20;
 /// Pages at most (far more than a cache budget keeps resident).
 const MAX_PAGES: usize = 64;
 
+/// Cap of the registered renderer's ground-texture pool. A backstop: pages are made as layers
+/// are needed, and the layers in use are bounded by the node-cache budget (every resident
+/// node's texture counts in it, `ground::content::TEXTURE_BYTES`), which the viewer can change
+/// while running.
+pub const GROUND_POOL_CAP_BYTES: usize = 4 << 30;
+
 /// Ground types the colour table holds (the map legend has at most this many).
 pub const GROUND_TYPES: usize = 256;
 
@@ -211,6 +217,8 @@ impl TerrainRenderer {
             label: Some("node ground texture sampler"),
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            anisotropy_clamp: 8,
             ..Default::default()
         });
         let dummy = device.create_texture(&wgpu::TextureDescriptor {
@@ -311,13 +319,15 @@ impl TerrainRenderer {
         });
         g.texturer
             .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
+        let levels: Vec<&wgpu::TextureView> =
+            std::iter::once(&slot.view).chain(&slot.mips).collect();
+        g.texturer.record_mips(gpu, enc, &levels);
         let uv_per_m = 1.0 / (texel_m(tree, key.level) * f64::from(SIDE));
         Some((slot, uv_per_m as f32))
     }
 
     /// The registered constructor: colours from the map's legend, ground textures when the
-    /// ground kind is registered (pool budget: the node cache's default budget, which counts
-    /// every resident node's texture).
+    /// ground kind is registered (pool cap [`GROUND_POOL_CAP_BYTES`]).
     pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
         let legend: Vec<[u8; 3]> = shared
             .world
@@ -332,8 +342,7 @@ impl TerrainRenderer {
         if shared.kind::<GroundContent>().is_none() {
             return Box::new(renderer);
         }
-        let budget = crate::stream::StreamSettings::default().cache_budget_bytes;
-        Box::new(renderer.with_ground_textures(gpu, &shared.world, budget))
+        Box::new(renderer.with_ground_textures(gpu, &shared.world, GROUND_POOL_CAP_BYTES))
     }
 
     /// Uploads one node mesh (vertices relative to its south-west corner, z absolute) into the

@@ -1,16 +1,22 @@
 //! Ground textures on the software adapter: a node's texels do not depend on what was rendered
 //! before, neighbours agree on their shared border texels, and roads land where the map says.
 
+use engine::camera::Camera;
+use engine::ground::content::TEXTURE_BYTES;
 use engine::ground::decal_index::DecalIndex;
 use engine::ground::layout::{BORDER, SIDE, TEXELS, texel_m};
 use engine::ground::pieces::node_decals;
 use engine::render::Target;
 use engine::render::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use engine::render::ground_pool::{GroundPool, LAYER_BYTES, LAYERS_PER_PAGE};
+use engine::render::terrain::{TerrainNodeGpu, TerrainRenderer};
+use engine::stream::StreamSettings;
 use engine::terrain::quadtree::{NodeKey, QuadTree, Side};
+use glam::DVec3;
 use tests::gpu::device;
 use tests::terrain::{tiny_world, tree_of};
 use worldgen::map::DecalKind;
+use worldgen::noise::unit3;
 
 /// Renders node `key`'s ground texture and reads it back (RGBA8, top texel row first).
 fn render(
@@ -221,4 +227,102 @@ fn the_texture_pool_stays_in_its_budget_and_reuses_dropped_layers() {
     drop(slots);
     drop(again);
     assert_eq!(pool.layers_in_use(), 0);
+}
+
+/// Layers of the viewer's ground pool in use, and resident nodes holding one.
+fn layers_and_holders(v: &engine::viewer::Viewer) -> (usize, usize) {
+    let terrain = v
+        .scene
+        .renderer::<TerrainRenderer>()
+        .expect("the viewer has a terrain renderer");
+    let s = &v.streamer;
+    let holders = s
+        .resident_keys()
+        .iter()
+        .filter_map(|&k| s.resident(k))
+        .filter(|r| {
+            r.work
+                .gpu
+                .get::<TerrainNodeGpu>()
+                .is_some_and(|t| t.ground_slot().is_some())
+        })
+        .count();
+    (terrain.ground_pool_use().0, holders)
+}
+
+/// A 10,000-frame storm of teleports and fast flights through the viewer (streaming and GPU
+/// phases; ground textures rendered and submitted) leaves no pool layer leaked: at every
+/// checkpoint and after settling, the layers in use are exactly those held by resident nodes,
+/// and after settling they fit the node-cache budget that counts them.
+#[test]
+fn a_teleport_storm_leaks_no_ground_texture_layer() {
+    let Some(g) = device() else { return };
+    let budget = 96 << 20;
+    let mut v = engine::viewer::Viewer::new(
+        &g,
+        engine::render::COLOR_FORMAT,
+        tiny_world(),
+        StreamSettings {
+            workers: 2,
+            cache_budget_bytes: budget,
+            tau_px: 2.0,
+            ..StreamSettings::default()
+        },
+    );
+    let cam = |x: f64, y: f64, above: f64, yaw: f64| {
+        let w = &v_world();
+        let p = DVec3::new(x, y, w.height_m(x, y) + above);
+        Camera::look_at(
+            p,
+            p + DVec3::new(yaw.cos(), yaw.sin(), -0.3),
+            60f64.to_radians(),
+            [320, 180],
+        )
+    };
+    let mut max_layers = 0;
+    for i in 0..10_000i64 {
+        let c = if i % 400 < 200 {
+            cam(
+                512.0 * unit3(5, i, 0),
+                512.0 * unit3(5, i, 1),
+                3.0 + 200.0 * unit3(5, i, 2),
+                6.3 * unit3(5, i, 3),
+            )
+        } else {
+            let t = (i % 200) as f64 / 200.0;
+            cam(20.0 + 470.0 * t, 256.0 + 180.0 * (t * 9.0).sin(), 10.0, 0.2)
+        };
+        v.stream_only(&g, &c, 1.0 / 60.0);
+        if i % 250 == 0 {
+            let (layers, holders) = layers_and_holders(&v);
+            assert_eq!(
+                layers, holders,
+                "frame {i}: layers in use vs resident holders"
+            );
+            max_layers = max_layers.max(layers);
+        }
+    }
+    assert!(max_layers > 20, "the storm made only {max_layers} textures");
+    let last = cam(250.0, 250.0, 30.0, 1.0);
+    let start = std::time::Instant::now();
+    while !v.stream_only(&g, &last, 0.1) {
+        assert!(
+            start.elapsed().as_secs() < 180,
+            "did not settle after the storm"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let (layers, holders) = layers_and_holders(&v);
+    assert_eq!(layers, holders, "after settling");
+    assert!(layers > 0, "the settled view has no textured node");
+    let resident: usize = v.streamer.stats.resident_bytes;
+    assert!(
+        layers * TEXTURE_BYTES <= resident && resident <= budget.max(v.streamer.stats.pinned_bytes),
+        "{layers} layers of {TEXTURE_BYTES} bytes, {resident} resident bytes, budget {budget}"
+    );
+}
+
+fn v_world() -> &'static engine::surface::World {
+    static WORLD: std::sync::OnceLock<engine::surface::World> = std::sync::OnceLock::new();
+    WORLD.get_or_init(tiny_world)
 }

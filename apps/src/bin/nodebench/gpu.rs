@@ -29,7 +29,13 @@ pub(crate) fn section_gpu(
     for &h in heights {
         let size = [h * 16 / 9, h];
         for plants in [true, false] {
-            let stats = fly(gpu, world_path, size, plants, frames)?;
+            let setup = |v: &mut Viewer| {
+                v.view.plants = plants;
+                if !plants {
+                    v.enable_gpu_reference(gpu, size);
+                }
+            };
+            let stats = fly(gpu, world_path, size, frames, setup, |_, _| Ok(()))?;
             let median = |f: &dyn Fn(&FrameStats) -> Option<f64>| {
                 let mut v: Vec<f64> = stats.iter().filter_map(f).collect();
                 v.sort_by(f64::total_cmp);
@@ -92,14 +98,16 @@ pub(crate) fn section_gpu(
     Ok(())
 }
 
-/// Renders `frames` frames spread over the automatic flight (after a warm start at its first
-/// camera) and returns their statistics; without vegetation the same-run reference is on.
-fn fly(
+/// Renders `frames` frames spread over the automatic flight through a viewer set up by `setup`,
+/// each view streamed until settled first, calls `each` after each measured frame has been
+/// drawn, and returns the measured frames' statistics.
+pub(crate) fn fly(
     gpu: &Gpu,
     world_path: &std::path::Path,
     size: [u32; 2],
-    plants: bool,
     frames: usize,
+    setup: impl FnOnce(&mut Viewer),
+    mut each: impl FnMut(&Viewer, &Target) -> Result<()>,
 ) -> Result<Vec<FrameStats>> {
     let world = open_world(world_path)?;
     let settings = StreamSettings {
@@ -107,10 +115,7 @@ fn fly(
         ..StreamSettings::default()
     };
     let mut viewer = Viewer::new(gpu, COLOR_FORMAT, world, settings);
-    viewer.view.plants = plants;
-    if !plants {
-        viewer.enable_gpu_reference(gpu, size);
-    }
+    setup(&mut viewer);
     let target = Target::new(&gpu.device, size, COLOR_FORMAT);
     let dt = 1.0 / 30.0;
     let b = bar(frames as u64, &format!("gpu {}x{}", size[0], size[1]));
@@ -148,6 +153,7 @@ fn fly(
                 .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
             last = Some(st);
         }
+        each(&viewer, &target)?;
         out.extend(last);
         b.inc(1);
     }

@@ -140,12 +140,13 @@ fn run(cli: &Cli) -> Result<()> {
                     textures::section_textures(
                         &g,
                         &name,
+                        &cli.map,
                         &world,
                         &tree,
                         &cams,
                         &mut report,
                         cli.quick,
-                    );
+                    )?;
                 }
                 adapter_name = Some(name);
             }

@@ -53,10 +53,17 @@ pub(crate) fn section_streaming(
     for busy in [0].into_iter().chain(worker_counts.iter().copied()) {
         scheduling_noise(r, frames, dt, busy);
     }
-    for (flight, workers) in FLIGHTS
+    // Every flight with 1 and N workers, ground textures on; and with 1 worker, off.
+    let runs: Vec<((f64, f64), usize, bool)> = FLIGHTS
         .iter()
-        .flat_map(|f| worker_counts.iter().map(move |&w| (*f, w)))
-    {
+        .flat_map(|&f| {
+            worker_counts
+                .iter()
+                .map(move |&w| (f, w, true))
+                .chain(std::iter::once((f, 1, false)))
+        })
+        .collect();
+    for (flight, workers, textures) in runs {
         let (speed, above) = flight;
         let world = open_world(world_path)?;
         let cams: Vec<Camera> = (0..frames)
@@ -81,7 +88,10 @@ pub(crate) fn section_streaming(
             ..StreamSettings::default()
         }
         .with_workers(workers);
-        let kinds = engine::kinds::content_kinds(&world);
+        let mut kinds = engine::kinds::content_kinds(&world);
+        if !textures {
+            kinds.retain(|k| k.name() != engine::ground::content::GroundContent::NAME);
+        }
         let mut s = Streamer::new(world, settings, kinds);
         // Warm start at the first camera, as after loading.
         if !s.settle(&cams[0], 300.0) {
@@ -161,8 +171,14 @@ pub(crate) fn section_streaming(
         let cancelled =
             s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
         let params = format!(
-            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s)",
-            s.settings.workers
+            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), ground \
+             textures {}",
+            s.settings.workers,
+            if textures {
+                "on (CPU side: decal pieces, texture bytes in the cache budget; nothing is drawn)"
+            } else {
+                "off"
+            }
         );
         let outcome = FlightOutcome {
             latencies: s.take_latencies(),

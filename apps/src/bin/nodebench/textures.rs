@@ -1,28 +1,36 @@
 //! Section `textures` (when an adapter exists): the ground texture of every node of the
 //! flight's sample rendered offscreen one at a time: the CPU time to gather its decal pieces
 //! and to record its pass, its GPU time from timestamp queries (where the adapter has them),
-//! bytes per node, and segments drawn per node. Node textures are not yet part of streaming (no
-//! pool, not sampled by the terrain), so there are no streaming rows with textures on and off.
+//! bytes per node, and segments drawn per node; then the automatic flight through the viewer
+//! with ground textures: texels per pixel on ground pixels (read back from the texel-density
+//! view) and pool layers in use.
 
 use crate::report::{Report, bar};
+use engine::color::srgb_to_linear;
+use engine::ground::content::TEXTURE_BYTES;
 use engine::ground::decal_index::DecalIndex;
-use engine::ground::layout::SIDE;
+use engine::ground::layout::{MIP_LEVELS, SIDE};
 use engine::ground::pieces::node_decals;
-use engine::render::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
-use engine::render::{Gpu, GpuTimer, Target};
+use engine::render::frame::{GroundView, texels_per_pixel_of};
+use engine::render::ground::GroundTexturer;
+use engine::render::ground_pool::GroundPool;
+use engine::render::terrain::TerrainNodeGpu;
+use engine::render::{Gpu, GpuTimer};
 use engine::surface::World;
 use engine::terrain::quadtree::QuadTree;
+use engine::viewer::Viewer;
 use std::time::Instant;
 
 pub(crate) fn section_textures(
     gpu: &Gpu,
     adapter: &str,
+    world_path: &std::path::Path,
     world: &World,
     tree: &QuadTree,
     cams: &[engine::camera::Camera],
     r: &mut Report,
     quick: bool,
-) {
+) -> anyhow::Result<()> {
     let keys = crate::terrain::flight_nodes(
         world,
         tree,
@@ -33,7 +41,11 @@ pub(crate) fn section_textures(
     let texturer = GroundTexturer::new(gpu, world);
     let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
-    let target = Target::new(&gpu.device, [SIDE, SIDE], GROUND_TEXTURE_FORMAT);
+    let mut pool = GroundPool::new(1);
+    let Some(slot) = pool.lease(&gpu.device) else {
+        anyhow::bail!("textures: the pool gave no layer");
+    };
+    let levels: Vec<&wgpu::TextureView> = std::iter::once(&slot.view).chain(&slot.mips).collect();
     let mut timer = GpuTimer::new(gpu);
     let (mut t_pieces, mut t_encode, mut t_gpu, mut segments) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -49,12 +61,13 @@ pub(crate) fn section_textures(
         texturer.record(
             gpu,
             &mut enc,
-            &target.color_view,
+            &slot.view,
             tree,
             key,
             &pieces,
             &world.map.decals,
         );
+        texturer.record_mips(gpu, &mut enc, &levels);
         if timed && let Some(t) = &timer {
             t.end(&mut enc);
         }
@@ -76,8 +89,9 @@ pub(crate) fn section_textures(
     }
     b.finish_and_clear();
     let params = format!(
-        "{} nodes from the flight at tau 2, {SIDE} x {SIDE} texels, {adapter}",
-        keys.len()
+        "{} nodes from the flight at tau 2, {SIDE} x {SIDE} texels and {} smaller mip levels, {adapter}",
+        keys.len(),
+        MIP_LEVELS - 1,
     );
     r.add(
         "textures",
@@ -89,7 +103,7 @@ pub(crate) fn section_textures(
     r.timings("textures", "node decal pieces (CPU)", t_pieces, &params);
     r.timings(
         "textures",
-        "node texture pass recorded (CPU)",
+        "node texture passes recorded (CPU)",
         t_encode,
         &params,
     );
@@ -98,7 +112,7 @@ pub(crate) fn section_textures(
     } else {
         r.timings(
             "textures",
-            "node texture pass (GPU, timestamp queries)",
+            "node texture passes (GPU, timestamp queries)",
             t_gpu,
             &params,
         );
@@ -106,9 +120,9 @@ pub(crate) fn section_textures(
     r.add(
         "textures",
         "bytes per node texture",
-        f64::from(SIDE * SIDE * 4),
+        TEXTURE_BYTES as f64,
         "bytes",
-        &format!("{params}, RGBA8 sRGB, no mips yet: the layout's size, not a measurement"),
+        &format!("{params}, RGBA8 sRGB: the layout's size, not a measurement"),
     );
     segments.sort_by(f64::total_cmp);
     for (name, q) in [("p50", 0.5), ("max", 1.0)] {
@@ -120,4 +134,91 @@ pub(crate) fn section_textures(
             &params,
         );
     }
+    flight_texels(gpu, adapter, world_path, r, quick)
+}
+
+/// The automatic flight through the viewer with ground textures at 720p, tau 2, vegetation off
+/// (its pixels would hide the ground), drawn in the texel-density view and read back: texels
+/// per pixel on every textured ground pixel, and pool layers held by resident nodes.
+fn flight_texels(
+    gpu: &Gpu,
+    adapter: &str,
+    world_path: &std::path::Path,
+    r: &mut Report,
+    quick: bool,
+) -> anyhow::Result<()> {
+    let size = if quick { [640, 360] } else { [1280, 720] };
+    let frames = if quick { 4 } else { 24 };
+    let (mut density, mut layers, mut untextured) = (Vec::new(), Vec::new(), 0usize);
+    let setup = |v: &mut Viewer| {
+        v.view.plants = false;
+        v.view.sky = false;
+        v.view.ground_view = GroundView::TexelDensity;
+    };
+    crate::gpu::fly(gpu, world_path, size, frames, setup, |v, target| {
+        let rgba = target.read_rgba(gpu)?;
+        for p in rgba.chunks_exact(4) {
+            let linear = [0, 1, 2].map(|k| srgb_to_linear(p[k]) as f32);
+            match texels_per_pixel_of(linear) {
+                Some(t) => density.push(f64::from(t)),
+                // Grey: a ground pixel of a node without a texture.
+                None if p[0] == p[1] && p[1] == p[2] && p[0] > 0 => untextured += 1,
+                None => {}
+            }
+        }
+        let s = &v.streamer;
+        let held = s
+            .resident_keys()
+            .iter()
+            .filter_map(|&k| s.resident(k))
+            .filter(|res| {
+                res.work
+                    .gpu
+                    .get::<TerrainNodeGpu>()
+                    .is_some_and(|t| t.ground_slot().is_some())
+            })
+            .count();
+        layers.push(held as f64);
+        Ok(())
+    })?;
+    let params = format!(
+        "{}x{}, tau 2 px, {frames} settled views of the automatic flight, vegetation off, {adapter}",
+        size[0], size[1]
+    );
+    density.sort_by(f64::total_cmp);
+    for (name, q) in [("p5", 0.05), ("p50", 0.5), ("p95", 0.95)] {
+        r.add(
+            "textures",
+            &format!("ground-texture texels per pixel on ground pixels {name}"),
+            apps::percentile(&density, q),
+            "texels/px",
+            &format!("{params}; the view encodes 1/16 to 16, clamped"),
+        );
+    }
+    let fine = density.iter().filter(|&&t| t >= 1.0).count();
+    r.add(
+        "textures",
+        "ground pixels whose texel is <= 1 px (texels per pixel >= 1)",
+        100.0 * fine as f64 / density.len().max(1) as f64,
+        "%",
+        &format!("{params}; target >= 95 %"),
+    );
+    r.add(
+        "textures",
+        "ground pixels of nodes without a texture",
+        100.0 * untextured as f64 / (density.len() + untextured).max(1) as f64,
+        "%",
+        &params,
+    );
+    layers.sort_by(f64::total_cmp);
+    for (name, q) in [("p50", 0.5), ("max", 1.0)] {
+        r.add(
+            "textures",
+            &format!("pool layers held by resident nodes {name}"),
+            apps::percentile(&layers, q),
+            "layers",
+            &format!("{params}; {TEXTURE_BYTES} bytes each"),
+        );
+    }
+    Ok(())
 }
