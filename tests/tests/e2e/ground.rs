@@ -326,3 +326,99 @@ fn v_world() -> &'static engine::surface::World {
     static WORLD: std::sync::OnceLock<engine::surface::World> = std::sync::OnceLock::new();
     WORLD.get_or_init(tiny_world)
 }
+
+/// The same through the viewer, in pixels of rendered views (streamed nodes, their textures
+/// sampled by the terrain shading, "texture only" view): looking down from 40 m on points of
+/// the map's roads, the road's centre is asphalt and the ground 10 m off the road is not.
+#[test]
+fn in_a_rendered_view_a_road_centre_is_road_and_ten_metres_off_is_not() {
+    let Some(g) = device() else { return };
+    let world = tiny_world();
+    let decals = world.map.decals.clone();
+    let mut v = tests::gpu::tiny_viewer(&g, 1.0);
+    v.view.plants = false;
+    v.view.ground_view = engine::render::frame::GroundView::TextureOnly;
+    let size = [128u32, 128];
+    let target = engine::render::Target::new(&g.device, size, engine::render::COLOR_FORMAT);
+    let pixel = |cam: &Camera, p: DVec3| {
+        let rel = p - cam.position_m;
+        let z = rel.dot(cam.forward);
+        let k = cam.k_px();
+        let x = f64::from(size[0]) * 0.5 + k * rel.dot(cam.right()) / z;
+        let y = f64::from(size[1]) * 0.5 - k * rel.dot(cam.up) / z;
+        (x.floor() as usize, y.floor() as usize)
+    };
+    let mut checked = 0;
+    for d in decals.iter().filter(|d| d.kind == DecalKind::Road) {
+        for w in d.points.windows(2).step_by(11) {
+            let (a, b) = (w[0], w[1]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            if len < 1.0 {
+                continue;
+            }
+            let mid = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])];
+            let n = [-(b[1] - a[1]) / len, (b[0] - a[0]) / len];
+            let off = [mid[0] + 10.0 * n[0], mid[1] + 10.0 * n[1]];
+            let near_other = decals.iter().any(|o| {
+                o.points.windows(2).any(|s| {
+                    let reach = 0.5 * f64::from(o.width_m) + f64::from(o.falloff_m) + 1.0;
+                    let (d_off, _) = worldgen::roads::segment_closest(
+                        off,
+                        [s[0][0], s[0][1]],
+                        [s[1][0], s[1][1]],
+                    );
+                    d_off < reach
+                }) || (o.kind != DecalKind::Road
+                    && o.points.windows(2).any(|s| {
+                        worldgen::roads::segment_closest(
+                            mid,
+                            [s[0][0], s[0][1]],
+                            [s[1][0], s[1][1]],
+                        )
+                        .0 < 0.5 * f64::from(o.width_m) + f64::from(o.falloff_m) + 1.0
+                    }))
+            });
+            if near_other {
+                continue; // another decal there, or one drawn over this road
+            }
+            let ground = DVec3::new(mid[0], mid[1], world.height_m(mid[0], mid[1]));
+            let cam = Camera::look_at(
+                ground + DVec3::new(0.0, 0.0, 40.0),
+                ground,
+                40f64.to_radians(),
+                size,
+            );
+            tests::gpu::settle(&g, &mut v, &target, &cam);
+            let img = target.read_rgba(&g).expect("readback");
+            let at = |(x, y): (usize, usize)| {
+                let k = (y * size[0] as usize + x) * 4;
+                [img[k], img[k + 1], img[k + 2]]
+            };
+            let road = at(pixel(&cam, ground));
+            let off_px = pixel(
+                &cam,
+                DVec3::new(off[0], off[1], world.height_m(off[0], off[1])),
+            );
+            let other = at(off_px);
+            for ch in 0..3 {
+                assert!(
+                    (i32::from(road[ch]) - 61).abs() <= 8,
+                    "road centre at {mid:?}: pixel {road:?} is not asphalt"
+                );
+            }
+            let diff = (0..3)
+                .map(|ch| (i32::from(road[ch]) - i32::from(other[ch])).abs())
+                .max()
+                .unwrap_or(0);
+            assert!(
+                diff > 15,
+                "10 m off the road at {off:?} (pixel {off_px:?}): {other:?} looks like the road"
+            );
+            checked += 1;
+            if checked >= 4 {
+                return;
+            }
+        }
+    }
+    assert!(checked >= 2, "only {checked} road points checked");
+}
