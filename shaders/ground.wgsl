@@ -2,8 +2,10 @@
 // one texel of the node's layout (engine::ground::layout). Its colour: the ground type at the
 // texel's position, read from the map's ground layer at a noise-perturbed position (natural
 // borders instead of the 4 m staircase), shaded with that type's tiled material; then the
-// node's road and path segments drawn over it with soft edges, in file order, each as a quad
-// around the segment (cost in proportion to the area covered, not texels x segments).
+// node's closed areas (fields, dirt, rock patches) in file order, each as its box with an
+// even-odd inside test and a soft edge; then its road and path segments with soft edges, in
+// file order, each as a quad around the segment (cost in proportion to the area covered, not
+// texels x segments).
 //
 // The prelude's groups 0 and 1 are not used here; this file's resources are group 2.
 //
@@ -25,7 +27,8 @@ struct GroundNode {
     material_lod: f32,
     segment_count: u32,
     ground_types: u32,
-    pad: u32,
+    // Texel size in metres (patterns finer than a few texels fade to their mean).
+    texel_m: f32,
 };
 
 // A road or path segment in texel-lattice units of the node's level (the same numbers in every
@@ -44,6 +47,24 @@ struct Segment {
 @group(2) @binding(2) var materials: texture_2d_array<f32>;
 @group(2) @binding(3) var material_sampler: sampler;
 @group(2) @binding(4) var<storage, read> segments: array<Segment>;
+
+// A closed decal area: its box (texel-lattice units, widened by its soft edge) and its outline
+// (points `first .. first + count` of `area_points`, lattice units).
+struct Area {
+    lo: vec2<f32>,
+    hi: vec2<f32>,
+    first: u32,
+    count: u32,
+    half_width: f32,
+    falloff: f32,
+    kind: u32,
+    pad: u32,
+    // Fields: the unit direction of the crop rows (lattice units).
+    rows: vec2<f32>,
+};
+
+@group(2) @binding(5) var<storage, read> areas: array<Area>;
+@group(2) @binding(6) var<storage, read> area_points: array<vec2<f32>>;
 
 @vertex
 fn vs_fill(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
@@ -142,6 +163,74 @@ fn fs_segment(in: DecalOut) -> @location(0) vec4<f32> {
     var color = ROAD_COLOR;
     if (s.kind == 1u) {
         color = PATH_COLOR;
+    }
+    return vec4<f32>(color, w);
+}
+
+struct AreaOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) area: u32,
+};
+
+// Area `k` as its box.
+@vertex
+fn vs_area(@builtin(vertex_index) v: u32, @builtin(instance_index) k: u32) -> AreaOut {
+    let a = areas[k];
+    var corners = array<vec2<f32>, 4>(a.lo, vec2<f32>(a.hi.x, a.lo.y), a.hi, vec2<f32>(a.lo.x, a.hi.y));
+    var order = array<u32, 6>(0u, 1u, 2u, 0u, 2u, 3u);
+    let q = (corners[order[v]] - vec2<f32>(node.first)) / f32(SIDE);
+    var out: AreaOut;
+    out.clip = vec4<f32>(q * 2.0 - 1.0, 0.0, 1.0);
+    out.area = k;
+    return out;
+}
+
+// How much of a pattern with features `feature_m` metres across a texel can show: all of it
+// from 3 texels per feature, none at 1 (the texel then holds the pattern's mean).
+fn resolvable(feature_m: f32) -> f32 {
+    return clamp((feature_m / node.texel_m - 1.0) * 0.5, 0.0, 1.0);
+}
+
+// The area's colour with its soft-edge weight as alpha: inside the outline (even-odd) weight 1,
+// outside it falls off with the distance to the outline.
+@fragment
+fn fs_area(in: AreaOut) -> @location(0) vec4<f32> {
+    let a = areas[in.area];
+    let p = texel_centre(in.clip);
+    var inside = false;
+    var d = 1e30;
+    for (var k = 0u; k < a.count; k = k + 1u) {
+        let pa = area_points[a.first + k];
+        let pb = area_points[a.first + (k + a.count - 1u) % a.count];
+        if ((pa.y > p.y) != (pb.y > p.y)) {
+            let x = pa.x + (p.y - pa.y) / (pb.y - pa.y) * (pb.x - pa.x);
+            if (p.x < x) {
+                inside = !inside;
+            }
+        }
+        d = min(d, segment_distance(p, pa, pb));
+    }
+    var w = 1.0;
+    if (!inside) {
+        w = 1.0 - smoothstep(a.half_width, a.half_width + max(a.falloff, 1e-3), d);
+    }
+    // Metres from the tree's south-west corner (the same numbers in every node of the level).
+    let m = p * node.texel_m;
+    var color = DIRT_PATCH_COLOR;
+    if (a.kind == 2u) {
+        // Rock: boulders (1.2 m) on slabs (5 m).
+        let v = 0.6 * (value_noise(m / 1.2) - 0.5) * resolvable(1.2)
+            + 0.5 * (value_noise(m / 5.0 + 31.0) - 0.5) * resolvable(5.0);
+        color = ROCK_PATCH_COLOR * (1.0 + v);
+    } else if (a.kind == 3u) {
+        // Crop rows 2.5 m apart across the first edge; a triangle wave of mean 1/2.
+        let u = dot(p, a.rows) * node.texel_m / 2.5;
+        let tri = abs(fract(u) - 0.5) * 2.0;
+        color = mix(FIELD_LOW_COLOR, FIELD_HIGH_COLOR, 0.5 + (tri - 0.5) * resolvable(1.25));
+    } else {
+        let v = 0.35 * (value_noise(m / 0.8 + 7.0) - 0.5) * resolvable(0.8)
+            + 0.3 * (value_noise(m / 3.0 + 13.0) - 0.5) * resolvable(3.0);
+        color = DIRT_PATCH_COLOR * (1.0 + v);
     }
     return vec4<f32>(color, w);
 }

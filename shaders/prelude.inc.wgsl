@@ -15,6 +15,8 @@ struct Frame {
     sky_horizon: vec4<f32>,
     // x: fog density per metre, y: largest fog amount, z: debug mode, w: unused.
     fog: vec4<f32>,
+    // xy: camera position modulo the detail period (engine::render::frame::DETAIL_PERIOD_M).
+    camera_wrap: vec4<f32>,
 };
 
 // One entry of the renderer's node table (`engine::render::node_table`).

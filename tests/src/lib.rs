@@ -83,6 +83,22 @@ pub fn tiny_map_params() -> worldgen::generate::GenerateParams {
     }
 }
 
+/// Parameters of the 2 km map the ground-patch tests use.
+pub fn patches_map_params() -> worldgen::generate::GenerateParams {
+    worldgen::generate::GenerateParams {
+        name: "patches".into(),
+        seed: 11,
+        size_m: 2048.0,
+        spacing_m: 4.0,
+        threads: 0,
+    }
+}
+
+/// A map generated in memory (no progress output).
+pub fn generated(p: &worldgen::generate::GenerateParams) -> worldgen::Map {
+    worldgen::generate::generate(p, &worldgen::progress::Silent, &mut Vec::new()).expect("generate")
+}
+
 /// Copies every file of folder `from` into a new folder `to`.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).expect("create copy folder");
@@ -157,6 +173,12 @@ pub mod terrain {
     /// The committed tiny map as a world.
     pub fn tiny_world() -> World {
         World::new(Map::load(&super::tiny_map_dir()).expect("tiny map loads"))
+    }
+
+    /// A generated 2 km map (seed 11, 4 m spacing), large enough to hold every kind of
+    /// worldgen's ground patches (fields, dirt, rock outcrops), as a world.
+    pub fn patches_world() -> World {
+        World::new(super::generated(&super::patches_map_params()))
     }
 
     /// The tiny map with hard cases burned into its heights: a 100 m vertical cliff (between

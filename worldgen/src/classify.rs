@@ -20,6 +20,7 @@ pub fn default_legend() -> Vec<GroundType> {
         name: name.into(),
         color,
         detail_amplitude_m,
+        material: None,
     };
     vec![
         t("water", [52, 92, 140], 0.0),

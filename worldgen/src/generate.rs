@@ -10,6 +10,7 @@ use crate::map::{
 };
 use crate::noise;
 use crate::par;
+use crate::patches::{self, PatchInputs};
 use crate::progress::{Progress, StepTime, timed};
 use crate::roads::{self, RoadInputs};
 use crate::sample::GridPlacement;
@@ -163,6 +164,21 @@ pub fn generate(
             water_level_m: WATER_LEVEL_M,
         })
     });
+    let patches = timed(times, "ground patches (fields, dirt, rock)", || {
+        let (w, h) = (heights.width(), heights.height());
+        let near_road = roads::decal_mask(&network.decals, placement, w, h, 6.0);
+        patches::place(&PatchInputs {
+            seed,
+            heights: &heights,
+            ground: &ground,
+            slope: &slope,
+            placement,
+            size_m: [p.size_m; 2],
+            near_road: &near_road,
+        })
+    });
+    let mut decals = network.decals;
+    decals.extend(patches);
     assemble(AssembleInputs {
         name: p.name.clone(),
         seed,
@@ -175,7 +191,7 @@ pub fn generate(
         ground,
         slope,
         moisture,
-        decals: network.decals,
+        decals,
         times,
     })
 }
@@ -292,6 +308,7 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
         .zip(density_grids)
         .map(|(spec, density)| DensityLayer { spec, density })
         .collect();
+    let materials = vec![None; manifest.ground.legend.len()];
     Ok(Map {
         manifest,
         heights: a.heights,
@@ -301,5 +318,6 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
         decals: a.decals,
         buildings: Vec::new(),
         poisson,
+        materials,
     })
 }

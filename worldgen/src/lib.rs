@@ -23,6 +23,7 @@ pub mod grid;
 pub mod map;
 pub mod noise;
 pub mod par;
+pub mod patches;
 pub mod poisson;
 pub mod progress;
 pub mod roads;

@@ -318,7 +318,8 @@ pub fn segment_closest(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, f64) {
 }
 
 /// A boolean grid (`w` x `h` samples at `placement`) marking samples within half a decal's width
-/// plus `extra_m` of any open decal's centre line.
+/// plus `extra_m` of any decal's centre line (open decals) or outline (closed areas), and every
+/// sample inside a closed area.
 pub fn decal_mask(
     decals: &[Decal],
     placement: GridPlacement,
@@ -328,32 +329,56 @@ pub fn decal_mask(
 ) -> Grid<bool> {
     let mut mask = Grid::new(w, h, false);
     let s = placement.spacing_m;
-    for d in decals.iter().filter(|d| !d.closed) {
+    let to_cell = |v: f64, o: f64| (v - o) / s;
+    let cell_range = |lo: f64, hi: f64, o: f64, n: usize| {
+        let a = to_cell(lo, o).floor().max(0.0) as usize;
+        let b = (to_cell(hi, o).ceil().max(0.0) as usize).min(n - 1);
+        a..=b
+    };
+    let at = |x: usize, y: usize| {
+        [
+            placement.origin_m[0] + x as f64 * s,
+            placement.origin_m[1] + y as f64 * s,
+        ]
+    };
+    for d in decals {
         let r = f64::from(d.width_m) * 0.5 + extra_m;
-        for seg in d.points.windows(2) {
-            let (a, b) = ([seg[0][0], seg[0][1]], [seg[1][0], seg[1][1]]);
-            let to_cell = |v: f64, o: f64| (v - o) / s;
-            let x0 = (to_cell(a[0].min(b[0]) - r, placement.origin_m[0])
-                .floor()
-                .max(0.0)) as usize;
-            let x1 = (to_cell(a[0].max(b[0]) + r, placement.origin_m[0])
-                .ceil()
-                .max(0.0) as usize)
-                .min(w - 1);
-            let y0 = (to_cell(a[1].min(b[1]) - r, placement.origin_m[1])
-                .floor()
-                .max(0.0)) as usize;
-            let y1 = (to_cell(a[1].max(b[1]) + r, placement.origin_m[1])
-                .ceil()
-                .max(0.0) as usize)
-                .min(h - 1);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    let p = [
-                        placement.origin_m[0] + x as f64 * s,
-                        placement.origin_m[1] + y as f64 * s,
-                    ];
-                    if point_segment_distance_m(p, a, b) <= r {
+        let n = d.points.len();
+        let segments = if d.closed { n } else { n.saturating_sub(1) };
+        for k in 0..segments {
+            let (pa, pb) = (d.points[k], d.points[(k + 1) % n]);
+            let (a, b) = ([pa[0], pa[1]], [pb[0], pb[1]]);
+            for y in cell_range(
+                a[1].min(b[1]) - r,
+                a[1].max(b[1]) + r,
+                placement.origin_m[1],
+                h,
+            ) {
+                for x in cell_range(
+                    a[0].min(b[0]) - r,
+                    a[0].max(b[0]) + r,
+                    placement.origin_m[0],
+                    w,
+                ) {
+                    if point_segment_distance_m(at(x, y), a, b) <= r {
+                        mask.set(x, y, true);
+                    }
+                }
+            }
+        }
+        if d.closed && n >= 3 {
+            let (lo, hi) = d.points.iter().fold(
+                ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+                |(lo, hi), p| {
+                    (
+                        [lo[0].min(p[0]), lo[1].min(p[1])],
+                        [hi[0].max(p[0]), hi[1].max(p[1])],
+                    )
+                },
+            );
+            for y in cell_range(lo[1], hi[1], placement.origin_m[1], h) {
+                for x in cell_range(lo[0], hi[0], placement.origin_m[0], w) {
+                    if inside_polygon(at(x, y), &d.points) {
                         mask.set(x, y, true);
                     }
                 }
@@ -361,4 +386,20 @@ pub fn decal_mask(
         }
     }
     mask
+}
+
+/// Even-odd point-in-polygon test on the (x, y) of `pts`.
+pub fn inside_polygon(p: [f64; 2], pts: &[[f64; 3]]) -> bool {
+    let mut inside = false;
+    let n = pts.len();
+    for i in 0..n {
+        let (a, b) = (pts[i], pts[(i + n - 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p[0] < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
 }

@@ -3,8 +3,9 @@
 //!
 //! Made by the engine at start-up, not stored in the map: they are a pure function of the
 //! legend (name and colour) and the map seed, cost about a millisecond per type, and so need no
-//! new map layer, no format version and no validation of generated files. (A map naming its own
-//! PNG materials is a later step; those would be validated on load like every layer.)
+//! new map layer, no format version and no validation of generated files. A map may instead name
+//! a PNG for a type (`ground.legend[i].material`, validated by `Map::load`): its texels are then
+//! the albedo, box-filtered (in linear light) or repeated to `MATERIAL_TEXELS`, north up.
 //!
 //! Each texture is periodic value noise (corner values hashed from lattice indices modulo the
 //! lattice size, so the texture's last column continues into its first) in a few octaves whose
@@ -14,7 +15,7 @@
 //! terrain had before.
 
 use crate::color::{linear_to_srgb, srgb_to_linear};
-use worldgen::map::GroundType;
+use worldgen::map::{GroundType, MaterialImage};
 use worldgen::noise::{fade, unit3};
 
 /// Texels per material side (a power of two: mips tile too).
@@ -119,12 +120,76 @@ pub fn material(index: usize, t: &GroundType, seed: u64) -> Material {
     }
 }
 
-/// The materials of a legend, in legend order.
-pub fn materials(legend: &[GroundType], seed: u64) -> Vec<Material> {
+/// The material made from a map's image for type `t`: `MATERIAL_TEXELS` texels a side (each
+/// the linear-light mean of the image texels it covers, or a repeat of the one it lies in when
+/// the image is smaller), rows south to north like the generated ones; detail height from the
+/// texels' luminance, stretched to 0..=255.
+pub fn material_from_image(t: &GroundType, image: &MaterialImage) -> Material {
+    let n = MATERIAL_TEXELS;
+    let side = image.side;
+    let (step, span) = if side >= n {
+        (side / n, side / n)
+    } else {
+        (1, 1)
+    };
+    let mut linear = Vec::with_capacity((n * n) as usize);
+    for j in 0..n {
+        // Material row j counts from the south; image row 0 is the north edge.
+        for i in 0..n {
+            let mut sum = [0.0f64; 3];
+            for dy in 0..span {
+                for dx in 0..span {
+                    let (x, y) = if side >= n {
+                        (i * step + dx, (n - 1 - j) * step + dy)
+                    } else {
+                        (i * side / n, (n - 1 - j) * side / n)
+                    };
+                    let p = image.rgba[(y * side + x) as usize];
+                    for c in 0..3 {
+                        sum[c] += srgb_to_linear(p[c]);
+                    }
+                }
+            }
+            linear.push(sum.map(|v| v / f64::from(span * span)));
+        }
+    }
+    let luminance: Vec<f64> = linear
+        .iter()
+        .map(|c| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2])
+        .collect();
+    let lo = luminance.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = luminance.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let range = (hi - lo).max(1e-9);
+    Material {
+        name: t.name.clone(),
+        albedo_srgb: linear
+            .iter()
+            .map(|c| {
+                let s = c.map(linear_to_srgb);
+                [s[0], s[1], s[2], 255]
+            })
+            .collect(),
+        height: luminance
+            .iter()
+            .map(|l| ((l - lo) / range * 255.0).round() as u8)
+            .collect(),
+    }
+}
+
+/// The materials of a legend, in legend order: from the map's image where it names one
+/// (`images[i]`, missing entries count as none), generated otherwise.
+pub fn materials(
+    legend: &[GroundType],
+    images: &[Option<MaterialImage>],
+    seed: u64,
+) -> Vec<Material> {
     legend
         .iter()
         .enumerate()
-        .map(|(i, t)| material(i, t, seed))
+        .map(|(i, t)| match images.get(i).and_then(Option::as_ref) {
+            Some(image) => material_from_image(t, image),
+            None => material(i, t, seed),
+        })
         .collect()
 }
 
@@ -146,9 +211,9 @@ mod tests {
     fn materials_are_deterministic_and_distinct() {
         let l = legend();
         assert!(l.len() >= 3);
-        let a = materials(&l, 7);
-        assert_eq!(a, materials(&l, 7));
-        assert_ne!(a[0].height, materials(&l, 8)[0].height);
+        let a = materials(&l, &[], 7);
+        assert_eq!(a, materials(&l, &[], 7));
+        assert_ne!(a[0].height, materials(&l, &[], 8)[0].height);
         for (i, m) in a.iter().enumerate().skip(1) {
             assert_ne!(
                 m.height,
@@ -165,7 +230,7 @@ mod tests {
     #[test]
     fn materials_tile_without_a_seam() {
         let n = MATERIAL_TEXELS as usize;
-        for m in materials(&legend(), 3) {
+        for m in materials(&legend(), &[], 3) {
             let h = |i: usize, j: usize| i32::from(m.height[(j % n) * n + i % n]);
             let mut inside = 0;
             let mut across = 0;
@@ -190,12 +255,51 @@ mod tests {
         }
     }
 
+    /// An image material: a 256-texel checker of two colours becomes 128 texels of 2x2 means
+    /// (each covering one colour, as the squares are 4 texels wide), north up; a 32-texel image
+    /// is repeated 4x4 per texel.
+    #[test]
+    fn image_materials_are_filtered_and_north_up() {
+        let t = legend().remove(0);
+        let red = [200, 30, 30, 255];
+        let blue = [20, 40, 220, 255];
+        let side = 256u32;
+        // Top half red, bottom half blue, with a 4-texel checker of the two in the top-left
+        // quarter.
+        let rgba = (0..side * side)
+            .map(|k| {
+                let (x, y) = (k % side, k / side);
+                let checker = x < 128 && y < 128 && ((x / 4 + y / 4) % 2 == 1);
+                if (y < 128) == checker { blue } else { red }
+            })
+            .collect();
+        let m = material_from_image(&t, &MaterialImage { side, rgba });
+        let n = MATERIAL_TEXELS as usize;
+        let at = |i: usize, j: usize| m.albedo_srgb[j * n + i];
+        // Row 0 is the south (image bottom, blue); the last row the north (image top).
+        assert_eq!(at(100, 0), blue);
+        assert_eq!(at(100, n - 1), red);
+        // The checker survives 2x2 filtering: texel (0, n-1) is image (0..2, 0..2), red.
+        assert_eq!(at(0, n - 1), red);
+        assert_eq!(at(2, n - 1), blue);
+        let small = MaterialImage {
+            side: 32,
+            rgba: (0..32 * 32)
+                .map(|k| if k % 32 < 16 { red } else { blue })
+                .collect(),
+        };
+        let m = material_from_image(&t, &small);
+        assert_eq!(m.albedo_srgb[63], red);
+        assert_eq!(m.albedo_srgb[64], blue);
+        assert!(m.height.contains(&0) && m.height.contains(&255));
+    }
+
     /// From afar a material looks like its legend colour: the mean linear albedo is within 2 %
     /// of the legend colour's (plus sRGB rounding).
     #[test]
     fn mean_albedo_is_the_legend_colour() {
         let l = legend();
-        for (t, m) in l.iter().zip(materials(&l, 5)) {
+        for (t, m) in l.iter().zip(materials(&l, &[], 5)) {
             for c in 0..3 {
                 let want = srgb_to_linear(t.color[c]);
                 let mean = m

@@ -8,6 +8,10 @@ use super::gpu_data::FrameUniforms;
 use crate::camera::Camera;
 use glam::{DVec3, Vec3};
 
+/// Period (m) of the ground's fine detail pattern (`terrain.wgsl`): the camera position is sent
+/// modulo this, and the pattern repeats with it (64 m, far beyond where it shows).
+pub const DETAIL_PERIOD_M: f64 = 64.0;
+
 /// Debug views and per-view switches.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[allow(
@@ -250,6 +254,12 @@ impl FrameResources {
             sky_zenith: [0.16, 0.32, 0.66, 1.0],
             sky_horizon: [0.62, 0.72, 0.84, 1.0],
             fog: [view.fog_per_m, view.fog_max, view.debug_mode(), 0.0],
+            camera_wrap: [
+                cam.position_m.x.rem_euclid(DETAIL_PERIOD_M) as f32,
+                cam.position_m.y.rem_euclid(DETAIL_PERIOD_M) as f32,
+                0.0,
+                0.0,
+            ],
         }
     }
 

@@ -16,6 +16,9 @@ pub struct FrameUniforms {
     pub sky_horizon: [f32; 4],
     /// x: fog density per metre, y: largest fog amount, z: debug mode ([`super::frame::ViewOptions::debug_mode`]), w: unused.
     pub fog: [f32; 4],
+    /// xy: the camera's position modulo [`super::frame::DETAIL_PERIOD_M`] (world positions of
+    /// nearby pixels, for the ground's fine detail, without f32 cancellation); zw: unused.
+    pub camera_wrap: [f32; 4],
 }
 
 /// Mirrors `Node`: one entry of a renderer's node table (a storage array indexed by the draw's
@@ -53,4 +56,4 @@ impl MeshVertex {
 
 const _: () = assert!(std::mem::size_of::<NodeEntry>() == 32);
 const _: () = assert!(std::mem::size_of::<MeshVertex>() == 28);
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 5 * 16);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 6 * 16);

@@ -1,10 +1,11 @@
 //! The GPU part of a node's ground texture: renders the texels of a node's layout
 //! ([`crate::ground::layout`]) into a colour target (the terrain renderer's pool layer for the
 //! node) — the ground type at a noise-perturbed position of the map's ground layer, shaded with
-//! the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's road
-//! and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around its
-//! segment blended in file order; then its mip levels (`record_mips`). Not yet: closed decal
-//! areas (listed in the pieces, not drawn), the materials' detail height (made, not used).
+//! the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's closed
+//! decal areas (fields, dirt, rock patches: each its box, an inside test and a soft edge) and
+//! its road and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around
+//! its segment, blended in file order (areas before segments); then its mip levels
+//! (`record_mips`). Not yet: the materials' detail height (made, not used).
 
 use super::Gpu;
 use super::frame::{sampler_entry, texture_entry};
@@ -21,17 +22,39 @@ pub const GROUND_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba
 /// Linear albedo of roads (asphalt) and paths (dirt).
 const ROAD_LINEAR: [f32; 3] = [0.045, 0.045, 0.05];
 const PATH_LINEAR: [f32; 3] = [0.26, 0.17, 0.09];
+/// Linear albedo of the closed areas: rock patches, bare earth, and a field's two row tones.
+const ROCK_PATCH_LINEAR: [f32; 3] = [0.21, 0.2, 0.19];
+const DIRT_PATCH_LINEAR: [f32; 3] = [0.2, 0.13, 0.075];
+const FIELD_LOW_LINEAR: [f32; 3] = [0.2, 0.13, 0.06];
+const FIELD_HIGH_LINEAR: [f32; 3] = [0.36, 0.3, 0.08];
 
 /// The assembled shader source.
 pub fn shader_source() -> String {
     let v = |c: [f32; 3]| format!("vec3<f32>({:?}, {:?}, {:?})", c[0], c[1], c[2]);
     super::shader::assemble(
         "ground",
-        &format!(
-            "const SIDE: u32 = {SIDE}u;\nconst ROAD_COLOR: vec3<f32> = {};\nconst PATH_COLOR: vec3<f32> = {};",
-            v(ROAD_LINEAR),
-            v(PATH_LINEAR)
-        ),
+        &[
+            format!("const SIDE: u32 = {SIDE}u;"),
+            format!("const ROAD_COLOR: vec3<f32> = {};", v(ROAD_LINEAR)),
+            format!("const PATH_COLOR: vec3<f32> = {};", v(PATH_LINEAR)),
+            format!(
+                "const ROCK_PATCH_COLOR: vec3<f32> = {};",
+                v(ROCK_PATCH_LINEAR)
+            ),
+            format!(
+                "const DIRT_PATCH_COLOR: vec3<f32> = {};",
+                v(DIRT_PATCH_LINEAR)
+            ),
+            format!(
+                "const FIELD_LOW_COLOR: vec3<f32> = {};",
+                v(FIELD_LOW_LINEAR)
+            ),
+            format!(
+                "const FIELD_HIGH_COLOR: vec3<f32> = {};",
+                v(FIELD_HIGH_LINEAR)
+            ),
+        ]
+        .join("\n"),
     )
 }
 
@@ -47,7 +70,7 @@ struct GroundNodeUniform {
     material_lod: f32,
     segment_count: u32,
     ground_types: u32,
-    pad: u32,
+    texel_m: f32,
 }
 
 /// One segment (mirrors `Segment` in `ground.wgsl`), in texel-lattice units of its level.
@@ -62,11 +85,37 @@ struct GpuSegment {
     pad: u32,
 }
 
+/// One closed area (mirrors `Area` in `ground.wgsl`), in texel-lattice units of its level.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GpuArea {
+    lo: [f32; 2],
+    hi: [f32; 2],
+    first: u32,
+    count: u32,
+    half_width: f32,
+    falloff: f32,
+    kind: u32,
+    pad: u32,
+    rows: [f32; 2],
+}
+
+/// The area kind numbers of `ground.wgsl` (segments use 0 road, 1 path).
+fn area_kind(kind: DecalKind) -> u32 {
+    match kind {
+        DecalKind::Road | DecalKind::Path | DecalKind::Dirt => 4,
+        DecalKind::RockPatch => 2,
+        DecalKind::Field => 3,
+    }
+}
+
 /// The ground-texture pipeline and the map data it reads.
 pub struct GroundTexturer {
     pipeline: wgpu::RenderPipeline,
     /// Road and path segments as quads, blended over the ground in file order.
     segments: wgpu::RenderPipeline,
+    /// Closed areas as their boxes, blended over the ground in file order (before segments).
+    areas: wgpu::RenderPipeline,
     /// A mip level from the one above it (2 x 2 box filter in linear light).
     downsample: wgpu::RenderPipeline,
     downsample_layout: wgpu::BindGroupLayout,
@@ -152,7 +201,7 @@ fn ground_types_view(gpu: &Gpu, ground: &worldgen::Grid<u8>) -> wgpu::TextureVie
 /// legend), and the layer count.
 fn materials_view(gpu: &Gpu, map: &worldgen::Map) -> (wgpu::TextureView, u32) {
     let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0);
-    let mut mats: Vec<Vec<[u8; 4]>> = materials(&map.manifest.ground.legend, seed)
+    let mut mats: Vec<Vec<[u8; 4]>> = materials(&map.manifest.ground.legend, &map.materials, seed)
         .into_iter()
         .map(|m| m.albedo_srgb)
         .collect();
@@ -228,16 +277,9 @@ impl GroundTexturer {
                 },
                 texture_entry(2, wgpu::TextureViewDimension::D2Array),
                 sampler_entry(3),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
+                storage_entry(4),
+                storage_entry(5),
+                storage_entry(6),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -304,10 +346,17 @@ impl GroundTexturer {
             "fs_segment",
             Some(wgpu::BlendState::ALPHA_BLENDING),
         );
+        let areas = make(
+            "ground texture areas",
+            "vs_area",
+            "fs_area",
+            Some(wgpu::BlendState::ALPHA_BLENDING),
+        );
         let downsample = make("ground texture mips", "vs_fill", "fs_downsample", None);
         Self {
             pipeline,
             segments,
+            areas,
             downsample,
             downsample_layout,
             layout,
@@ -399,6 +448,7 @@ impl GroundTexturer {
         if segments.is_empty() {
             segments.push(bytemuck::Zeroable::zeroed());
         }
+        let (areas, points, area_count) = gpu_areas(decals, decal_list, &lattice, t);
         let gs = self.ground_spacing_m;
         let material_m = MATERIAL_TILE_M;
         let corner = |o: f64, r: f64, unit: f64| (r - o) / unit;
@@ -419,7 +469,7 @@ impl GroundTexturer {
                 .max(0.0) as f32,
             segment_count,
             ground_types: self.types,
-            pad: 0,
+            texel_m: t as f32,
         };
         let device = &gpu.device;
         let ubuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -430,6 +480,16 @@ impl GroundTexturer {
         let sbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("ground segments"),
             contents: bytemuck::cast_slice(&segments),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let abuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ground areas"),
+            contents: bytemuck::cast_slice(&areas),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let pbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ground area points"),
+            contents: bytemuck::cast_slice(&points),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -456,6 +516,14 @@ impl GroundTexturer {
                     binding: 4,
                     resource: sbuf.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: abuf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: pbuf.as_entire_binding(),
+                },
             ],
         });
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -477,9 +545,81 @@ impl GroundTexturer {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(2, &group, &[]);
         pass.draw(0..3, 0..1);
+        if area_count > 0 {
+            pass.set_pipeline(&self.areas);
+            pass.draw(0..6, 0..area_count);
+        }
         if segment_count > 0 {
             pass.set_pipeline(&self.segments);
             pass.draw(0..6, 0..segment_count);
         }
     }
+}
+
+/// A read-only storage buffer of the ground-texture group, seen by both stages.
+fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A node's closed areas for `ground.wgsl` (lattice units of texel size `t`) and their outline
+/// points, each padded to one element when empty (a binding cannot be empty), and the count.
+fn gpu_areas(
+    decals: &NodeDecals,
+    decal_list: &[worldgen::map::Decal],
+    lattice: &impl Fn([f64; 3]) -> [f32; 2],
+    t: f64,
+) -> (Vec<GpuArea>, Vec<[f32; 2]>, u32) {
+    let mut points: Vec<[f32; 2]> = Vec::new();
+    let mut areas: Vec<GpuArea> = decals
+        .areas
+        .iter()
+        .map(|&i| {
+            let d = &decal_list[i as usize];
+            let first = points.len() as u32;
+            points.extend(d.points.iter().map(|&p| lattice(p)));
+            let outline = &points[first as usize..];
+            let half_width = (0.5 * f64::from(d.width_m) / t) as f32;
+            let falloff = (f64::from(d.falloff_m) / t) as f32;
+            let reach = half_width + falloff + 1.0;
+            let (lo, hi) = outline.iter().fold(
+                ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]),
+                |(lo, hi), p| {
+                    (
+                        [lo[0].min(p[0]), lo[1].min(p[1])],
+                        [hi[0].max(p[0]), hi[1].max(p[1])],
+                    )
+                },
+            );
+            let (a, b) = (d.points[0], d.points[1]);
+            let edge = [b[0] - a[0], b[1] - a[1]];
+            let len = edge[0].hypot(edge[1]).max(1e-9);
+            GpuArea {
+                lo: [lo[0] - reach, lo[1] - reach],
+                hi: [hi[0] + reach, hi[1] + reach],
+                first,
+                count: d.points.len() as u32,
+                half_width,
+                falloff,
+                kind: area_kind(d.kind),
+                pad: 0,
+                // Rows run along the first edge: the pattern varies across it.
+                rows: [(-edge[1] / len) as f32, (edge[0] / len) as f32],
+            }
+        })
+        .collect();
+    let area_count = areas.len() as u32;
+    if areas.is_empty() {
+        areas.push(bytemuck::Zeroable::zeroed());
+        points.push([0.0; 2]);
+    }
+    (areas, points, area_count)
 }

@@ -50,7 +50,8 @@ pub fn shader_source() -> String {
         "terrain",
         &format!(
             "const GROUND_TYPES: u32 = {GROUND_TYPES}u;\nconst GROUND_SIDE: u32 = {SIDE}u;\n\
-             const GROUND_BORDER: u32 = {BORDER}u;"
+             const GROUND_BORDER: u32 = {BORDER}u;\nconst DETAIL_PERIOD_M: f32 = {:?};",
+            super::frame::DETAIL_PERIOD_M as f32
         ),
     )
 }

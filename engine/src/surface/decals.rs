@@ -18,7 +18,7 @@
 
 use rustc_hash::FxHashMap;
 use worldgen::map::{Decal, DecalKind};
-use worldgen::roads::segment_closest;
+use worldgen::roads::{inside_polygon, segment_closest};
 use worldgen::sample::catmull_rom_weights;
 
 /// Spacing (m) of the decal offset lattice.
@@ -122,22 +122,6 @@ impl BlockRuns {
     }
 }
 
-/// Even-odd point-in-polygon test.
-fn inside_polygon(p: [f64; 2], pts: &[[f64; 3]]) -> bool {
-    let mut inside = false;
-    let n = pts.len();
-    for i in 0..n {
-        let (a, b) = (pts[i], pts[(i + n - 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if p[0] < x {
-                inside = !inside;
-            }
-        }
-    }
-    inside
-}
-
 /// Decal weight at distance `d_m` from its centre line (or outside its area).
 pub fn decal_weight(d: &Decal, d_m: f64) -> f64 {
     let half = flat_half_width_m(d);
@@ -157,7 +141,7 @@ fn flat_half_width_m(d: &Decal) -> f64 {
     let half = f64::from(d.width_m) * 0.5;
     match d.kind {
         DecalKind::Road | DecalKind::Path => half + FLAT_MARGIN_M,
-        DecalKind::RockPatch => half,
+        DecalKind::RockPatch | DecalKind::Field | DecalKind::Dirt => half,
     }
 }
 
@@ -254,7 +238,9 @@ impl DecalField {
                         *rw = rw.max(w as f32);
                         w * (z + f64::from(d.height_offset_m) - ground_height_m(p[0], p[1]))
                     }
-                    DecalKind::RockPatch => w * f64::from(d.height_offset_m),
+                    DecalKind::RockPatch | DecalKind::Field | DecalKind::Dirt => {
+                        w * f64::from(d.height_offset_m)
+                    }
                 };
                 let e = samples.entry((ix, iy)).or_insert((0.0, 0.0));
                 if w > e.0 {

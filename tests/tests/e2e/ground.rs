@@ -293,13 +293,18 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
             cam(20.0 + 470.0 * t, 256.0 + 180.0 * (t * 9.0).sin(), 10.0, 0.2)
         };
         v.stream_only(&g, &c, 1.0 / 60.0);
+        // Layers held, every frame (how far the storm got depends on the workers' speed).
+        let terrain = v
+            .scene
+            .renderer::<TerrainRenderer>()
+            .expect("terrain renderer");
+        max_layers = max_layers.max(terrain.ground_pool_use().0);
         if i % 250 == 0 {
             let (layers, holders) = layers_and_holders(&v);
             assert_eq!(
                 layers, holders,
                 "frame {i}: layers in use vs resident holders"
             );
-            max_layers = max_layers.max(layers);
         }
     }
     assert!(max_layers > 20, "the storm made only {max_layers} textures");
@@ -421,4 +426,158 @@ fn in_a_rendered_view_a_road_centre_is_road_and_ten_metres_off_is_not() {
         }
     }
     assert!(checked >= 2, "only {checked} road points checked");
+}
+
+/// Closed areas (fields, dirt, rock patches) where the map puts them: around an area's centre
+/// the texture has the kind's colour (nearer to it than to the legend colour of the ground type
+/// there), and 4 m beyond the area's soft edge it has the ground's colour, not the kind's.
+/// Colours are means over 5 x 5 texels (27 cm each) against the material and pattern noise.
+#[test]
+fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
+    let Some(gpu) = device() else { return };
+    let world = tests::terrain::patches_world();
+    let tree = tree_of(&world);
+    let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
+    let t = GroundTexturer::new(&gpu, &world);
+    let decals = &world.map.decals;
+    let map = &world.map;
+    let level = tree.max_level - 2;
+    let tm = texel_m(&tree, level);
+    let srgb = |l: f64| {
+        let s = if l <= 0.003_130_8 {
+            12.92 * l
+        } else {
+            1.055 * l.powf(1.0 / 2.4) - 0.055
+        };
+        s * 255.0
+    };
+    // The kinds' mean linear albedo (the field's the mean of its two row tones).
+    let kind_color = |k: DecalKind| {
+        let lin = match k {
+            DecalKind::RockPatch => [0.21, 0.2, 0.19],
+            DecalKind::Dirt => [0.2, 0.13, 0.075],
+            _ => [0.28, 0.215, 0.07],
+        };
+        lin.map(srgb)
+    };
+    let legend_at = |p: [f64; 2]| {
+        let s = map.manifest.ground.spacing_m;
+        let x = ((p[0] - map.manifest.origin_m[0]) / s).round() as usize;
+        let y = ((p[1] - map.manifest.origin_m[1]) / s).round() as usize;
+        let g = map.ground.get(
+            x.min(map.ground.width() - 1),
+            y.min(map.ground.height() - 1),
+        );
+        map.manifest.ground.legend[g as usize].color.map(f64::from)
+    };
+    // The legend colour around `p` when the ground samples within 8 m are all one type.
+    let uniform_legend_at = |p: [f64; 2]| {
+        let s = map.manifest.ground.spacing_m;
+        let x = ((p[0] - map.manifest.origin_m[0]) / s).round() as i64;
+        let y = ((p[1] - map.manifest.origin_m[1]) / s).round() as i64;
+        let reach = (8.0 / s).ceil() as i64;
+        let g = map.ground.get_clamped(x, y);
+        let same = (-reach..=reach)
+            .all(|dy| (-reach..=reach).all(|dx| map.ground.get_clamped(x + dx, y + dy) == g));
+        same.then(|| map.manifest.ground.legend[g as usize].color.map(f64::from))
+    };
+    // Mean colour of the 5 x 5 texels around `p` in the texture of the level's node there.
+    let mean_at = |p: [f64; 2]| -> Option<[f64; 3]> {
+        let key = tree.key_at(level, p[0], p[1])?;
+        let r = tree.rect(key);
+        let img = render(&gpu, &t, &world, &index, &tree, key);
+        let ci = ((p[0] - r.min[0]) / tm).floor() as i64 + i64::from(BORDER);
+        let cj = ((p[1] - r.min[1]) / tm).floor() as i64 + i64::from(BORDER);
+        let mut sum = [0.0; 3];
+        for dj in -2..=2 {
+            for di in -2..=2 {
+                let (i, j) = ((ci + di) as u32, (cj + dj) as u32);
+                let px = texel(&img, i, j);
+                for c in 0..3 {
+                    sum[c] += f64::from(px[c]) / 25.0;
+                }
+            }
+        }
+        Some(sum)
+    };
+    let dist = |a: [f64; 3], b: [f64; 3]| {
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    };
+    // How far `p` is from any decal's reach (negative: inside one).
+    let clear_of_decals = |p: [f64; 2]| {
+        decals.iter().all(|o| {
+            let n = o.points.len();
+            let segs = if o.closed { n } else { n - 1 };
+            let reach = 0.5 * f64::from(o.width_m) + f64::from(o.falloff_m) + 2.0;
+            !(o.closed && worldgen::roads::inside_polygon(p, &o.points))
+                && (0..segs).all(|k| {
+                    let (a, b) = (o.points[k], o.points[(k + 1) % n]);
+                    worldgen::roads::point_segment_distance_m(p, [a[0], a[1]], [b[0], b[1]]) > reach
+                })
+        })
+    };
+    let mut checked = 0;
+    let mut kinds = Vec::new();
+    for d in decals.iter().filter(|d| d.closed) {
+        let n = d.points.len() as f64;
+        let c = [
+            d.points.iter().map(|p| p[0]).sum::<f64>() / n,
+            d.points.iter().map(|p| p[1]).sum::<f64>() / n,
+        ];
+        // The 5 x 5 block around the centre must lie inside the outline.
+        let half_block = 2.5 * tm * std::f64::consts::SQRT_2;
+        let inner = (0..d.points.len()).all(|k| {
+            let (a, b) = (d.points[k], d.points[(k + 1) % d.points.len()]);
+            worldgen::roads::point_segment_distance_m(c, [a[0], a[1]], [b[0], b[1]]) > half_block
+        });
+        if !worldgen::roads::inside_polygon(c, &d.points) || !inner {
+            continue;
+        }
+        // Beyond the soft edge: past the farthest outline point plus the reach, plus 4 m.
+        let rmax = d
+            .points
+            .iter()
+            .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
+            .fold(0.0, f64::max);
+        let out_r = rmax + 0.5 * f64::from(d.width_m) + f64::from(d.falloff_m) + 4.0;
+        let out = (0..8).map(|k| {
+            let a = std::f64::consts::TAU * f64::from(k) / 8.0;
+            [c[0] + out_r * a.cos(), c[1] + out_r * a.sin()]
+        });
+        let size = world.size_m();
+        let kind = kind_color(d.kind);
+        // Outside, the ground must be one type all around (its texels then show that type
+        // whatever the border noise) and that type must not look like the kind.
+        let Some((out, ground_out)) = out
+            .filter(|p| p[0] > 8.0 && p[1] > 8.0 && p[0] < size[0] - 8.0 && p[1] < size[1] - 8.0)
+            .filter(|&p| clear_of_decals(p))
+            .find_map(|p| {
+                uniform_legend_at(p)
+                    .filter(|g| dist(*g, kind) > 40.0)
+                    .map(|g| (p, g))
+            })
+        else {
+            continue;
+        };
+        let (Some(inside), Some(outside)) = (mean_at(c), mean_at(out)) else {
+            continue;
+        };
+        assert!(
+            dist(inside, kind) < dist(inside, legend_at(c)),
+            "{:?} at {c:?}: texels {inside:?} are nearer the ground's {:?} than the kind's {kind:?}",
+            d.kind,
+            legend_at(c)
+        );
+        assert!(
+            dist(outside, ground_out) < dist(outside, kind),
+            "beyond the {:?} at {out:?}: texels {outside:?} look like the kind {kind:?}",
+            d.kind
+        );
+        checked += 1;
+        if !kinds.contains(&d.kind) {
+            kinds.push(d.kind);
+        }
+    }
+    assert!(checked >= 10, "only {checked} areas checked");
+    assert_eq!(kinds.len(), 3, "only kinds {kinds:?} met");
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 use tests::{copy_dir, hash_dir, tiny_map_dir, tiny_map_params};
 use worldgen::Map;
 use worldgen::generate::{GenerateParams, generate};
-use worldgen::map::MapError;
+use worldgen::map::{Decal, DecalKind, MapError};
 use worldgen::progress::Silent;
 
 fn generate_into(p: &GenerateParams, dir: &Path) -> Map {
@@ -488,4 +488,239 @@ fn malformed_decal_and_path_escape() {
         table(t, "heights").insert("file".into(), "../../etc/passwd".into());
     });
     expect_error(&dir2, "map.toml", &["heights.file", "plain file name"]);
+}
+
+// ---- material images ---------------------------------------------------------------------
+
+/// Writes an 8-bit PNG of `color` type with `channels` bytes per texel.
+fn write_test_png(path: &Path, w: u32, h: u32, color: png::ColorType, texel: &[u8]) {
+    let file = std::fs::File::create(path).unwrap();
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    enc.set_color(color);
+    enc.set_depth(png::BitDepth::Eight);
+    let data: Vec<u8> = (0..w * h).flat_map(|_| texel.iter().copied()).collect();
+    let mut writer = enc.write_header().unwrap();
+    writer.write_image_data(&data).unwrap();
+    writer.finish().unwrap();
+}
+
+/// Names `file` as legend entry 2's material.
+fn name_material(dir: &Path, file: &str) {
+    edit_manifest(dir, |t| {
+        let legend = table(t, "ground")
+            .get_mut("legend")
+            .and_then(toml::Value::as_array_mut)
+            .unwrap();
+        legend[2]
+            .as_table_mut()
+            .unwrap()
+            .insert("material".into(), file.into());
+    });
+}
+
+/// A map naming a material image loads it, writes it back unchanged, and the engine's material
+/// for that type is made from the image (its texels are the image's colour), the others not.
+#[test]
+fn a_named_material_image_loads_round_trips_and_makes_the_material() {
+    let (_t, dir) = broken_copy();
+    write_test_png(
+        &dir.join("stone.png"),
+        64,
+        64,
+        png::ColorType::Rgb,
+        &[90, 80, 200],
+    );
+    name_material(&dir, "stone.png");
+    let map = Map::load(&dir).expect("a valid material image loads");
+    let image = map.materials[2].as_ref().expect("entry 2 has its image");
+    assert_eq!(image.side, 64);
+    assert!(image.rgba.iter().all(|p| *p == [90, 80, 200, 255]));
+    assert!(
+        map.materials
+            .iter()
+            .enumerate()
+            .all(|(i, m)| (i == 2) == m.is_some())
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let again = tmp.path().join("again");
+    map.write(&again).expect("write");
+    assert_eq!(Map::load(&again).expect("reload"), map);
+    let mats = engine::ground::materials::materials(&map.manifest.ground.legend, &map.materials, 1);
+    assert!(mats[2].albedo_srgb.iter().all(|p| *p == [90, 80, 200, 255]));
+    assert!(
+        mats[1]
+            .albedo_srgb
+            .iter()
+            .any(|p| *p != mats[1].albedo_srgb[0])
+    );
+}
+
+/// Broken material images are refused with an error naming the file and the manifest field.
+#[test]
+fn malformed_material_images() {
+    let field = "ground.legend[2].material";
+    // Missing file.
+    let (_t, dir) = broken_copy();
+    name_material(&dir, "nothere.png");
+    let e = expect_error(&dir, "nothere.png", &["material"]);
+    assert!(matches!(e, MapError::Io { .. }), "{e:?}");
+    // A path out of the map folder.
+    let (_t, dir) = broken_copy();
+    name_material(&dir, "../stone.png");
+    let e = expect_error(&dir, "map.toml", &[field, "plain file name"]);
+    assert!(matches!(e, MapError::InvalidField { .. }), "{e:?}");
+    // Not a PNG; a truncated PNG.
+    let (_t, dir) = broken_copy();
+    std::fs::write(dir.join("stone.png"), b"GIF89a not a png at all").unwrap();
+    name_material(&dir, "stone.png");
+    let e = expect_error(&dir, "stone.png", &[field, "material PNG"]);
+    assert!(matches!(e, MapError::BadLayerFile { .. }), "{e:?}");
+    let (_t, dir) = broken_copy();
+    let p = dir.join("stone.png");
+    write_test_png(&p, 128, 128, png::ColorType::Rgba, &[1, 2, 3, 255]);
+    let bytes = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    name_material(&dir, "stone.png");
+    expect_error(&dir, "stone.png", &[field, "material PNG"]);
+    // Wrong shapes and sample types; a huge header refused before decoding.
+    for (w, h, color, texel, words) in [
+        (100, 100, png::ColorType::Rgb, &[1u8, 2, 3][..], "100x100"),
+        (64, 32, png::ColorType::Rgb, &[1, 2, 3][..], "64x32"),
+        (8, 8, png::ColorType::Rgb, &[1, 2, 3][..], "8x8"),
+        (2048, 2048, png::ColorType::Grayscale, &[7][..], "2048x2048"),
+        (
+            64,
+            64,
+            png::ColorType::Grayscale,
+            &[7][..],
+            "expected 8-bit RGB or RGBA",
+        ),
+    ] {
+        let (_t, dir) = broken_copy();
+        write_test_png(&dir.join("stone.png"), w, h, color, texel);
+        name_material(&dir, "stone.png");
+        let e = expect_error(&dir, "stone.png", &[field, words]);
+        assert!(matches!(e, MapError::BadLayerFile { .. }), "{e:?}");
+    }
+}
+
+// ---- ground patches ----------------------------------------------------------------------
+
+/// Worldgen's closed areas on a 2 km map: all three kinds appear; each keeps off roads and
+/// paths (no outline point or centre within the road's half width + 2 m of a centre line) and
+/// off water (every outline point above the water level); two areas of a kind never overlap
+/// (disjoint boxes); and the vegetation density is zero at a field's centre.
+#[test]
+fn ground_patches_keep_off_roads_water_and_each_other() {
+    let map = tests::generated(&tests::patches_map_params());
+    let areas: Vec<_> = map.decals.iter().filter(|d| d.closed).collect();
+    let roads: Vec<_> = map.decals.iter().filter(|d| !d.closed).collect();
+    assert!(!roads.is_empty(), "no roads to keep off");
+    for kind in [DecalKind::Field, DecalKind::Dirt, DecalKind::RockPatch] {
+        let n = areas.iter().filter(|d| d.kind == kind).count();
+        assert!(n > 0, "no {kind:?} on a 2 km map");
+    }
+    let bbox = |d: &Decal| {
+        d.points.iter().fold(
+            ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+            |(lo, hi), p| {
+                (
+                    [lo[0].min(p[0]), lo[1].min(p[1])],
+                    [hi[0].max(p[0]), hi[1].max(p[1])],
+                )
+            },
+        )
+    };
+    for (i, d) in areas.iter().enumerate() {
+        assert!(d.kind.is_area());
+        let n = d.points.len() as f64;
+        let centre = [
+            d.points.iter().map(|p| p[0]).sum::<f64>() / n,
+            d.points.iter().map(|p| p[1]).sum::<f64>() / n,
+        ];
+        for q in d.points.iter().map(|p| [p[0], p[1]]).chain([centre]) {
+            for r in &roads {
+                for w in r.points.windows(2) {
+                    let dist = worldgen::roads::point_segment_distance_m(
+                        q,
+                        [w[0][0], w[0][1]],
+                        [w[1][0], w[1][1]],
+                    );
+                    assert!(
+                        dist > 0.5 * f64::from(r.width_m) + 2.0,
+                        "{:?} point {q:?} is {dist} m from a {:?}",
+                        d.kind,
+                        r.kind
+                    );
+                }
+            }
+            let h = map.height_bilinear_m(q[0], q[1]);
+            assert!(
+                h > map.manifest.water_level_m,
+                "{:?} point {q:?} under water",
+                d.kind
+            );
+        }
+        let (lo, hi) = bbox(d);
+        for o in areas[i + 1..].iter().filter(|o| o.kind == d.kind) {
+            let (olo, ohi) = bbox(o);
+            let apart = lo[0] > ohi[0] || olo[0] > hi[0] || lo[1] > ohi[1] || olo[1] > hi[1];
+            assert!(
+                apart,
+                "two {:?} areas overlap: {lo:?}..{hi:?} and {olo:?}..{ohi:?}",
+                d.kind
+            );
+        }
+        if d.kind == DecalKind::Field {
+            for layer in &map.densities {
+                let s = layer.spec.spacing_m;
+                let x = ((centre[0] - map.manifest.origin_m[0]) / s).round() as usize;
+                let y = ((centre[1] - map.manifest.origin_m[1]) / s).round() as usize;
+                assert_eq!(
+                    layer.density.get(x, y),
+                    0,
+                    "{} grows in the field at {centre:?}",
+                    layer.spec.species
+                );
+            }
+        }
+    }
+    // A map written and read back keeps its areas (decals version 2).
+    let tmp = tempfile::tempdir().unwrap();
+    map.write(&tmp.path().join("m")).expect("write");
+    let again = Map::load(&tmp.path().join("m")).expect("load");
+    assert_eq!(again.decals, map.decals);
+}
+
+/// A decals file of version 1 still loads (roads, paths, rock patches); a version-1 file with a
+/// field, or an area kind not marked closed, is refused naming the decal and field.
+#[test]
+fn decal_versions_and_area_kinds_are_checked() {
+    let (_t, dir) = broken_copy();
+    let p = dir.join("decals.toml");
+    let text = std::fs::read_to_string(&p).unwrap();
+    assert!(
+        text.contains("version = 2"),
+        "the tiny map writes decals version 2"
+    );
+    let v1: String = text
+        .replace("version = 2", "version = 1")
+        .split("[[decal]]")
+        .filter(|block| !block.contains("\"field\"") && !block.contains("\"dirt\""))
+        .collect::<Vec<_>>()
+        .join("[[decal]]");
+    std::fs::write(&p, &v1).unwrap();
+    Map::load(&dir).expect("a version-1 decal file without the new kinds loads");
+    let field = "[[decal]]\nkind = \"field\"\nclosed = true\nwidth_m = 1.0\nfalloff_m = 1.0\n\
+                 height_offset_m = 0.0\npoints = [[10.0, 10.0, 5.0], [30.0, 10.0, 5.0], \
+                 [30.0, 30.0, 5.0]]\n";
+    std::fs::write(&p, format!("{v1}\n{field}")).unwrap();
+    expect_error(&dir, "decals.toml", &["kind", "version 2"]);
+    let v2 = text.clone();
+    std::fs::write(
+        &p,
+        format!("{v2}\n{}", field.replace("closed = true", "closed = false")),
+    )
+    .unwrap();
+    expect_error(&dir, "decals.toml", &["closed", "field"]);
 }

@@ -12,7 +12,8 @@ pub const TREES_COLUMNS: &str = "species,x_m,y_m,height_m,crown_radius_m";
 pub const BUILDINGS_MAGIC: &str = "tvs-buildings 1";
 pub const BUILDINGS_COLUMNS: &str = "mesh,x_m,y_m,z_m,yaw_deg,scale";
 pub const DECALS_FORMAT: &str = "tvs-decals";
-pub const DECALS_VERSION: u32 = 1;
+/// Version written; version 1 files (roads, paths and rock patches only) are read as well.
+pub const DECALS_VERSION: u32 = 2;
 
 /// A large tree placed explicitly by the map.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,6 +47,12 @@ pub enum DecalKind {
     Path,
     /// Rock patch (closed area): the ground is raised by the offset inside the polygon.
     RockPatch,
+    /// Cultivated field (closed area, since decals version 2): striped crop rows along the
+    /// polygon's first edge; the ground is moved by the offset inside (usually 0).
+    Field,
+    /// Bare earth (closed area, since decals version 2): a dirt patch in meadow or forest; the
+    /// ground is moved by the offset inside (usually 0 or slightly negative).
+    Dirt,
 }
 
 impl DecalKind {
@@ -54,7 +61,14 @@ impl DecalKind {
             Self::Road => "road",
             Self::Path => "path",
             Self::RockPatch => "rock_patch",
+            Self::Field => "field",
+            Self::Dirt => "dirt",
         }
+    }
+
+    /// Whether this kind is a closed area (a polygon) rather than a polyline.
+    pub fn is_area(self) -> bool {
+        matches!(self, Self::RockPatch | Self::Field | Self::Dirt)
     }
 }
 
@@ -313,13 +327,15 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
             format!("expected format = \"{DECALS_FORMAT}\""),
         ));
     }
-    if table.get("version").and_then(toml::Value::as_integer) != Some(i64::from(DECALS_VERSION)) {
+    let version = table.get("version").and_then(toml::Value::as_integer);
+    if !version.is_some_and(|v| (1..=i64::from(DECALS_VERSION)).contains(&v)) {
         return Err(MapError::field(
             path,
             "version",
-            format!("expected version = {DECALS_VERSION}"),
+            format!("expected version = 1..={DECALS_VERSION}"),
         ));
     }
+    let v1 = version == Some(1);
     let file: DecalFile = toml::from_str(&text).map_err(|e| MapError::ManifestSyntax {
         path: path.to_path_buf(),
         message: e.to_string(),
@@ -329,6 +345,32 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
     }
     for (i, d) in file.decal.iter().enumerate() {
         let f = |name: &str| format!("decal[{i}].{name}");
+        if v1 && matches!(d.kind, DecalKind::Field | DecalKind::Dirt) {
+            return Err(MapError::field(
+                path,
+                f("kind"),
+                format!(
+                    "{:?} needs decals version 2, the file says version 1",
+                    d.kind.name()
+                ),
+            ));
+        }
+        if d.closed != d.kind.is_area() {
+            return Err(MapError::field(
+                path,
+                f("closed"),
+                format!(
+                    "is {}, but a {} decal is {}",
+                    d.closed,
+                    d.kind.name(),
+                    if d.kind.is_area() {
+                        "a closed area (closed = true)"
+                    } else {
+                        "an open polyline (closed = false)"
+                    }
+                ),
+            ));
+        }
         let min_points = if d.closed { 3 } else { 2 };
         if d.points.len() < min_points {
             return Err(MapError::field(

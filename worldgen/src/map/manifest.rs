@@ -74,6 +74,11 @@ pub struct GroundType {
     pub color: [u8; 3],
     /// Amplitude (m) of the procedural detail the engine adds on this ground type.
     pub detail_amplitude_m: f32,
+    /// Optional albedo image for this type's ground material: a PNG in the map folder (8-bit
+    /// RGB or RGBA, square, a power-of-two side in 16..=1024 texels) that tiles over one
+    /// material tile. Without it the engine makes the material from the name and colour.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<String>,
 }
 
 /// The ground-type layer: an indexed PNG and its legend (index = position in `legend`).
@@ -369,6 +374,9 @@ fn validate_ground(path: &Path, m: &Manifest) -> Result<(), MapError> {
             100.0,
             "",
         )?;
+        if let Some(file) = &t.material {
+            check_file_name(path, &format!("ground.legend[{i}].material"), file)?;
+        }
     }
     Ok(())
 }

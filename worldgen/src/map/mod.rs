@@ -19,6 +19,7 @@
 mod layers;
 mod lists;
 mod manifest;
+pub mod material_image;
 
 pub use lists::{Building, Decal, DecalKind, Tree};
 pub use manifest::validate as validate_manifest;
@@ -26,6 +27,7 @@ pub use manifest::{
     FORMAT_NAME, FORMAT_VERSION, FileSpec, GridSpec, GroundSpec, GroundType, Manifest, PoissonSpec,
     SpeciesSpec,
 };
+pub use material_image::MaterialImage;
 
 use crate::Grid;
 use crate::sample::{self, GridPlacement};
@@ -185,6 +187,8 @@ pub struct Map {
     pub buildings: Vec<Building>,
     /// The ranked Poisson-disc tile (points in rank order on the unit torus).
     pub poisson: crate::poisson::PoissonTile,
+    /// Per legend entry, the material image it names (`ground.legend[i].material`), if any.
+    pub materials: Vec<Option<MaterialImage>>,
 }
 
 /// Summary numbers for `worldgen check` and logs.
@@ -224,6 +228,16 @@ impl Map {
             &dir.join(&manifest.poisson.file),
             manifest.poisson.min_distance,
         )?;
+        let mut materials = Vec::with_capacity(manifest.ground.legend.len());
+        for (i, t) in manifest.ground.legend.iter().enumerate() {
+            materials.push(match &t.material {
+                Some(file) => Some(material_image::read(
+                    &dir.join(file),
+                    &format!("ground.legend[{i}].material"),
+                )?),
+                None => None,
+            });
+        }
         Ok(Self {
             manifest,
             heights,
@@ -233,6 +247,7 @@ impl Map {
             decals,
             buildings,
             poisson,
+            materials,
         })
     }
 
@@ -276,6 +291,19 @@ impl Map {
             &self.buildings,
         )?;
         lists::write_poisson(&staging.join(&self.manifest.poisson.file), &self.poisson)?;
+        for (i, (t, image)) in self
+            .manifest
+            .ground
+            .legend
+            .iter()
+            .zip(&self.materials)
+            .enumerate()
+        {
+            if let (Some(file), Some(image)) = (&t.material, image) {
+                let field = format!("ground.legend[{i}].material");
+                material_image::write(&staging.join(file), &field, image)?;
+            }
+        }
         if dir.exists() {
             std::fs::remove_dir_all(dir).map_err(|e| MapError::io(dir, "replace folder", e))?;
         }
@@ -327,6 +355,32 @@ impl Map {
                 d.density.width(),
                 d.density.height(),
             )?;
+        }
+        let legend = &self.manifest.ground.legend;
+        if self.materials.len() != legend.len() {
+            return Err(MapError::field(
+                &path,
+                "ground.legend",
+                "one material entry (an image or none) per legend entry is required",
+            ));
+        }
+        for (i, (t, image)) in legend.iter().zip(&self.materials).enumerate() {
+            let ok = match (&t.material, image) {
+                (Some(_), Some(m)) => {
+                    m.side.is_power_of_two()
+                        && (material_image::MIN_SIDE..=material_image::MAX_SIDE).contains(&m.side)
+                        && m.rgba.len() == (m.side * m.side) as usize
+                }
+                (None, None) => true,
+                _ => false,
+            };
+            if !ok {
+                return Err(MapError::field(
+                    &path,
+                    format!("ground.legend[{i}].material"),
+                    "names a file without an image in memory, or the image has a bad size",
+                ));
+            }
         }
         Ok(())
     }
