@@ -72,23 +72,16 @@ fn vs_fill(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
     return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
 }
 
-fn hash2(p: vec2<i32>) -> f32 {
-    var h = u32(p.x) * 0x8da6b343u ^ u32(p.y) * 0xd8163841u;
-    h = (h ^ (h >> 15u)) * 0x2c1b3c6du;
-    h = h ^ (h >> 12u);
-    return f32(h & 0xffffu) / 65535.0;
-}
-
 // Value noise in [0, 1] at `p` (lattice of unit cells).
 fn value_noise(p: vec2<f32>) -> f32 {
     let c = floor(p);
     let f = p - c;
     let u = f * f * (3.0 - 2.0 * f);
     let i = vec2<i32>(c);
-    let a = hash2(i);
-    let b = hash2(i + vec2<i32>(1, 0));
-    let d = hash2(i + vec2<i32>(0, 1));
-    let e = hash2(i + vec2<i32>(1, 1));
+    let a = lattice_hash(i);
+    let b = lattice_hash(i + vec2<i32>(1, 0));
+    let d = lattice_hash(i + vec2<i32>(0, 1));
+    let e = lattice_hash(i + vec2<i32>(1, 1));
     return mix(mix(a, b, u.x), mix(d, e, u.x), u.y);
 }
 

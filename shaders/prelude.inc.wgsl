@@ -115,3 +115,12 @@ fn lit_color(in: VertexOut) -> vec4<f32> {
     let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
     return fogged(albedo * (frame.sun_color.rgb * sun + ambient), in.rel);
 }
+
+// A hash of an integer lattice point to [0, 1] (value-noise corners; ground textures and the
+// terrain's fine detail).
+fn lattice_hash(p: vec2<i32>) -> f32 {
+    var h = u32(p.x) * 0x8da6b343u ^ u32(p.y) * 0xd8163841u;
+    h = (h ^ (h >> 15u)) * 0x2c1b3c6du;
+    h = h ^ (h >> 12u);
+    return f32(h & 0xffffu) / 65535.0;
+}

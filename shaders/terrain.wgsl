@@ -49,13 +49,6 @@ fn density_color(uv: vec2<f32>) -> vec3<f32> {
     return vec3<f32>(1.0 - g, g, 0.0);
 }
 
-fn detail_hash(i: vec2<i32>) -> f32 {
-    var h = u32(i.x) * 0x8da6b343u ^ u32(i.y) * 0xd8163841u;
-    h = (h ^ (h >> 15u)) * 0x2c1b3c6du;
-    h = h ^ (h >> 12u);
-    return f32(h & 0xffffu) / 65535.0;
-}
-
 // Value noise in [0, 1] with `cells` lattice cells per detail period, periodic in it, at `p`
 // (metres within the period).
 fn detail_noise(p: vec2<f32>, cells: i32) -> f32 {
@@ -66,10 +59,10 @@ fn detail_noise(p: vec2<f32>, cells: i32) -> f32 {
     let i = vec2<i32>(c);
     let at = vec2<i32>(((i.x % cells) + cells) % cells, ((i.y % cells) + cells) % cells);
     let next = vec2<i32>((at.x + 1) % cells, (at.y + 1) % cells);
-    let a = detail_hash(at);
-    let b = detail_hash(vec2<i32>(next.x, at.y));
-    let d = detail_hash(vec2<i32>(at.x, next.y));
-    let e = detail_hash(next);
+    let a = lattice_hash(at);
+    let b = lattice_hash(vec2<i32>(next.x, at.y));
+    let d = lattice_hash(vec2<i32>(at.x, next.y));
+    let e = lattice_hash(next);
     return mix(mix(a, b, u.x), mix(d, e, u.x), u.y);
 }
 

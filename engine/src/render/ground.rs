@@ -388,22 +388,7 @@ impl GroundTexturer {
                     resource: wgpu::BindingResource::TextureView(pair[0]),
                 }],
             });
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("ground texture mip"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: pair[1],
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = clear_pass(enc, pair[1], "ground texture mip");
             pass.set_pipeline(&self.downsample);
             pass.set_bind_group(3, &group, &[]);
             pass.draw(0..3, 0..1);
@@ -526,22 +511,7 @@ impl GroundTexturer {
                 },
             ],
         });
-        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("ground texture"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: target,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = clear_pass(enc, target, "ground texture");
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(2, &group, &[]);
         pass.draw(0..3, 0..1);
@@ -622,4 +592,28 @@ fn gpu_areas(
         points.push([0.0; 2]);
     }
     (areas, points, area_count)
+}
+
+/// A render pass into `view` alone, cleared first (every texel is then written by the pass).
+fn clear_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    view: &wgpu::TextureView,
+    label: &str,
+) -> wgpu::RenderPass<'e> {
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: None,
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
 }
