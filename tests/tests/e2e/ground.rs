@@ -293,7 +293,16 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
             cam(20.0 + 470.0 * t, 256.0 + 180.0 * (t * 9.0).sin(), 10.0, 0.2)
         };
         v.stream_only(&g, &c, 1.0 / 60.0);
-        // Layers held, every frame (how far the storm got depends on the workers' speed).
+        // Every 1,000 frames the camera waits where it is until its view is ready, so the storm
+        // has made textures whatever the workers' speed (the teleports after it drop them).
+        if i % 1000 == 999 {
+            let start = std::time::Instant::now();
+            while !v.stream_only(&g, &c, 0.1) {
+                assert!(start.elapsed().as_secs() < 180, "frame {i}: view not ready");
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        }
+        // Layers held, every frame.
         let terrain = v
             .scene
             .renderer::<TerrainRenderer>()
