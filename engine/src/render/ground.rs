@@ -126,6 +126,9 @@ pub struct GroundTexturer {
     types: u32,
     map_origin_m: [f64; 2],
     ground_spacing_m: f64,
+    /// Bound in place of a node's segment, area or point list when it is empty (zeroed, one
+    /// element of the largest of them), so empty lists create no buffer per node.
+    empty: wgpu::Buffer,
 }
 
 impl std::fmt::Debug for GroundTexturer {
@@ -366,6 +369,12 @@ impl GroundTexturer {
             types,
             map_origin_m: map.manifest.origin_m,
             ground_spacing_m: map.manifest.ground.spacing_m,
+            empty: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("ground empty list"),
+                size: std::mem::size_of::<GpuArea>() as u64,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
         }
     }
 
@@ -413,7 +422,7 @@ impl GroundTexturer {
         // Lattice units of the level: (world - root) / t, in f64, then f32 (the same numbers
         // in every node).
         let lattice = |p: [f64; 3]| [((p[0] - root[0]) / t) as f32, ((p[1] - root[1]) / t) as f32];
-        let mut segments: Vec<GpuSegment> = decals
+        let segments: Vec<GpuSegment> = decals
             .segments
             .iter()
             .map(|s| {
@@ -430,9 +439,6 @@ impl GroundTexturer {
             })
             .collect();
         let segment_count = segments.len() as u32;
-        if segments.is_empty() {
-            segments.push(bytemuck::Zeroable::zeroed());
-        }
         let (areas, points, area_count) = gpu_areas(decals, decal_list, &lattice, t);
         let gs = self.ground_spacing_m;
         let material_m = MATERIAL_TILE_M;
@@ -462,20 +468,26 @@ impl GroundTexturer {
             contents: bytemuck::bytes_of(&uniform),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let sbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ground segments"),
-            contents: bytemuck::cast_slice(&segments),
-            usage: wgpu::BufferUsages::STORAGE,
+        let sbuf = (!segments.is_empty()).then(|| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("ground segments"),
+                contents: bytemuck::cast_slice(&segments),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
         });
-        let abuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ground areas"),
-            contents: bytemuck::cast_slice(&areas),
-            usage: wgpu::BufferUsages::STORAGE,
+        let abuf = (!areas.is_empty()).then(|| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("ground areas"),
+                contents: bytemuck::cast_slice(&areas),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
         });
-        let pbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ground area points"),
-            contents: bytemuck::cast_slice(&points),
-            usage: wgpu::BufferUsages::STORAGE,
+        let pbuf = (!points.is_empty()).then(|| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("ground area points"),
+                contents: bytemuck::cast_slice(&points),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
         });
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("ground node"),
@@ -499,15 +511,15 @@ impl GroundTexturer {
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
-                    resource: sbuf.as_entire_binding(),
+                    resource: sbuf.as_ref().unwrap_or(&self.empty).as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
-                    resource: abuf.as_entire_binding(),
+                    resource: abuf.as_ref().unwrap_or(&self.empty).as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 6,
-                    resource: pbuf.as_entire_binding(),
+                    resource: pbuf.as_ref().unwrap_or(&self.empty).as_entire_binding(),
                 },
             ],
         });
@@ -541,7 +553,7 @@ fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 }
 
 /// A node's closed areas for `ground.wgsl` (lattice units of texel size `t`) and their outline
-/// points, each padded to one element when empty (a binding cannot be empty), and the count.
+/// points, and the count.
 fn gpu_areas(
     decals: &NodeDecals,
     decal_list: &[worldgen::map::Decal],
@@ -549,7 +561,7 @@ fn gpu_areas(
     t: f64,
 ) -> (Vec<GpuArea>, Vec<[f32; 2]>, u32) {
     let mut points: Vec<[f32; 2]> = Vec::new();
-    let mut areas: Vec<GpuArea> = decals
+    let areas: Vec<GpuArea> = decals
         .areas
         .iter()
         .map(|&i| {
@@ -587,10 +599,6 @@ fn gpu_areas(
         })
         .collect();
     let area_count = areas.len() as u32;
-    if areas.is_empty() {
-        areas.push(bytemuck::Zeroable::zeroed());
-        points.push([0.0; 2]);
-    }
     (areas, points, area_count)
 }
 
