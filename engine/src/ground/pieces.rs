@@ -53,7 +53,7 @@ pub fn node_decals(
     let mut out = NodeDecals::default();
     for i in index.query(rect.0, rect.1) {
         let d = &decals[i as usize];
-        if d.closed {
+        if d.kind.is_area() {
             out.areas.push(i);
             continue;
         }

@@ -6,9 +6,15 @@
 //! its road and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around
 //! its segment, blended in file order (areas before segments); then its mip levels
 //! (`record_mips`). Not yet: the materials' detail height (made, not used).
+//!
+//! Nodes recorded between two submissions share one set of buffers: each node's uniforms sit
+//! at a 256-byte dynamic offset, its segments and areas are instance ranges of the batch's
+//! lists, and [`GroundTexturer::submit`] writes the batch once before submitting (a node
+//! texture creates no buffer, bind group or view; the pool keeps each layer's views).
 
 use super::Gpu;
 use super::frame::{sampler_entry, texture_entry};
+use super::ground_pool::GroundSlot;
 use crate::ground::layout::{SIDE, lattice_index, texel_m};
 use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M, materials};
 use crate::ground::pieces::NodeDecals;
@@ -103,9 +109,11 @@ struct GpuArea {
 /// The area kind numbers of `ground.wgsl` (segments use 0 road, 1 path).
 fn area_kind(kind: DecalKind) -> u32 {
     match kind {
-        DecalKind::Road | DecalKind::Path | DecalKind::Dirt => 4,
+        DecalKind::Dirt => 4,
         DecalKind::RockPatch => 2,
         DecalKind::Field => 3,
+        // `pieces::node_decals` lists only area kinds as areas.
+        DecalKind::Road | DecalKind::Path => unreachable!("a road or path is never an area"),
     }
 }
 
@@ -126,9 +134,55 @@ pub struct GroundTexturer {
     types: u32,
     map_origin_m: [f64; 2],
     ground_spacing_m: f64,
-    /// Bound in place of a node's segment, area or point list when it is empty (zeroed, one
-    /// element of the largest of them), so empty lists create no buffer per node.
-    empty: wgpu::Buffer,
+    /// The node data of the passes recorded since the last [`Self::submit`] (behind a lock so
+    /// that recording takes `&self`; one thread records at a time in practice).
+    pending: std::sync::Mutex<Pending>,
+}
+
+/// Node data waiting for the next submission.
+struct Pending {
+    /// The nodes recorded since the last submission: their uniforms, segments, areas and
+    /// outline points, written to `buffers` just before it.
+    batch: Batch,
+    buffers: BatchBuffers,
+    /// Earlier, smaller buffers still read by recorded passes (after a batch outgrew them),
+    /// with the data to write to them; cleared on submit.
+    outgrown: Vec<(BatchBuffers, Batch)>,
+}
+
+/// Bytes between two nodes' uniforms (the dynamic-offset alignment every adapter accepts).
+const UNIFORM_STRIDE: usize = 256;
+
+/// A batch's node data on the CPU. Segment and area indices are the batch's, so a node draws
+/// its instances `first .. first + count` (no per-node buffer).
+#[derive(Default)]
+struct Batch {
+    uniforms: Vec<u8>,
+    segments: Vec<GpuSegment>,
+    areas: Vec<GpuArea>,
+    points: Vec<[f32; 2]>,
+}
+
+impl Batch {
+    fn clear(&mut self) {
+        self.uniforms.clear();
+        self.segments.clear();
+        self.areas.clear();
+        self.points.clear();
+    }
+}
+
+/// The GPU buffers of a batch and the bind group over them, with their capacities (elements).
+struct BatchBuffers {
+    uniforms: wgpu::Buffer,
+    segments: wgpu::Buffer,
+    areas: wgpu::Buffer,
+    points: wgpu::Buffer,
+    group: wgpu::BindGroup,
+    nodes: usize,
+    segment_capacity: usize,
+    area_capacity: usize,
+    point_capacity: usize,
 }
 
 impl std::fmt::Debug for GroundTexturer {
@@ -267,7 +321,7 @@ impl GroundTexturer {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("ground texture layout"),
             entries: &[
-                super::frame::uniform_entry(0, false, wgpu::ShaderStages::VERTEX_FRAGMENT),
+                super::frame::uniform_entry(0, true, wgpu::ShaderStages::VERTEX_FRAGMENT),
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -356,6 +410,13 @@ impl GroundTexturer {
             Some(wgpu::BlendState::ALPHA_BLENDING),
         );
         let downsample = make("ground texture mips", "vs_fill", "fs_downsample", None);
+        let buffers = BatchBuffers::new(
+            device,
+            &layout,
+            [&ground_types, &materials],
+            &sampler,
+            [64, 4096, 1024, 8192],
+        );
         Self {
             pipeline,
             segments,
@@ -369,37 +430,47 @@ impl GroundTexturer {
             types,
             map_origin_m: map.manifest.origin_m,
             ground_spacing_m: map.manifest.ground.spacing_m,
-            empty: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("ground empty list"),
-                size: std::mem::size_of::<GpuArea>() as u64,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
+            pending: std::sync::Mutex::new(Pending {
+                batch: Batch::default(),
+                buffers,
+                outgrown: Vec::new(),
             }),
         }
     }
 
-    /// Records the mip levels of a node texture: `levels[k]` (k >= 1) from `levels[k - 1]`,
-    /// each texel the mean of the four above it in linear light. Texel blocks never straddle
+    /// The layout of a mip pass's source: what [`super::ground_pool::GroundPool`] binds each
+    /// layer's levels with.
+    pub fn mip_source_layout(&self) -> &wgpu::BindGroupLayout {
+        &self.downsample_layout
+    }
+
+    /// Writes the node data of everything recorded since the last submission to the GPU, then
+    /// submits `enc` (which holds those recordings). Every encoder [`Self::record`] wrote to
+    /// must be submitted through here.
+    pub fn submit(&self, gpu: &Gpu, enc: wgpu::CommandEncoder) {
+        let mut guard = self
+            .pending
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let p = &mut *guard;
+        for (buffers, batch) in p.outgrown.drain(..) {
+            buffers.write(&gpu.queue, &batch);
+        }
+        p.buffers.write(&gpu.queue, &p.batch);
+        p.batch.clear();
+        drop(guard);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Records the mip levels of a node texture in `slot`: level k >= 1 from level k - 1, each
+    /// texel the mean of the four above it in linear light. Texel blocks never straddle
     /// a node edge (node sides are `TEXELS` texels, a multiple of `2^(levels - 1)`), so
     /// neighbours' shared border texels stay equal at every level.
-    pub fn record_mips(
-        &self,
-        gpu: &Gpu,
-        enc: &mut wgpu::CommandEncoder,
-        levels: &[&wgpu::TextureView],
-    ) {
-        for pair in levels.windows(2) {
-            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("ground mip source"),
-                layout: &self.downsample_layout,
-                entries: &[wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(pair[0]),
-                }],
-            });
-            let mut pass = clear_pass(enc, pair[1], "ground texture mip");
+    pub fn record_mips(&self, enc: &mut wgpu::CommandEncoder, slot: &GroundSlot) {
+        for (target, source) in slot.mips.iter().zip(&slot.mip_sources) {
+            let mut pass = clear_pass(enc, target, "ground texture mip");
             pass.set_pipeline(&self.downsample);
-            pass.set_bind_group(3, &group, &[]);
+            pass.set_bind_group(3, source, &[]);
             pass.draw(0..3, 0..1);
         }
     }
@@ -438,8 +509,7 @@ impl GroundTexturer {
                 }
             })
             .collect();
-        let segment_count = segments.len() as u32;
-        let (areas, points, area_count) = gpu_areas(decals, decal_list, &lattice, t);
+        let (areas, points) = gpu_areas(decals, decal_list, &lattice, t);
         let gs = self.ground_spacing_m;
         let material_m = MATERIAL_TILE_M;
         let corner = |o: f64, r: f64, unit: f64| (r - o) / unit;
@@ -458,83 +528,184 @@ impl GroundTexturer {
             material_lod: (t / (material_m / f64::from(MATERIAL_TEXELS)))
                 .log2()
                 .max(0.0) as f32,
-            segment_count,
+            segment_count: segments.len() as u32,
             ground_types: self.types,
             texel_m: t as f32,
         };
-        let device = &gpu.device;
-        let ubuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ground node"),
-            contents: bytemuck::bytes_of(&uniform),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let sbuf = (!segments.is_empty()).then(|| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("ground segments"),
-                contents: bytemuck::cast_slice(&segments),
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        });
-        let abuf = (!areas.is_empty()).then(|| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("ground areas"),
-                contents: bytemuck::cast_slice(&areas),
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        });
-        let pbuf = (!points.is_empty()).then(|| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("ground area points"),
-                contents: bytemuck::cast_slice(&points),
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ground node"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: ubuf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&self.ground_types),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&self.materials),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: sbuf.as_ref().unwrap_or(&self.empty).as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: abuf.as_ref().unwrap_or(&self.empty).as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: pbuf.as_ref().unwrap_or(&self.empty).as_entire_binding(),
-                },
-            ],
-        });
+        let mut guard = self
+            .pending
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let p = &mut *guard;
+        let need = [
+            p.batch.uniforms.len() / UNIFORM_STRIDE + 1,
+            p.batch.segments.len() + segments.len(),
+            p.batch.areas.len() + areas.len(),
+            p.batch.points.len() + points.len(),
+        ];
+        if !p.buffers.holds(need) {
+            // The passes recorded so far read the current buffers: keep them with their data
+            // until the submission, and go on in buffers twice the size this node needs.
+            let have = p.buffers.capacity();
+            let bigger = BatchBuffers::new(
+                &gpu.device,
+                &self.layout,
+                [&self.ground_types, &self.materials],
+                &self.sampler,
+                std::array::from_fn(|i| (2 * need[i]).max(have[i])),
+            );
+            let old = std::mem::replace(&mut p.buffers, bigger);
+            p.outgrown.push((old, std::mem::take(&mut p.batch)));
+        }
+        let b = &mut p.batch;
+        let offset = b.uniforms.len();
+        b.uniforms.extend_from_slice(bytemuck::bytes_of(&uniform));
+        b.uniforms.resize(offset + UNIFORM_STRIDE, 0);
+        let first_segment = b.segments.len() as u32;
+        b.segments.extend_from_slice(&segments);
+        let first_area = b.areas.len() as u32;
+        let first_point = b.points.len() as u32;
+        b.areas.extend(areas.iter().map(|a| GpuArea {
+            first: a.first + first_point,
+            ..*a
+        }));
+        b.points.extend_from_slice(&points);
         let mut pass = clear_pass(enc, target, "ground texture");
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(2, &group, &[]);
+        pass.set_bind_group(2, &p.buffers.group, &[offset as u32]);
         pass.draw(0..3, 0..1);
-        if area_count > 0 {
+        if !areas.is_empty() {
             pass.set_pipeline(&self.areas);
-            pass.draw(0..6, 0..area_count);
+            pass.draw(0..6, first_area..first_area + areas.len() as u32);
         }
-        if segment_count > 0 {
+        if !segments.is_empty() {
             pass.set_pipeline(&self.segments);
-            pass.draw(0..6, 0..segment_count);
+            pass.draw(0..6, first_segment..first_segment + segments.len() as u32);
         }
+    }
+}
+
+impl BatchBuffers {
+    /// Buffers for `[nodes, segments, areas, points]` and their bind group.
+    fn new(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        [ground_types, materials]: [&wgpu::TextureView; 2],
+        sampler: &wgpu::Sampler,
+        [nodes, segments, areas, points]: [usize; 4],
+    ) -> Self {
+        let buffer = |label: &str, bytes: usize, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes.max(64) as u64,
+                usage: usage | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let uniforms = buffer(
+            "ground node uniforms",
+            nodes * UNIFORM_STRIDE,
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let segment_buffer = buffer(
+            "ground segments",
+            segments * std::mem::size_of::<GpuSegment>(),
+            storage,
+        );
+        let area_buffer = buffer(
+            "ground areas",
+            areas * std::mem::size_of::<GpuArea>(),
+            storage,
+        );
+        let point_buffer = buffer(
+            "ground area points",
+            points * std::mem::size_of::<[f32; 2]>(),
+            storage,
+        );
+        let group =
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("ground nodes"),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &uniforms,
+                            offset: 0,
+                            size: wgpu::BufferSize::new(
+                                std::mem::size_of::<GroundNodeUniform>() as u64
+                            ),
+                        }),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(ground_types),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(materials),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::Sampler(sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: segment_buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: area_buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: point_buffer.as_entire_binding(),
+                    },
+                ],
+            });
+        Self {
+            uniforms,
+            segments: segment_buffer,
+            areas: area_buffer,
+            points: point_buffer,
+            group,
+            nodes,
+            segment_capacity: segments,
+            area_capacity: areas,
+            point_capacity: points,
+        }
+    }
+
+    /// `[nodes, segments, areas, points]` they hold.
+    fn capacity(&self) -> [usize; 4] {
+        [
+            self.nodes,
+            self.segment_capacity,
+            self.area_capacity,
+            self.point_capacity,
+        ]
+    }
+
+    /// Whether `[nodes, segments, areas, points]` fit.
+    fn holds(&self, [nodes, segments, areas, points]: [usize; 4]) -> bool {
+        nodes <= self.nodes
+            && segments <= self.segment_capacity
+            && areas <= self.area_capacity
+            && points <= self.point_capacity
+    }
+
+    /// Queues `batch` into these buffers (written before the next submission's commands).
+    fn write(&self, queue: &wgpu::Queue, batch: &Batch) {
+        let put = |buffer: &wgpu::Buffer, bytes: &[u8]| {
+            if !bytes.is_empty() {
+                queue.write_buffer(buffer, 0, bytes);
+            }
+        };
+        put(&self.uniforms, &batch.uniforms);
+        put(&self.segments, bytemuck::cast_slice(&batch.segments));
+        put(&self.areas, bytemuck::cast_slice(&batch.areas));
+        put(&self.points, bytemuck::cast_slice(&batch.points));
     }
 }
 
@@ -553,13 +724,13 @@ fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 }
 
 /// A node's closed areas for `ground.wgsl` (lattice units of texel size `t`) and their outline
-/// points, and the count.
+/// points (each area's `first` counts from the node's first point).
 fn gpu_areas(
     decals: &NodeDecals,
     decal_list: &[worldgen::map::Decal],
     lattice: &impl Fn([f64; 3]) -> [f32; 2],
     t: f64,
-) -> (Vec<GpuArea>, Vec<[f32; 2]>, u32) {
+) -> (Vec<GpuArea>, Vec<[f32; 2]>) {
     let mut points: Vec<[f32; 2]> = Vec::new();
     let areas: Vec<GpuArea> = decals
         .areas
@@ -598,8 +769,7 @@ fn gpu_areas(
             }
         })
         .collect();
-    let area_count = areas.len() as u32;
-    (areas, points, area_count)
+    (areas, points)
 }
 
 /// A render pass into `view` alone, cleared first (every texel is then written by the pass).

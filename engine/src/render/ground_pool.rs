@@ -1,7 +1,9 @@
 //! The pool node ground textures live in (owned by the terrain renderer): layers
 //! of a few `SIDE x SIDE` texture arrays (pages of [`LAYERS_PER_PAGE`], created as needed, at
 //! most as many as the byte budget allows), one layer leased per node and given back when the
-//! lease drops (with the node's GPU objects, on eviction).
+//! lease drops (with the node's GPU objects, on eviction). A layer's views and the bind groups
+//! its mip passes read are made once, the first time the layer is leased, and kept with the
+//! page (a node texture then creates no GPU object).
 
 use super::ground::GROUND_TEXTURE_FORMAT;
 use super::suballoc::{Lease, Suballocator};
@@ -12,12 +14,22 @@ pub const LAYERS_PER_PAGE: u32 = 256;
 /// Bytes of one layer (RGBA8 with its mip levels).
 pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
 
-/// A node's layer: the lease (given back on drop), the view of its level 0 to render into and
-/// the views of its smaller mip levels (1, 2, ...).
+/// A node's layer: the lease (given back on drop), the view of its level 0 to render into, the
+/// views of its smaller mip levels (1, 2, ...) and, per mip level k >= 1, the bind group that
+/// reads level k - 1 (`GroundTexturer::record_mips`).
 pub struct GroundSlot {
     lease: Lease,
     pub view: wgpu::TextureView,
     pub mips: Vec<wgpu::TextureView>,
+    pub mip_sources: Vec<wgpu::BindGroup>,
+}
+
+/// What a layer's slots share: made once per layer.
+#[derive(Clone)]
+struct LayerViews {
+    view: wgpu::TextureView,
+    mips: Vec<wgpu::TextureView>,
+    mip_sources: Vec<wgpu::BindGroup>,
 }
 
 impl std::fmt::Debug for GroundSlot {
@@ -45,6 +57,10 @@ impl GroundSlot {
 pub struct GroundPool {
     alloc: Suballocator,
     pages: Vec<wgpu::Texture>,
+    /// Per page, per layer: its views and mip-source bind groups, once leased.
+    layers: Vec<Vec<Option<LayerViews>>>,
+    /// The layout of a mip pass's source (`GroundTexturer::mip_source_layout`).
+    mip_source_layout: wgpu::BindGroupLayout,
 }
 
 impl std::fmt::Debug for GroundPool {
@@ -59,12 +75,15 @@ impl std::fmt::Debug for GroundPool {
 }
 
 impl GroundPool {
-    /// A pool of at most `budget_bytes` of texture pages (at least one page).
-    pub fn new(budget_bytes: usize) -> Self {
+    /// A pool of at most `budget_bytes` of texture pages (at least one page), whose mip passes
+    /// read their source through `mip_source_layout`.
+    pub fn new(budget_bytes: usize, mip_source_layout: &wgpu::BindGroupLayout) -> Self {
         let page_bytes = LAYER_BYTES * LAYERS_PER_PAGE as usize;
         Self {
             alloc: Suballocator::new(&[LAYERS_PER_PAGE], (budget_bytes / page_bytes).max(1)),
             pages: Vec::new(),
+            layers: Vec::new(),
+            mip_source_layout: mip_source_layout.clone(),
         }
     }
 
@@ -91,21 +110,21 @@ impl GroundPool {
                     view_formats: &[],
                 }));
         }
-        let page = &self.pages[lease.page as usize];
-        let level = |mip: u32| {
-            page.create_view(&wgpu::TextureViewDescriptor {
-                label: Some("ground texture layer"),
-                dimension: Some(wgpu::TextureViewDimension::D2),
-                base_array_layer: lease.start[0],
-                array_layer_count: Some(1),
-                base_mip_level: mip,
-                mip_level_count: Some(1),
-                ..Default::default()
+        while self.layers.len() < self.pages.len() {
+            self.layers.push(vec![None; LAYERS_PER_PAGE as usize]);
+        }
+        let (page, layer) = (lease.page as usize, lease.start[0]);
+        let views = self.layers[page][layer as usize]
+            .get_or_insert_with(|| {
+                layer_views(device, &self.pages[page], layer, &self.mip_source_layout)
             })
-        };
-        let view = level(0);
-        let mips = (1..MIP_LEVELS).map(level).collect();
-        Some(GroundSlot { lease, view, mips })
+            .clone();
+        Some(GroundSlot {
+            lease,
+            view: views.view,
+            mips: views.mips,
+            mip_sources: views.mip_sources,
+        })
     }
 
     /// Pages made so far.
@@ -127,5 +146,45 @@ impl GroundPool {
     /// and at least one page).
     pub fn bytes(&self) -> usize {
         self.pages.len() * LAYERS_PER_PAGE as usize * LAYER_BYTES
+    }
+}
+
+/// Layer `layer` of `page`: a view per mip level and, per level k >= 1, a bind group of level
+/// k - 1 as the source of its mip pass.
+fn layer_views(
+    device: &wgpu::Device,
+    page: &wgpu::Texture,
+    layer: u32,
+    mip_source_layout: &wgpu::BindGroupLayout,
+) -> LayerViews {
+    let level = |mip: u32| {
+        page.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("ground texture layer"),
+            dimension: Some(wgpu::TextureViewDimension::D2),
+            base_array_layer: layer,
+            array_layer_count: Some(1),
+            base_mip_level: mip,
+            mip_level_count: Some(1),
+            ..Default::default()
+        })
+    };
+    let all: Vec<wgpu::TextureView> = (0..MIP_LEVELS).map(level).collect();
+    let mip_sources = all[..all.len() - 1]
+        .iter()
+        .map(|source| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("ground mip source"),
+                layout: mip_source_layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(source),
+                }],
+            })
+        })
+        .collect();
+    LayerViews {
+        view: all[0].clone(),
+        mips: all[1..].to_vec(),
+        mip_sources,
     }
 }

@@ -37,7 +37,7 @@ pub mod terrain;
 mod timer;
 pub mod vegetation;
 
-pub use target::{Target, depth_view, texture_view_2d, write_png};
+pub use target::{Target, depth_view, read_texels, texture_view_2d, write_png};
 pub use timer::GpuTimer;
 
 /// Colour format of every target (sRGB, so shading happens in linear space).

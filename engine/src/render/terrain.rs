@@ -266,9 +266,10 @@ impl TerrainRenderer {
         world: &World,
         pool_budget_bytes: usize,
     ) -> Self {
+        let texturer = GroundTexturer::new(gpu, world);
         self.ground = Some(GroundTextures {
-            texturer: GroundTexturer::new(gpu, world),
-            pool: GroundPool::new(pool_budget_bytes),
+            pool: GroundPool::new(pool_budget_bytes, texturer.mip_source_layout()),
+            texturer,
             decals: world.map.decals.clone(),
             encoder: None,
             groups: Vec::new(),
@@ -320,9 +321,7 @@ impl TerrainRenderer {
         });
         g.texturer
             .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
-        let levels: Vec<&wgpu::TextureView> =
-            std::iter::once(&slot.view).chain(&slot.mips).collect();
-        g.texturer.record_mips(gpu, enc, &levels);
+        g.texturer.record_mips(enc, &slot);
         let uv_per_m = 1.0 / (texel_m(tree, key.level) * f64::from(SIDE));
         Some((slot, uv_per_m as f32))
     }
@@ -447,8 +446,10 @@ impl NodeRenderer for TerrainRenderer {
     }
 
     fn finish_uploads(&mut self, gpu: &Gpu) {
-        if let Some(enc) = self.ground.as_mut().and_then(|g| g.encoder.take()) {
-            gpu.queue.submit([enc.finish()]);
+        if let Some(g) = self.ground.as_mut()
+            && let Some(enc) = g.encoder.take()
+        {
+            g.texturer.submit(gpu, enc);
         }
     }
 

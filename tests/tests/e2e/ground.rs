@@ -4,11 +4,12 @@
 use engine::camera::Camera;
 use engine::ground::content::TEXTURE_BYTES;
 use engine::ground::decal_index::DecalIndex;
-use engine::ground::layout::{BORDER, SIDE, TEXELS, texel_m};
+use engine::ground::layout::{BORDER, MIP_LEVELS, SIDE, TEXELS, texel_m};
 use engine::ground::pieces::node_decals;
 use engine::render::Target;
 use engine::render::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use engine::render::ground_pool::{GroundPool, LAYER_BYTES, LAYERS_PER_PAGE};
+use engine::render::read_texels;
 use engine::render::terrain::{TerrainNodeGpu, TerrainRenderer};
 use engine::stream::StreamSettings;
 use engine::terrain::quadtree::{NodeKey, QuadTree, Side};
@@ -41,13 +42,63 @@ fn render(
         &pieces,
         &world.map.decals,
     );
-    gpu.queue.submit([enc.finish()]);
+    t.submit(gpu, enc);
     target.read_rgba(gpu).expect("readback")
 }
 
+/// Renders node `key`'s ground texture with its mip levels into a layer of `pool` and reads
+/// every level back (level k: `SIDE >> k` texels a side, top row first).
+fn render_levels(
+    gpu: &engine::render::Gpu,
+    t: &GroundTexturer,
+    pool: &mut GroundPool,
+    world: &engine::surface::World,
+    index: &DecalIndex,
+    tree: &QuadTree,
+    key: NodeKey,
+) -> Vec<Vec<u8>> {
+    let slot = pool.lease(&gpu.device).expect("a free layer");
+    let pieces = node_decals(&world.map.decals, index, tree, key);
+    let mut enc = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    t.record(
+        gpu,
+        &mut enc,
+        &slot.view,
+        tree,
+        key,
+        &pieces,
+        &world.map.decals,
+    );
+    t.record_mips(&mut enc, &slot);
+    t.submit(gpu, enc);
+    let page = pool.page(slot.page()).expect("the slot's page");
+    (0..MIP_LEVELS)
+        .map(|mip| {
+            let source = wgpu::TexelCopyTextureInfo {
+                texture: page,
+                mip_level: mip,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: slot.layer(),
+                },
+                aspect: wgpu::TextureAspect::All,
+            };
+            read_texels(gpu, source, [SIDE >> mip, SIDE >> mip]).expect("readback")
+        })
+        .collect()
+}
+
 fn texel(img: &[u8], i: u32, j: u32) -> [u8; 4] {
-    let row = (SIDE - 1 - j) as usize;
-    let k = (row * SIDE as usize + i as usize) * 4;
+    texel_of(img, SIDE, i, j)
+}
+
+/// Texel (i east, j north) of an RGBA8 image `side` texels a side, top row first.
+fn texel_of(img: &[u8], side: u32, i: u32, j: u32) -> [u8; 4] {
+    let row = (side - 1 - j) as usize;
+    let k = (row * side as usize + i as usize) * 4;
     [img[k], img[k + 1], img[k + 2], img[k + 3]]
 }
 
@@ -102,6 +153,81 @@ fn node_textures_do_not_depend_on_order_and_neighbours_share_border_texels() {
             "level {level}: the node's texture changed after rendering its neighbours"
         );
     }
+}
+
+/// Every mip level of neighbouring nodes' textures (as the renderer makes them, in pool
+/// layers) agrees on the shared border texels bit for bit: level k has `BORDER >> k` border
+/// texels and `TEXELS >> k` inner ones, and the 2 x 2 means never straddle a node edge.
+#[test]
+fn neighbours_share_border_texels_at_every_mip_level() {
+    let Some(gpu) = device() else { return };
+    let world = tiny_world();
+    let tree = tree_of(&world);
+    let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
+    let t = GroundTexturer::new(&gpu, &world);
+    let mut pool = GroundPool::new(0, t.mip_source_layout());
+    let road = world
+        .map
+        .decals
+        .iter()
+        .find(|d| d.kind == DecalKind::Road)
+        .expect("the tiny map has a road");
+    let p = road.points[road.points.len() / 3];
+    let mut compared = 0;
+    for level in [tree.max_level - 3, tree.max_level] {
+        let a = tree.key_at(level, p[0], p[1]).expect("on the map");
+        let first = render_levels(&gpu, &t, &mut pool, &world, &index, &tree, a);
+        for side in [Side::East, Side::North] {
+            let Some(b) = tree.neighbour_across(a, side, level) else {
+                continue;
+            };
+            let other = render_levels(&gpu, &t, &mut pool, &world, &index, &tree, b);
+            for mip in 1..MIP_LEVELS {
+                let (n, border, texels) = (SIDE >> mip, BORDER >> mip, TEXELS >> mip);
+                for k in 0..border {
+                    for s in 0..n {
+                        let pairs = [(texels + border + k, border + k), (texels + k, k)];
+                        for (ia, ib) in pairs {
+                            let (ta, tb) = match side {
+                                Side::East => (
+                                    texel_of(&first[mip as usize], n, ia, s),
+                                    texel_of(&other[mip as usize], n, ib, s),
+                                ),
+                                _ => (
+                                    texel_of(&first[mip as usize], n, s, ia),
+                                    texel_of(&other[mip as usize], n, s, ib),
+                                ),
+                            };
+                            assert_eq!(
+                                ta, tb,
+                                "level {level} mip {mip} {side:?}: texel {ia}/{ib} row {s}"
+                            );
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+            // The mips are of this texture: level 1's texel is the mean of level 0's four
+            // (within sRGB rounding), so a mip chain left black or stale would fail here.
+            for (i, j) in [(5, 7), (60, 33), (100, 120)] {
+                let m = texel_of(&other[1], SIDE >> 1, i, j);
+                for c in 0..3 {
+                    let lin = engine::color::srgb_to_linear;
+                    let mean = (0..4)
+                        .map(|q| lin(texel_of(&other[0], SIDE, 2 * i + q % 2, 2 * j + q / 2)[c]))
+                        .sum::<f64>()
+                        / 4.0;
+                    let got = lin(m[c]);
+                    assert!(
+                        (got - mean).abs() <= 0.01 + 0.02 * mean,
+                        "level {level} {side:?}: mip 1 texel ({i}, {j}) channel {c} is {got}, \
+                         the mean of its four level-0 texels is {mean}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(compared > 1000, "only {compared} mip texel pairs compared");
 }
 
 /// Road texels where the map's road runs, ground texels 10 m to its side (positions from the
@@ -195,7 +321,9 @@ fn a_road_centre_is_road_and_ten_metres_off_is_not() {
 fn the_texture_pool_stays_in_its_budget_and_reuses_dropped_layers() {
     let Some(gpu) = device() else { return };
     let page = LAYERS_PER_PAGE as usize * LAYER_BYTES;
-    let mut pool = GroundPool::new(page + page / 2);
+    let world = tiny_world();
+    let t = GroundTexturer::new(&gpu, &world);
+    let mut pool = GroundPool::new(page + page / 2, t.mip_source_layout());
     let mut slots: Vec<_> = (0..LAYERS_PER_PAGE)
         .map(|_| pool.lease(&gpu.device).expect("a free layer"))
         .collect();
@@ -452,14 +580,7 @@ fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
     let map = &world.map;
     let level = tree.max_level - 2;
     let tm = texel_m(&tree, level);
-    let srgb = |l: f64| {
-        let s = if l <= 0.003_130_8 {
-            12.92 * l
-        } else {
-            1.055 * l.powf(1.0 / 2.4) - 0.055
-        };
-        s * 255.0
-    };
+    let srgb = |l: f64| f64::from(engine::color::linear_to_srgb(l));
     // The kinds' mean linear albedo (the field's the mean of its two row tones).
     let kind_color = |k: DecalKind| {
         let lin = match k {

@@ -41,14 +41,13 @@ pub(crate) fn section_textures(
     let texturer = GroundTexturer::new(gpu, world);
     let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
-    let mut pool = GroundPool::new(1);
+    let mut pool = GroundPool::new(1, texturer.mip_source_layout());
     let Some(slot) = pool.lease(&gpu.device) else {
         anyhow::bail!("textures: the pool gave no layer");
     };
-    let levels: Vec<&wgpu::TextureView> = std::iter::once(&slot.view).chain(&slot.mips).collect();
     let mut timer = GpuTimer::new(gpu);
-    let (mut t_pieces, mut t_encode, mut t_gpu, mut segments) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut t_pieces, mut t_encode, mut t_submit, mut t_gpu, mut segments) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let b = bar(keys.len() as u64, "ground textures");
     for &key in &keys {
         let t0 = Instant::now();
@@ -67,13 +66,13 @@ pub(crate) fn section_textures(
             &pieces,
             &world.map.decals,
         );
-        texturer.record_mips(gpu, &mut enc, &levels);
+        texturer.record_mips(&mut enc, &slot);
         if timed && let Some(t) = &timer {
             t.end(&mut enc);
         }
-        let cmd = enc.finish();
         let t2 = Instant::now();
-        gpu.queue.submit([cmd]);
+        texturer.submit(gpu, enc);
+        let t3 = Instant::now();
         if let Some(t) = timer.as_mut() {
             t.after_submit();
             let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
@@ -84,6 +83,7 @@ pub(crate) fn section_textures(
         }
         t_pieces.push((t1 - t0).as_secs_f64());
         t_encode.push((t2 - t1).as_secs_f64());
+        t_submit.push((t3 - t2).as_secs_f64());
         segments.push(pieces.segments.len() as f64);
         b.inc(1);
     }
@@ -105,6 +105,12 @@ pub(crate) fn section_textures(
         "textures",
         "node texture passes recorded (CPU)",
         t_encode,
+        &params,
+    );
+    r.timings(
+        "textures",
+        "node data written and passes submitted (CPU)",
+        t_submit,
         &params,
     );
     if t_gpu.is_empty() {
