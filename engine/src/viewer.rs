@@ -287,6 +287,14 @@ impl Viewer {
         self.streamer.in_flight() == 0 && self.wanted_not_drawn() == 0
     }
 
+    /// [`Self::stream_only`] with the camera's predicted path (`Streamer::update_along`): the
+    /// streaming of a frame whose path is known (benchmarks), uploads included, nothing drawn.
+    pub fn stream_along(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
+        self.streamer.update_along(cam, dt_s, future);
+        self.upload(gpu);
+        self.scene.finish_uploads(gpu);
+    }
+
     /// The streamer's GPU phases under their budget: every renderer's upload hook.
     fn upload(&mut self, gpu: &Gpu) {
         let scene = &mut self.scene;

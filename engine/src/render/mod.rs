@@ -20,6 +20,7 @@
 //! Depth is reversed-Z `Depth32Float` with an infinite far plane: clear to 0, test `Greater`.
 //! Positions reach the GPU camera-relative: node origin minus camera in f64, then f32.
 
+pub mod batch_timer;
 pub mod batches;
 pub mod frame;
 pub mod gpu_data;

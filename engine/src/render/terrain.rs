@@ -8,6 +8,7 @@
 //! colours the vertices.
 
 use super::Gpu;
+use super::batch_timer::BatchTimer;
 use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
@@ -98,6 +99,11 @@ struct MeshPage {
 /// their mesh page and their ground-texture page ([`NO_TEXTURE`] for nodes without one).
 type BatchKey = (bool, u32, u32);
 
+/// GPU time a node texture is expected to take before the first measurement (and on adapters
+/// without timestamp queries): about 3x what an NVIDIA H100 takes, a quarter of lavapipe's
+/// on 2 cores (`nodebench --only textures`).
+const TEXTURE_GPU_PRIOR_S: f64 = 0.5e-3;
+
 /// The ground page of nodes without a ground texture.
 const NO_TEXTURE: u32 = u32::MAX;
 
@@ -109,6 +115,8 @@ struct GroundTextures {
     /// The map's decals (the nodes' pieces refer to them by index).
     decals: Vec<worldgen::map::Decal>,
     encoder: Option<wgpu::CommandEncoder>,
+    /// GPU time per node texture (timestamp queries around each submitted batch).
+    timer: BatchTimer,
     groups: Vec<wgpu::BindGroup>,
     /// Nodes left without a texture because the pool was full.
     refused: u64,
@@ -272,6 +280,7 @@ impl TerrainRenderer {
             texturer,
             decals: world.map.decals.clone(),
             encoder: None,
+            timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
             groups: Vec::new(),
             refused: 0,
         });
@@ -319,6 +328,7 @@ impl TerrainRenderer {
                     label: Some("ground textures"),
                 })
         });
+        g.timer.item(gpu, enc);
         g.texturer
             .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
         g.texturer.record_mips(enc, &slot);
@@ -439,6 +449,11 @@ impl NodeRenderer for TerrainRenderer {
         };
         if let Some(pieces) = work.get::<NodeGround>() {
             node.ground = self.render_ground(gpu, tree, work.key, pieces);
+            if node.ground.is_some()
+                && let Some(g) = &self.ground
+            {
+                work.gpu_estimate_s += g.timer.per_item_s();
+            }
         }
         let bytes = node.bytes;
         work.gpu.put(node);
@@ -447,9 +462,11 @@ impl NodeRenderer for TerrainRenderer {
 
     fn finish_uploads(&mut self, gpu: &Gpu) {
         if let Some(g) = self.ground.as_mut()
-            && let Some(enc) = g.encoder.take()
+            && let Some(mut enc) = g.encoder.take()
         {
+            g.timer.before_submit(&mut enc);
             g.texturer.submit(gpu, enc);
+            g.timer.after_submit();
         }
     }
 

@@ -112,6 +112,9 @@ pub struct NodeWork {
     payloads: Vec<Box<dyn Payload>>,
     /// Set by the GPU phase: bytes that went to the GPU.
     pub uploaded_bytes: usize,
+    /// Set by the GPU phase: the GPU seconds its upload hooks expect the work they recorded
+    /// to take (e.g. rendering a ground texture); counts in the per-frame GPU budget.
+    pub gpu_estimate_s: f64,
     /// The node's GPU objects, set by the renderers' upload hooks, dropped with the node.
     pub gpu: GpuSlots,
 }
@@ -124,6 +127,7 @@ impl NodeWork {
             tiles: Vec::new(),
             payloads: Vec::new(),
             uploaded_bytes: 0,
+            gpu_estimate_s: 0.0,
             gpu: GpuSlots::default(),
         }
     }

@@ -239,6 +239,7 @@ impl Streamer {
     pub fn run_gpu_phases_with(&mut self, upload: &mut dyn FnMut(&Shared, &mut NodeWork)) -> usize {
         let t0 = Instant::now();
         let mut bytes = 0usize;
+        let mut gpu_s = 0.0;
         let mut order: Vec<(u8, u64, NodeKey)> = self
             .requests
             .iter()
@@ -249,7 +250,7 @@ impl Streamer {
         let mut ran = 0;
         for (_, _, key) in order {
             if ran > 0
-                && (t0.elapsed().as_secs_f64() >= self.settings.gpu_budget_s
+                && (t0.elapsed().as_secs_f64() + gpu_s >= self.settings.gpu_budget_s
                     || bytes >= self.settings.gpu_budget_bytes)
             {
                 break;
@@ -268,6 +269,7 @@ impl Streamer {
                 i += 1;
             }
             bytes += w.uploaded_bytes;
+            gpu_s += w.gpu_estimate_s;
             ran += 1;
             if i >= self.phases.len() {
                 self.finish(key, w);

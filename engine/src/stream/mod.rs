@@ -108,7 +108,9 @@ pub struct StreamSettings {
     pub workers: usize,
     /// Memory budget for prepared nodes kept resident (bytes).
     pub cache_budget_bytes: usize,
-    /// GPU phases per frame: time and bytes budgets (at least one phase runs per frame).
+    /// GPU phases per frame: time and bytes budgets (at least one phase runs per frame). The
+    /// time is the frame thread's time in the phases plus the GPU time their recorded work is
+    /// expected to take (`NodeWork::gpu_estimate_s`).
     pub gpu_budget_s: f64,
     pub gpu_budget_bytes: usize,
     /// Cross-fade duration.

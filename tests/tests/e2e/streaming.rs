@@ -540,3 +540,38 @@ fn turning_within_the_guard_band_needs_no_new_node() {
         assert!(s.is_ready(n.key), "{:?} came into view unprepared", n.key);
     }
 }
+
+/// The per-frame GPU budget counts the GPU time the upload hooks expect their work to take
+/// (`NodeWork::gpu_estimate_s`, e.g. a ground texture's measured GPU time), not only the frame
+/// thread's time: at 1.5 ms a phase a 4 ms budget runs at most three phases a frame, where the
+/// same waiting jobs without an estimate all run in one frame.
+#[test]
+fn the_gpu_budget_counts_the_expected_gpu_time_of_uploads() {
+    let mut s = streamer(StreamSettings {
+        gpu_budget_s: 4e-3,
+        gpu_budget_bytes: usize::MAX,
+        ..settings(2)
+    });
+    let cam = cam_at(256.0, 256.0, 20.0, 0.0);
+    // No GPU phase runs yet: every finished job waits for one.
+    loop {
+        s.update(&cam, 1.0 / 60.0);
+        if s.stats.queued + s.stats.running == 0 && s.stats.waiting_gpu > 0 {
+            break;
+        }
+        std::thread::yield_now();
+    }
+    let waiting = s.stats.waiting_gpu;
+    assert!(waiting >= 8, "only {waiting} jobs wait for the GPU");
+    let ran = s.run_gpu_phases_with(&mut |_, w| w.gpu_estimate_s = 1.5e-3);
+    assert!(
+        (1..=3).contains(&ran),
+        "{ran} phases of 1.5 ms ran under a 4 ms budget"
+    );
+    let rest = s.run_gpu_phases_with(&mut |_, w| w.gpu_estimate_s = 0.0);
+    assert!(
+        rest > 3,
+        "without an estimate only {rest} of the {} waiting phases ran",
+        waiting - ran
+    );
+}

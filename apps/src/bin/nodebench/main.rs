@@ -126,12 +126,28 @@ fn run(cli: &Cli) -> Result<()> {
     if want("vegetation") {
         vegetation::section_vegetation(&world, &tree, &cams, &mut report, cli.quick);
     }
+    // One adapter for the sections that use it (streaming renders ground textures with it).
+    let adapter = if want("streaming") || want("gpu") || want("textures") {
+        gpu::adapter()
+    } else {
+        None
+    };
     if want("streaming") {
-        streaming::section_streaming(&cli.map, &mut report, cli.quick, workers, [vh * 16 / 9, vh])?;
+        streaming::section_streaming(
+            &cli.map,
+            &mut report,
+            cli.quick,
+            workers,
+            [vh * 16 / 9, vh],
+            adapter.as_ref().map(|(g, name)| (g, name.as_str())),
+        )?;
     }
-    let mut adapter_name = None;
+    let mut adapter_name = adapter
+        .as_ref()
+        .filter(|_| want("streaming"))
+        .map(|(_, name)| name.clone());
     if want("gpu") || want("textures") {
-        match gpu::adapter() {
+        match adapter {
             Some((g, name)) => {
                 if want("gpu") {
                     gpu::section_gpu(&g, &name, &cli.map, &mut report, cli.quick)?;

@@ -5,7 +5,10 @@ use crate::open_world;
 use crate::report::{Report, bar};
 use anyhow::{Result, bail};
 use engine::camera::Camera;
+use engine::render::Gpu;
+use engine::stream::Streamer;
 use engine::surface::World;
+use engine::viewer::Viewer;
 use std::time::Instant;
 
 /// A closed loop over the map at `above_m` over the ground (or the water), flown at
@@ -33,14 +36,96 @@ fn loop_camera(
 /// Flights: (speed m/s, height above the ground m). The last is a jet.
 const FLIGHTS: [(f64, f64); 4] = [(50.0, 40.0), (150.0, 40.0), (300.0, 40.0), (1000.0, 1000.0)];
 
+/// A flight's streaming: the streamer alone, or with a GPU the viewer's streaming with every
+/// renderer's upload hook (ground textures rendered under the per-frame GPU budget), nothing
+/// drawn.
+enum Flight<'g> {
+    Cpu(Box<Streamer>),
+    Gpu(&'g Gpu, Box<Viewer>),
+}
+
+impl<'g> Flight<'g> {
+    /// The flight's streaming of `world` with `kinds`, through the viewer where there is a GPU.
+    fn new(
+        world: engine::surface::World,
+        settings: engine::stream::StreamSettings,
+        kinds: &[engine::kinds::Registration],
+        gpu: Option<&'g Gpu>,
+    ) -> Self {
+        match gpu {
+            Some(g) => Flight::Gpu(
+                g,
+                Box::new(Viewer::with_kinds(
+                    g,
+                    wgpu::TextureFormat::Rgba8UnormSrgb,
+                    world,
+                    settings,
+                    kinds,
+                )),
+            ),
+            None => Flight::Cpu(Box::new(Streamer::new(
+                world,
+                settings,
+                kinds
+                    .iter()
+                    .map(|k| std::sync::Arc::clone(&k.kind))
+                    .collect(),
+            ))),
+        }
+    }
+
+    fn streamer(&self) -> &Streamer {
+        match self {
+            Flight::Cpu(s) => s,
+            Flight::Gpu(_, v) => &v.streamer,
+        }
+    }
+
+    fn streamer_mut(&mut self) -> &mut Streamer {
+        match self {
+            Flight::Cpu(s) => s,
+            Flight::Gpu(_, v) => &mut v.streamer,
+        }
+    }
+
+    /// Streams until `cam`'s view is ready (at most `timeout_s`); false on timeout.
+    fn settle(&mut self, cam: &Camera, timeout_s: f64) -> bool {
+        match self {
+            Flight::Cpu(s) => s.settle(cam, timeout_s),
+            Flight::Gpu(gpu, v) => {
+                let start = Instant::now();
+                while !v.stream_only(gpu, cam, 1.0 / 60.0) {
+                    if start.elapsed().as_secs_f64() > timeout_s {
+                        return false;
+                    }
+                    std::thread::yield_now();
+                }
+                true
+            }
+        }
+    }
+
+    /// One frame's streaming: update along the predicted path, then the GPU phases.
+    fn frame(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
+        match self {
+            Flight::Cpu(s) => {
+                s.update_along(cam, dt_s, future);
+                s.run_gpu_phases();
+            }
+            Flight::Gpu(gpu, v) => v.stream_along(gpu, cam, dt_s, future),
+        }
+    }
+}
+
 pub(crate) fn section_streaming(
     world_path: &std::path::Path,
     r: &mut Report,
     quick: bool,
     workers: usize,
     viewport_px: [u32; 2],
+    gpu: Option<(&Gpu, &str)>,
 ) -> Result<()> {
-    use engine::stream::{StreamSettings, Streamer};
+    use engine::stream::StreamSettings;
     let dt = 1.0 / 60.0;
     let seconds = if quick { 2.0 } else { 12.0 };
     let frames = (seconds / dt) as usize;
@@ -88,16 +173,17 @@ pub(crate) fn section_streaming(
             ..StreamSettings::default()
         }
         .with_workers(workers);
-        let mut kinds = engine::kinds::content_kinds(&world);
+        let mut kinds = engine::kinds::registered(&world);
         if !textures {
-            kinds.retain(|k| k.name() != engine::ground::content::GroundContent::NAME);
+            kinds.retain(|k| k.kind.name() != engine::ground::content::GroundContent::NAME);
         }
-        let mut s = Streamer::new(world, settings, kinds);
+        let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
         // Warm start at the first camera, as after loading.
-        if !s.settle(&cams[0], 300.0) {
+        if !flight_run.settle(&cams[0], 300.0) {
             bail!("streaming at {speed} m/s: the warm start did not settle within 300 s");
         }
-        s.take_latencies();
+        flight_run.streamer_mut().take_latencies();
+        let s = flight_run.streamer();
         let c0 = s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu;
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
         let (mut debt_frames, mut worst_excess, mut frame_times) =
@@ -107,8 +193,8 @@ pub(crate) fn section_streaming(
         for (f, cam) in cams.iter().enumerate() {
             let t = Instant::now();
             let on_cpu = cpu_time::ThreadTime::try_now().ok();
-            s.update_along(cam, dt, &future[f]);
-            s.run_gpu_phases();
+            flight_run.frame(cam, dt, &future[f]);
+            let s = flight_run.streamer();
             frame_times.push(t.elapsed().as_secs_f64());
             if let Some(d) = on_cpu.and_then(|t| t.try_elapsed().ok()) {
                 on_cpu_times.push(d.as_secs_f64());
@@ -168,16 +254,22 @@ pub(crate) fn section_streaming(
             }
         }
         b.finish_and_clear();
+        let s = flight_run.streamer_mut();
         let cancelled =
             s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
         let params = format!(
             "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), ground \
              textures {}",
             s.settings.workers,
-            if textures {
-                "on (CPU side: decal pieces, texture bytes in the cache budget; nothing is drawn)"
-            } else {
-                "off"
+            match (textures, gpu) {
+                (false, _) => "off".to_string(),
+                (true, Some((_, adapter))) => format!(
+                    "on (rendered on {adapter} under the per-frame GPU budget; uploads of every \
+                     kind, nothing drawn)"
+                ),
+                (true, None) => "on (no GPU adapter: CPU side only, decal pieces and texture \
+                                 bytes in the cache budget)"
+                    .to_string(),
             }
         );
         let outcome = FlightOutcome {

@@ -1,0 +1,83 @@
+//! GPU time per item of work recorded in batches (node ground textures: several per
+//! submission), from timestamp queries around whole batches, so that the streamer's per-frame
+//! GPU budget can count what the GPU will spend, not only what recording costs the CPU.
+
+use super::{Gpu, GpuTimer};
+
+/// Weight of a new batch's per-item time in the running estimate.
+const NEW_WEIGHT: f64 = 0.25;
+
+/// A running estimate of GPU seconds per item.
+pub struct BatchTimer {
+    timer: Option<GpuTimer>,
+    /// Items recorded into the open batch, and whether the timer started in it.
+    open_items: usize,
+    open_timed: bool,
+    /// Items of the batch whose measurement is on its way back.
+    measured_items: usize,
+    estimate_s: f64,
+}
+
+impl std::fmt::Debug for BatchTimer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "BatchTimer({:.1} µs per item)", self.estimate_s * 1e6)
+    }
+}
+
+impl BatchTimer {
+    /// An estimate that starts at `prior_s` per item and follows measurements where the
+    /// adapter has timestamp queries (else it stays at the prior).
+    pub fn new(gpu: &Gpu, prior_s: f64) -> Self {
+        Self {
+            timer: GpuTimer::new(gpu),
+            open_items: 0,
+            open_timed: false,
+            measured_items: 0,
+            estimate_s: prior_s,
+        }
+    }
+
+    /// GPU seconds one item is expected to take.
+    pub fn per_item_s(&self) -> f64 {
+        self.estimate_s
+    }
+
+    /// Call before recording an item into `enc`; the first item of a batch starts the timer
+    /// when it is free (a finished measurement is collected first).
+    pub fn item(&mut self, gpu: &Gpu, enc: &mut wgpu::CommandEncoder) {
+        if self.open_items == 0
+            && let Some(t) = self.timer.as_mut()
+        {
+            t.harvest(gpu);
+            if let Some(ms) = t.last_ms.take()
+                && self.measured_items > 0
+            {
+                let sample = ms * 1e-3 / self.measured_items as f64;
+                self.estimate_s += NEW_WEIGHT * (sample - self.estimate_s);
+            }
+            self.open_timed = t.begin(enc);
+        }
+        self.open_items += 1;
+    }
+
+    /// Call with the batch's encoder just before it is finished and submitted.
+    pub fn before_submit(&self, enc: &mut wgpu::CommandEncoder) {
+        if self.open_timed
+            && let Some(t) = &self.timer
+        {
+            t.end(enc);
+        }
+    }
+
+    /// Call after the batch was submitted.
+    pub fn after_submit(&mut self) {
+        if self.open_timed
+            && let Some(t) = &self.timer
+        {
+            t.after_submit();
+            self.measured_items = self.open_items;
+        }
+        self.open_items = 0;
+        self.open_timed = false;
+    }
+}
