@@ -72,19 +72,6 @@ fn vs_fill(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
     return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
 }
 
-// Value noise in [0, 1] at `p` (lattice of unit cells).
-fn value_noise(p: vec2<f32>) -> f32 {
-    let c = floor(p);
-    let f = p - c;
-    let u = f * f * (3.0 - 2.0 * f);
-    let i = vec2<i32>(c);
-    let a = lattice_hash(i);
-    let b = lattice_hash(i + vec2<i32>(1, 0));
-    let d = lattice_hash(i + vec2<i32>(0, 1));
-    let e = lattice_hash(i + vec2<i32>(1, 1));
-    return mix(mix(a, b, u.x), mix(d, e, u.x), u.y);
-}
-
 fn segment_distance(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> f32 {
     let ab = b - a;
     let t = clamp(dot(p - a, ab) / max(dot(ab, ab), 1e-12), 0.0, 1.0);
@@ -99,11 +86,7 @@ fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     // Ground type: the nearest ground sample to a position moved by two octaves of noise of
     // up to 0.7 ground cells.
     let g = node.ground_anchor + centre * node.ground_step;
-    let wobble = vec2<f32>(
-        value_noise(g * 1.3) + 0.5 * value_noise(g * 3.7 + 17.0),
-        value_noise(g * 1.3 + 41.0) + 0.5 * value_noise(g * 3.7 + 59.0),
-    ) / 1.5 - 0.5;
-    let at = clamp(vec2<i32>(round(g + 1.4 * wobble)), vec2<i32>(0), size - 1);
+    let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), size - 1);
     let t = min(textureLoad(ground_types, at, 0).r, node.ground_types - 1u);
     let uv = fract(node.material_anchor + centre * node.material_step);
     var albedo = textureSampleLevel(materials, material_sampler, uv, t, node.material_lod).rgb;

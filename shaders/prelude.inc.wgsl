@@ -124,3 +124,27 @@ fn lattice_hash(p: vec2<i32>) -> f32 {
     h = h ^ (h >> 12u);
     return f32(h & 0xffffu) / 65535.0;
 }
+
+// Value noise in [0, 1] at `p` (lattice of unit cells).
+fn value_noise(p: vec2<f32>) -> f32 {
+    let c = floor(p);
+    let f = p - c;
+    let u = f * f * (3.0 - 2.0 * f);
+    let i = vec2<i32>(c);
+    let a = lattice_hash(i);
+    let b = lattice_hash(i + vec2<i32>(1, 0));
+    let d = lattice_hash(i + vec2<i32>(0, 1));
+    let e = lattice_hash(i + vec2<i32>(1, 1));
+    return mix(mix(a, b, u.x), mix(d, e, u.x), u.y);
+}
+
+// The ground-layer sample whose type shows at `g` (ground-cell coordinates from the map
+// origin): the nearest one to `g` moved by two octaves of noise of up to 0.7 cells, so type
+// borders are natural instead of the 4 m staircase (ground textures and the terrain's detail).
+fn perturbed_ground_cell(g: vec2<f32>) -> vec2<i32> {
+    let wobble = vec2<f32>(
+        value_noise(g * 1.3) + 0.5 * value_noise(g * 3.7 + 17.0),
+        value_noise(g * 1.3 + 41.0) + 0.5 * value_noise(g * 3.7 + 59.0),
+    ) / 1.5 - 0.5;
+    return vec2<i32>(round(g + 1.4 * wobble));
+}

@@ -9,6 +9,26 @@
 @group(2) @binding(1) var ground_page: texture_2d_array<f32>;
 @group(2) @binding(2) var ground_sampler: sampler;
 
+// The ground's detail below the finest node texel (engine::render::ground_detail): the
+// materials (one layer per ground type, tiling over `material_tile_m`), the map's ground layer
+// (row 0 south) and the camera's place in both, in f32 near the camera.
+struct GroundDetail {
+    camera_cells: vec2<f32>,
+    camera_tiles: vec2<f32>,
+    ground_spacing_m: f32,
+    ground_types: u32,
+    material_tile_m: f32,
+    finest_lod: f32,
+    finest_texel_m: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
+};
+@group(2) @binding(3) var materials: texture_2d_array<f32>;
+@group(2) @binding(4) var ground_types: texture_2d<u32>;
+@group(2) @binding(5) var material_sampler: sampler;
+@group(2) @binding(6) var<uniform> detail: GroundDetail;
+
 struct TerrainOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) rel: vec3<f32>,
@@ -66,7 +86,7 @@ fn detail_noise(p: vec2<f32>, cells: i32) -> f32 {
     return mix(mix(a, b, u.x), mix(d, e, u.x), u.y);
 }
 
-// The ground's fine detail below the finest ground texel (6.7 cm): an albedo factor of mean 1
+// Nodes drawn with legend colours (no ground texture): an albedo factor of mean 1
 // from two octaves of world-anchored noise (cells of 1/32 and 1/16 m), each shown only where a
 // pixel is a few times smaller than its cells (`px_m`: metres per pixel), so it fades in with
 // distance continuously, whatever node or level the pixel belongs to: no seam.
@@ -78,6 +98,30 @@ fn fine_detail(rel: vec3<f32>, px_m: f32) -> f32 {
     v = v + 0.22 * (detail_noise(p, 2048) - 0.5) * fine;
     v = v + 0.22 * (detail_noise(p + vec2<f32>(17.0, 5.0), 1024) - 0.5) * coarse;
     return 1.0 + v;
+}
+
+// The material's detail at a pixel `rel` (camera-relative) of `px_m` metres: the ground type's
+// material luminance at the pixel's scale over its luminance at the finest node texel's scale
+// (what the node texture already holds), 1 where a pixel is a finest texel or larger, in full
+// from a third of one. Explicit mip levels, so pixels beyond that reach skip the lookups.
+fn material_detail(rel: vec3<f32>, px_m: f32) -> f32 {
+    let w = clamp((detail.finest_texel_m / px_m - 1.0) * 0.5, 0.0, 1.0);
+    if (w <= 0.0) {
+        return 1.0;
+    }
+    let g = detail.camera_cells + rel.xy / detail.ground_spacing_m;
+    let size = vec2<i32>(textureDimensions(ground_types));
+    let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), size - 1);
+    let t = min(textureLoad(ground_types, at, 0).r, detail.ground_types - 1u);
+    // Material coordinates as the node texture's pass has them (engine::render::ground).
+    let uv = detail.camera_tiles + rel.xy / detail.material_tile_m;
+    let texel_m = detail.material_tile_m / f32(textureDimensions(materials).x);
+    let lod = max(log2(px_m / texel_m), 0.0);
+    let fine = textureSampleLevel(materials, material_sampler, uv, t, lod).rgb;
+    let coarse = textureSampleLevel(materials, material_sampler, uv, t, detail.finest_lod).rgb;
+    let luma = vec3<f32>(0.2126, 0.7152, 0.0722);
+    let ratio = dot(fine, luma) / max(dot(coarse, luma), 1e-4);
+    return mix(1.0, ratio, w);
 }
 
 fn terrain_color(in: TerrainOut) -> vec4<f32> {
@@ -94,7 +138,14 @@ fn terrain_color(in: TerrainOut) -> vec4<f32> {
     if (mode == 3u) {
         return vec4<f32>(albedo, 1.0);
     }
-    let detailed = albedo * fine_detail(in.rel, max(px_m, 1e-6));
+    // Textured: the material's own detail; legend colours: procedural grain.
+    var factor = 1.0;
+    if (textured) {
+        factor = material_detail(in.rel, max(px_m, 1e-6));
+    } else {
+        factor = fine_detail(in.rel, max(px_m, 1e-6));
+    }
+    let detailed = albedo * factor;
     return lit_color(VertexOut(in.clip, in.rel, in.normal, detailed, in.fade));
 }
 

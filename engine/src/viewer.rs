@@ -86,7 +86,14 @@ pub struct Viewer {
     reference: Option<TerrainReference>,
     reference_size: [u32; 2],
     frame: u64,
+    /// When the previous frame started (its interval sets this frame's GPU budget).
+    last_frame_start: Option<Instant>,
 }
+
+/// Share of the time between frames the GPU phases may take when frames are slower than the
+/// settings' budget assumes (a software adapter at a few frames per second): at 60 Hz it is
+/// the settings' 4 ms; at 3 Hz, 83 ms, so streaming keeps up with the frames it gets.
+const GPU_BUDGET_FRAME_SHARE: f64 = 0.25;
 
 impl std::fmt::Debug for Viewer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -133,6 +140,7 @@ impl Viewer {
             reference: None,
             reference_size: [1, 1],
             frame: 0,
+            last_frame_start: None,
         }
     }
 
@@ -149,10 +157,19 @@ impl Viewer {
     ) -> FrameStats {
         let t0 = Instant::now();
         let on_cpu0 = cpu_time::ThreadTime::try_now().ok();
+        let interval_s = self
+            .last_frame_start
+            .replace(t0)
+            .map_or(0.0, |t| (t0 - t).as_secs_f64());
+        let budget_s = self
+            .streamer
+            .settings
+            .gpu_budget_s
+            .max(GPU_BUDGET_FRAME_SHARE * interval_s);
         let select_cam = self.frozen.unwrap_or(*cam);
         self.streamer.update(&select_cam, dt_s);
         let t1 = Instant::now();
-        self.upload(gpu);
+        self.upload(gpu, budget_s);
         let t2 = Instant::now();
         let drawn: Vec<DrawnNode<'_>> = self
             .streamer
@@ -282,7 +299,7 @@ impl Viewer {
     /// benchmarks). True when no job is in flight and every wanted node is drawn.
     pub fn stream_only(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64) -> bool {
         self.streamer.update(cam, dt_s);
-        self.upload(gpu);
+        self.upload(gpu, self.streamer.settings.gpu_budget_s);
         self.scene.finish_uploads(gpu);
         self.streamer.in_flight() == 0 && self.wanted_not_drawn() == 0
     }
@@ -291,16 +308,17 @@ impl Viewer {
     /// streaming of a frame whose path is known (benchmarks), uploads included, nothing drawn.
     pub fn stream_along(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
         self.streamer.update_along(cam, dt_s, future);
-        self.upload(gpu);
+        self.upload(gpu, self.streamer.settings.gpu_budget_s);
         self.scene.finish_uploads(gpu);
     }
 
-    /// The streamer's GPU phases under their budget: every renderer's upload hook.
-    fn upload(&mut self, gpu: &Gpu) {
+    /// The streamer's GPU phases under `budget_s`: every renderer's upload hook.
+    fn upload(&mut self, gpu: &Gpu, budget_s: f64) {
         let scene = &mut self.scene;
-        self.streamer.run_gpu_phases_with(&mut |shared, work| {
-            work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
-        });
+        self.streamer
+            .run_gpu_phases_within(budget_s, &mut |shared, work| {
+                work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
+            });
     }
 
     /// Wanted nodes not drawn yet (a coarser ancestor stands in for them): the pop debt count.

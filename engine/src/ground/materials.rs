@@ -18,8 +18,10 @@ use crate::color::{linear_to_srgb, srgb_to_linear};
 use worldgen::map::{GroundType, MaterialImage};
 use worldgen::noise::{fade, unit3};
 
-/// Texels per material side (a power of two: mips tile too).
-pub const MATERIAL_TEXELS: u32 = 128;
+/// Texels per material side (a power of two: mips tile too): 7.8 mm texels, four times finer
+/// than the finest node texture's (3.3 cm), so that close up the terrain shader can show the
+/// material's own detail below the node texture's (`render::ground_detail`).
+pub const MATERIAL_TEXELS: u32 = 512;
 /// Metres one material tile covers.
 pub const MATERIAL_TILE_M: f64 = 4.0;
 
@@ -49,22 +51,22 @@ fn character(name: &str) -> Character {
         }
     } else if has("rock") || has("stone") || has("cliff") {
         Character {
-            octaves: &[(4, 0.5), (8, 0.3), (32, 0.2)],
+            octaves: &[(4, 0.5), (8, 0.3), (32, 0.2), (256, 0.12)],
             contrast: 0.35,
         }
     } else if has("grass") || has("meadow") {
         Character {
-            octaves: &[(8, 0.3), (32, 0.3), (64, 0.4)],
+            octaves: &[(8, 0.3), (32, 0.3), (64, 0.4), (256, 0.3)],
             contrast: 0.25,
         }
     } else if has("sand") {
         Character {
-            octaves: &[(16, 0.4), (64, 0.6)],
+            octaves: &[(16, 0.4), (64, 0.6), (256, 0.4)],
             contrast: 0.12,
         }
     } else {
         Character {
-            octaves: &[(4, 0.3), (16, 0.4), (64, 0.3)],
+            octaves: &[(4, 0.3), (16, 0.4), (64, 0.3), (256, 0.2)],
             contrast: 0.22,
         }
     }
@@ -255,22 +257,23 @@ mod tests {
         }
     }
 
-    /// An image material: a 256-texel checker of two colours becomes 128 texels of 2x2 means
-    /// (each covering one colour, as the squares are 4 texels wide), north up; a 32-texel image
-    /// is repeated 4x4 per texel.
+    /// An image material: an image twice `MATERIAL_TEXELS` wide becomes texels of 2x2 means
+    /// (a 4-texel checker of two colours survives: each mean covers one colour), north up; a
+    /// 32-texel image is repeated, each image texel over `MATERIAL_TEXELS / 32` texels.
     #[test]
     fn image_materials_are_filtered_and_north_up() {
         let t = legend().remove(0);
         let red = [200, 30, 30, 255];
         let blue = [20, 40, 220, 255];
-        let side = 256u32;
+        let side = 2 * MATERIAL_TEXELS;
+        let half = side / 2;
         // Top half red, bottom half blue, with a 4-texel checker of the two in the top-left
         // quarter.
         let rgba = (0..side * side)
             .map(|k| {
                 let (x, y) = (k % side, k / side);
-                let checker = x < 128 && y < 128 && ((x / 4 + y / 4) % 2 == 1);
-                if (y < 128) == checker { blue } else { red }
+                let checker = x < half && y < half && ((x / 4 + y / 4) % 2 == 1);
+                if (y < half) == checker { blue } else { red }
             })
             .collect();
         let m = material_from_image(&t, &MaterialImage { side, rgba });
@@ -289,8 +292,8 @@ mod tests {
                 .collect(),
         };
         let m = material_from_image(&t, &small);
-        assert_eq!(m.albedo_srgb[63], red);
-        assert_eq!(m.albedo_srgb[64], blue);
+        assert_eq!(m.albedo_srgb[n / 2 - 1], red);
+        assert_eq!(m.albedo_srgb[n / 2], blue);
         assert!(m.height.contains(&0) && m.height.contains(&255));
     }
 

@@ -438,6 +438,16 @@ impl GroundTexturer {
         }
     }
 
+    /// What the terrain's detail below the finest texel samples: the materials array, the
+    /// map's ground layer and the number of ground types.
+    pub fn detail_sources(&self) -> (wgpu::TextureView, wgpu::TextureView, u32) {
+        (
+            self.materials.clone(),
+            self.ground_types.clone(),
+            self.types,
+        )
+    }
+
     /// The layout of a mip pass's source: what [`super::ground_pool::GroundPool`] binds each
     /// layer's levels with.
     pub fn mip_source_layout(&self) -> &wgpu::BindGroupLayout {

@@ -25,6 +25,7 @@ pub mod batches;
 pub mod frame;
 pub mod gpu_data;
 pub mod ground;
+pub mod ground_detail;
 pub mod ground_pool;
 pub mod impostors;
 pub mod node_table;

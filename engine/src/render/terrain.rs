@@ -4,8 +4,9 @@
 //! wireframe. The ground's colour is the node's ground texture where the ground kind is
 //! registered: its upload hook renders the texture ([`super::ground`]) into a layer of the
 //! renderer's [`GroundPool`] (the terrain shading is the texture's only reader), and the layer
-//! is given back when the node's GPU object drops. Without one, the map's ground-type legend
-//! colours the vertices.
+//! is given back when the node's GPU object drops; close up, the materials' own detail below
+//! the finest texel multiplies it ([`super::ground_detail`]). Without one, the map's
+//! ground-type legend colours the vertices (with procedural grain close up).
 
 use super::Gpu;
 use super::batch_timer::BatchTimer;
@@ -16,6 +17,7 @@ use super::frame::{
 };
 use super::gpu_data::MeshVertex;
 use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
+use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot};
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
@@ -136,6 +138,8 @@ pub struct TerrainRenderer {
     group_layout: wgpu::BindGroupLayout,
     colors_buffer: wgpu::Buffer,
     sampler: wgpu::Sampler,
+    /// The materials' detail below the finest node texel (stand-ins without ground textures).
+    detail: GroundDetail,
     ground: Option<GroundTextures>,
     pool: Suballocator,
     pages: Vec<MeshPage>,
@@ -169,6 +173,19 @@ impl TerrainRenderer {
                 uniform_entry(0, false, wgpu::ShaderStages::VERTEX),
                 texture_entry(1, wgpu::TextureViewDimension::D2Array),
                 sampler_entry(2),
+                texture_entry(3, wgpu::TextureViewDimension::D2Array),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                sampler_entry(5),
+                uniform_entry(6, false, wgpu::ShaderStages::FRAGMENT),
             ],
         });
         let layout = frame.pipeline_layout(
@@ -244,7 +261,15 @@ impl TerrainRenderer {
             usage: wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         });
-        let colors = ground_group(device, &colors_layout, &colors_buffer, &dummy, &sampler);
+        let detail = GroundDetail::none(gpu);
+        let colors = ground_group(
+            device,
+            &colors_layout,
+            &colors_buffer,
+            &dummy,
+            &sampler,
+            &detail,
+        );
         Self {
             fill,
             solid,
@@ -253,6 +278,7 @@ impl TerrainRenderer {
             group_layout: colors_layout,
             colors_buffer,
             sampler,
+            detail,
             ground: None,
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
             pages: Vec::new(),
@@ -275,6 +301,16 @@ impl TerrainRenderer {
         pool_budget_bytes: usize,
     ) -> Self {
         let texturer = GroundTexturer::new(gpu, world);
+        let (materials, ground_types, types) = texturer.detail_sources();
+        let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let ground = &world.map.manifest.ground;
+        self.detail = GroundDetail::new(
+            gpu,
+            materials,
+            ground_types,
+            (world.map.manifest.origin_m, ground.spacing_m, types),
+            texel_m(&tree, tree.max_level),
+        );
         self.ground = Some(GroundTextures {
             pool: GroundPool::new(pool_budget_bytes, texturer.mip_source_layout()),
             texturer,
@@ -320,6 +356,7 @@ impl TerrainRenderer {
                 &self.colors_buffer,
                 page,
                 &self.sampler,
+                &self.detail,
             ));
         }
         let enc = g.encoder.get_or_insert_with(|| {
@@ -471,6 +508,7 @@ impl NodeRenderer for TerrainRenderer {
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+        self.detail.write(&gpu.queue, draws.camera);
         self.batches.clear();
         self.triangles = 0;
         self.merged = draws.view.multi_draw(gpu);
@@ -557,6 +595,7 @@ fn ground_group(
     colors: &wgpu::Buffer,
     page: &wgpu::Texture,
     sampler: &wgpu::Sampler,
+    detail: &GroundDetail,
 ) -> wgpu::BindGroup {
     let view = page.create_view(&wgpu::TextureViewDescriptor {
         label: Some("ground texture page"),
@@ -567,18 +606,23 @@ fn ground_group(
         label: Some("terrain ground group"),
         layout,
         entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: colors.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::TextureView(&view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: wgpu::BindingResource::Sampler(sampler),
-            },
-        ],
+            [
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: colors.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(sampler),
+                },
+            ]
+            .as_slice(),
+            detail.entries().as_slice(),
+        ]
+        .concat(),
     })
 }

@@ -237,6 +237,16 @@ impl Streamer {
     /// [`Self::run_gpu_phases`] where each GPU phase also calls `upload` (the renderer creates
     /// the node's buffers there and stores them in [`NodeWork::gpu`]).
     pub fn run_gpu_phases_with(&mut self, upload: &mut dyn FnMut(&Shared, &mut NodeWork)) -> usize {
+        self.run_gpu_phases_within(self.settings.gpu_budget_s, upload)
+    }
+
+    /// [`Self::run_gpu_phases_with`] under a time budget of `budget_s` this frame instead of
+    /// the settings' (the byte budget stays).
+    pub fn run_gpu_phases_within(
+        &mut self,
+        budget_s: f64,
+        upload: &mut dyn FnMut(&Shared, &mut NodeWork),
+    ) -> usize {
         let t0 = Instant::now();
         let mut bytes = 0usize;
         let mut gpu_s = 0.0;
@@ -250,7 +260,7 @@ impl Streamer {
         let mut ran = 0;
         for (_, _, key) in order {
             if ran > 0
-                && (t0.elapsed().as_secs_f64() + gpu_s >= self.settings.gpu_budget_s
+                && (t0.elapsed().as_secs_f64() + gpu_s >= budget_s
                     || bytes >= self.settings.gpu_budget_bytes)
             {
                 break;

@@ -110,7 +110,8 @@ pub struct StreamSettings {
     pub cache_budget_bytes: usize,
     /// GPU phases per frame: time and bytes budgets (at least one phase runs per frame). The
     /// time is the frame thread's time in the phases plus the GPU time their recorded work is
-    /// expected to take (`NodeWork::gpu_estimate_s`).
+    /// expected to take (`NodeWork::gpu_estimate_s`). The viewer raises the time budget to a
+    /// quarter of the time between frames when frames are slower than that.
     pub gpu_budget_s: f64,
     pub gpu_budget_bytes: usize,
     /// Cross-fade duration.

@@ -230,6 +230,26 @@ fn neighbours_share_border_texels_at_every_mip_level() {
     assert!(compared > 1000, "only {compared} mip texel pairs compared");
 }
 
+/// `road` (sRGB) is asphalt within `tolerance` per channel (linear 0.045 is sRGB ~61), and
+/// `off_road`, 10 m to the side, differs from it by more than 15 in some channel; `at` names
+/// the place in the failure message.
+fn assert_road_and_off_road(road: &[u8], off_road: &[u8], tolerance: i32, at: &str) {
+    for ch in 0..3 {
+        assert!(
+            (i32::from(road[ch]) - 61).abs() <= tolerance,
+            "{at}: the road centre's {road:?} is not asphalt"
+        );
+    }
+    let diff = (0..3)
+        .map(|ch| (i32::from(road[ch]) - i32::from(off_road[ch])).abs())
+        .max()
+        .unwrap_or(0);
+    assert!(
+        diff > 15,
+        "{at}: 10 m off the road {off_road:?} looks like the road {road:?}"
+    );
+}
+
 /// Road texels where the map's road runs, ground texels 10 m to its side (positions from the
 /// map's decal list; colours from the texture the GPU rendered).
 #[test]
@@ -291,21 +311,7 @@ fn a_road_centre_is_road_and_ten_metres_off_is_not() {
             let img = render(&gpu, &t, &world, &index, &tree, key);
             let road = texel(&img, c.0, c.1);
             let ground = texel(&img, o.0, o.1);
-            // Asphalt: linear 0.045 is sRGB ~60.
-            for ch in 0..3 {
-                assert!(
-                    (i32::from(road[ch]) - 61).abs() <= 6,
-                    "road centre at {mid:?}: texel {road:?} is not asphalt"
-                );
-            }
-            let diff = (0..3)
-                .map(|ch| (i32::from(road[ch]) - i32::from(ground[ch])).abs())
-                .max()
-                .unwrap_or(0);
-            assert!(
-                diff > 15,
-                "10 m off the road at {off:?}: texel {ground:?} looks like the road {road:?}"
-            );
+            assert_road_and_off_road(&road, &ground, 6, &format!("texels at {mid:?} / {off:?}"));
             checked += 1;
             if checked >= 6 {
                 return;
@@ -542,19 +548,11 @@ fn in_a_rendered_view_a_road_centre_is_road_and_ten_metres_off_is_not() {
                 DVec3::new(off[0], off[1], world.height_m(off[0], off[1])),
             );
             let other = at(off_px);
-            for ch in 0..3 {
-                assert!(
-                    (i32::from(road[ch]) - 61).abs() <= 8,
-                    "road centre at {mid:?}: pixel {road:?} is not asphalt"
-                );
-            }
-            let diff = (0..3)
-                .map(|ch| (i32::from(road[ch]) - i32::from(other[ch])).abs())
-                .max()
-                .unwrap_or(0);
-            assert!(
-                diff > 15,
-                "10 m off the road at {off:?} (pixel {off_px:?}): {other:?} looks like the road"
+            assert_road_and_off_road(
+                &road,
+                &other,
+                8,
+                &format!("pixels at {mid:?} / {off:?} (pixel {off_px:?})"),
             );
             checked += 1;
             if checked >= 4 {
@@ -710,4 +708,91 @@ fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
     }
     assert!(checked >= 10, "only {checked} areas checked");
     assert_eq!(kinds.len(), 3, "only kinds {kinds:?} met");
+}
+
+/// Close up the ground shows its material's own texels below the finest node texel. Every
+/// ground type gets a material image of one-texel checks (7.8 mm at 512 texels over 4 m): the
+/// node textures (3.3 cm texels at best) hold only the checks' grey mean, so the texture-only
+/// view from 0.5 m is flat, while the lit view shows the checks as strong pixel contrast; from
+/// 8 m (a pixel larger than the finest texel) the detail is gone again.
+#[test]
+fn close_up_the_ground_shows_the_material_below_the_finest_texel() {
+    use engine::render::frame::GroundView;
+    let Some(g) = device() else { return };
+    let mut world = tiny_world();
+    let side = engine::ground::materials::MATERIAL_TEXELS;
+    let checks = worldgen::map::MaterialImage {
+        side,
+        rgba: (0..side * side)
+            .map(|k| {
+                if (k % side + k / side).is_multiple_of(2) {
+                    [220, 220, 220, 255]
+                } else {
+                    [30, 30, 30, 255]
+                }
+            })
+            .collect(),
+    };
+    world.map.materials = vec![Some(checks); world.map.manifest.ground.legend.len()];
+    // A dry spot 12 m or more from every decal.
+    let water = world.map.manifest.water_level_m;
+    let spot = (1..16)
+        .flat_map(|j| (1..16).map(move |i| [32.0 * f64::from(i), 32.0 * f64::from(j)]))
+        .find(|&p| {
+            world.height_m(p[0], p[1]) > water + 1.0
+                && world.map.decals.iter().all(|d| {
+                    d.points.windows(2).all(|s| {
+                        let (dist, _) = worldgen::roads::segment_closest(
+                            p,
+                            [s[0][0], s[0][1]],
+                            [s[1][0], s[1][1]],
+                        );
+                        dist > 12.0 + 0.5 * f64::from(d.width_m) + f64::from(d.falloff_m)
+                    })
+                })
+        })
+        .expect("a dry spot away from decals");
+    let ground = DVec3::new(spot[0], spot[1], world.height_m(spot[0], spot[1]));
+    let mut v = tests::gpu::viewer(&g, world, 1.0);
+    v.view.plants = false;
+    let size = [128u32, 128];
+    let target = engine::render::Target::new(&g.device, size, engine::render::COLOR_FORMAT);
+    // Luma range (max - min) over the central 64 x 64 pixels of the view from `above` metres.
+    let mut contrast = |above: f64, view: GroundView| {
+        v.view.ground_view = view;
+        let cam = Camera::look_at(
+            ground + DVec3::new(0.0, 0.0, above),
+            ground,
+            40f64.to_radians(),
+            size,
+        );
+        tests::gpu::settle(&g, &mut v, &target, &cam);
+        let img = target.read_rgba(&g).expect("readback");
+        let luma: Vec<f64> = (32..96)
+            .flat_map(|y| (32..96).map(move |x| (y * size[0] as usize + x) * 4))
+            .map(|k| {
+                0.2126 * f64::from(img[k])
+                    + 0.7152 * f64::from(img[k + 1])
+                    + 0.0722 * f64::from(img[k + 2])
+            })
+            .collect();
+        let lo = luma.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = luma.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        hi - lo
+    };
+    let texture_only = contrast(0.5, GroundView::TextureOnly);
+    let close = contrast(0.5, GroundView::Shaded);
+    let far = contrast(8.0, GroundView::Shaded);
+    assert!(
+        texture_only < 12.0,
+        "the node texture should hold only the checks' mean: luma range {texture_only:.1}"
+    );
+    assert!(
+        close > 80.0,
+        "from 0.5 m the material's checks should show: luma range {close:.1}"
+    );
+    assert!(
+        far < close / 3.0,
+        "from 8 m the detail should be gone: luma range {far:.1} (close up {close:.1})"
+    );
 }
