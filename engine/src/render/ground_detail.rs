@@ -7,7 +7,7 @@
 //! at the pixel (the map's ground layer, with the node texture's noise-perturbed borders).
 //!
 //! Bindings 3 to 6 of the terrain's group 2: the materials array, the ground layer, a
-//! repeating sampler and [`DetailUniform`], rewritten each frame from the camera.
+//! repeating sampler and a small uniform (`DetailUniform`), rewritten each frame from the camera.
 
 use super::Gpu;
 use crate::camera::Camera;
