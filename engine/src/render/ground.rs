@@ -13,7 +13,7 @@
 //! texture creates no buffer, bind group or view; the pool keeps each layer's views).
 
 use super::Gpu;
-use super::frame::{sampler_entry, texture_entry};
+use super::frame::{sampler_entry, texture_entry, uint_texture_entry};
 use super::ground_pool::GroundSlot;
 use crate::ground::layout::{SIDE, lattice_index, texel_m};
 use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M, materials};
@@ -322,16 +322,7 @@ impl GroundTexturer {
             label: Some("ground texture layout"),
             entries: &[
                 super::frame::uniform_entry(0, true, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                uint_texture_entry(1),
                 texture_entry(2, wgpu::TextureViewDimension::D2Array),
                 sampler_entry(3),
                 storage_entry(4),

@@ -13,7 +13,7 @@ use super::batch_timer::BatchTimer;
 use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
-    texture_entry, uniform_entry,
+    texture_entry, uint_texture_entry, uniform_entry,
 };
 use super::gpu_data::MeshVertex;
 use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
@@ -174,16 +174,7 @@ impl TerrainRenderer {
                 texture_entry(1, wgpu::TextureViewDimension::D2Array),
                 sampler_entry(2),
                 texture_entry(3, wgpu::TextureViewDimension::D2Array),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                uint_texture_entry(4),
                 sampler_entry(5),
                 uniform_entry(6, false, wgpu::ShaderStages::FRAGMENT),
             ],

@@ -29,21 +29,27 @@ fn render(
     key: NodeKey,
 ) -> Vec<u8> {
     let target = Target::new(&gpu.device, [SIDE, SIDE], GROUND_TEXTURE_FORMAT);
+    let enc = record_node(gpu, t, &target.color_view, world, index, tree, key);
+    t.submit(gpu, enc);
+    target.read_rgba(gpu).expect("readback")
+}
+
+/// An encoder holding node `key`'s texture pass into `view` (level 0 only).
+fn record_node(
+    gpu: &engine::render::Gpu,
+    t: &GroundTexturer,
+    view: &wgpu::TextureView,
+    world: &engine::surface::World,
+    index: &DecalIndex,
+    tree: &QuadTree,
+    key: NodeKey,
+) -> wgpu::CommandEncoder {
     let pieces = node_decals(&world.map.decals, index, tree, key);
     let mut enc = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    t.record(
-        gpu,
-        &mut enc,
-        &target.color_view,
-        tree,
-        key,
-        &pieces,
-        &world.map.decals,
-    );
-    t.submit(gpu, enc);
-    target.read_rgba(gpu).expect("readback")
+    t.record(gpu, &mut enc, view, tree, key, &pieces, &world.map.decals);
+    enc
 }
 
 /// Renders node `key`'s ground texture with its mip levels into a layer of `pool` and reads
@@ -58,19 +64,7 @@ fn render_levels(
     key: NodeKey,
 ) -> Vec<Vec<u8>> {
     let slot = pool.lease(&gpu.device).expect("a free layer");
-    let pieces = node_decals(&world.map.decals, index, tree, key);
-    let mut enc = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    t.record(
-        gpu,
-        &mut enc,
-        &slot.view,
-        tree,
-        key,
-        &pieces,
-        &world.map.decals,
-    );
+    let mut enc = record_node(gpu, t, &slot.view, world, index, tree, key);
     t.record_mips(&mut enc, &slot);
     t.submit(gpu, enc);
     let page = pool.page(slot.page()).expect("the slot's page");
