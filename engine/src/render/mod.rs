@@ -76,6 +76,12 @@ pub struct Gpu {
     /// Whether multi-draw indirect with a non-zero first instance is available (else merged
     /// batches are recorded as plain loops of the same draws, see `batches`).
     pub multi_draw: bool,
+    /// Anisotropy clamp for textures seen at grazing angles: 8, or 1 (plain trilinear) on a CPU
+    /// adapter. llvmpipe (Mesa 22) filters anisotropically with an elliptical filter that visits
+    /// every texel of the pixel's footprint in the chosen mip level, computed from the
+    /// coordinates' own derivatives (explicit gradients do not bound it); a distant node texture
+    /// under a few pixels then costs seconds per frame.
+    pub anisotropy: u16,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -137,6 +143,11 @@ impl Gpu {
             adapter: adapter.get_info().name,
             reason: e.to_string(),
         })?;
+        let anisotropy = if adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+            1
+        } else {
+            8
+        };
         Ok(Self {
             instance,
             adapter,
@@ -145,6 +156,7 @@ impl Gpu {
             wireframe,
             timestamps,
             multi_draw,
+            anisotropy,
         })
     }
 

@@ -235,7 +235,7 @@ impl TerrainRenderer {
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
-            anisotropy_clamp: 8,
+            anisotropy_clamp: gpu.anisotropy,
             ..Default::default()
         });
         let dummy = device.create_texture(&wgpu::TextureDescriptor {

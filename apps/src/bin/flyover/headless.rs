@@ -15,7 +15,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
     eprintln!(
-        "headless on {} ({} draws)",
+        "headless on {} ({} draws, ground textures filtered with anisotropy {}x)",
         gpu.adapter_name(),
         if cli.per_item_draws {
             "per-item"
@@ -23,7 +23,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
             "merged, multi-draw indirect"
         } else {
             "merged batches as plain loops: no multi-draw indirect on this adapter"
-        }
+        },
+        gpu.anisotropy
     );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
