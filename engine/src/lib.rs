@@ -31,6 +31,7 @@ pub mod color;
 pub mod flight;
 pub mod ground;
 pub mod kinds;
+pub mod lighting;
 #[cfg(feature = "measure")]
 pub mod measure;
 pub mod render;

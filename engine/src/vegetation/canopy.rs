@@ -86,20 +86,31 @@ impl Canopy {
         for i in 0..SIGHT_SAMPLES {
             let p = eye + d * ((i as f64 + 0.5) / SIGHT_SAMPLES as f64);
             let above = p.z - worldgen::sample::bilinear(&world.map.heights, heights, p.x, p.y);
-            if above < 0.0 || above > self.top_m {
-                continue;
-            }
-            for (ext, spacing, h) in &self.layers {
-                if above <= *h {
-                    let at = worldgen::sample::GridPlacement {
-                        origin_m: self.origin_m,
-                        spacing_m: *spacing,
-                    };
-                    depth += worldgen::sample::bilinear(ext, at, p.x, p.y) * step;
-                }
-            }
+            depth += self.extinction_per_m(p.x, p.y, above) * step;
         }
         (-depth).exp()
+    }
+}
+
+impl Canopy {
+    /// The extinction (1/m) at world point (`x_m`, `y_m`) and `above_m` metres above the
+    /// ground: the sum over the species layers (and large trees) that reach that high, each
+    /// bilinear on its own grid. Zero below the ground and above [`Self::top_m`].
+    pub fn extinction_per_m(&self, x_m: f64, y_m: f64, above_m: f64) -> f64 {
+        if !(0.0..=self.top_m).contains(&above_m) {
+            return 0.0;
+        }
+        let mut sum = 0.0;
+        for (ext, spacing, h) in &self.layers {
+            if above_m <= *h {
+                let at = worldgen::sample::GridPlacement {
+                    origin_m: self.origin_m,
+                    spacing_m: *spacing,
+                };
+                sum += worldgen::sample::bilinear(ext, at, x_m, y_m);
+            }
+        }
+        sum
     }
 }
 

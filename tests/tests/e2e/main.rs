@@ -4,6 +4,7 @@
 mod camera_path;
 mod dem_import;
 mod ground;
+mod lighting;
 mod map_format;
 mod render;
 mod streaming;

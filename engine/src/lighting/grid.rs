@@ -1,0 +1,418 @@
+//! One light grid: sky and sun visibility on columns over a node of side [`GRID_SIDE_M`].
+//!
+//! **Sky visibility** of a horizontal receiver is `(1/pi) * integral of T(w) sin(e) cos(e)` over
+//! the directions `w` above the terrain horizon (elevation `e`, canopy transmittance `T`).
+//! With `s = sin^2 e` the weight is uniform in `s`, so per azimuth the visible part is the
+//! integral of `T` over `s` from `sin^2` of the horizon elevation to 1, and open flat ground
+//! gives exactly 1. The grid takes [`HORIZON_AZIMUTHS`] azimuths for the horizon and
+//! [`CANOPY_AZIMUTHS`] x [`SKY_BANDS`] (equal bands of `s`) rays through the canopy.
+//!
+//! **Horizons** are marched on the finest surface near the grid (a lattice of `F` at
+//! [`NEAR_SPACING_M`] over the node widened by [`NEAR_MARGIN_M`], bilinear between its points)
+//! and on the map heights beyond (bilinear), out to [`HORIZON_REACH_M`], with steps that grow
+//! with the distance. **Canopy transmittance** is `exp(-optical depth)` of
+//! [`Canopy::extinction_per_m`] summed at midpoints along the ray until it leaves the canopy.
+//! **Sun visibility**: 1 when the sun is above the horizon along its own azimuth, else 0, times
+//! the canopy transmittance toward it.
+//!
+//! Values are stored as bytes (1/255 steps); the tests compare them with a ray-marched
+//! reference on the finest surface (tests/tests/e2e/lighting.rs).
+
+use crate::surface::World;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::vegetation::canopy::Canopy;
+use glam::DVec3;
+use worldgen::sample::{GridPlacement, bilinear};
+
+/// Side of a light grid's node (m).
+pub const GRID_SIDE_M: f64 = 128.0;
+/// Distance between columns (m).
+pub const COLUMN_SPACING_M: f64 = 4.0;
+/// Columns along each side (the border columns included).
+pub const COLUMNS: usize = 33;
+/// Heights of the layers above the finest surface (m): the ground (a hand above it, so the
+/// surface's own sampling does not shadow the sample), then up through the canopy.
+pub const LAYER_HEIGHTS_M: [f64; 5] = [0.25, 2.0, 6.0, 14.0, 30.0];
+/// Azimuths of the terrain horizon.
+pub const HORIZON_AZIMUTHS: usize = 16;
+/// Azimuths of the canopy rays (each serves the horizon azimuths nearest to it).
+pub const CANOPY_AZIMUTHS: usize = 8;
+/// Equal bands of `sin^2(elevation)` of the canopy rays.
+pub const SKY_BANDS: usize = 3;
+/// How far horizons are marched (m).
+pub const HORIZON_REACH_M: f64 = 4000.0;
+/// Spacing of the finest-surface lattice near the grid (m).
+pub const NEAR_SPACING_M: f64 = 2.0;
+/// How far beyond the node that lattice reaches (m).
+pub const NEAR_MARGIN_M: f64 = 64.0;
+/// Midpoint samples of a sky ray through the canopy.
+pub const CANOPY_STEPS: usize = 12;
+/// Midpoint samples of the sun ray through the canopy (one a sample, often long and low).
+pub const SUN_CANOPY_STEPS: usize = 32;
+
+/// The sun: where it stands, as a compass azimuth (degrees clockwise from north) and an
+/// elevation above the horizontal (degrees).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sun {
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+}
+
+impl Default for Sun {
+    /// An afternoon sun in the south-west, 35 degrees high.
+    fn default() -> Self {
+        Self {
+            azimuth_deg: 225.0,
+            elevation_deg: 35.0,
+        }
+    }
+}
+
+impl Sun {
+    /// Unit vector toward the sun (x east, y north, z up).
+    pub fn toward(&self) -> DVec3 {
+        let (a, e) = (
+            self.azimuth_deg.to_radians(),
+            self.elevation_deg.to_radians(),
+        );
+        DVec3::new(a.sin() * e.cos(), a.cos() * e.cos(), e.sin())
+    }
+}
+
+/// A node's light grid (see the module docs). Sample `(layer, row, col)` is at world
+/// `origin_m + (col, row) * COLUMN_SPACING_M`, `LAYER_HEIGHTS_M[layer]` above `ground_m`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightGrid {
+    pub key: NodeKey,
+    /// World position of column (0, 0), the node's south-west corner.
+    pub origin_m: [f64; 2],
+    /// The finest surface at each column (row-major, row 0 south).
+    pub ground_m: Vec<f32>,
+    /// Sky visibility in 1/255 steps, `[layer][row][col]`.
+    pub sky: Vec<u8>,
+    /// Sun visibility in 1/255 steps, `[layer][row][col]`.
+    pub sun: Vec<u8>,
+    /// The sun the grid was lit for.
+    pub sun_dir: Sun,
+}
+
+/// The terrain heights a grid's horizons are marched on: the finest-surface lattice near the
+/// node, the map heights beyond. The lattice's points lie on one global lattice (multiples of
+/// [`NEAR_SPACING_M`] from the tree's origin), and positions are turned into lattice
+/// coordinates from that origin, so neighbouring grids read the same numbers for the same
+/// position.
+struct HorizonHeights<'a> {
+    world: &'a World,
+    near: Vec<f64>,
+    /// Points along each side of `near`.
+    n: usize,
+    /// Global lattice index of `near`'s point (0, 0).
+    first: [i64; 2],
+    tree_origin_m: [f64; 2],
+    map_at: GridPlacement,
+}
+
+impl HorizonHeights<'_> {
+    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        let gx = (x_m - self.tree_origin_m[0]) / NEAR_SPACING_M;
+        let gy = (y_m - self.tree_origin_m[1]) / NEAR_SPACING_M;
+        let (fx, fy) = (gx.floor(), gy.floor());
+        let (i, j) = (fx as i64 - self.first[0], fy as i64 - self.first[1]);
+        let last = self.n as i64 - 1;
+        if (0..last).contains(&i) && (0..last).contains(&j) {
+            let (tx, ty) = (gx - fx, gy - fy);
+            let k = j as usize * self.n + i as usize;
+            let (a, b) = (self.near[k], self.near[k + 1]);
+            let (c, d) = (self.near[k + self.n], self.near[k + self.n + 1]);
+            let lo = a + (b - a) * tx;
+            let hi = c + (d - c) * tx;
+            lo + (hi - lo) * ty
+        } else {
+            bilinear(&self.world.map.heights, self.map_at, x_m, y_m)
+        }
+    }
+}
+
+/// `sin^2` of the elevation whose tangent is `t` (0 for directions at or below horizontal).
+fn sin2_of_tan(t: f64) -> f64 {
+    if t <= 0.0 { 0.0 } else { t * t / (1.0 + t * t) }
+}
+
+/// The distances of a horizon march: from 1 m, each step 6 % of the distance (at least 1 m).
+fn march_distances() -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut r = 1.0f64;
+    while r <= HORIZON_REACH_M {
+        out.push(r);
+        r += (0.06 * r).max(1.0);
+    }
+    out
+}
+
+/// The level of the light-grid nodes in `tree`: the finest whose nodes are at least
+/// [`GRID_SIDE_M`] wide (exactly that with 8 m leaves), or the root on a smaller map.
+pub fn grid_level(tree: &QuadTree) -> u8 {
+    (0..=tree.max_level)
+        .rev()
+        .find(|&l| tree.node_size_m(l) >= GRID_SIDE_M - 1e-9)
+        .unwrap_or(0)
+}
+
+impl LightGrid {
+    /// Sample index of `(layer, row, col)`.
+    pub fn index(layer: usize, row: usize, col: usize) -> usize {
+        (layer * COLUMNS + row) * COLUMNS + col
+    }
+
+    /// Bytes the grid holds (its heights and both visibilities).
+    pub fn bytes(&self) -> usize {
+        self.ground_m.len() * 4 + self.sky.len() + self.sun.len()
+    }
+
+    /// Computes the grid of node `key` for `sun`: [`COLUMNS`] columns from the node's
+    /// south-west corner, covering the node when it is at [`grid_level`].
+    pub fn compute(
+        world: &World,
+        canopy: &Canopy,
+        tree: &QuadTree,
+        key: NodeKey,
+        sun: Sun,
+    ) -> Self {
+        // Columns and lattice points by global index from the tree's origin (see
+        // `HorizonHeights`): a border column shared with a neighbour has the same coordinates.
+        let o = tree.origin_m;
+        let per_node = (COLUMNS - 1) as i64;
+        let col0 = [i64::from(key.ix) * per_node, i64::from(key.iy) * per_node];
+        let column_m =
+            |axis: usize, c: usize| o[axis] + (col0[axis] + c as i64) as f64 * COLUMN_SPACING_M;
+        let origin = [column_m(0, 0), column_m(1, 0)];
+        let ratio = (COLUMN_SPACING_M / NEAR_SPACING_M).round() as i64;
+        let margin = (NEAR_MARGIN_M / NEAR_SPACING_M).round() as i64;
+        let n_near = (per_node * ratio + 2 * margin + 1) as usize;
+        let first = [col0[0] * ratio - margin, col0[1] * ratio - margin];
+        let axis = |a: usize| -> Vec<f64> {
+            (0..n_near as i64)
+                .map(|i| o[a] + (first[a] + i) as f64 * NEAR_SPACING_M)
+                .collect()
+        };
+        let (xs, ys) = (axis(0), axis(1));
+        let heights = HorizonHeights {
+            world,
+            near: world.heights_on_lattice(&xs, &ys),
+            n: n_near,
+            first,
+            tree_origin_m: o,
+            map_at: GridPlacement {
+                origin_m: world.origin_m(),
+                spacing_m: world.map.manifest.heights.spacing_m,
+            },
+        };
+        let distances = march_distances();
+        // Directions: the horizon azimuths, then the sun's.
+        let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
+            .map(|a| {
+                let phi = std::f64::consts::TAU * a as f64 / HORIZON_AZIMUTHS as f64;
+                [phi.sin(), phi.cos()]
+            })
+            .collect();
+        let toward = sun.toward();
+        let flat = toward.truncate().length();
+        dirs.push(if flat > 1e-9 {
+            [toward.x / flat, toward.y / flat]
+        } else {
+            [0.0, 1.0]
+        });
+        let sun_tan = if flat > 1e-9 {
+            toward.z / flat
+        } else {
+            f64::INFINITY
+        };
+        let layers = LAYER_HEIGHTS_M.len();
+        let cells = COLUMNS * COLUMNS;
+        let mut out = Self {
+            key,
+            origin_m: origin,
+            ground_m: vec![0.0; cells],
+            sky: vec![0; layers * cells],
+            sun: vec![0; layers * cells],
+            sun_dir: sun,
+        };
+        let per_canopy = HORIZON_AZIMUTHS / CANOPY_AZIMUTHS;
+        for row in 0..COLUMNS {
+            for col in 0..COLUMNS {
+                let (x, y) = (column_m(0, col), column_m(1, row));
+                // The column's ground is a lattice point: exactly the finest surface.
+                let k = (row * ratio as usize + margin as usize) * n_near
+                    + col * ratio as usize
+                    + margin as usize;
+                let ground = heights.near[k];
+                out.ground_m[row * COLUMNS + col] = ground as f32;
+                // Highest tangent of the terrain seen from each layer, per direction.
+                let mut tan_max = vec![[f64::NEG_INFINITY; LAYER_HEIGHTS_M.len()]; dirs.len()];
+                for (d, dir) in dirs.iter().enumerate() {
+                    for &r in &distances {
+                        let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r) - ground;
+                        for (l, lh) in LAYER_HEIGHTS_M.iter().enumerate() {
+                            let t = (dh - lh) / r;
+                            if t > tan_max[d][l] {
+                                tan_max[d][l] = t;
+                            }
+                        }
+                    }
+                }
+                for (l, &lh) in LAYER_HEIGHTS_M.iter().enumerate() {
+                    let p0 = DVec3::new(x, y, ground + lh);
+                    let under = lh < canopy.top_m;
+                    // Canopy transmittance per canopy azimuth and band.
+                    let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
+                    if under {
+                        for (c, t) in trans.iter_mut().enumerate() {
+                            let dir = dirs[c * per_canopy];
+                            for (b, tb) in t.iter_mut().enumerate() {
+                                let s = (b as f64 + 0.5) / SKY_BANDS as f64;
+                                let (sin_e, cos_e) = (s.sqrt(), (1.0 - s).sqrt());
+                                let w = DVec3::new(dir[0] * cos_e, dir[1] * cos_e, sin_e);
+                                *tb =
+                                    canopy_transmittance(&heights, canopy, p0, w, lh, CANOPY_STEPS);
+                            }
+                        }
+                    }
+                    let mut sky = 0.0;
+                    for (a, tan) in tan_max.iter().take(HORIZON_AZIMUTHS).enumerate() {
+                        let s_h = sin2_of_tan(tan[l]);
+                        // The canopy azimuth nearest to horizon azimuth `a`.
+                        let c = ((a + per_canopy / 2) / per_canopy) % CANOPY_AZIMUTHS;
+                        for (b, tb) in trans[c].iter().enumerate() {
+                            let (lo, hi) = (
+                                b as f64 / SKY_BANDS as f64,
+                                (b + 1) as f64 / SKY_BANDS as f64,
+                            );
+                            sky += tb * (hi - s_h.max(lo)).max(0.0);
+                        }
+                    }
+                    sky /= HORIZON_AZIMUTHS as f64;
+                    let lit = sun.elevation_deg > 0.0 && tan_max[HORIZON_AZIMUTHS][l] < sun_tan;
+                    let sun_vis = if !lit {
+                        0.0
+                    } else if under {
+                        canopy_transmittance(&heights, canopy, p0, toward, lh, SUN_CANOPY_STEPS)
+                    } else {
+                        1.0
+                    };
+                    let i = Self::index(l, row, col);
+                    out.sky[i] = to_byte(sky);
+                    out.sun[i] = to_byte(sun_vis);
+                }
+            }
+        }
+        out
+    }
+
+    /// Trilinear sky and sun visibility at world (`x_m`, `y_m`), `above_m` above the ground
+    /// (clamped to the grid's columns and layers), as the shaders will sample it.
+    pub fn sample(&self, x_m: f64, y_m: f64, above_m: f64) -> (f64, f64) {
+        let gx = ((x_m - self.origin_m[0]) / COLUMN_SPACING_M).clamp(0.0, (COLUMNS - 1) as f64);
+        let gy = ((y_m - self.origin_m[1]) / COLUMN_SPACING_M).clamp(0.0, (COLUMNS - 1) as f64);
+        let (c0, r0) = (
+            (gx as usize).min(COLUMNS - 2),
+            (gy as usize).min(COLUMNS - 2),
+        );
+        let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
+        let h = &LAYER_HEIGHTS_M;
+        let a = above_m.clamp(h[0], h[h.len() - 1]);
+        let l0 = (0..h.len() - 1).rfind(|&l| h[l] <= a).unwrap_or(0);
+        let fz = (a - h[l0]) / (h[l0 + 1] - h[l0]);
+        let get = |v: &[u8]| {
+            let mut sum = 0.0;
+            for (dl, wz) in [(0, 1.0 - fz), (1, fz)] {
+                for (dr, wy) in [(0, 1.0 - fy), (1, fy)] {
+                    for (dc, wx) in [(0, 1.0 - fx), (1, fx)] {
+                        let i = Self::index(l0 + dl, r0 + dr, c0 + dc);
+                        sum += wz * wy * wx * f64::from(v[i]) / 255.0;
+                    }
+                }
+            }
+            sum
+        };
+        (get(&self.sky), get(&self.sun))
+    }
+}
+
+fn to_byte(v: f64) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// `exp(-optical depth)` from `p0` (`above_m` over the ground) along unit `w` until the ray
+/// leaves the canopy, at `steps` midpoints (ground from the horizon heights).
+fn canopy_transmittance(
+    heights: &HorizonHeights<'_>,
+    canopy: &Canopy,
+    p0: DVec3,
+    w: DVec3,
+    above_m: f64,
+    steps: usize,
+) -> f64 {
+    if w.z <= 1e-6 {
+        return 0.0;
+    }
+    // Leaves the canopy when it has climbed from its height to the top over flat ground (ground
+    // that falls away ends it earlier, rising ground later: that part is not followed).
+    let len = ((canopy.top_m - above_m) / w.z).min(HORIZON_REACH_M);
+    if len <= 0.0 {
+        return 1.0;
+    }
+    let dl = len / steps as f64;
+    let mut depth = 0.0;
+    for k in 0..steps {
+        let p = p0 + w * ((k as f64 + 0.5) * dl);
+        let above = p.z - heights.height_m(p.x, p.y);
+        depth += canopy.extinction_per_m(p.x, p.y, above) * dl;
+    }
+    (-depth).exp()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vegetation::placement::Placer;
+
+    /// Neighbouring grids hold exactly the same values (ground, sky, sun, every layer) in the
+    /// columns they share, on a map moved to an origin with a fraction of a metre.
+    #[test]
+    fn shared_border_columns_are_identical() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        let mut map = worldgen::Map::load(&dir).expect("tiny map loads");
+        map.manifest.origin_m = [1234.567, -89.0123];
+        let world = World::new(map);
+        let canopy = Canopy::new(&world, &Placer::new(&world));
+        let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let level = grid_level(&tree);
+        let at = |ix, iy| {
+            let key = NodeKey { level, ix, iy };
+            LightGrid::compute(&world, &canopy, &tree, key, Sun::default())
+        };
+        let (a, east, north) = (at(1, 1), at(2, 1), at(1, 2));
+        let last = COLUMNS - 1;
+        let layers = LAYER_HEIGHTS_M.len();
+        for k in 0..COLUMNS {
+            assert_eq!(a.ground_m[k * COLUMNS + last], east.ground_m[k * COLUMNS]);
+            assert_eq!(a.ground_m[last * COLUMNS + k], north.ground_m[k]);
+            for l in 0..layers {
+                let (ae, e) = (LightGrid::index(l, k, last), LightGrid::index(l, k, 0));
+                let (an, n) = (LightGrid::index(l, last, k), LightGrid::index(l, 0, k));
+                assert_eq!(
+                    (a.sky[ae], a.sun[ae]),
+                    (east.sky[e], east.sun[e]),
+                    "east {l} {k}"
+                );
+                assert_eq!(
+                    (a.sky[an], a.sun[an]),
+                    (north.sky[n], north.sun[n]),
+                    "north {l} {k}"
+                );
+            }
+        }
+        // Not a constant field: the test would pass on anything uniform.
+        assert!(a.sky.iter().any(|&v| v != a.sky[0]));
+    }
+}

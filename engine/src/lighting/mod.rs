@@ -1,0 +1,21 @@
+//! Static lighting from light grids (seed 002: "static lighting is calculated using a light
+//! grid, which is created for a higher-level node when there are descendant nodes that need
+//! it"). CPU only, no wgpu.
+//!
+//! A [`grid::LightGrid`] belongs to a node of side [`grid::GRID_SIDE_M`]; its samples are
+//! columns [`grid::COLUMN_SPACING_M`] apart (the border columns are shared with the
+//! neighbouring grids and computed from the same world positions, so both hold the same values)
+//! with layers at fixed heights above the finest surface up to the tree tops. Each sample holds
+//! the sky visibility (the share of a horizontal receiver's cosine-weighted sky that neither the
+//! terrain horizon nor the vegetation canopy hides) and the sun visibility (terrain shadow times
+//! the canopy's transmittance toward the sun, [`grid::Sun`]).
+//!
+//! Not yet done (issue 17): ambient colour with a ground bounce, the streaming hook that makes a
+//! grid when a descendant needs it, GPU upload and the shaders' trilinear sampling, relighting
+//! on a sun change.
+
+pub mod grid;
+#[cfg(feature = "measure")]
+pub mod reference;
+
+pub use grid::{LightGrid, Sun};
