@@ -30,9 +30,34 @@ pub const GRID_SIDE_M: f64 = 128.0;
 pub const COLUMN_SPACING_M: f64 = 4.0;
 /// Columns along each side (the border columns included).
 pub const COLUMNS: usize = 33;
-/// Heights of the layers above the finest surface (m): the ground (a hand above it, so the
-/// surface's own sampling does not shadow the sample), then up through the canopy.
-pub const LAYER_HEIGHTS_M: [f64; 5] = [0.25, 2.0, 6.0, 14.0, 30.0];
+/// Height of the ground layer above the finest surface (m): a hand above it, so the surface's own
+/// sampling does not shadow the sample.
+pub const GROUND_LAYER_M: f64 = 0.25;
+/// Layers of a grid.
+pub const LAYERS: usize = 7;
+
+/// The layer heights above the finest surface (m) under `canopy`: the ground layer, the top of
+/// every canopy layer (the light changes fastest with height just there: above a species' top
+/// its crowns no longer shade), and midpoints of the widest gaps until there are [`LAYERS`];
+/// at least up to 4 m, so maps without vegetation still have layers above the ground.
+pub fn layer_heights_m(canopy: &Canopy) -> [f64; LAYERS] {
+    let top = canopy.top_m.max(4.0);
+    let mut h = vec![GROUND_LAYER_M, top];
+    for t in canopy.layer_tops_m() {
+        if t > GROUND_LAYER_M + 0.1 && t < top - 0.1 && h.len() < LAYERS {
+            h.push(t);
+        }
+    }
+    h.sort_by(f64::total_cmp);
+    while h.len() < LAYERS {
+        let widest = (0..h.len() - 1)
+            .max_by(|&a, &b| (h[a + 1] - h[a]).total_cmp(&(h[b + 1] - h[b])))
+            .unwrap_or(0);
+        h.insert(widest + 1, 0.5 * (h[widest] + h[widest + 1]));
+    }
+    std::array::from_fn(|i| h[i])
+}
+
 /// Azimuths of the terrain horizon.
 pub const HORIZON_AZIMUTHS: usize = 16;
 /// Azimuths of the canopy rays (each serves the horizon azimuths nearest to it).
@@ -47,8 +72,9 @@ pub const NEAR_SPACING_M: f64 = 2.0;
 pub const NEAR_MARGIN_M: f64 = 64.0;
 /// Midpoint samples of a sky ray through the canopy.
 pub const CANOPY_STEPS: usize = 12;
-/// Midpoint samples of the sun ray through the canopy (one a sample, often long and low).
-pub const SUN_CANOPY_STEPS: usize = 32;
+/// Midpoint samples of the sun ray through the canopy (one a sample, often long and low; it is
+/// followed for twice its flat-ground length, over ground that rises toward the sun).
+pub const SUN_CANOPY_STEPS: usize = 48;
 
 /// The sun: where it stands, as a compass azimuth (degrees clockwise from north) and an
 /// elevation above the horizontal (degrees).
@@ -80,7 +106,7 @@ impl Sun {
 }
 
 /// A node's light grid (see the module docs). Sample `(layer, row, col)` is at world
-/// `origin_m + (col, row) * COLUMN_SPACING_M`, `LAYER_HEIGHTS_M[layer]` above `ground_m`.
+/// `origin_m + (col, row) * COLUMN_SPACING_M`, `layers_m[layer]` above `ground_m`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightGrid {
     pub key: NodeKey,
@@ -94,6 +120,8 @@ pub struct LightGrid {
     pub sun: Vec<u8>,
     /// The sun the grid was lit for.
     pub sun_dir: Sun,
+    /// Heights of the layers above the ground (m), [`layer_heights_m`] of the canopy.
+    pub layers_m: [f64; LAYERS],
 }
 
 /// The terrain heights a grid's horizons are marched on: the finest-surface lattice near the
@@ -207,6 +235,19 @@ impl LightGrid {
                 spacing_m: world.map.manifest.heights.spacing_m,
             },
         };
+        // No canopy anywhere a canopy ray can reach: every transmittance is 1 (open ground,
+        // water, rock; most of many maps). A ray climbs out of the canopy within
+        // `top / tan(elevation)` horizontally (the sun ray is followed twice as far).
+        let lowest_sky = ((0.5 / SKY_BANDS as f64) / (1.0 - 0.5 / SKY_BANDS as f64)).sqrt();
+        let sun_tan_reach = sun.elevation_deg.to_radians().tan().max(1e-3);
+        let reach = (canopy.top_m / lowest_sky)
+            .max(2.0 * canopy.top_m / sun_tan_reach)
+            .min(HORIZON_REACH_M);
+        let side_m = per_node as f64 * COLUMN_SPACING_M;
+        let canopy_near = canopy.max_extinction_in(
+            [origin[0] - reach, origin[1] - reach],
+            [origin[0] + side_m + reach, origin[1] + side_m + reach],
+        ) > 0.0;
         let distances = march_distances();
         // Directions: the horizon azimuths, then the sun's.
         let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
@@ -227,7 +268,8 @@ impl LightGrid {
         } else {
             f64::INFINITY
         };
-        let layers = LAYER_HEIGHTS_M.len();
+        let layers_m = layer_heights_m(canopy);
+        let layers = LAYERS;
         let cells = COLUMNS * COLUMNS;
         let mut out = Self {
             key,
@@ -236,6 +278,7 @@ impl LightGrid {
             sky: vec![0; layers * cells],
             sun: vec![0; layers * cells],
             sun_dir: sun,
+            layers_m,
         };
         let per_canopy = HORIZON_AZIMUTHS / CANOPY_AZIMUTHS;
         for row in 0..COLUMNS {
@@ -248,11 +291,11 @@ impl LightGrid {
                 let ground = heights.near[k];
                 out.ground_m[row * COLUMNS + col] = ground as f32;
                 // Highest tangent of the terrain seen from each layer, per direction.
-                let mut tan_max = vec![[f64::NEG_INFINITY; LAYER_HEIGHTS_M.len()]; dirs.len()];
+                let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
                 for (d, dir) in dirs.iter().enumerate() {
                     for &r in &distances {
                         let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r) - ground;
-                        for (l, lh) in LAYER_HEIGHTS_M.iter().enumerate() {
+                        for (l, lh) in layers_m.iter().enumerate() {
                             let t = (dh - lh) / r;
                             if t > tan_max[d][l] {
                                 tan_max[d][l] = t;
@@ -260,9 +303,9 @@ impl LightGrid {
                         }
                     }
                 }
-                for (l, &lh) in LAYER_HEIGHTS_M.iter().enumerate() {
+                for (l, &lh) in layers_m.iter().enumerate() {
                     let p0 = DVec3::new(x, y, ground + lh);
-                    let under = lh < canopy.top_m;
+                    let under = canopy_near && lh < canopy.top_m;
                     // Canopy transmittance per canopy azimuth and band.
                     let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
                     if under {
@@ -272,8 +315,13 @@ impl LightGrid {
                                 let s = (b as f64 + 0.5) / SKY_BANDS as f64;
                                 let (sin_e, cos_e) = (s.sqrt(), (1.0 - s).sqrt());
                                 let w = DVec3::new(dir[0] * cos_e, dir[1] * cos_e, sin_e);
-                                *tb =
-                                    canopy_transmittance(&heights, canopy, p0, w, lh, CANOPY_STEPS);
+                                *tb = canopy_transmittance(
+                                    &heights,
+                                    canopy,
+                                    (p0, w),
+                                    lh,
+                                    (CANOPY_STEPS, 1.0),
+                                );
                             }
                         }
                     }
@@ -295,7 +343,13 @@ impl LightGrid {
                     let sun_vis = if !lit {
                         0.0
                     } else if under {
-                        canopy_transmittance(&heights, canopy, p0, toward, lh, SUN_CANOPY_STEPS)
+                        canopy_transmittance(
+                            &heights,
+                            canopy,
+                            (p0, toward),
+                            lh,
+                            (SUN_CANOPY_STEPS, 2.0),
+                        )
                     } else {
                         1.0
                     };
@@ -318,7 +372,7 @@ impl LightGrid {
             (gy as usize).min(COLUMNS - 2),
         );
         let (fx, fy) = (gx - c0 as f64, gy - r0 as f64);
-        let h = &LAYER_HEIGHTS_M;
+        let h = &self.layers_m;
         let a = above_m.clamp(h[0], h[h.len() - 1]);
         let l0 = (0..h.len() - 1).rfind(|&l| h[l] <= a).unwrap_or(0);
         let fz = (a - h[l0]) / (h[l0 + 1] - h[l0]);
@@ -347,17 +401,16 @@ fn to_byte(v: f64) -> u8 {
 fn canopy_transmittance(
     heights: &HorizonHeights<'_>,
     canopy: &Canopy,
-    p0: DVec3,
-    w: DVec3,
+    (p0, w): (DVec3, DVec3),
     above_m: f64,
-    steps: usize,
+    (steps, reach): (usize, f64),
 ) -> f64 {
     if w.z <= 1e-6 {
         return 0.0;
     }
-    // Leaves the canopy when it has climbed from its height to the top over flat ground (ground
-    // that falls away ends it earlier, rising ground later: that part is not followed).
-    let len = ((canopy.top_m - above_m) / w.z).min(HORIZON_REACH_M);
+    // `reach` times the length that climbs from its height to the canopy's top over flat
+    // ground (more than 1 follows ground rising under the ray, which keeps it in the canopy).
+    let len = (reach * (canopy.top_m - above_m) / w.z).min(HORIZON_REACH_M);
     if len <= 0.0 {
         return 1.0;
     }
@@ -393,7 +446,7 @@ mod tests {
         };
         let (a, east, north) = (at(1, 1), at(2, 1), at(1, 2));
         let last = COLUMNS - 1;
-        let layers = LAYER_HEIGHTS_M.len();
+        let layers = LAYERS;
         for k in 0..COLUMNS {
             assert_eq!(a.ground_m[k * COLUMNS + last], east.ground_m[k * COLUMNS]);
             assert_eq!(a.ground_m[last * COLUMNS + k], north.ground_m[k]);

@@ -115,6 +115,43 @@ impl Canopy {
 }
 
 impl Canopy {
+    /// The heights (m) up to which each layer (species, large trees) blocks light, ascending.
+    pub fn layer_tops_m(&self) -> Vec<f64> {
+        let mut v: Vec<f64> = self.layers.iter().map(|l| l.2).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v
+    }
+
+    /// An upper bound of [`Self::extinction_per_m`] over the rectangle `min`..`max` (world m)
+    /// at any height: per layer the largest grid value whose cell touches the rectangle (a
+    /// bilinear value never exceeds its corners; positions outside a grid clamp to its border).
+    pub fn max_extinction_in(&self, min: [f64; 2], max: [f64; 2]) -> f64 {
+        let mut sum = 0.0;
+        for (ext, spacing, _) in &self.layers {
+            let range = |axis: usize, len: usize| {
+                let to =
+                    |v: f64| ((v - self.origin_m[axis]) / spacing).clamp(0.0, (len - 1) as f64);
+                (
+                    to(min[axis]).floor() as usize,
+                    to(max[axis]).ceil() as usize,
+                )
+            };
+            let (x0, x1) = range(0, ext.width());
+            let (y0, y1) = range(1, ext.height());
+            let mut m = 0.0f64;
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    m = m.max(f64::from(ext.get(x, y)));
+                }
+            }
+            sum += m;
+        }
+        sum
+    }
+}
+
+impl Canopy {
     /// The factor on a node's projected error for a camera at `eye`: the visibility of the
     /// node's top centre, integrated up to the node's border (its own vegetation does not hide
     /// it), or 1 when the camera is above the canopy or the node is near.

@@ -3,7 +3,7 @@
 //! grid takes, sharing no code with the grid); and hard cases with known answers (a cliff's shadow length, a flat sea, a valley under a ridge, a forest floor next to
 //! a clearing).
 
-use engine::lighting::grid::{self, LAYER_HEIGHTS_M, LightGrid, Sun};
+use engine::lighting::grid::{self, GROUND_LAYER_M, LightGrid, Sun};
 use engine::lighting::reference;
 use engine::surface::world::World;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
@@ -107,8 +107,9 @@ fn grid_visibility_agrees_with_a_ray_marched_reference() {
         let r = grids.tree.rect(key);
         let x = r.min[0] + (r.max[0] - r.min[0]) * unit3(6, i, 0);
         let y = r.min[1] + (r.max[1] - r.min[1]) * unit3(6, i, 1);
-        let top = LAYER_HEIGHTS_M[LAYER_HEIGHTS_M.len() - 1];
-        let above = LAYER_HEIGHTS_M[0] + (top - LAYER_HEIGHTS_M[0]) * unit3(6, i, 2).powi(2);
+        // From the ground to a third above the canopy's top.
+        let top = 1.3 * grid::layer_heights_m(&canopy)[grid::LAYERS - 1];
+        let above = GROUND_LAYER_M + (top - GROUND_LAYER_M) * unit3(6, i, 2).powi(2);
         let (g_sky, g_sun) = grids.at(x, y, above);
         let (r_sky, r_sun) = reference::visibility(&world, &canopy, x, y, above, sun);
         let (ds, dn) = ((g_sky - r_sky).abs(), (g_sun - r_sun).abs());
@@ -164,7 +165,7 @@ fn a_cliff_casts_a_shadow_of_the_analytic_length_and_a_flat_sea_is_fully_lit() {
     // Going west from the foot of the step: the first metre lit by half the sun.
     let mut tip = None;
     for d in 3..200 {
-        let (_, s) = grids.at(cliff_x - f64::from(d), y, LAYER_HEIGHTS_M[0]);
+        let (_, s) = grids.at(cliff_x - f64::from(d), y, GROUND_LAYER_M);
         if s >= 0.5 {
             tip = Some(f64::from(d));
             break;
@@ -177,7 +178,7 @@ fn a_cliff_casts_a_shadow_of_the_analytic_length_and_a_flat_sea_is_fully_lit() {
         "shadow {tip} m, analytic 100 m"
     );
     // On the plateau, far from its edge, everything is lit.
-    let (sky, s) = grids.at(cliff_x + 60.0, y, LAYER_HEIGHTS_M[0]);
+    let (sky, s) = grids.at(cliff_x + 60.0, y, GROUND_LAYER_M);
     assert!(s > 0.99 && sky > 0.97, "plateau: sky {sky}, sun {s}");
 
     let sea = bare_world(|_, _| 0.0);
@@ -186,7 +187,7 @@ fn a_cliff_casts_a_shadow_of_the_analytic_length_and_a_flat_sea_is_fully_lit() {
     for i in 0..40 {
         let x = o[0] + sea.size_m()[0] * unit3(8, i, 0);
         let y = o[1] + sea.size_m()[1] * unit3(8, i, 1);
-        let (sky, s) = grids.at(x, y, LAYER_HEIGHTS_M[0]);
+        let (sky, s) = grids.at(x, y, GROUND_LAYER_M);
         assert!(
             sky > 1.0 - 1e-9 && s > 1.0 - 1e-9,
             "sea at ({x}, {y}): sky {sky}, sun {s}"
@@ -218,8 +219,8 @@ fn a_valley_is_darker_than_the_ridge_and_a_forest_floor_darker_than_a_clearing()
     let canopy = canopy_of(&bare);
     let mut grids = Grids::new(&bare, &canopy, Sun::default());
     let (xc, y) = (o[0] + 64.0 * f64::from(spacing), o[1] + 0.5 * s[1] + 1.0);
-    let floor = grids.at(xc, y, LAYER_HEIGHTS_M[0]).0;
-    let ridge = grids.at(xc + 100.0, y, LAYER_HEIGHTS_M[0]).0;
+    let floor = grids.at(xc, y, GROUND_LAYER_M).0;
+    let ridge = grids.at(xc + 100.0, y, GROUND_LAYER_M).0;
     println!("valley floor sky {floor:.3} (analytic 0.707), ridge sky {ridge:.3}");
     assert!(
         (floor - 0.5f64.sqrt()).abs() <= 0.03,
@@ -262,8 +263,8 @@ fn a_valley_is_darker_than_the_ridge_and_a_forest_floor_darker_than_a_clearing()
             da.total_cmp(&db)
         })
         .expect("the tiny map has a clearing");
-    let forest = grids.at(fx, fy, LAYER_HEIGHTS_M[0]).0;
-    let clearing = grids.at(cx, cy, LAYER_HEIGHTS_M[0]).0;
+    let forest = grids.at(fx, fy, GROUND_LAYER_M).0;
+    let clearing = grids.at(cx, cy, GROUND_LAYER_M).0;
     println!(
         "forest floor sky {forest:.3} (vertical optical depth {:.2}), clearing sky {clearing:.3} \
          at {:.0} m",

@@ -3,6 +3,7 @@
 
 mod error;
 mod gpu;
+mod lighting;
 mod plot;
 mod report;
 mod selection;
@@ -21,12 +22,13 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 8] = [
+const SECTIONS: [&str; 9] = [
     "tiles",
     "terrain",
     "selection",
     "error",
     "vegetation",
+    "lighting",
     "streaming",
     "gpu",
     "textures",
@@ -40,7 +42,9 @@ const SECTIONS: [&str; 8] = [
 /// CDLOD-style distance selection tuned to the same measured error), `vegetation` (kept points per
 /// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
 /// vegetation phase time per node, instances and draw calls per frame on the flight),
-/// `streaming` (real-time
+/// `lighting` (light grids: sky and sun visibility against a ray-marched reference, computation
+/// time and bytes per grid, relighting the flight's grids after a sun change), `streaming`
+/// (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
 /// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
 /// jobs, pop debt, bookkeeping per frame), `gpu` (when an adapter exists: the automatic flight
@@ -55,7 +59,7 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// streaming, gpu, textures.
+    /// lighting, streaming, gpu, textures.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -125,6 +129,9 @@ fn run(cli: &Cli) -> Result<()> {
     }
     if want("vegetation") {
         vegetation::section_vegetation(&world, &tree, &cams, &mut report, cli.quick);
+    }
+    if want("lighting") {
+        lighting::section_lighting(&world, &tree, &cams, &mut report, cli.quick, workers);
     }
     // One adapter for the sections that use it (streaming renders ground textures with it).
     let adapter = if want("streaming") || want("gpu") || want("textures") {

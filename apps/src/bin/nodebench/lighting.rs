@@ -1,0 +1,164 @@
+//! Section `lighting`: light grids against the ray-marched reference (the share of points whose
+//! sky and whose sun visibility agree within the tolerance), computation time per grid, bytes
+//! per grid, and the time to relight every grid the flight's selections need after a sun change.
+
+use crate::report::{Report, bar};
+use crate::terrain::flight_nodes;
+use engine::camera::Camera;
+use engine::lighting::grid::{GROUND_LAYER_M, LightGrid, Sun, grid_level};
+use engine::lighting::reference;
+use engine::surface::World;
+use engine::terrain::quadtree::{NodeKey, QuadTree};
+use engine::vegetation::Placer;
+use engine::vegetation::canopy::Canopy;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+use worldgen::noise::unit3;
+
+/// Agreement tolerance on a visibility (see tests/tests/e2e/lighting.rs for why).
+const TOLERANCE: f64 = 0.05;
+
+/// A low morning sun in the east.
+const SUN: Sun = Sun {
+    azimuth_deg: 100.0,
+    elevation_deg: 15.0,
+};
+
+pub(crate) fn section_lighting(
+    world: &World,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    quick: bool,
+    workers: usize,
+) {
+    let canopy = Canopy::new(world, &Placer::new(world));
+    let level = grid_level(tree);
+    // The grid nodes the flight needs: the ancestors at the grid level of its selected nodes.
+    let mut keys: Vec<NodeKey> = flight_nodes(world, tree, cams, usize::MAX)
+        .into_iter()
+        .filter(|k| k.level >= level)
+        .map(|k| NodeKey {
+            level,
+            ix: k.ix >> (k.level - level),
+            iy: k.iy >> (k.level - level),
+        })
+        .collect();
+    keys.sort();
+    keys.dedup();
+    if quick {
+        keys.truncate(8);
+    }
+    if keys.is_empty() {
+        eprintln!("lighting: the flight needs no light grid on this map; section left out");
+        return;
+    }
+    let params = format!(
+        "{} grids of the flight's selections (tau 2), sun azimuth {} deg, elevation {} deg",
+        keys.len(),
+        SUN.azimuth_deg,
+        SUN.elevation_deg
+    );
+
+    // Computation per grid, one core.
+    let timed = keys.len().min(if quick { 3 } else { 24 });
+    let step = (keys.len() / timed.max(1)).max(1);
+    let sample: Vec<NodeKey> = keys.iter().copied().step_by(step).take(timed).collect();
+    let b = bar(sample.len() as u64, "light grids");
+    let mut secs = Vec::new();
+    let mut grids = Vec::new();
+    for &key in &sample {
+        let t0 = Instant::now();
+        let g = LightGrid::compute(world, &canopy, tree, key, SUN);
+        secs.push(t0.elapsed().as_secs_f64());
+        grids.push(g);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    r.timings(
+        "lighting",
+        "grid computation",
+        secs,
+        &format!("{} grids, 1 core", sample.len()),
+    );
+    if let Some(g) = grids.first() {
+        r.add(
+            "lighting",
+            "bytes per grid",
+            g.bytes() as f64,
+            "B",
+            "heights f32 + sky and sun u8 per sample",
+        );
+    }
+
+    // Agreement with the reference on random points of the timed grids.
+    let points = if quick { 40 } else { 300 };
+    let b = bar(points as u64, "lighting reference");
+    let (mut sky_ok, mut sun_ok) = (0usize, 0usize);
+    for i in 0..points {
+        let g = &grids[i % grids.len()];
+        let rect = tree.rect(g.key);
+        let x = rect.min[0] + (rect.max[0] - rect.min[0]) * unit3(17, i as i64, 0);
+        let y = rect.min[1] + (rect.max[1] - rect.min[1]) * unit3(17, i as i64, 1);
+        // From the ground to a third above the canopy's top.
+        let hi = 1.3 * g.layers_m[g.layers_m.len() - 1];
+        let above = GROUND_LAYER_M + (hi - GROUND_LAYER_M) * unit3(17, i as i64, 2).powi(2);
+        let (g_sky, g_sun) = g.sample(x, y, above);
+        let (r_sky, r_sun) = reference::visibility(world, &canopy, x, y, above, SUN);
+        sky_ok += usize::from((g_sky - r_sky).abs() <= TOLERANCE);
+        sun_ok += usize::from((g_sun - r_sun).abs() <= TOLERANCE);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    let share = |ok: usize| 100.0 * ok as f64 / points as f64;
+    let ref_params = format!(
+        "{points} random points in {} grids, heights from the ground to 1.3 x the canopy top, tolerance {TOLERANCE}, \
+         reference: {} azimuths x {} bands marched on the finest surface",
+        grids.len(),
+        reference::REF_AZIMUTHS,
+        reference::REF_BANDS
+    );
+    r.add(
+        "lighting",
+        "sky visibility within tolerance of the reference",
+        share(sky_ok),
+        "%",
+        &ref_params,
+    );
+    r.add(
+        "lighting",
+        "sun visibility within tolerance of the reference",
+        share(sun_ok),
+        "%",
+        &ref_params,
+    );
+
+    // Relighting after a sun change: every grid of the flight, on all workers.
+    let next = AtomicUsize::new(0);
+    let sun = Sun {
+        azimuth_deg: SUN.azimuth_deg + 30.0,
+        ..SUN
+    };
+    let b = bar(keys.len() as u64, "relighting");
+    let t0 = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&key) = keys.get(i) else { break };
+                    let _ = LightGrid::compute(world, &canopy, tree, key, sun);
+                    b.inc(1);
+                }
+            });
+        }
+    });
+    b.finish_and_clear();
+    r.add(
+        "lighting",
+        "relight every grid of the flight after a sun change",
+        t0.elapsed().as_secs_f64() * 1e3,
+        "ms",
+        &format!("{params}; {workers} worker(s)"),
+    );
+}
