@@ -392,6 +392,10 @@ impl LightGrid {
     }
 }
 
+/// An optical depth beyond which a ray counts as blocked: `exp(-6)` = 0.0025, under half a
+/// byte step.
+const OPAQUE_DEPTH: f64 = 6.0;
+
 fn to_byte(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
@@ -420,6 +424,9 @@ fn canopy_transmittance(
         let p = p0 + w * ((k as f64 + 0.5) * dl);
         let above = p.z - heights.height_m(p.x, p.y);
         depth += canopy.extinction_per_m(p.x, p.y, above) * dl;
+        if depth > OPAQUE_DEPTH {
+            return 0.0;
+        }
     }
     (-depth).exp()
 }
