@@ -249,6 +249,7 @@ impl LightGrid {
             [origin[0] + side_m + reach, origin[1] + side_m + reach],
         ) > 0.0;
         let distances = march_distances();
+        let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
         // Directions: the horizon azimuths, then the sun's.
         let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
             .map(|a| {
@@ -293,13 +294,11 @@ impl LightGrid {
                 // Highest tangent of the terrain seen from each layer, per direction.
                 let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
                 for (d, dir) in dirs.iter().enumerate() {
-                    for &r in &distances {
+                    let best = &mut tan_max[d];
+                    for (&r, &inv_r) in distances.iter().zip(&inverse) {
                         let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r) - ground;
-                        for (l, lh) in layers_m.iter().enumerate() {
-                            let t = (dh - lh) / r;
-                            if t > tan_max[d][l] {
-                                tan_max[d][l] = t;
-                            }
+                        for (b, lh) in best.iter_mut().zip(&layers_m) {
+                            *b = b.max((dh - lh) * inv_r);
                         }
                     }
                 }
