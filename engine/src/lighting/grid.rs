@@ -29,7 +29,7 @@ pub const GRID_SIDE_M: f64 = 128.0;
 /// Distance between columns (m).
 pub const COLUMN_SPACING_M: f64 = 4.0;
 /// Columns along each side (the border columns included).
-pub const COLUMNS: usize = 33;
+pub const COLUMNS: usize = (GRID_SIDE_M / COLUMN_SPACING_M) as usize + 1;
 /// Height of the ground layer above the finest surface (m): a hand above it, so the surface's own
 /// sampling does not shadow the sample.
 pub const GROUND_LAYER_M: f64 = 0.25;
@@ -239,14 +239,18 @@ impl LightGrid {
         // water, rock; most of many maps). A ray climbs out of the canopy within
         // `top / tan(elevation)` horizontally (the sun ray is followed twice as far).
         let lowest_sky = ((0.5 / SKY_BANDS as f64) / (1.0 - 0.5 / SKY_BANDS as f64)).sqrt();
-        let sun_tan_reach = sun.elevation_deg.to_radians().tan().max(1e-3);
-        let reach = (canopy.top_m / lowest_sky)
-            .max(2.0 * canopy.top_m / sun_tan_reach)
-            .min(HORIZON_REACH_M);
-        let side_m = per_node as f64 * COLUMN_SPACING_M;
+        let mut reach = canopy.top_m / lowest_sky;
+        if sun.elevation_deg > 0.0 {
+            let sun_tan = sun.elevation_deg.to_radians().tan().max(1e-3);
+            reach = reach.max(2.0 * canopy.top_m / sun_tan);
+        }
+        let reach = reach.min(HORIZON_REACH_M);
         let canopy_near = canopy.max_extinction_in(
             [origin[0] - reach, origin[1] - reach],
-            [origin[0] + side_m + reach, origin[1] + side_m + reach],
+            [
+                origin[0] + GRID_SIDE_M + reach,
+                origin[1] + GRID_SIDE_M + reach,
+            ],
         ) > 0.0;
         let distances = march_distances();
         let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
@@ -270,18 +274,19 @@ impl LightGrid {
             f64::INFINITY
         };
         let layers_m = layer_heights_m(canopy);
-        let layers = LAYERS;
         let cells = COLUMNS * COLUMNS;
         let mut out = Self {
             key,
             origin_m: origin,
             ground_m: vec![0.0; cells],
-            sky: vec![0; layers * cells],
-            sun: vec![0; layers * cells],
+            sky: vec![0; LAYERS * cells],
+            sun: vec![0; LAYERS * cells],
             sun_dir: sun,
             layers_m,
         };
         let per_canopy = HORIZON_AZIMUTHS / CANOPY_AZIMUTHS;
+        // Highest tangent of the terrain seen from each layer, per direction (per column).
+        let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
         for row in 0..COLUMNS {
             for col in 0..COLUMNS {
                 let (x, y) = (column_m(0, col), column_m(1, row));
@@ -291,10 +296,8 @@ impl LightGrid {
                     + margin as usize;
                 let ground = heights.near[k];
                 out.ground_m[row * COLUMNS + col] = ground as f32;
-                // Highest tangent of the terrain seen from each layer, per direction.
-                let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
-                for (d, dir) in dirs.iter().enumerate() {
-                    let best = &mut tan_max[d];
+                for (best, dir) in tan_max.iter_mut().zip(&dirs) {
+                    *best = [f64::NEG_INFINITY; LAYERS];
                     for (&r, &inv_r) in distances.iter().zip(&inverse) {
                         let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r) - ground;
                         for (b, lh) in best.iter_mut().zip(&layers_m) {
