@@ -26,9 +26,24 @@ struct Node {
     // x: dither interval end, y: quad-tree level, zw: the renderer's own (terrain: ground
     // texture layer or -1, texture coordinates per metre).
     hi_level: vec4<f32>,
+    // The node's light grid (engine::render::light_pool::LightLease::entry): x its tile in the
+    // pool or -1, y columns per metre, zw the node's south-west corner in the grid's columns.
+    light: vec4<f32>,
+};
+
+// The light-grid pool (engine::render::light_pool): tiles of COLUMNS x COLUMNS x LAYERS
+// samples, r sky and g sun visibility.
+struct LightInfo {
+    // Heights of the layers above the ground (m), 7 used.
+    layers_m: array<vec4<f32>, 2>,
+    // x: tiles per side.
+    tiles: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var light_grids: texture_3d<f32>;
+@group(0) @binding(2) var light_sampler: sampler;
+@group(0) @binding(3) var<uniform> light_info: LightInfo;
 @group(1) @binding(0) var<storage, read> nodes: array<Node>;
 
 // What the fragment stage needs of a node: x, y its dither interval, z its level.
@@ -52,7 +67,48 @@ struct VertexOut {
     @location(2) albedo: vec3<f32>,
     // The node's `node_fade` (one node per primitive).
     @location(3) @interpolate(flat) fade: vec3<f32>,
+    // Sky and sun visibility (`light_at`).
+    @location(4) light: vec2<f32>,
 };
+
+// Where a point of node `n` (`local_xy` from the node's south-west corner, `above_m` over the
+// ground) samples the light-grid pool: xyz texture coordinates, w < 0 for a node without a
+// grid. Affine in the position, so it may be interpolated.
+fn light_coords(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
+    let tiles = light_info.tiles.x;
+    let side = f32(LIGHT_COLUMNS);
+    let slot = max(n.light.x, 0.0);
+    let tile = vec2<f32>(slot % tiles, floor(slot / tiles));
+    let g = clamp(n.light.zw + local_xy * n.light.y, vec2<f32>(0.0), vec2<f32>(side - 1.0));
+    let uv = (tile * side + 0.5 + g) / (tiles * side);
+    // Fractional layer of `above_m` between the layer heights.
+    var layer = 0.0;
+    for (var i = 0u; i + 1u < LIGHT_LAYERS; i = i + 1u) {
+        let lo = light_info.layers_m[i / 4u][i % 4u];
+        let hi = light_info.layers_m[(i + 1u) / 4u][(i + 1u) % 4u];
+        if (above_m >= lo) {
+            layer = f32(i) + clamp((above_m - lo) / max(hi - lo, 1e-3), 0.0, 1.0);
+        }
+    }
+    let w = (layer + 0.5) / f32(LIGHT_LAYERS);
+    return vec4<f32>(uv, w, select(1.0, -1.0, n.light.x < 0.0));
+}
+
+// Sky and sun visibility at `light_coords` `c` (trilinear), 1 and 1 without a grid.
+fn light_at(c: vec4<f32>) -> vec2<f32> {
+    let v = textureSampleLevel(light_grids, light_sampler, c.xyz, 0.0).rg;
+    return select(v, vec2<f32>(1.0), c.w < 0.0);
+}
+
+// The share of a pre-lit colour (billboard images, lit by the full sun and sky) that visibility
+// `vis` (sky, sun) leaves: the sun's part (on a surface facing it half-way) scaled by the sun
+// visibility, the sky's by the sky visibility.
+fn prelit_factor(vis: vec2<f32>) -> f32 {
+    let luma = vec3<f32>(0.2126, 0.7152, 0.0722);
+    let s = dot(frame.sun_color.rgb, luma) * max(frame.sun_dir.z, 0.0) * 0.5 + 1e-4;
+    let a = dot(mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5), luma);
+    return (s * vis.y + a * vis.x) / (s + a);
+}
 
 // 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
 fn bayer8(p: vec2<u32>) -> f32 {
@@ -94,7 +150,7 @@ fn level_color(level: f32) -> vec3<f32> {
 }
 
 // A lit, fogged, dithered surface pixel (terrain and plant meshes); debug mode 1 colours it by
-// the node's level.
+// the node's level, 4 makes it grey (lighting only).
 fn lit_pixel(in: VertexOut) -> vec4<f32> {
     if (!in_dither(in.clip.xy, in.fade)) {
         discard;
@@ -110,10 +166,14 @@ fn lit_color(in: VertexOut) -> vec4<f32> {
     if (mode == 1u) {
         albedo = level_color(in.fade.z);
     }
+    if (mode == 4u) {
+        albedo = vec3<f32>(0.6);
+    }
     let n = normalize(in.normal);
-    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
+    // The light grid's visibilities scale the direct sun (shadow) and the sky (occlusion).
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0) * in.light.y;
     let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
-    return fogged(albedo * (frame.sun_color.rgb * sun + ambient), in.rel);
+    return fogged(albedo * (frame.sun_color.rgb * sun + ambient * in.light.x), in.rel);
 }
 
 // A hash of an integer lattice point to [0, 1] (value-noise corners; ground textures and the

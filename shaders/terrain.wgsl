@@ -39,6 +39,8 @@ struct TerrainOut {
     @location(4) uv: vec2<f32>,
     // The node's layer in `ground_page`, or -1 without a texture.
     @location(5) @interpolate(flat) layer: i32,
+    // Where the ground layer of the node's light grid is sampled (`light_coords`).
+    @location(6) light: vec4<f32>,
 };
 
 // The draw's first instance is the node's slot in the node table.
@@ -58,6 +60,7 @@ fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
     let t = border + v.position.xy * node.hi_level.w;
     out.uv = vec2<f32>(t.x, 1.0 - t.y);
     out.layer = i32(round(node.hi_level.z));
+    out.light = light_coords(node, v.position.xy, 0.0);
     return out;
 }
 
@@ -129,9 +132,9 @@ fn terrain_color(in: TerrainOut) -> vec4<f32> {
     let texel = textureSample(ground_page, ground_sampler, in.uv, max(in.layer, 0)).rgb;
     let density = density_color(in.uv);
     let px_m = max(length(dpdx(in.rel)), length(dpdy(in.rel)));
-    let textured = in.layer >= 0;
-    let albedo = select(in.albedo, texel, textured);
     let mode = u32(frame.fog.z + 0.5);
+    let textured = in.layer >= 0 && mode != 4u;
+    let albedo = select(in.albedo, texel, textured);
     if (mode == 2u) {
         return vec4<f32>(select(vec3<f32>(0.5), density, textured), 1.0);
     }
@@ -146,7 +149,8 @@ fn terrain_color(in: TerrainOut) -> vec4<f32> {
         factor = fine_detail(in.rel, max(px_m, 1e-6));
     }
     let detailed = albedo * factor;
-    return lit_color(VertexOut(in.clip, in.rel, in.normal, detailed, in.fade));
+    let vis = light_at(in.light);
+    return lit_color(VertexOut(in.clip, in.rel, in.normal, detailed, in.fade, vis));
 }
 
 // Nodes in a cross-fade: dithered.

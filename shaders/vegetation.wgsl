@@ -37,6 +37,7 @@ fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
     let look = plant_looks[min(inst.look, MAX_LOOKS - 1u)];
     out.albedo = select(look.rgb, TRUNK, v.tag == 0u);
     out.fade = node_fade(node);
+    out.light = light_at(light_coords(node, inst.position.xy + turned.xy, turned.z));
     return out;
 }
 
@@ -47,6 +48,8 @@ struct BillboardOut {
     @location(1) uv: vec2<f32>,
     @location(2) @interpolate(flat) look: u32,
     @location(3) @interpolate(flat) fade: vec3<f32>,
+    // Sky and sun visibility (`light_at`).
+    @location(4) light: vec2<f32>,
 };
 
 @fragment
@@ -79,6 +82,8 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
     out.uv = corner;
     out.look = inst.look;
     out.fade = node_fade(node);
+    let local = inst.position.xy + right.xy * (corner.x * inst.radius);
+    out.light = light_at(light_coords(node, local, corner.y * inst.height));
     return out;
 }
 
@@ -97,7 +102,11 @@ fn billboard_pixel(in: BillboardOut, texel: vec4<f32>) -> vec4<f32> {
     if (texel.a < 0.5) {
         discard;
     }
-    return fogged(texel.rgb, in.rel);
+    let factor = prelit_factor(in.light);
+    if (u32(frame.fog.z + 0.5) == 4u) {
+        return fogged(vec3<f32>(0.6 * factor), in.rel);
+    }
+    return fogged(texel.rgb * factor, in.rel);
 }
 
 // Baking the billboard images: the unit shape of look `inst.look` seen from the south (-y),

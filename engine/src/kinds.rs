@@ -8,6 +8,8 @@
 //! viewer and the other renderers stay as they are.
 
 use crate::ground::content::GroundContent;
+use crate::lighting::content::LightingContent;
+use crate::lighting::grid::Sun;
 use crate::render::Gpu;
 use crate::render::frame::FrameResources;
 use crate::render::scene::NodeRenderer;
@@ -42,7 +44,15 @@ fn entry(kind: impl ContentKind, renderer: Option<RendererFactory>) -> Registrat
 
 /// Every node-content kind, in phase and drawing order.
 pub fn registered(world: &World) -> Vec<Registration> {
+    let vegetation = VegetationContent::new(world);
+    let canopy = Arc::clone(&vegetation.canopy);
     vec![
+        // First, so the other renderers' upload hooks find the node's grid lease (their
+        // `prepare` reads it); it draws nothing.
+        entry(
+            LightingContent::new(world, canopy, Sun::default()),
+            Some(crate::render::lighting::LightingRenderer::create),
+        ),
         entry(
             TerrainContent,
             Some(crate::render::terrain::TerrainRenderer::create),
@@ -51,7 +61,7 @@ pub fn registered(world: &World) -> Vec<Registration> {
         // samples it.
         entry(GroundContent::new(world), None),
         entry(
-            VegetationContent::new(world),
+            vegetation,
             Some(crate::render::vegetation::VegetationRenderer::create),
         ),
     ]

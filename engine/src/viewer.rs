@@ -3,6 +3,8 @@
 
 use crate::camera::Camera;
 use crate::kinds::Registration;
+use crate::lighting::Sun;
+use crate::lighting::content::LightingContent;
 use crate::render::frame::{DrawStats, ViewOptions};
 use crate::render::reference::TerrainReference;
 use crate::render::scene::{DrawnNode, FrameDraws, Scene};
@@ -11,6 +13,7 @@ use crate::render::{Gpu, GpuTimer};
 use crate::stream::{StreamSettings, Streamer};
 use crate::surface::World;
 use crate::terrain::quadtree::NodeKey;
+use glam::DVec3;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -142,6 +145,22 @@ impl Viewer {
             frame: 0,
             last_frame_start: None,
         }
+    }
+
+    /// Sets the sun: the frame's light direction now, and the light grids (if that kind is
+    /// registered) relit in the background, nearest to `camera_m` first; grids made from now on
+    /// use it too. Frames never wait for the relight.
+    pub fn set_sun(&mut self, sun: Sun, camera_m: DVec3) {
+        self.view.sun = sun;
+        if let Some(lighting) = self.lighting() {
+            lighting.set_camera(camera_m.truncate());
+            lighting.set_sun(sun);
+        }
+    }
+
+    /// The light-grid kind, if registered.
+    pub fn lighting(&self) -> Option<&LightingContent> {
+        self.streamer.shared.kind::<LightingContent>()
     }
 
     /// Runs the streaming update and GPU uploads, then records the frame into `encoder`.

@@ -374,8 +374,13 @@ pub mod gpu {
         for _ in 0..20_000 {
             let st = frame(g, v, target, cam, 0.05);
             if v.streamer.in_flight() == 0 && st.pop_debt_nodes == 0 {
+                // Light grids are computed in the background: every frame from here draws with
+                // all the grids its nodes hold (wait for that event, then draw).
                 let mut last = st;
                 for _ in 0..10 {
+                    if let Some(l) = v.lighting() {
+                        l.wait_idle();
+                    }
                     last = frame(g, v, target, cam, 0.1);
                 }
                 return last;

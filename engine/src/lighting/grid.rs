@@ -1,4 +1,6 @@
-//! One light grid: sky and sun visibility on columns over a node of side [`GRID_SIDE_M`].
+//! One light grid: sky and sun visibility on [`COLUMNS`] x [`COLUMNS`] columns over a node: the
+//! nodes of [`grid_level`] (side [`GRID_SIDE_M`], columns [`COLUMN_SPACING_M`] apart) and every
+//! coarser node (the same columns over its larger side), so distant terrain is shaded too.
 //!
 //! **Sky visibility** of a horizontal receiver is `(1/pi) * integral of T(w) sin(e) cos(e)` over
 //! the directions `w` above the terrain horizon (elevation `e`, canopy transmittance `T`).
@@ -26,7 +28,8 @@ use worldgen::sample::{GridPlacement, bilinear};
 
 /// Side of a light grid's node (m).
 pub const GRID_SIDE_M: f64 = 128.0;
-/// Distance between columns (m).
+/// Distance between columns of a grid-level node (m); a coarser node's columns are as much
+/// farther apart as the node is wider.
 pub const COLUMN_SPACING_M: f64 = 4.0;
 /// Columns along each side (the border columns included).
 pub const COLUMNS: usize = (GRID_SIDE_M / COLUMN_SPACING_M) as usize + 1;
@@ -66,9 +69,10 @@ pub const CANOPY_AZIMUTHS: usize = 8;
 pub const SKY_BANDS: usize = 3;
 /// How far horizons are marched (m).
 pub const HORIZON_REACH_M: f64 = 4000.0;
-/// Spacing of the finest-surface lattice near the grid (m).
+/// Spacing of the finest-surface lattice near a grid-level node (m; half a column spacing at
+/// every level).
 pub const NEAR_SPACING_M: f64 = 2.0;
-/// How far beyond the node that lattice reaches (m).
+/// How far beyond a grid-level node that lattice reaches (m; 16 column spacings at every level).
 pub const NEAR_MARGIN_M: f64 = 64.0;
 /// Midpoint samples of a sky ray through the canopy.
 pub const CANOPY_STEPS: usize = 12;
@@ -85,11 +89,11 @@ pub struct Sun {
 }
 
 impl Default for Sun {
-    /// An afternoon sun in the south-west, 35 degrees high.
+    /// The viewer's sun since its first version: north-east (56 degrees), 49 degrees high.
     fn default() -> Self {
         Self {
-            azimuth_deg: 225.0,
-            elevation_deg: 35.0,
+            azimuth_deg: 56.0,
+            elevation_deg: 49.0,
         }
     }
 }
@@ -106,12 +110,15 @@ impl Sun {
 }
 
 /// A node's light grid (see the module docs). Sample `(layer, row, col)` is at world
-/// `origin_m + (col, row) * COLUMN_SPACING_M`, `layers_m[layer]` above `ground_m`.
+/// `origin_m + (col, row) * spacing_m`, `layers_m[layer]` above `ground_m`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightGrid {
     pub key: NodeKey,
     /// World position of column (0, 0), the node's south-west corner.
     pub origin_m: [f64; 2],
+    /// Distance between columns (m): [`COLUMN_SPACING_M`] at [`grid_level`], twice that a level
+    /// coarser.
+    pub spacing_m: f64,
     /// The finest surface at each column (row-major, row 0 south).
     pub ground_m: Vec<f32>,
     /// Sky visibility in 1/255 steps, `[layer][row][col]`.
@@ -131,6 +138,8 @@ pub struct LightGrid {
 /// position.
 struct HorizonHeights<'a> {
     world: &'a World,
+    /// Spacing of `near` (m).
+    spacing_m: f64,
     near: Vec<f64>,
     /// Points along each side of `near`.
     n: usize,
@@ -142,8 +151,8 @@ struct HorizonHeights<'a> {
 
 impl HorizonHeights<'_> {
     fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
-        let gx = (x_m - self.tree_origin_m[0]) / NEAR_SPACING_M;
-        let gy = (y_m - self.tree_origin_m[1]) / NEAR_SPACING_M;
+        let gx = (x_m - self.tree_origin_m[0]) / self.spacing_m;
+        let gy = (y_m - self.tree_origin_m[1]) / self.spacing_m;
         let (fx, fy) = (gx.floor(), gy.floor());
         let (i, j) = (fx as i64 - self.first[0], fy as i64 - self.first[1]);
         let last = self.n as i64 - 1;
@@ -197,8 +206,14 @@ impl LightGrid {
         self.ground_m.len() * 4 + self.sky.len() + self.sun.len()
     }
 
-    /// Computes the grid of node `key` for `sun`: [`COLUMNS`] columns from the node's
-    /// south-west corner, covering the node when it is at [`grid_level`].
+    /// The node whose grid shades node `key`: its ancestor at [`grid_level`], or itself when it
+    /// is at that level or coarser.
+    pub fn owner(tree: &QuadTree, key: NodeKey) -> NodeKey {
+        key.ancestor_at(grid_level(tree).min(key.level))
+    }
+
+    /// Computes the grid of node `key` (at [`grid_level`] or coarser) for `sun`: [`COLUMNS`]
+    /// columns from the node's south-west corner to its north-east one.
     pub fn compute(
         world: &World,
         canopy: &Canopy,
@@ -209,10 +224,12 @@ impl LightGrid {
         // Columns and lattice points by global index from the tree's origin (see
         // `HorizonHeights`): a border column shared with a neighbour has the same coordinates.
         let o = tree.origin_m;
+        let side_m = tree.node_size_m(key.level);
+        let spacing_m = side_m / (COLUMNS - 1) as f64;
+        let near_spacing_m = spacing_m * (NEAR_SPACING_M / COLUMN_SPACING_M);
         let per_node = (COLUMNS - 1) as i64;
         let col0 = [i64::from(key.ix) * per_node, i64::from(key.iy) * per_node];
-        let column_m =
-            |axis: usize, c: usize| o[axis] + (col0[axis] + c as i64) as f64 * COLUMN_SPACING_M;
+        let column_m = |axis: usize, c: usize| o[axis] + (col0[axis] + c as i64) as f64 * spacing_m;
         let origin = [column_m(0, 0), column_m(1, 0)];
         let ratio = (COLUMN_SPACING_M / NEAR_SPACING_M).round() as i64;
         let margin = (NEAR_MARGIN_M / NEAR_SPACING_M).round() as i64;
@@ -220,12 +237,13 @@ impl LightGrid {
         let first = [col0[0] * ratio - margin, col0[1] * ratio - margin];
         let axis = |a: usize| -> Vec<f64> {
             (0..n_near as i64)
-                .map(|i| o[a] + (first[a] + i) as f64 * NEAR_SPACING_M)
+                .map(|i| o[a] + (first[a] + i) as f64 * near_spacing_m)
                 .collect()
         };
         let (xs, ys) = (axis(0), axis(1));
         let heights = HorizonHeights {
             world,
+            spacing_m: near_spacing_m,
             near: world.heights_on_lattice(&xs, &ys),
             n: n_near,
             first,
@@ -247,10 +265,7 @@ impl LightGrid {
         let reach = reach.min(HORIZON_REACH_M);
         let canopy_near = canopy.max_extinction_in(
             [origin[0] - reach, origin[1] - reach],
-            [
-                origin[0] + GRID_SIDE_M + reach,
-                origin[1] + GRID_SIDE_M + reach,
-            ],
+            [origin[0] + side_m + reach, origin[1] + side_m + reach],
         ) > 0.0;
         let distances = march_distances();
         let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
@@ -278,6 +293,7 @@ impl LightGrid {
         let mut out = Self {
             key,
             origin_m: origin,
+            spacing_m,
             ground_m: vec![0.0; cells],
             sky: vec![0; LAYERS * cells],
             sun: vec![0; LAYERS * cells],
@@ -367,8 +383,8 @@ impl LightGrid {
     /// Trilinear sky and sun visibility at world (`x_m`, `y_m`), `above_m` above the ground
     /// (clamped to the grid's columns and layers), as the shaders will sample it.
     pub fn sample(&self, x_m: f64, y_m: f64, above_m: f64) -> (f64, f64) {
-        let gx = ((x_m - self.origin_m[0]) / COLUMN_SPACING_M).clamp(0.0, (COLUMNS - 1) as f64);
-        let gy = ((y_m - self.origin_m[1]) / COLUMN_SPACING_M).clamp(0.0, (COLUMNS - 1) as f64);
+        let gx = ((x_m - self.origin_m[0]) / self.spacing_m).clamp(0.0, (COLUMNS - 1) as f64);
+        let gy = ((y_m - self.origin_m[1]) / self.spacing_m).clamp(0.0, (COLUMNS - 1) as f64);
         let (c0, r0) = (
             (gx as usize).min(COLUMNS - 2),
             (gy as usize).min(COLUMNS - 2),

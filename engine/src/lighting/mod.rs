@@ -10,10 +10,13 @@
 //! terrain horizon nor the vegetation canopy hides) and the sun visibility (terrain shadow times
 //! the canopy's transmittance toward the sun, [`grid::Sun`]).
 //!
-//! Not yet done (issue 17): ambient colour with a ground bounce, the streaming hook that makes a
-//! grid when a descendant needs it, GPU upload and the shaders' trilinear sampling, relighting
-//! on a sun change.
+//! [`content`] makes grids a node-content kind (shared by a grid node's descendants, relit in
+//! the background when the sun changes); `render::lighting` uploads them into slots of one 3D
+//! texture that the terrain and vegetation shaders sample trilinearly.
+//!
+//! Not yet done (issue 17): ambient colour with a ground bounce, a dominant light direction.
 
+pub mod content;
 pub mod grid;
 #[cfg(feature = "measure")]
 pub mod reference;

@@ -5,7 +5,9 @@
 
 use super::DEPTH_FORMAT;
 use super::gpu_data::FrameUniforms;
+use super::light_pool::LightPool;
 use crate::camera::Camera;
+use crate::lighting::Sun;
 use glam::{DVec3, Vec3};
 
 /// Period (m) of the ground's fine detail pattern (`terrain.wgsl`): the camera position is sent
@@ -36,6 +38,10 @@ pub struct ViewOptions {
     pub merged_draws: bool,
     /// How the ground is shown (debug views of the ground textures).
     pub ground_view: GroundView,
+    /// The sun (its light's direction; the light grids are made for the same sun).
+    pub sun: Sun,
+    /// Debug view: everything grey, lit by the light grids alone (sky and sun visibility).
+    pub lighting_only: bool,
 }
 
 /// Debug views of the ground.
@@ -62,10 +68,11 @@ pub fn texels_per_pixel_of(linear_rgb: [f32; 3]) -> Option<f32> {
 
 impl ViewOptions {
     /// The shaders' debug mode: 1 colour by level, 2 texel density, 3 ground texture only,
-    /// 0 none.
+    /// 4 lighting only, 0 none.
     pub fn debug_mode(&self) -> f32 {
         match (self.color_by_level, self.ground_view) {
             (true, _) => 1.0,
+            (false, _) if self.lighting_only => 4.0,
             (false, GroundView::Shaded) => 0.0,
             (false, GroundView::TexelDensity) => 2.0,
             (false, GroundView::TextureOnly) => 3.0,
@@ -91,6 +98,8 @@ impl Default for ViewOptions {
             plants: true,
             merged_draws: true,
             ground_view: GroundView::Shaded,
+            sun: Sun::default(),
+            lighting_only: false,
         }
     }
 }
@@ -124,6 +133,8 @@ pub struct FrameResources {
     pub group: wgpu::BindGroup,
     /// Group 1: a renderer's node table (a read-only storage array, vertex stage).
     pub node_layout: wgpu::BindGroupLayout,
+    /// The light-grid pool (group 0, bindings 1 to 3).
+    pub light: LightPool,
     camera_m: DVec3,
 }
 
@@ -215,7 +226,18 @@ impl FrameResources {
         let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame layout"),
-            entries: &[uniform_entry(0, false, vf)],
+            entries: &[
+                uniform_entry(0, false, vf),
+                wgpu::BindGroupLayoutEntry {
+                    visibility: vf,
+                    ..texture_entry(1, wgpu::TextureViewDimension::D3)
+                },
+                wgpu::BindGroupLayoutEntry {
+                    visibility: vf,
+                    ..sampler_entry(2)
+                },
+                uniform_entry(3, false, vf),
+            ],
         });
         let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("node table layout"),
@@ -236,13 +258,36 @@ impl FrameResources {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let group = uniform_group(device, "frame group", &layout, 0, &buffer);
+        let light = LightPool::new(device);
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame group"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&light.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&light.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: light.info.as_entire_binding(),
+                },
+            ],
+        });
         Self {
             color_format,
             buffer,
             layout,
             group,
             node_layout,
+            light,
             camera_m: DVec3::ZERO,
         }
     }
@@ -259,7 +304,7 @@ impl FrameResources {
             cam.near_m as f32,
         );
         let clip_from_rel = proj * view_m;
-        let sun = Vec3::new(0.45, 0.3, 0.62).normalize();
+        let sun = view.sun.toward().as_vec3();
         FrameUniforms {
             clip_from_rel: clip_from_rel.to_cols_array_2d(),
             rel_from_clip: clip_from_rel.inverse().to_cols_array_2d(),

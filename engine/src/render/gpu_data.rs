@@ -31,6 +31,9 @@ pub struct NodeEntry {
     /// x: dither interval end, y: quad-tree level, zw: the renderer's own (terrain: ground
     /// texture layer or -1, texture coordinates per metre).
     pub hi_level: [f32; 4],
+    /// The node's light grid ([`super::light_pool::LightLease::entry`]): x its tile in the pool
+    /// or -1, y columns per metre, zw the node's south-west corner in the grid's columns.
+    pub light: [f32; 4],
 }
 
 /// Mirrors `VertexIn` (28 bytes): terrain vertices and plant-shape vertices.
@@ -54,6 +57,6 @@ impl MeshVertex {
     };
 }
 
-const _: () = assert!(std::mem::size_of::<NodeEntry>() == 32);
+const _: () = assert!(std::mem::size_of::<NodeEntry>() == 48);
 const _: () = assert!(std::mem::size_of::<MeshVertex>() == 28);
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 6 * 16);

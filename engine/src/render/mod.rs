@@ -28,6 +28,8 @@ pub mod ground;
 pub mod ground_detail;
 pub mod ground_pool;
 pub mod impostors;
+pub mod light_pool;
+pub mod lighting;
 pub mod node_table;
 pub mod reference;
 pub mod scene;

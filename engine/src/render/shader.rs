@@ -35,6 +35,12 @@ fn prelude_text() -> std::borrow::Cow<'static, str> {
     file_text("prelude.inc", PRELUDE)
 }
 
+/// The prelude's own constants (the light grids' shape).
+fn prelude_constants() -> String {
+    use crate::lighting::grid::{COLUMNS, LAYERS};
+    format!("const LIGHT_COLUMNS: u32 = {COLUMNS}u;\nconst LIGHT_LAYERS: u32 = {LAYERS}u;\n")
+}
+
 /// The assembled source of renderer file `name` with its generated `constants` (WGSL `const`
 /// lines). An unknown name gives the prelude alone.
 pub fn assemble(name: &str, constants: &str) -> String {
@@ -43,7 +49,8 @@ pub fn assemble(name: &str, constants: &str) -> String {
         .find(|(n, _)| *n == name)
         .map_or_else(String::new, |(n, f)| file_text(n, f).into_owned());
     format!(
-        "// ---- generated constants ----\n{constants}\n// ---- prelude.inc.wgsl ----\n{}\n// ---- {name}.wgsl ----\n{body}",
+        "// ---- generated constants ----\n{}{constants}\n// ---- prelude.inc.wgsl ----\n{}\n// ---- {name}.wgsl ----\n{body}",
+        prelude_constants(),
         prelude_text()
     )
 }

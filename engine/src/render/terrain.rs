@@ -19,6 +19,7 @@ use super::gpu_data::MeshVertex;
 use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot};
+use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
 use super::suballoc::{Lease, Suballocator};
@@ -515,8 +516,16 @@ impl NodeRenderer for TerrainRenderer {
                 let (page, extra) = node.ground.as_ref().map_or((NO_TEXTURE, [-1.0, 0.0]), |g| {
                     (g.0.page(), [g.0.layer() as f32, g.1])
                 });
-                self.table
-                    .set(frame, slot, node.origin_m, d.key.level, d.dither, extra);
+                let light = light_entry(draws.tree, d.work);
+                self.table.set(
+                    frame,
+                    slot,
+                    node.origin_m,
+                    d.key.level,
+                    d.dither,
+                    extra,
+                    light,
+                );
                 let m = &node.mesh;
                 let fading = d.dither[0] > 0.0 || d.dither[1] < 1.0;
                 self.batches.push(

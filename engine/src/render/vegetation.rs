@@ -14,6 +14,7 @@ use super::frame::{
 };
 use super::gpu_data::MeshVertex;
 use super::impostors::ImpostorPages;
+use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
 use super::suballoc::{Lease, Suballocator};
@@ -691,7 +692,7 @@ impl VegetationRenderer {
         &mut self,
         frame: &FrameResources,
         p: &PlantsGpu,
-        level: u8,
+        (level, light): (u8, [f32; 4]),
         dither: [f32; 2],
         drawn: bool,
         is_ancestor: bool,
@@ -710,7 +711,7 @@ impl VegetationRenderer {
                 GroupDither::Full => [0.0, 1.0],
             };
             self.table
-                .set(frame, entry, p.origin_m, level, interval, [0.0; 2]);
+                .set(frame, entry, p.origin_m, level, interval, [0.0; 2], light);
             let first_instance = base + g.first;
             let quads = |key| {
                 (
@@ -806,8 +807,16 @@ impl NodeRenderer for VegetationRenderer {
                         .ancestors
                         .binary_search_by_key(&d.key, |a| a.key)
                         .is_ok();
-                    let (level, dither) = (d.key.level, d.dither);
-                    self.plan_node(frame, p, level, dither, true, is_ancestor, GroupDither::Own);
+                    let node = (d.key.level, light_entry(draws.tree, d.work));
+                    self.plan_node(
+                        frame,
+                        p,
+                        node,
+                        d.dither,
+                        true,
+                        is_ancestor,
+                        GroupDither::Own,
+                    );
                 }
             }
             for a in draws.ancestors {
@@ -815,8 +824,8 @@ impl NodeRenderer for VegetationRenderer {
                     && p.groups.iter().any(|g| g.kept)
                     && visible(p)
                 {
-                    let level = a.key.level;
-                    self.plan_node(frame, p, level, [0.0, 1.0], false, true, GroupDither::Full);
+                    let node = (a.key.level, light_entry(draws.tree, a.work));
+                    self.plan_node(frame, p, node, [0.0, 1.0], false, true, GroupDither::Full);
                 }
             }
         }

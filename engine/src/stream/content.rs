@@ -84,6 +84,10 @@ pub trait ContentKind: Any + Send + Sync + std::fmt::Debug {
     /// payloads), and put their result with [`NodeWork::put`].
     fn phases(self: Arc<Self>) -> Vec<Phase>;
 
+    /// Told where the camera is at every streaming update (a kind with background work of its
+    /// own, such as the light grids, does the nearest first). Default: nothing.
+    fn observe_camera(&self, _camera_m: DVec3) {}
+
     /// How visible (0..=1) the top of a node at `rect` (highest point `z_max_m`, at `dist_m`) is
     /// from `camera_m` through this content; selection multiplies a node's projected error by it
     /// when `StreamSettings::vegetation_occlusion` is on. 1: this content blocks nothing.

@@ -429,6 +429,9 @@ impl Streamer {
     pub fn update_along(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
         self.frame += 1;
         self.camera = Some(*cam);
+        for k in &self.shared.kinds {
+            k.observe_camera(cam.position_m);
+        }
         self.collect_results();
         let tau = self.settings.tau_px;
         let t_select = Instant::now();

@@ -12,13 +12,14 @@ use std::sync::Arc;
 #[derive(Debug)]
 pub struct VegetationContent {
     pub placer: Placer,
-    pub canopy: Canopy,
+    /// Shared with the light-grid kind.
+    pub canopy: Arc<Canopy>,
 }
 
 impl VegetationContent {
     pub fn new(world: &World) -> Self {
         let placer = Placer::new(world);
-        let canopy = Canopy::new(world, &placer);
+        let canopy = Arc::new(Canopy::new(world, &placer));
         Self { placer, canopy }
     }
 }

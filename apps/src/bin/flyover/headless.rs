@@ -15,7 +15,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
     eprintln!(
-        "headless on {} ({} draws, ground textures filtered with anisotropy {}x)",
+        "headless on {} ({} draws, ground textures filtered with anisotropy {}x), sun azimuth \
+         {} deg, elevation {} deg{}",
         gpu.adapter_name(),
         if cli.per_item_draws {
             "per-item"
@@ -24,7 +25,14 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         } else {
             "merged batches as plain loops: no multi-draw indirect on this adapter"
         },
-        gpu.anisotropy
+        gpu.anisotropy,
+        cli.sun_azimuth_deg,
+        cli.sun_elevation_deg,
+        if cli.no_lighting {
+            ", no light grids"
+        } else {
+            ""
+        }
     );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);

@@ -12,6 +12,8 @@ use clap::{CommandFactory, FromArgMatches, Parser};
 use engine::camera::Camera;
 use engine::flight::{CameraPath, auto_flyover};
 use engine::ground::content::GroundContent;
+use engine::lighting::Sun;
+use engine::lighting::content::LightingContent;
 use engine::render::Gpu;
 use engine::render::frame::GroundView;
 use engine::stream::StreamSettings;
@@ -105,6 +107,47 @@ pub(crate) struct Cli {
     /// ground types, as before issue 16): for comparing cost and looks.
     #[arg(long)]
     pub(crate) no_ground_textures: bool,
+    /// The sun's compass azimuth in degrees (0 north, 90 east). The light grids (terrain and
+    /// canopy shadows, sky occlusion) are made for it; the panel's sliders change it live.
+    #[arg(long, default_value_t = Sun::default().azimuth_deg, value_parser = azimuth)]
+    pub(crate) sun_azimuth_deg: f64,
+    /// The sun's elevation above the horizon in degrees (-10 to 90; low values give long
+    /// shadows, at or below 0 only the sky lights the scene).
+    #[arg(long, default_value_t = Sun::default().elevation_deg, value_parser = elevation)]
+    pub(crate) sun_elevation_deg: f64,
+    /// Do not make light grids: the sun and sky light everything fully, with no shadows or
+    /// occlusion (as before issue 17), for comparing cost and looks.
+    #[arg(long)]
+    pub(crate) no_lighting: bool,
+    /// Debug view: everything grey, lit by the light grids alone.
+    #[arg(long)]
+    pub(crate) lighting_only: bool,
+}
+
+impl Cli {
+    /// The sun of --sun-azimuth-deg and --sun-elevation-deg.
+    pub(crate) fn sun(&self) -> Sun {
+        Sun {
+            azimuth_deg: self.sun_azimuth_deg,
+            elevation_deg: self.sun_elevation_deg,
+        }
+    }
+}
+
+fn azimuth(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v.rem_euclid(360.0)),
+        Ok(v) => Err(format!("{v} must be a finite number of degrees")),
+        Err(e) => Err(format!("{s:?} is not a number: {e}")),
+    }
+}
+
+fn elevation(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (-10.0..=90.0).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} must be between -10 and 90 degrees")),
+        Err(e) => Err(format!("{s:?} is not a number: {e}")),
+    }
 }
 
 /// `--ground-view` values.
@@ -126,7 +169,8 @@ impl From<GroundViewArg> for GroundView {
 }
 
 /// The viewer for `cli`: every registered content kind (less ground textures with
-/// `--no-ground-textures`), the ground view of `--ground-view`.
+/// `--no-ground-textures`, less light grids with `--no-lighting`), the ground view of
+/// `--ground-view`, the sun of `--sun-*`.
 pub(crate) fn make_viewer(
     cli: &Cli,
     gpu: &Gpu,
@@ -137,8 +181,13 @@ pub(crate) fn make_viewer(
     if cli.no_ground_textures {
         kinds.retain(|k| k.kind.name() != GroundContent::NAME);
     }
+    if cli.no_lighting {
+        kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+    }
     let mut viewer = Viewer::with_kinds(gpu, format, world, settings(cli), &kinds);
     viewer.view.ground_view = cli.ground_view.into();
+    viewer.view.lighting_only = cli.lighting_only;
+    viewer.set_sun(cli.sun(), glam::DVec3::ZERO);
     viewer
 }
 

@@ -1,5 +1,6 @@
 //! The egui panel: detail level, workers, memory budget, debug views and live statistics.
 
+use engine::lighting::Sun;
 use engine::render::Gpu;
 use engine::render::frame::{GroundView, ViewOptions};
 use engine::viewer::FrameStats;
@@ -13,6 +14,8 @@ pub(crate) struct Ui {
     pub(crate) frozen: bool,
     pub(crate) occlusion: bool,
     pub(crate) slider_rect: [f32; 4],
+    /// The sun the sliders show (applied with `Viewer::set_sun` when it changes).
+    pub(crate) sun: Sun,
 }
 
 pub(crate) fn panel(
@@ -34,6 +37,13 @@ pub(crate) fn panel(
     ui.add(egui::Slider::new(&mut st_ui.workers, 1..=32).text("workers (restarts streaming)"));
     ui.add(egui::Slider::new(&mut st_ui.budget_mib, 32..=8192).text("node cache MiB"));
     ui.separator();
+    ui.heading("Sun");
+    ui.add(
+        egui::Slider::new(&mut st_ui.sun.azimuth_deg, 0.0..=360.0).text("azimuth (deg from north)"),
+    );
+    ui.add(egui::Slider::new(&mut st_ui.sun.elevation_deg, -10.0..=90.0).text("elevation (deg)"));
+    ui.label("light grids are relit in the background, nearest first");
+    ui.separator();
     ui.heading("Debug views");
     let mut fixed = st_ui.fixed_level.is_some();
     if gpu.wireframe {
@@ -42,6 +52,10 @@ pub(crate) fn panel(
         ui.label("wireframe: not supported by this adapter");
     }
     ui.checkbox(&mut view.color_by_level, "colour by level");
+    ui.checkbox(
+        &mut view.lighting_only,
+        "lighting only (grey, light grids alone)",
+    );
     ui.horizontal(|ui| {
         ui.label("ground:");
         ui.radio_value(&mut view.ground_view, GroundView::Shaded, "lit");

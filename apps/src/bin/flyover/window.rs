@@ -150,6 +150,7 @@ impl App {
                 frozen: false,
                 occlusion: !cli.no_vegetation_occlusion,
                 slider_rect: [0.0; 4],
+                sun: cli.sun(),
             },
             auto: true,
             yaw_pitch: (cam.forward.y.atan2(cam.forward.x), cam.forward.z.asin()),
@@ -323,6 +324,9 @@ fn apply_panel(st: &mut State) {
         let world = shared.world.clone();
         let kinds = shared.kinds.clone();
         st.viewer.streamer = engine::stream::Streamer::new(world, s, kinds);
+    }
+    if st.ui.sun != st.viewer.view.sun {
+        st.viewer.set_sun(st.ui.sun, st.cam.position_m);
     }
     match (st.ui.frozen, st.viewer.frozen) {
         (true, None) => st.viewer.frozen = Some(st.cam),

@@ -5,6 +5,7 @@ use crate::open_world;
 use crate::report::{Report, bar};
 use anyhow::{Result, bail};
 use engine::camera::Camera;
+use engine::lighting::content::{LightingContent, NodeLight};
 use engine::render::Gpu;
 use engine::stream::Streamer;
 use engine::surface::World;
@@ -88,8 +89,17 @@ impl<'g> Flight<'g> {
         }
     }
 
-    /// Streams until `cam`'s view is ready (at most `timeout_s`); false on timeout.
+    /// Streams until `cam`'s view is ready (at most `timeout_s`), then waits until its light
+    /// grids are computed; false on timeout.
     fn settle(&mut self, cam: &Camera, timeout_s: f64) -> bool {
+        let ready = self.settle_streaming(cam, timeout_s);
+        if let Some(l) = self.streamer().shared.kind::<LightingContent>() {
+            l.wait_idle();
+        }
+        ready
+    }
+
+    fn settle_streaming(&mut self, cam: &Camera, timeout_s: f64) -> bool {
         match self {
             Flight::Cpu(s) => s.settle(cam, timeout_s),
             Flight::Gpu(gpu, v) => {
@@ -138,17 +148,18 @@ pub(crate) fn section_streaming(
     for busy in [0].into_iter().chain(worker_counts.iter().copied()) {
         scheduling_noise(r, frames, dt, busy);
     }
-    // Every flight with 1 and N workers, ground textures on; and with 1 worker, off.
-    let runs: Vec<((f64, f64), usize, bool)> = FLIGHTS
+    // Every flight with 1 and N workers, ground textures and light grids on; and with 1
+    // worker, ground textures off with light grids on and off.
+    let runs: Vec<((f64, f64), usize, bool, bool)> = FLIGHTS
         .iter()
         .flat_map(|&f| {
             worker_counts
                 .iter()
-                .map(move |&w| (f, w, true))
-                .chain(std::iter::once((f, 1, false)))
+                .map(move |&w| (f, w, true, true))
+                .chain([(f, 1, false, true), (f, 1, false, false)])
         })
         .collect();
-    for (flight, workers, textures) in runs {
+    for (flight, workers, textures, lighting) in runs {
         let (speed, above) = flight;
         let world = open_world(world_path)?;
         let cams: Vec<Camera> = (0..frames)
@@ -177,6 +188,9 @@ pub(crate) fn section_streaming(
         if !textures {
             kinds.retain(|k| k.kind.name() != engine::ground::content::GroundContent::NAME);
         }
+        if !lighting {
+            kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+        }
         let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
         // Warm start at the first camera, as after loading.
         if !flight_run.settle(&cams[0], 300.0) {
@@ -188,6 +202,9 @@ pub(crate) fn section_streaming(
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
         let (mut debt_frames, mut worst_excess, mut frame_times) =
             (0usize, 0.0f64, Vec::with_capacity(frames));
+        // Light debt: frames with a visible drawn node whose light grid is not computed yet
+        // (drawn fully lit), and the share of such nodes over all frames.
+        let (mut unlit_frames, mut unlit_nodes, mut lit_checked) = (0usize, 0usize, 0usize);
         let mut on_cpu_times = Vec::with_capacity(frames);
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
@@ -199,52 +216,14 @@ pub(crate) fn section_streaming(
             if let Some(d) = on_cpu.and_then(|t| t.try_elapsed().ok()) {
                 on_cpu_times.push(d.as_secs_f64());
             }
-            // Pop debt: a visible drawn node whose own error, projected at its own distance,
-            // is over tau (a finer level exists but is not shown yet). Every drawn node is
-            // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
-            // traversal at tau reaches a non-culled node at or below it (a box test alone
-            // passes big boxes behind the camera; the traversal refines them).
-            let (k, tree, frustum) = (cam.k_px(), *s.tree(), cam.frustum());
-            let ideal = engine::terrain::select::traverse(
-                &tree,
-                cam,
-                true,
-                |key| s.shared.bounds.peek(key),
-                |_, _, _, px| px > tau,
-            );
-            let visible: std::collections::HashSet<_> = ideal
-                .nodes
-                .iter()
-                .map(|n| n.key)
-                .chain(ideal.unknown_bounds.iter().copied())
-                .flat_map(|key| std::iter::once(key).chain(key.ancestors()))
-                .collect();
-            let mut excess = 0.0f64;
-            for d in s.draw_list() {
-                let Some(b) = s.resident(d.key).and_then(|r| r.work.bounds) else {
-                    continue; // not resident: nothing drawn
-                };
-                if d.key.level == tree.max_level
-                    || d.dither_hi <= d.dither_lo
-                    || !visible.contains(&d.key)
-                {
-                    continue;
-                }
-                let px = engine::terrain::select::projected_error_px(
-                    &tree,
-                    d.key,
-                    &b,
-                    cam.position_m,
-                    k,
-                    Some(&frustum),
-                    cam.near_m,
-                );
-                excess = excess.max(px - tau);
-            }
+            let (excess, unlit, checked) = frame_debts(s, cam, tau);
+            lit_checked += checked;
             if excess > 0.0 {
                 debt_frames += 1;
                 worst_excess = worst_excess.max(excess);
             }
+            unlit_frames += usize::from(unlit > 0);
+            unlit_nodes += unlit;
             b.inc(1);
             // Real time: frame f ends at (f + 1) * dt.
             let due = (f + 1) as f64 * dt;
@@ -258,9 +237,10 @@ pub(crate) fn section_streaming(
         let cancelled =
             s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
         let params = format!(
-            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), ground \
-             textures {}",
+            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), light \
+             grids {}, ground textures {}",
             s.settings.workers,
+            if lighting { "on" } else { "off" },
             match (textures, gpu) {
                 (false, _) => "off".to_string(),
                 (true, Some((_, adapter))) => format!(
@@ -279,10 +259,73 @@ pub(crate) fn section_streaming(
             worst_excess_px: worst_excess,
             frame_times_s: frame_times,
             on_cpu_times_s: on_cpu_times,
+            light_debt: lighting.then(|| {
+                (
+                    unlit_frames as f64 / frames as f64,
+                    unlit_nodes as f64 / lit_checked.max(1) as f64,
+                )
+            }),
         };
         outcome.report(r, &params);
     }
     Ok(())
+}
+
+/// One frame's debts: the largest excess over `tau` of a visible drawn node (pop debt when
+/// above 0), and of the visible drawn nodes with a light grid, how many still lack it, and how
+/// many were checked.
+fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> (f64, usize, usize) {
+    // Pop debt: a visible drawn node whose own error, projected at its own distance,
+    // is over tau (a finer level exists but is not shown yet). Every drawn node is
+    // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
+    // traversal at tau reaches a non-culled node at or below it (a box test alone
+    // passes big boxes behind the camera; the traversal refines them).
+    let (k, tree, frustum) = (cam.k_px(), *s.tree(), cam.frustum());
+    let ideal = engine::terrain::select::traverse(
+        &tree,
+        cam,
+        true,
+        |key| s.shared.bounds.peek(key),
+        |_, _, _, px| px > tau,
+    );
+    let visible: std::collections::HashSet<_> = ideal
+        .nodes
+        .iter()
+        .map(|n| n.key)
+        .chain(ideal.unknown_bounds.iter().copied())
+        .flat_map(|key| std::iter::once(key).chain(key.ancestors()))
+        .collect();
+    let mut excess = 0.0f64;
+    let (mut unlit, mut checked) = (0, 0);
+    for d in s.draw_list() {
+        let Some(res) = s.resident(d.key) else {
+            continue; // not resident: nothing drawn
+        };
+        let Some(b) = res.work.bounds else {
+            continue;
+        };
+        if d.dither_hi <= d.dither_lo || !visible.contains(&d.key) {
+            continue;
+        }
+        if let Some(l) = res.work.get::<NodeLight>() {
+            checked += 1;
+            unlit += usize::from(l.grid.grid().is_none());
+        }
+        if d.key.level == tree.max_level {
+            continue;
+        }
+        let px = engine::terrain::select::projected_error_px(
+            &tree,
+            d.key,
+            &b,
+            cam.position_m,
+            k,
+            Some(&frustum),
+            cam.near_m,
+        );
+        excess = excess.max(px - tau);
+    }
+    (excess, unlit, checked)
 }
 
 /// The machine's own scheduling noise, next to the bookkeeping rows: a fixed amount of
@@ -351,6 +394,9 @@ struct FlightOutcome {
     /// The same spans' on-CPU time of the frame thread (empty where the platform does not
     /// report it).
     on_cpu_times_s: Vec<f64>,
+    /// With light grids: the share of frames with a visible drawn node still without its grid,
+    /// and the share of visible drawn nodes (over all frames) without it.
+    light_debt: Option<(f64, f64)>,
 }
 
 impl FlightOutcome {
@@ -420,6 +466,22 @@ impl FlightOutcome {
             "%",
             params,
         );
+        if let Some((frames, nodes)) = self.light_debt {
+            r.add(
+                "streaming",
+                "light debt (frames with a drawn node still without its light grid)",
+                100.0 * frames,
+                "%",
+                params,
+            );
+            r.add(
+                "streaming",
+                "drawn nodes without their light grid (share over all frames)",
+                100.0 * nodes,
+                "%",
+                params,
+            );
+        }
         r.add(
             "streaming",
             "worst excess over tau",

@@ -1,0 +1,338 @@
+//! Light grids as a node-content kind. Phase `light grid` (cheap): a node finer than
+//! [`grid_level`] is shaded by the grid of its ancestor at that level, a node at that level or
+//! coarser by its own; the phase finds that [`SharedGrid`] (or registers it) and stores it as
+//! the node's [`NodeLight`]. Every node holding a grid keeps it alive; the last one evicted
+//! frees it.
+//!
+//! **Computing** a grid takes about 0.1 s, a hundred times a node's other preparation, so node
+//! jobs never wait for it: one background thread at the lowest priority computes the grids
+//! that are missing or were lit for another sun, always the one nearest to the camera next
+//! (distance to the grid's square: the coarse grids around the camera come first). Until its
+//! grid arrives a node is drawn fully lit; [`SharedGrid::version`] tells the renderer when to
+//! upload. **Relighting** after a sun change ([`LightingContent::set_sun`]) is the same work:
+//! every live grid is stale, nearest first, and no frame waits for it.
+
+use super::grid::{COLUMNS, LAYERS, LightGrid, Sun, grid_level};
+use crate::stream::{ContentKind, NodeWork, Payload, Phase, Shared};
+use crate::surface::World;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::vegetation::canopy::Canopy;
+use glam::DVec2;
+use rustc_hash::FxHashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, Weak};
+
+/// Bytes of one grid on the GPU (sky and sun, one byte each per sample), counted in the
+/// node-cache budget by the node that owns the grid.
+pub const GRID_GPU_BYTES: usize = COLUMNS * COLUMNS * LAYERS * 2;
+
+/// Keys kept by [`LightingContent::computed_keys`].
+pub const LOG_LEN: usize = 4096;
+
+/// One grid shared by the nodes it shades.
+#[derive(Debug)]
+pub struct SharedGrid {
+    pub key: NodeKey,
+    /// The current grid (None until the first computation is done).
+    grid: Mutex<Option<Arc<LightGrid>>>,
+    /// Bumped each time a grid is stored (first computation and every relight).
+    version: AtomicU64,
+}
+
+impl SharedGrid {
+    /// The current grid, None before the first computation.
+    pub fn grid(&self) -> Option<Arc<LightGrid>> {
+        self.grid.lock().expect("grid lock").clone()
+    }
+
+    /// How many times a grid was stored: a renderer uploads again when it changes.
+    pub fn version(&self) -> u64 {
+        self.version.load(Ordering::Acquire)
+    }
+
+    fn store(&self, grid: LightGrid) {
+        *self.grid.lock().expect("grid lock") = Some(Arc::new(grid));
+        self.version.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// Whether the grid is missing or lit for another sun than `sun`.
+    fn stale(&self, sun: Sun) -> bool {
+        self.grid
+            .lock()
+            .expect("grid lock")
+            .as_ref()
+            .is_none_or(|g| g.sun_dir != sun)
+    }
+}
+
+/// The lighting kind's payload of a node: the grid that shades it.
+#[derive(Debug, Clone)]
+pub struct NodeLight {
+    pub grid: Arc<SharedGrid>,
+    /// Whether the grid is this node's own (its bytes count here, once).
+    pub owns: bool,
+}
+
+impl Payload for NodeLight {
+    fn bytes(&self) -> usize {
+        if self.owns { GRID_GPU_BYTES } else { 0 }
+    }
+}
+
+/// The light thread's state.
+#[derive(Debug, Default)]
+struct ThreadState {
+    started: bool,
+    stop: bool,
+    /// Nothing stale is left (set by the thread, cleared by every new request).
+    idle: bool,
+}
+
+/// What the light thread shares with the kind.
+#[derive(Debug)]
+struct Inner {
+    world: World,
+    tree: QuadTree,
+    canopy: Arc<Canopy>,
+    sun: Mutex<Sun>,
+    camera_xy_m: Mutex<DVec2>,
+    grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
+    computed: AtomicU64,
+    /// The keys computed, in order (the last [`LOG_LEN`]).
+    log: Mutex<std::collections::VecDeque<NodeKey>>,
+    state: Mutex<ThreadState>,
+    /// Wakes the thread (a new grid, a new sun).
+    wake: Condvar,
+    /// Wakes [`LightingContent::wait_idle`].
+    idle: Condvar,
+}
+
+impl Inner {
+    fn sun(&self) -> Sun {
+        *self.sun.lock().expect("sun lock")
+    }
+
+    /// The live stale grid nearest to the camera (coarser first at equal distance).
+    fn next_stale(&self) -> Option<Arc<SharedGrid>> {
+        let sun = self.sun();
+        let camera = *self.camera_xy_m.lock().expect("camera lock");
+        let mut grids = self.grids.lock().expect("grids lock");
+        grids.retain(|_, g| g.strong_count() > 0);
+        let distance = |key: NodeKey| {
+            let r = self.tree.rect(key);
+            let dx = (r.min[0] - camera.x).max(camera.x - r.max[0]).max(0.0);
+            let dy = (r.min[1] - camera.y).max(camera.y - r.max[1]).max(0.0);
+            dx.hypot(dy)
+        };
+        grids
+            .values()
+            .filter_map(Weak::upgrade)
+            .filter(|g| g.stale(sun))
+            .min_by(|a, b| {
+                distance(a.key)
+                    .total_cmp(&distance(b.key))
+                    .then(a.key.level.cmp(&b.key.level))
+                    .then(a.key.cmp(&b.key))
+            })
+    }
+
+    fn run(&self) {
+        crate::stream::lower_priority();
+        loop {
+            let next = {
+                let mut state = self.state.lock().expect("state lock");
+                loop {
+                    if state.stop {
+                        return;
+                    }
+                    if let Some(g) = self.next_stale() {
+                        state.idle = false;
+                        break g;
+                    }
+                    state.idle = true;
+                    self.idle.notify_all();
+                    state = self.wake.wait(state).expect("state lock");
+                }
+            };
+            let sun = self.sun();
+            self.computed.fetch_add(1, Ordering::Relaxed);
+            {
+                let mut log = self.log.lock().expect("log lock");
+                if log.len() == LOG_LEN {
+                    log.pop_front();
+                }
+                log.push_back(next.key);
+            }
+            next.store(LightGrid::compute(
+                &self.world,
+                &self.canopy,
+                &self.tree,
+                next.key,
+                sun,
+            ));
+        }
+    }
+
+    /// Tells the thread there may be work.
+    fn poke(&self) {
+        self.state.lock().expect("state lock").idle = false;
+        self.wake.notify_all();
+    }
+}
+
+/// The light-grid kind (phase `light grid`; payload [`NodeLight`]).
+#[derive(Debug)]
+pub struct LightingContent {
+    inner: Arc<Inner>,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+impl Drop for LightingContent {
+    fn drop(&mut self) {
+        self.inner.state.lock().expect("state lock").stop = true;
+        self.inner.wake.notify_all();
+        if let Some(t) = self.thread.lock().expect("thread lock").take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl LightingContent {
+    /// The kind's registered name.
+    pub const NAME: &'static str = "lighting";
+
+    /// The kind for `world` (kept by the light thread), lit through `canopy` (the vegetation
+    /// kind's), with `sun`.
+    pub fn new(world: &World, canopy: Arc<Canopy>, sun: Sun) -> Self {
+        Self {
+            inner: Arc::new(Inner {
+                world: world.clone(),
+                tree: QuadTree::new(world.origin_m(), world.size_m()),
+                canopy,
+                sun: Mutex::new(sun),
+                camera_xy_m: Mutex::new(DVec2::ZERO),
+                grids: Mutex::new(FxHashMap::default()),
+                computed: AtomicU64::new(0),
+                log: Mutex::new(std::collections::VecDeque::new()),
+                state: Mutex::new(ThreadState::default()),
+                wake: Condvar::new(),
+                idle: Condvar::new(),
+            }),
+            thread: Mutex::new(None),
+        }
+    }
+
+    /// The sun grids are made for.
+    pub fn sun(&self) -> Sun {
+        self.inner.sun()
+    }
+
+    /// The canopy grids are lit through.
+    pub fn canopy(&self) -> &Canopy {
+        &self.inner.canopy
+    }
+
+    /// Grids computed so far (first computations and relights).
+    pub fn computed(&self) -> u64 {
+        self.inner.computed.load(Ordering::Relaxed)
+    }
+
+    /// The keys of the last grids computed (up to [`LOG_LEN`]), oldest first.
+    pub fn computed_keys(&self) -> Vec<NodeKey> {
+        self.inner
+            .log
+            .lock()
+            .expect("log lock")
+            .iter()
+            .copied()
+            .collect()
+    }
+
+    /// Grids alive (held by some node).
+    pub fn live_grids(&self) -> Vec<Arc<SharedGrid>> {
+        let grids = self.inner.grids.lock().expect("grids lock");
+        grids.values().filter_map(Weak::upgrade).collect()
+    }
+
+    /// Where the camera is (the light thread computes the nearest stale grid next).
+    pub fn set_camera(&self, camera_xy_m: DVec2) {
+        *self.inner.camera_xy_m.lock().expect("camera lock") = camera_xy_m;
+    }
+
+    /// Sets a new sun: every live grid is relit in the background, nearest to the camera first,
+    /// and grids made from now on use it.
+    pub fn set_sun(&self, sun: Sun) {
+        *self.inner.sun.lock().expect("sun lock") = sun;
+        self.inner.poke();
+    }
+
+    /// Waits until every live grid is computed for the current sun (tests and benchmarks wait
+    /// on this event, not on time).
+    pub fn wait_idle(&self) {
+        if !self.inner.state.lock().expect("state lock").started {
+            return;
+        }
+        let mut state = self.inner.state.lock().expect("state lock");
+        while !state.idle && !state.stop {
+            state = self.inner.idle.wait(state).expect("state lock");
+        }
+    }
+
+    /// The grid of node `key` (at [`grid_level`] or coarser): the live one, or a new one the
+    /// light thread will compute.
+    pub fn grid_for(&self, key: NodeKey) -> Arc<SharedGrid> {
+        let mut grids = self.inner.grids.lock().expect("grids lock");
+        if let Some(g) = grids.get(&key).and_then(Weak::upgrade) {
+            return g;
+        }
+        let g = Arc::new(SharedGrid {
+            key,
+            grid: Mutex::new(None),
+            version: AtomicU64::new(0),
+        });
+        grids.insert(key, Arc::downgrade(&g));
+        drop(grids);
+        self.start_thread();
+        self.inner.poke();
+        g
+    }
+
+    fn start_thread(&self) {
+        let mut state = self.inner.state.lock().expect("state lock");
+        if state.started {
+            return;
+        }
+        state.started = true;
+        let inner = Arc::clone(&self.inner);
+        let handle = std::thread::Builder::new()
+            .name("light grids".into())
+            .spawn(move || inner.run())
+            .expect("the light-grid thread starts");
+        *self.thread.lock().expect("thread lock") = Some(handle);
+    }
+}
+
+impl ContentKind for LightingContent {
+    fn name(&self) -> &'static str {
+        Self::NAME
+    }
+
+    fn observe_camera(&self, camera_m: glam::DVec3) {
+        self.set_camera(camera_m.truncate());
+    }
+
+    fn phases(self: Arc<Self>) -> Vec<Phase> {
+        vec![Phase::cpu(
+            "light grid",
+            move |s: &Shared, w: &mut NodeWork| {
+                let owner = LightGrid::owner(&s.tree, w.key);
+                debug_assert!(owner.level <= grid_level(&s.tree));
+                let grid = self.grid_for(owner);
+                w.put(NodeLight {
+                    grid,
+                    owns: owner == w.key,
+                });
+            },
+        )]
+    }
+}

@@ -1,0 +1,223 @@
+//! The light-grid pool: one 3D texture (`Rg8Unorm`: sky and sun visibility) of
+//! [`POOL_TILES`] x [`POOL_TILES`] tiles, each a grid's `COLUMNS x COLUMNS x LAYERS` samples,
+//! bound in the frame group (binding 1, with a clamping linear sampler at 2 and the layer
+//! heights at 3) so that every renderer's shaders sample it (`light_coords` and `light_at` in
+//! the prelude). The hardware filters trilinearly inside a tile: coordinates are clamped to the
+//! tile's sample centres, so neighbouring tiles never bleed in.
+//!
+//! A grid's tile is leased by the first node that needs it ([`LightPool::lease`]) and shared
+//! by every node the grid shades; it returns to the pool when the last [`LightLease`] drops
+//! (with the nodes' GPU objects). A relit grid is written again into the same tile.
+
+use crate::lighting::content::SharedGrid;
+use crate::lighting::grid::{COLUMNS, LAYERS};
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use rustc_hash::FxHashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, Weak};
+
+/// Tiles along each side of the pool texture (`POOL_TILES^2` grids resident at once).
+pub const POOL_TILES: u32 = 32;
+/// Texels of one tile along x and y.
+const TILE: u32 = COLUMNS as u32;
+
+/// Mirrors the prelude's `LightInfo`: the layer heights above the ground (m, [`LAYERS`] of
+/// them, the rest repeat the last) and the pool's tiles per side.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct LightInfo {
+    pub layers_m: [[f32; 4]; 2],
+    /// x: tiles per side, yzw: unused.
+    pub tiles: [f32; 4],
+}
+
+/// `LightLease::written` before the first write.
+const NOT_WRITTEN: u64 = u64::MAX;
+
+/// A grid's tile, held by the nodes it shades.
+#[derive(Debug)]
+pub struct LightLease {
+    pub tile: u32,
+    pub grid: Arc<SharedGrid>,
+    /// The grid version written into the tile.
+    written: AtomicU64,
+    free: Arc<Mutex<Vec<u32>>>,
+}
+
+impl Drop for LightLease {
+    fn drop(&mut self) {
+        if let Ok(mut free) = self.free.lock() {
+            free.push(self.tile);
+        }
+    }
+}
+
+impl LightLease {
+    /// Whether the tile holds the grid (some version of it).
+    pub fn written(&self) -> bool {
+        self.written.load(Ordering::Acquire) != NOT_WRITTEN
+    }
+
+    /// The node-table numbers of node `key` shaded by this grid: tile, columns per metre and
+    /// the node's south-west corner in the grid's columns.
+    pub fn entry(&self, tree: &QuadTree, key: NodeKey) -> [f32; 4] {
+        if !self.written() {
+            return NO_LIGHT;
+        }
+        let grid = tree.rect(self.grid.key);
+        let node = tree.rect(key);
+        let per_m = (COLUMNS - 1) as f64 / (grid.max[0] - grid.min[0]);
+        [
+            self.tile as f32,
+            per_m as f32,
+            ((node.min[0] - grid.min[0]) * per_m) as f32,
+            ((node.min[1] - grid.min[1]) * per_m) as f32,
+        ]
+    }
+}
+
+/// The node-table numbers of a node without a grid (the shaders light it fully).
+pub const NO_LIGHT: [f32; 4] = [-1.0, 0.0, 0.0, 0.0];
+
+pub struct LightPool {
+    texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+    pub sampler: wgpu::Sampler,
+    pub info: wgpu::Buffer,
+    free: Arc<Mutex<Vec<u32>>>,
+    leases: Mutex<FxHashMap<NodeKey, Weak<LightLease>>>,
+    /// Grids that found no free tile (drawn fully lit), for statistics.
+    pub refused: AtomicU64,
+}
+
+impl std::fmt::Debug for LightPool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "LightPool({} leased)", self.leased())
+    }
+}
+
+impl LightPool {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("light-grid pool"),
+            size: wgpu::Extent3d {
+                width: TILE * POOL_TILES,
+                height: TILE * POOL_TILES,
+                depth_or_array_layers: LAYERS as u32,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rg8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("light-grid sampler"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let info = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("light-grid info"),
+            size: std::mem::size_of::<LightInfo>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self {
+            texture,
+            view,
+            sampler,
+            info,
+            free: Arc::new(Mutex::new((0..POOL_TILES * POOL_TILES).rev().collect())),
+            leases: Mutex::new(FxHashMap::default()),
+            refused: AtomicU64::new(0),
+        }
+    }
+
+    /// Writes the layer heights the grids use (the same for every grid of a map).
+    pub fn set_layers(&self, queue: &wgpu::Queue, layers_m: &[f64; LAYERS]) {
+        let mut l = [0.0f32; 8];
+        for (i, v) in l.iter_mut().enumerate() {
+            *v = layers_m[i.min(LAYERS - 1)] as f32;
+        }
+        let info = LightInfo {
+            layers_m: [[l[0], l[1], l[2], l[3]], [l[4], l[5], l[6], l[7]]],
+            tiles: [POOL_TILES as f32, 0.0, 0.0, 0.0],
+        };
+        queue.write_buffer(&self.info, 0, bytemuck::bytes_of(&info));
+    }
+
+    /// The tile of `grid` (leased now if no node holds it yet; written by [`Self::refresh`] once
+    /// the grid is computed), or None when the pool is full.
+    pub fn lease(&self, grid: &Arc<SharedGrid>) -> Option<Arc<LightLease>> {
+        let mut leases = self.leases.lock().expect("leases lock");
+        if let Some(l) = leases.get(&grid.key).and_then(Weak::upgrade)
+            && Arc::ptr_eq(&l.grid, grid)
+        {
+            return Some(l);
+        }
+        let tile = self.free.lock().expect("pool lock").pop();
+        let Some(tile) = tile else {
+            self.refused.fetch_add(1, Ordering::Relaxed);
+            return None;
+        };
+        let lease = Arc::new(LightLease {
+            tile,
+            grid: Arc::clone(grid),
+            written: AtomicU64::new(NOT_WRITTEN),
+            free: Arc::clone(&self.free),
+        });
+        leases.retain(|_, l| l.strong_count() > 0);
+        leases.insert(grid.key, Arc::downgrade(&lease));
+        Some(lease)
+    }
+
+    /// Writes the lease's grid if it arrived or changed since (a relight); true if it wrote.
+    pub fn refresh(&self, queue: &wgpu::Queue, lease: &LightLease) -> bool {
+        let version = lease.grid.version();
+        if lease.written.load(Ordering::Acquire) == version {
+            return false;
+        }
+        let Some(grid) = lease.grid.grid() else {
+            return false;
+        };
+        let mut texels = Vec::with_capacity(grid.sky.len() * 2);
+        for (&sky, &sun) in grid.sky.iter().zip(&grid.sun) {
+            texels.push(sky);
+            texels.push(sun);
+        }
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: (lease.tile % POOL_TILES) * TILE,
+                    y: (lease.tile / POOL_TILES) * TILE,
+                    z: 0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            &texels,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(TILE * 2),
+                rows_per_image: Some(TILE),
+            },
+            wgpu::Extent3d {
+                width: TILE,
+                height: TILE,
+                depth_or_array_layers: LAYERS as u32,
+            },
+        );
+        lease.written.store(version, Ordering::Release);
+        true
+    }
+
+    /// Grids holding a tile now.
+    pub fn leased(&self) -> usize {
+        let leases = self.leases.lock().expect("leases lock");
+        leases.values().filter(|l| l.strong_count() > 0).count()
+    }
+}

@@ -1,0 +1,105 @@
+//! The light-grid kind's renderer: it draws nothing itself. Its upload hook gives a node the
+//! pool tile of the grid that shades it ([`LightPool::lease`]) and stores
+//! the lease as the node's [`NodeLightGpu`]; the terrain and vegetation renderers put
+//! [`light_entry`] into their node-table entries (fully lit until the grid arrives). Each
+//! frame `prepare` writes the tiles of drawn grids that arrived or were relit since (a sun
+//! change), nearest first as the light thread makes them.
+
+use super::Gpu;
+use super::frame::{DrawStats, FrameResources};
+use super::light_pool::{LightLease, NO_LIGHT};
+use super::scene::{FrameDraws, NodeRenderer};
+use crate::lighting::content::{LightingContent, NodeLight};
+use crate::lighting::grid::layer_heights_m;
+use crate::stream::{NodeWork, Shared};
+use crate::terrain::quadtree::QuadTree;
+use std::sync::Arc;
+
+/// A node's lease on its grid's pool tile (in the node's `GpuSlots`).
+#[derive(Debug, Clone)]
+pub struct NodeLightGpu(pub Arc<LightLease>);
+
+/// The node-table numbers of `work`'s light grid, [`NO_LIGHT`] without one.
+pub fn light_entry(tree: &QuadTree, work: &NodeWork) -> [f32; 4] {
+    work.gpu
+        .get::<NodeLightGpu>()
+        .map_or(NO_LIGHT, |l| l.0.entry(tree, work.key))
+}
+
+#[derive(Debug, Default)]
+pub struct LightingRenderer {
+    /// Tiles written this frame (grids that arrived or were relit).
+    pub rewritten: usize,
+    /// Drawn nodes still without their grid this frame (drawn fully lit).
+    pub unlit_drawn: usize,
+}
+
+impl LightingRenderer {
+    /// The renderer; writes the grids' layer heights into the pool's uniform.
+    pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
+        if let Some(kind) = shared.kind::<LightingContent>() {
+            frame
+                .light
+                .set_layers(&gpu.queue, &layer_heights_m(kind.canopy()));
+        }
+        Box::new(Self::default())
+    }
+}
+
+impl NodeRenderer for LightingRenderer {
+    fn name(&self) -> &'static str {
+        "lighting"
+    }
+
+    fn upload(
+        &mut self,
+        _gpu: &Gpu,
+        frame: &FrameResources,
+        _tree: &QuadTree,
+        work: &mut NodeWork,
+    ) -> usize {
+        let Some(light) = work.get::<NodeLight>() else {
+            return 0;
+        };
+        let owns = light.owns;
+        let Some(lease) = frame.light.lease(&light.grid) else {
+            return 0;
+        };
+        work.gpu.put(NodeLightGpu(lease));
+        if owns {
+            crate::lighting::content::GRID_GPU_BYTES
+        } else {
+            0
+        }
+    }
+
+    fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+        self.rewritten = 0;
+        self.unlit_drawn = 0;
+        for d in draws.drawn.iter().chain(draws.ancestors) {
+            if let Some(l) = d.work.gpu.get::<NodeLightGpu>()
+                && frame.light.refresh(&gpu.queue, &l.0)
+            {
+                self.rewritten += 1;
+            }
+        }
+        for d in draws.drawn {
+            if d.work
+                .gpu
+                .get::<NodeLightGpu>()
+                .is_none_or(|l| !l.0.written())
+            {
+                self.unlit_drawn += 1;
+            }
+        }
+    }
+
+    fn draw(
+        &self,
+        _pass: &mut wgpu::RenderPass<'_>,
+        _frame: &FrameResources,
+        _draws: &FrameDraws<'_>,
+        _stats: &mut DrawStats,
+    ) {
+    }
+}
