@@ -5,8 +5,9 @@
 //! frees it.
 //!
 //! **Computing** a grid takes about 0.1 s, a hundred times a node's other preparation, so node
-//! jobs never wait for it: one background thread at the lowest priority computes the grids
-//! that are missing or were lit for another sun, always the one nearest to the camera next
+//! jobs never wait for it: background threads at the lowest priority (as many as the node
+//! workers by default) compute the grids that are missing or were lit for another sun, each
+//! taking the one nearest to the camera next
 //! (distance to the grid's square: the coarse grids around the camera come first). Until its
 //! grid arrives a node is drawn fully lit; [`SharedGrid::version`] tells the renderer when to
 //! upload. **Relighting** after a sun change ([`LightingContent::set_sun`]) is the same work:
@@ -35,6 +36,8 @@ pub struct SharedGrid {
     pub key: NodeKey,
     /// The current grid (None until the first computation is done).
     grid: Mutex<Option<Arc<LightGrid>>>,
+    /// A light thread is computing it (changed under the threads' state lock).
+    computing: std::sync::atomic::AtomicBool,
     /// Bumped each time a grid is stored (first computation and every relight).
     version: AtomicU64,
 }
@@ -79,16 +82,19 @@ impl Payload for NodeLight {
     }
 }
 
-/// The light thread's state.
+/// The light threads' state.
 #[derive(Debug, Default)]
 struct ThreadState {
     started: bool,
     stop: bool,
-    /// Nothing stale is left (set by the thread, cleared by every new request).
+    /// Threads computing a grid now.
+    busy: usize,
+    /// Nothing stale is left and no thread is computing (set by the threads, cleared by every
+    /// new request).
     idle: bool,
 }
 
-/// What the light thread shares with the kind.
+/// What the light threads share with the kind.
 #[derive(Debug)]
 struct Inner {
     world: World,
@@ -98,10 +104,10 @@ struct Inner {
     camera_xy_m: Mutex<DVec2>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
     computed: AtomicU64,
-    /// The keys computed, in order (the last [`LOG_LEN`]).
+    /// The keys picked for computing, in order (the last [`LOG_LEN`]).
     log: Mutex<std::collections::VecDeque<NodeKey>>,
     state: Mutex<ThreadState>,
-    /// Wakes the thread (a new grid, a new sun).
+    /// Wakes the threads (a new grid, a new sun, a grid done).
     wake: Condvar,
     /// Wakes [`LightingContent::wait_idle`].
     idle: Condvar,
@@ -127,7 +133,7 @@ impl Inner {
         grids
             .values()
             .filter_map(Weak::upgrade)
-            .filter(|g| g.stale(sun))
+            .filter(|g| !g.computing.load(Ordering::Acquire) && g.stale(sun))
             .min_by(|a, b| {
                 distance(a.key)
                     .total_cmp(&distance(b.key))
@@ -146,23 +152,27 @@ impl Inner {
                         return;
                     }
                     if let Some(g) = self.next_stale() {
+                        g.computing.store(true, Ordering::Release);
+                        state.busy += 1;
+                        // Logged in the order picked (nearest first), under the state lock.
+                        self.computed.fetch_add(1, Ordering::Relaxed);
+                        let mut log = self.log.lock().expect("log lock");
+                        if log.len() == LOG_LEN {
+                            log.pop_front();
+                        }
+                        log.push_back(g.key);
+                        drop(log);
                         state.idle = false;
                         break g;
                     }
-                    state.idle = true;
-                    self.idle.notify_all();
+                    if state.busy == 0 {
+                        state.idle = true;
+                        self.idle.notify_all();
+                    }
                     state = self.wake.wait(state).expect("state lock");
                 }
             };
             let sun = self.sun();
-            self.computed.fetch_add(1, Ordering::Relaxed);
-            {
-                let mut log = self.log.lock().expect("log lock");
-                if log.len() == LOG_LEN {
-                    log.pop_front();
-                }
-                log.push_back(next.key);
-            }
             next.store(LightGrid::compute(
                 &self.world,
                 &self.canopy,
@@ -170,6 +180,11 @@ impl Inner {
                 next.key,
                 sun,
             ));
+            let mut state = self.state.lock().expect("state lock");
+            next.computing.store(false, Ordering::Release);
+            state.busy -= 1;
+            // The others may wait for this one to decide they are idle.
+            self.wake.notify_all();
         }
     }
 
@@ -184,14 +199,21 @@ impl Inner {
 #[derive(Debug)]
 pub struct LightingContent {
     inner: Arc<Inner>,
-    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
+    /// Light threads to start (on the first grid).
+    threads: usize,
+    handles: Mutex<Vec<std::thread::JoinHandle<()>>>,
+}
+
+/// The default number of light threads: one less than the cores (as node workers), at least 1.
+pub fn default_light_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get().saturating_sub(1).max(1))
 }
 
 impl Drop for LightingContent {
     fn drop(&mut self) {
         self.inner.state.lock().expect("state lock").stop = true;
         self.inner.wake.notify_all();
-        if let Some(t) = self.thread.lock().expect("thread lock").take() {
+        for t in self.handles.lock().expect("threads lock").drain(..) {
             let _ = t.join();
         }
     }
@@ -201,9 +223,14 @@ impl LightingContent {
     /// The kind's registered name.
     pub const NAME: &'static str = "lighting";
 
-    /// The kind for `world` (kept by the light thread), lit through `canopy` (the vegetation
-    /// kind's), with `sun`.
+    /// The kind for `world` (kept by the light threads), lit through `canopy` (the vegetation
+    /// kind's), with `sun`, and [`default_light_threads`] threads.
     pub fn new(world: &World, canopy: Arc<Canopy>, sun: Sun) -> Self {
+        Self::with_threads(world, canopy, sun, default_light_threads())
+    }
+
+    /// [`Self::new`] with `threads` light threads (at least 1).
+    pub fn with_threads(world: &World, canopy: Arc<Canopy>, sun: Sun, threads: usize) -> Self {
         Self {
             inner: Arc::new(Inner {
                 world: world.clone(),
@@ -218,8 +245,14 @@ impl LightingContent {
                 wake: Condvar::new(),
                 idle: Condvar::new(),
             }),
-            thread: Mutex::new(None),
+            threads: threads.max(1),
+            handles: Mutex::new(Vec::new()),
         }
+    }
+
+    /// The light threads it runs.
+    pub fn threads(&self) -> usize {
+        self.threads
     }
 
     /// The sun grids are made for.
@@ -254,7 +287,7 @@ impl LightingContent {
         grids.values().filter_map(Weak::upgrade).collect()
     }
 
-    /// Where the camera is (the light thread computes the nearest stale grid next).
+    /// Where the camera is (the light threads compute the nearest stale grid next).
     pub fn set_camera(&self, camera_xy_m: DVec2) {
         *self.inner.camera_xy_m.lock().expect("camera lock") = camera_xy_m;
     }
@@ -279,7 +312,7 @@ impl LightingContent {
     }
 
     /// The grid of node `key` (at [`grid_level`] or coarser): the live one, or a new one the
-    /// light thread will compute.
+    /// light threads will compute.
     pub fn grid_for(&self, key: NodeKey) -> Arc<SharedGrid> {
         let mut grids = self.inner.grids.lock().expect("grids lock");
         if let Some(g) = grids.get(&key).and_then(Weak::upgrade) {
@@ -287,6 +320,7 @@ impl LightingContent {
         }
         let g = Arc::new(SharedGrid {
             key,
+            computing: std::sync::atomic::AtomicBool::new(false),
             grid: Mutex::new(None),
             version: AtomicU64::new(0),
         });
@@ -303,12 +337,16 @@ impl LightingContent {
             return;
         }
         state.started = true;
-        let inner = Arc::clone(&self.inner);
-        let handle = std::thread::Builder::new()
-            .name("light grids".into())
-            .spawn(move || inner.run())
-            .expect("the light-grid thread starts");
-        *self.thread.lock().expect("thread lock") = Some(handle);
+        let mut handles = self.handles.lock().expect("threads lock");
+        for i in 0..self.threads {
+            let inner = Arc::clone(&self.inner);
+            handles.push(
+                std::thread::Builder::new()
+                    .name(format!("light grids {i}"))
+                    .spawn(move || inner.run())
+                    .expect("a light-grid thread starts"),
+            );
+        }
     }
 }
 

@@ -122,6 +122,10 @@ pub(crate) struct Cli {
     /// Debug view: everything grey, lit by the light grids alone.
     #[arg(long)]
     pub(crate) lighting_only: bool,
+    /// Headless: before the first frame, stream its view until ready and its light grids are
+    /// computed (pictures of a settled view; the frames' statistics then start warm).
+    #[arg(long)]
+    pub(crate) warm_start: bool,
 }
 
 impl Cli {
