@@ -6,6 +6,7 @@ use crate::kinds::Registration;
 use crate::lighting::Sun;
 use crate::lighting::content::LightingContent;
 use crate::render::frame::{DrawStats, ViewOptions};
+use crate::render::lighting::LightingRenderer;
 use crate::render::reference::TerrainReference;
 use crate::render::scene::{DrawnNode, FrameDraws, Scene};
 use crate::render::sky::{BoundsLines, SkyRenderer};
@@ -68,6 +69,9 @@ pub struct FrameStats {
     pub cache_bytes: usize,
     /// Wanted nodes not yet shown (a coarser ancestor stands in for them).
     pub pop_debt_nodes: usize,
+    /// Drawn nodes whose light grid has not arrived yet (drawn fully lit); 0 without light
+    /// grids.
+    pub unlit_nodes: usize,
 }
 
 impl FrameStats {
@@ -287,6 +291,10 @@ impl Viewer {
             node_buffers_bytes: node_bytes,
             cache_bytes: st.resident_bytes,
             pop_debt_nodes: wanted_missing,
+            unlit_nodes: self
+                .scene
+                .renderer::<LightingRenderer>()
+                .map_or(0, |r| r.unlit_drawn),
         }
     }
 

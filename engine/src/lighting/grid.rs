@@ -175,13 +175,14 @@ fn sin2_of_tan(t: f64) -> f64 {
     if t <= 0.0 { 0.0 } else { t * t / (1.0 + t * t) }
 }
 
-/// The distances of a horizon march: from 1 m, each step 6 % of the distance (at least 1 m).
+/// The distances of a horizon march: from 1 m, each step 10 % of the distance (at least 1 m;
+/// 6 % gave the same agreement with the reference at 20 % more time).
 fn march_distances() -> Vec<f64> {
     let mut out = Vec::new();
     let mut r = 1.0f64;
     while r <= HORIZON_REACH_M {
         out.push(r);
-        r += (0.06 * r).max(1.0);
+        r += (0.10 * r).max(1.0);
     }
     out
 }

@@ -16,8 +16,11 @@ use rustc_hash::FxHashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 
-/// Tiles along each side of the pool texture (`POOL_TILES^2` grids resident at once).
-pub const POOL_TILES: u32 = 32;
+/// Tiles along each side of the pool texture: 2,304 grids resident at once (35 MB), those of
+/// as many resident nodes at the grid level or coarser (finer nodes share their ancestor's). A
+/// grid that finds the pool full is drawn fully lit (logged once, counted in
+/// `LightPool::refused`).
+pub const POOL_TILES: u32 = 48;
 /// Texels of one tile along x and y.
 const TILE: u32 = COLUMNS as u32;
 
@@ -160,7 +163,12 @@ impl LightPool {
         }
         let tile = self.free.lock().expect("pool lock").pop();
         let Some(tile) = tile else {
-            self.refused.fetch_add(1, Ordering::Relaxed);
+            if self.refused.fetch_add(1, Ordering::Relaxed) == 0 {
+                log::warn!(
+                    "light-grid pool full ({} grids): further grids are drawn fully lit",
+                    POOL_TILES * POOL_TILES
+                );
+            }
             return None;
         };
         let lease = Arc::new(LightLease {

@@ -1,5 +1,5 @@
 //! The light-grid kind's renderer: it draws nothing itself. Its upload hook gives a node the
-//! pool tile of the grid that shades it ([`LightPool::lease`]) and stores
+//! pool tile of the grid that shades it ([`super::light_pool::LightPool::lease`]) and stores
 //! the lease as the node's [`NodeLightGpu`]; the terrain and vegetation renderers put
 //! [`light_entry`] into their node-table entries (fully lit until the grid arrives). Each
 //! frame `prepare` writes the tiles of drawn grids that arrived or were relit since (a sun

@@ -126,7 +126,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 17] = [
+    let rows: [(&str, Vec<f64>); 18] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -176,6 +176,10 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "vegetation mesh triangles",
             col(|s| s.plant_triangles as f64),
+        ),
+        (
+            "drawn nodes still without their light grid (drawn fully lit)",
+            col(|s| s.unlit_nodes as f64),
         ),
     ];
     println!("| per frame | median | p95 | max |\n|---|---:|---:|---:|");

@@ -123,5 +123,9 @@ pub(crate) fn panel(
         "pop debt: {} wanted nodes not shown yet",
         s.pop_debt_nodes
     ));
+    ui.label(format!(
+        "light grids: {} drawn nodes still without their grid (drawn fully lit)",
+        s.unlit_nodes
+    ));
     ui.label(extra);
 }
