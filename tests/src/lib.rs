@@ -305,6 +305,16 @@ pub mod terrain {
 }
 
 /// GPU helpers: a headless device (lavapipe here and in CI) and a settled viewer.
+/// Unit direction of the ray through the centre of pixel (`px`, `py`) of `cam` (row 0 at the
+/// top), as the renderer's projection places it.
+pub fn pixel_ray(cam: &engine::camera::Camera, px: u32, py: u32) -> glam::DVec3 {
+    let [w, h] = cam.viewport_px;
+    let ty = (cam.fovy_rad * 0.5).tan();
+    let sx = ((f64::from(px) + 0.5) / f64::from(w) * 2.0 - 1.0) * ty * cam.aspect();
+    let sy = (1.0 - (f64::from(py) + 0.5) / f64::from(h) * 2.0) * ty;
+    (cam.forward + cam.right() * sx + cam.up * sy).normalize()
+}
+
 pub mod gpu {
     use engine::camera::Camera;
     use engine::render::{COLOR_FORMAT, Gpu, Target};

@@ -204,9 +204,9 @@ pub struct LightingContent {
     handles: Mutex<Vec<std::thread::JoinHandle<()>>>,
 }
 
-/// The default number of light threads: one less than the cores (as node workers), at least 1.
+/// The default number of light threads: as many as the default node workers.
 pub fn default_light_threads() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get().saturating_sub(1).max(1))
+    crate::stream::StreamSettings::default().workers
 }
 
 impl Drop for LightingContent {
@@ -279,12 +279,6 @@ impl LightingContent {
             .iter()
             .copied()
             .collect()
-    }
-
-    /// Grids alive (held by some node).
-    pub fn live_grids(&self) -> Vec<Arc<SharedGrid>> {
-        let grids = self.inner.grids.lock().expect("grids lock");
-        grids.values().filter_map(Weak::upgrade).collect()
     }
 
     /// Where the camera is (the light threads compute the nearest stale grid next).

@@ -182,14 +182,14 @@ impl LightPool {
         Some(lease)
     }
 
-    /// Writes the lease's grid if it arrived or changed since (a relight); true if it wrote.
-    pub fn refresh(&self, queue: &wgpu::Queue, lease: &LightLease) -> bool {
+    /// Writes the lease's grid if it arrived or changed since (a relight).
+    pub fn refresh(&self, queue: &wgpu::Queue, lease: &LightLease) {
         let version = lease.grid.version();
         if lease.written.load(Ordering::Acquire) == version {
-            return false;
+            return;
         }
         let Some(grid) = lease.grid.grid() else {
-            return false;
+            return;
         };
         let mut texels = Vec::with_capacity(grid.sky.len() * 2);
         for (&sky, &sun) in grid.sky.iter().zip(&grid.sun) {
@@ -220,7 +220,6 @@ impl LightPool {
             },
         );
         lease.written.store(version, Ordering::Release);
-        true
     }
 
     /// Grids holding a tile now.

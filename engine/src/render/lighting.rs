@@ -28,8 +28,6 @@ pub fn light_entry(tree: &QuadTree, work: &NodeWork) -> [f32; 4] {
 
 #[derive(Debug, Default)]
 pub struct LightingRenderer {
-    /// Tiles written this frame (grids that arrived or were relit).
-    pub rewritten: usize,
     /// Drawn nodes still without their grid this frame (drawn fully lit).
     pub unlit_drawn: usize,
 }
@@ -74,13 +72,10 @@ impl NodeRenderer for LightingRenderer {
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        self.rewritten = 0;
         self.unlit_drawn = 0;
         for d in draws.drawn.iter().chain(draws.ancestors) {
-            if let Some(l) = d.work.gpu.get::<NodeLightGpu>()
-                && frame.light.refresh(&gpu.queue, &l.0)
-            {
-                self.rewritten += 1;
+            if let Some(l) = d.work.gpu.get::<NodeLightGpu>() {
+                frame.light.refresh(&gpu.queue, &l.0);
             }
         }
         for d in draws.drawn {

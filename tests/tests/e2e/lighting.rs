@@ -430,11 +430,7 @@ fn rendered_terrain_is_dark_in_the_cliff_shadow_and_lit_beyond_it() {
     );
     // Where each pixel's ray meets the lowland (z = 0), if it does west of the cliff.
     let ground_x = |px: u32, py: u32| -> Option<f64> {
-        let [w, h] = cam.viewport_px;
-        let ty = (cam.fovy_rad * 0.5).tan();
-        let sx = ((f64::from(px) + 0.5) / f64::from(w) * 2.0 - 1.0) * ty * cam.aspect();
-        let sy = (1.0 - (f64::from(py) + 0.5) / f64::from(h) * 2.0) * ty;
-        let dir = (cam.forward + cam.right() * sx + cam.up * sy).normalize();
+        let dir = tests::pixel_ray(&cam, px, py);
         (dir.z < -1e-3).then(|| (cam.position_m + dir * (-cam.position_m.z / dir.z)).x)
     };
     let mut means = Vec::new();

@@ -277,11 +277,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
 /// Whether the ray through pixel (px, py) hits the map's finest surface inside the map
 /// (ray-marched with steps no longer than half the height above ground).
 fn ray_hits_ground(world: &engine::surface::world::World, cam: &Camera, px: u32, py: u32) -> bool {
-    let [w, h] = cam.viewport_px;
-    let ty = (cam.fovy_rad * 0.5).tan();
-    let sx = ((f64::from(px) + 0.5) / f64::from(w) * 2.0 - 1.0) * ty * cam.aspect();
-    let sy = (1.0 - (f64::from(py) + 0.5) / f64::from(h) * 2.0) * ty;
-    let dir = (cam.forward + cam.right() * sx + cam.up * sy).normalize();
+    let dir = tests::pixel_ray(cam, px, py);
     let (o, s) = (world.origin_m(), world.size_m());
     let mut t = 0.0;
     for _ in 0..4000 {

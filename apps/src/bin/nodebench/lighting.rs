@@ -40,11 +40,7 @@ pub(crate) fn section_lighting(
     let mut keys: Vec<NodeKey> = flight_nodes(world, tree, cams, usize::MAX)
         .into_iter()
         .filter(|k| k.level >= level)
-        .map(|k| NodeKey {
-            level,
-            ix: k.ix >> (k.level - level),
-            iy: k.iy >> (k.level - level),
-        })
+        .map(|k| k.ancestor_at(level))
         .collect();
     keys.sort();
     keys.dedup();
