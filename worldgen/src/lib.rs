@@ -24,6 +24,7 @@ pub mod map;
 pub mod noise;
 pub mod par;
 pub mod patches;
+pub mod pm;
 pub mod poisson;
 pub mod progress;
 pub mod roads;

@@ -6,6 +6,7 @@ mod dem_import;
 mod ground;
 mod lighting;
 mod map_format;
+mod pm;
 mod render;
 mod streaming;
 mod terrain;

@@ -88,6 +88,25 @@ enum Command {
         /// The map folder.
         dir: PathBuf,
     },
+    /// Build a progressive mesh from an OBJ or glTF mesh: half-edge collapses down to one
+    /// vertex, the measured error bound of every level, written as a versioned `.pm` file.
+    /// Prints the build times and the error at a few triangle counts.
+    Pm {
+        /// The input mesh (.obj, .gltf, .glb).
+        input: PathBuf,
+        /// Output `.pm` file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Collapse cost: `longest-edge` (the seed's: the longest edge of the vanishing
+        /// triangles, corners survive), `quadric` (Garland-Heckbert with border and seam
+        /// planes) or `melax`.
+        #[arg(long, default_value = "quadric")]
+        cost: String,
+        /// Spacing of the error samples on the full mesh, as a fraction of its diagonal. The
+        /// stored error bound includes the samples' covering radius (spacing / sqrt 3).
+        #[arg(long, default_value_t = 0.005)]
+        sample_fraction: f64,
+    },
 }
 
 /// indicatif bars for the library's long steps.
@@ -149,6 +168,90 @@ fn print_times(times: &[StepTime], total_s: f64) {
 fn write_map(map: &Map, out: &std::path::Path, times: &mut Vec<StepTime>) -> Result<()> {
     worldgen::progress::timed(times, "write map files", || map.write(out))
         .with_context(|| format!("writing map to {}", out.display()))
+}
+
+fn build_pm(
+    input: &std::path::Path,
+    out: &std::path::Path,
+    cost: &str,
+    sample_fraction: f64,
+    bars: &Bars,
+) -> Result<()> {
+    use worldgen::pm::{CostKind, PmMesh, file, load_mesh};
+    let Some(kind) = CostKind::from_name(cost) else {
+        bail!("--cost {cost:?}: expected longest-edge, quadric or melax");
+    };
+    if !(sample_fraction > 0.0 && sample_fraction <= 0.1) {
+        bail!("--sample-fraction {sample_fraction}: expected a number in (0, 0.1]");
+    }
+    let t0 = Instant::now();
+    let (mesh, weld) = load_mesh(input)?;
+    let load_s = t0.elapsed().as_secs_f64();
+    let mut current = String::new();
+    let (pm, times) = PmMesh::build(&mesh, kind, sample_fraction, &mut |part, done, total| {
+        if part != current {
+            if !current.is_empty() {
+                bars.end();
+            }
+            bars.begin(part, total as u64);
+            current = part.to_string();
+        }
+        if let Ok(slot) = bars.bar.lock()
+            && let Some(b) = slot.as_ref()
+        {
+            b.set_position(done as u64);
+        }
+    });
+    bars.end();
+    file::write(&pm, out)?;
+    let bytes = std::fs::metadata(out).map_or(0, |m| m.len());
+    say!(
+        "{} -> {}: {} triangles ({} input, {} degenerate and {} duplicate dropped), {} positions, {} wedges, cost {}",
+        input.display(),
+        out.display(),
+        mesh.triangles.len(),
+        weld.input_triangles,
+        weld.degenerate_dropped,
+        weld.duplicates_dropped,
+        mesh.positions.len(),
+        mesh.wedge_position.len(),
+        kind.name()
+    );
+    say!(
+        "| part | time (s) |\n|---|---:|\n| read + weld | {load_s:.3} |\n| collapse order | {:.3} |\n| error bounds | {:.3} |\n| layout | {:.3} |",
+        times.collapse_s,
+        times.error_s,
+        times.assemble_s
+    );
+    say!(
+        "collapse order: {:.2} M input triangles/s; file {} bytes ({:.1} bytes per triangle)",
+        mesh.triangles.len() as f64 / times.collapse_s.max(1e-9) / 1e6,
+        bytes,
+        bytes as f64 / mesh.triangles.len().max(1) as f64
+    );
+    let diag = mesh.diagonal();
+    say!(
+        "| triangles | share | positions | error bound | error / diagonal |\n|---:|---:|---:|---:|---:|"
+    );
+    let full = pm.triangles.len();
+    for share in [1.0, 0.5, 0.1, 0.01, 0.001] {
+        let target = (full as f64 * share).round() as usize;
+        // The coarsest level that still draws at least `target` triangles.
+        let p = pm
+            .levels
+            .iter()
+            .position(|l| l.triangles as usize >= target)
+            .map_or(pm.level_count(), |i| i + 1);
+        let l = pm.levels[p - 1];
+        say!(
+            "| {} | {:.1} % | {p} | {:.4e} | {:.3e} |",
+            l.triangles,
+            100.0 * l.triangles as f64 / full.max(1) as f64,
+            l.error,
+            l.error / diag
+        );
+    }
+    Ok(())
 }
 
 fn main() -> std::process::ExitCode {
@@ -244,6 +347,12 @@ fn run(cli: Cli) -> Result<()> {
             print_times(&times, t0.elapsed().as_secs_f64());
             say!("{}", map.summary());
         }
+        Command::Pm {
+            input,
+            out,
+            cost,
+            sample_fraction,
+        } => build_pm(&input, &out, &cost, sample_fraction, &bars)?,
         Command::Check { dir } => {
             if !dir.join("map.toml").exists() && !dir.is_dir() {
                 bail!("{}: no such map folder", dir.display());

@@ -1,0 +1,465 @@
+//! Progressive meshes (issue 18): hard meshes collapse to one vertex with valid index lists at
+//! every level, per-instance edits agree with the one-pass rebuild, the stored error bounds an
+//! independent measurement on the shared meshes, files are deterministic and malformed inputs
+//! name the file and the problem.
+
+use glam::DVec3;
+use std::path::Path;
+use worldgen::pm::build::{FLAG_FLIPPED, FLAG_ISOLATED};
+use worldgen::pm::mesh::Corner;
+use worldgen::pm::{CostKind, PmEdits, PmInstance, PmMesh, TriMesh, file, obj};
+
+fn corner(p: [f32; 3]) -> Corner {
+    Corner {
+        position: p,
+        uv: None,
+        normal: None,
+    }
+}
+
+fn tri(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [Corner; 3] {
+    [corner(a), corner(b), corner(c)]
+}
+
+/// A bumpy open grid of `n` x `n` quads (open border on all four sides).
+fn grid(n: usize) -> Vec<[Corner; 3]> {
+    let h = |i: usize, j: usize| [i as f32, j as f32, ((i * 7 + j * 3) % 5) as f32 * 0.3];
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            out.push(tri(h(i, j), h(i + 1, j), h(i + 1, j + 1)));
+            out.push(tri(h(i, j), h(i + 1, j + 1), h(i, j + 1)));
+        }
+    }
+    out
+}
+
+fn tetrahedron(o: [f32; 3]) -> Vec<[Corner; 3]> {
+    let p = |x: f32, y: f32, z: f32| [o[0] + x, o[1] + y, o[2] + z];
+    let (a, b, c, d) = (p(0., 0., 0.), p(1., 0., 0.), p(0., 1., 0.), p(0., 0., 1.));
+    vec![tri(a, c, b), tri(a, b, d), tri(b, c, d), tri(c, a, d)]
+}
+
+/// The hard cases of the issue, by name.
+fn hard_meshes() -> Vec<(&'static str, Vec<[Corner; 3]>)> {
+    let o = [0.0, 0.0, 0.0];
+    let x = [1.0, 0.0, 0.0];
+    let y = [0.0, 1.0, 0.0];
+    let xy = [1.0, 1.0, 0.0];
+    let mut seam = grid(4);
+    // Give the left half and right half different UVs: a seam down the middle.
+    for t in &mut seam {
+        for c in t.iter_mut() {
+            let side = if c.position[0] < 2.0 { 0.0 } else { 0.5 };
+            c.uv = Some([side + c.position[0] * 0.1, c.position[1] * 0.1]);
+        }
+    }
+    let mut disconnected = tetrahedron([0.0; 3]);
+    disconnected.extend(tetrahedron([5.0, 0.0, 0.0]));
+    disconnected.extend(tetrahedron([0.0, 9.0, 1.0]));
+    disconnected.push(tri([20.0, 0.0, 0.0], [21.0, 0.0, 0.0], [20.0, 1.0, 0.0]));
+    vec![
+        ("single triangle", vec![tri(o, x, y)]),
+        ("two-triangle quad", vec![tri(o, x, xy), tri(o, xy, y)]),
+        (
+            "non-manifold edge (three triangles on one edge)",
+            vec![
+                tri(o, x, y),
+                tri(x, o, [0.5, -1.0, 0.0]),
+                tri(o, x, [0.5, 0.0, 1.0]),
+            ],
+        ),
+        (
+            "zero-area and degenerate triangles",
+            vec![
+                tri(o, x, y),
+                tri(o, x, [2.0, 0.0, 0.0]),
+                tri(o, o, x),
+                tri(x, xy, y),
+            ],
+        ),
+        (
+            "duplicate triangles and vertices",
+            vec![
+                tri(o, x, y),
+                tri(o, x, y),
+                tri(x, y, o),
+                tri(y, x, xy),
+                tri(y, x, xy),
+            ],
+        ),
+        ("disconnected parts", disconnected),
+        ("open borders", grid(6)),
+        ("UV seam", seam),
+    ]
+}
+
+fn positions_of(pm: &PmMesh, indices: &[u32]) -> Vec<[u32; 3]> {
+    indices
+        .chunks_exact(3)
+        .map(|t| [t[0], t[1], t[2]].map(|w| pm.wedge_position[w as usize]))
+        .collect()
+}
+
+fn normal(pm: &PmMesh, t: [u32; 3]) -> DVec3 {
+    let p = t.map(|i| {
+        let q = pm.positions[i as usize];
+        DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64)
+    });
+    (p[1] - p[0]).cross(p[2] - p[0])
+}
+
+/// Every level of `pm`: indices in range and drawing no degenerate triangle; between
+/// neighbouring levels, a collapse not flagged as flipping turns no surviving triangle over.
+fn check_levels(name: &str, pm: &PmMesh) {
+    pm.validate()
+        .unwrap_or_else(|(f, m)| panic!("{name}: invalid PM: {f}: {m}"));
+    assert_eq!(pm.triangles_at(1), 0, "{name}: level 1 draws nothing");
+    let mut idx = Vec::new();
+    let mut prev: Option<Vec<[u32; 3]>> = None;
+    for p in (1..=pm.level_count()).rev() {
+        pm.indices_at(p, &mut idx);
+        assert_eq!(idx.len(), pm.triangles_at(p) * 3);
+        let live = pm.wedges_at(p) as u32;
+        assert!(
+            idx.iter().all(|&w| w < live),
+            "{name}: level {p} names a dead wedge"
+        );
+        let tris = positions_of(pm, &idx);
+        for t in &tris {
+            assert!(
+                t[0] != t[1] && t[1] != t[2] && t[0] != t[2],
+                "{name}: level {p} draws a degenerate triangle {t:?}"
+            );
+        }
+        if let Some(finer) = &prev {
+            let flags = pm.levels[p].flags;
+            if flags & FLAG_FLIPPED == 0 {
+                for (k, t) in tris.iter().enumerate() {
+                    let (n0, n1) = (normal(pm, finer[k]), normal(pm, *t));
+                    if n0.length_squared() > 1e-20 {
+                        assert!(
+                            n0.dot(n1) > 0.0,
+                            "{name}: collapse {} -> {p} flips triangle {k} without the flag",
+                            p + 1
+                        );
+                    }
+                }
+            }
+        }
+        prev = Some(tris);
+    }
+}
+
+/// Walks an instance through levels (steps of 1, jumps, back and forth) and compares with the
+/// one-pass rebuild at every stop.
+fn check_instance_edits(name: &str, pm: &PmMesh) {
+    let edits = PmEdits::new(pm);
+    let n = pm.level_count();
+    let mut inst = PmInstance::new(pm, n);
+    let mut idx = Vec::new();
+    let mut stops: Vec<usize> = (1..=n).rev().collect();
+    stops.extend(1..=n);
+    let mut x = 12345u64;
+    for _ in 0..64 {
+        x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        stops.push(1 + (x >> 33) as usize % n);
+    }
+    for p in stops {
+        inst.set_level(pm, &edits, p);
+        pm.indices_at(p, &mut idx);
+        assert_eq!(
+            inst.indices(),
+            &idx[..],
+            "{name}: edited list differs at level {p}"
+        );
+    }
+}
+
+#[test]
+fn hard_meshes_collapse_to_one_vertex_with_valid_lists_at_every_level() {
+    for (name, tris) in hard_meshes() {
+        let (mesh, _) = TriMesh::weld(&tris);
+        for cost in CostKind::ALL {
+            let label = format!("{name} ({})", cost.name());
+            let (pm, _) = PmMesh::build(&mesh, cost, 0.01, &mut |_, _, _| {});
+            assert_eq!(pm.level_count(), mesh.positions.len(), "{label}");
+            assert_eq!(pm.triangles.len(), mesh.triangles.len(), "{label}");
+            check_levels(&label, &pm);
+            check_instance_edits(&label, &pm);
+        }
+    }
+    // The weld itself: duplicates and degenerate triangles are counted, not drawn.
+    let (mesh, report) = TriMesh::weld(&hard_meshes()[4].1);
+    assert_eq!((report.duplicates_dropped, mesh.triangles.len()), (3, 2));
+    let (_, report) = TriMesh::weld(&hard_meshes()[3].1);
+    assert_eq!(report.degenerate_dropped, 1);
+}
+
+#[test]
+fn disconnected_parts_end_in_isolated_collapses() {
+    let (name, tris) = &hard_meshes()[5];
+    let (mesh, _) = TriMesh::weld(tris);
+    let (pm, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {});
+    // Four parts, each ending as lone points once its last triangles vanish (a tetrahedron
+    // ends as two points, a triangle as two): these join by isolated collapses, which happen
+    // only when nothing is drawn any more.
+    let isolated: Vec<usize> = (2..=pm.level_count())
+        .filter(|&p| pm.levels[p - 1].flags & FLAG_ISOLATED != 0)
+        .collect();
+    assert_eq!(
+        isolated.len(),
+        7,
+        "{name}: 3 tetrahedra and a triangle leave 8 points"
+    );
+    for p in isolated {
+        assert_eq!(
+            pm.triangles_at(p),
+            0,
+            "{name}: isolated collapse at a drawn level {p}"
+        );
+    }
+}
+
+/// Independent reference: points drawn uniformly by area on one mesh (a seeded generator, not the
+/// builder's lattice), each measured by brute force against every triangle of the other.
+fn reference_distance(from: &[[DVec3; 3]], to: &[[DVec3; 3]], points: usize, seed: u64) -> f64 {
+    let areas: Vec<f64> = from
+        .iter()
+        .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).length() / 2.0)
+        .collect();
+    let total: f64 = areas.iter().sum();
+    let mut cumulative = Vec::with_capacity(areas.len());
+    let mut acc = 0.0;
+    for a in &areas {
+        acc += a;
+        cumulative.push(acc);
+    }
+    let mut x = seed;
+    let mut rand = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut worst = 0.0f64;
+    for _ in 0..points {
+        let r = rand() * total;
+        let k = cumulative.partition_point(|&c| c < r).min(from.len() - 1);
+        let (mut u, mut v) = (rand(), rand());
+        if u + v > 1.0 {
+            u = 1.0 - u;
+            v = 1.0 - v;
+        }
+        let [a, b, c] = from[k];
+        let p = a + (b - a) * u + (c - a) * v;
+        let d = to
+            .iter()
+            .map(|t| segment_free_distance(p, t))
+            .fold(f64::INFINITY, f64::min);
+        worst = worst.max(d);
+    }
+    worst
+}
+
+/// Distance from a point to a triangle by barycentric clamping on the three edges and the
+/// interior (written independently of worldgen's kernel).
+fn segment_free_distance(p: DVec3, t: &[DVec3; 3]) -> f64 {
+    let [a, b, c] = *t;
+    let n = (b - a).cross(c - a);
+    let seg = |s: DVec3, e: DVec3| {
+        let d = e - s;
+        let l = d.length_squared();
+        let h = if l > 0.0 {
+            ((p - s).dot(d) / l).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (s + d * h - p).length()
+    };
+    let mut best = seg(a, b).min(seg(b, c)).min(seg(c, a));
+    let nl = n.length();
+    if nl > 0.0 {
+        let nn = n / nl;
+        let q = p - nn * (p - a).dot(nn);
+        let w0 = (b - q).cross(c - q).dot(nn);
+        let w1 = (c - q).cross(a - q).dot(nn);
+        let w2 = (a - q).cross(b - q).dot(nn);
+        if w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0 {
+            best = best.min((p - q).length());
+        }
+    }
+    best
+}
+
+fn soup(pm: &PmMesh, p: usize) -> Vec<[DVec3; 3]> {
+    let mut idx = Vec::new();
+    pm.indices_at(p, &mut idx);
+    idx.chunks_exact(3)
+        .map(|t| {
+            [t[0], t[1], t[2]].map(|w| {
+                let q = pm.positions[pm.wedge_position[w as usize] as usize];
+                DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64)
+            })
+        })
+        .collect()
+}
+
+fn check_bound(path: &Path, cost: CostKind, levels: usize, points: usize) {
+    let (mesh, _) = obj::load(path).expect("shared mesh loads");
+    let (pm, _) = PmMesh::build(&mesh, cost, 0.005, &mut |_, _, _| {});
+    check_levels(&path.display().to_string(), &pm);
+    let full = soup(&pm, pm.level_count());
+    let n = pm.level_count();
+    // Log-spaced levels from 3 positions up to about half the mesh, plus seeded random ones.
+    let mut chosen: Vec<usize> = (0..levels)
+        .map(|k| {
+            ((3.0f64).ln() + ((n as f64 / 2.0).ln() - 3.0f64.ln()) * k as f64 / (levels - 1) as f64)
+                .exp() as usize
+        })
+        .collect();
+    chosen.extend([n - 1, n - 7, n / 3]);
+    chosen.sort_unstable();
+    chosen.dedup();
+    let mut closest = f64::INFINITY;
+    for (k, &p) in chosen.iter().enumerate() {
+        let level = soup(&pm, p);
+        if level.is_empty() {
+            continue;
+        }
+        let measured = reference_distance(&full, &level, points, 7 + k as u64)
+            .max(reference_distance(&level, &full, points, 1000 + k as u64));
+        let stored = pm.levels[p - 1].error as f64;
+        assert!(
+            stored >= measured * (1.0 - 1e-5),
+            "{} ({}) level {p}: stored error {stored:.4e} below the measured {measured:.4e}",
+            path.display(),
+            cost.name()
+        );
+        closest = closest.min(stored / measured.max(1e-12));
+    }
+    println!(
+        "{} ({}): {} levels checked, tightest stored / measured = {closest:.2}",
+        path.display(),
+        cost.name(),
+        chosen.len()
+    );
+}
+
+#[test]
+fn stored_error_bounds_an_independent_measurement_on_the_shared_meshes() {
+    for (mesh, cost, levels, points) in [
+        ("meshes/cow.obj", CostKind::Quadric, 24, 1500),
+        ("meshes/cow.obj", CostKind::LongestEdge, 12, 1500),
+        ("meshes/spot.obj", CostKind::Melax, 12, 1500),
+        ("meshes/stanford-bunny.obj", CostKind::Quadric, 4, 300),
+    ] {
+        let Some(path) = tests::shared_data(mesh) else {
+            return;
+        };
+        check_bound(&path, cost, levels, points);
+    }
+}
+
+#[test]
+fn uv_seams_of_spot_stay_split_and_pm_bytes_are_deterministic() {
+    let Some(path) = tests::shared_data("meshes/spot.obj") else {
+        return;
+    };
+    let (mesh, report) = obj::load(&path).expect("spot loads");
+    assert!(
+        mesh.wedge_position.len() > mesh.positions.len(),
+        "spot has UV seams: more wedges ({}) than positions ({})",
+        mesh.wedge_position.len(),
+        mesh.positions.len()
+    );
+    assert_eq!(report.degenerate_dropped, 0);
+    let (a, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {});
+    let (b, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {});
+    let bytes = file::to_bytes(&a);
+    assert_eq!(bytes, file::to_bytes(&b), "two builds give different bytes");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("spot.pm");
+    file::write(&a, &out).expect("write");
+    let back = file::read(&out).expect("read back");
+    assert_eq!(back, a);
+    // Every wedge keeps its UV through the layout (the seam is two wedges on one position).
+    assert_eq!(back.uvs.len(), back.wedge_position.len());
+}
+
+fn expect_err(bytes: &[u8], what: &str) {
+    let path = Path::new("broken/thing.pm");
+    let err = file::from_bytes(bytes, path).expect_err(what).to_string();
+    assert!(
+        err.contains("broken/thing.pm"),
+        "{what}: error {err:?} does not name the file"
+    );
+    println!("{what}: {err}");
+}
+
+#[test]
+fn malformed_pm_and_obj_files_are_refused_with_the_file_and_the_problem() {
+    let (mesh, _) = TriMesh::weld(&grid(3));
+    let (pm, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {});
+    let good = file::to_bytes(&pm);
+    file::from_bytes(&good, Path::new("ok.pm")).expect("the good file reads");
+    expect_err(&good[..good.len() - 1], "truncated");
+    expect_err(b"not a mesh at all", "bad magic");
+    let mut v = good.clone();
+    v[8] = 9;
+    expect_err(&v, "version");
+    let mut v = good.clone();
+    let mid = v.len() / 2;
+    v[mid] ^= 0x40;
+    let err = file::from_bytes(&v, Path::new("x.pm"))
+        .expect_err("flipped bit")
+        .to_string();
+    assert!(err.contains("checksum"), "{err}");
+    // A consistent checksum over an inconsistent body: the validator names the field.
+    let mut bad = pm.clone();
+    let last = bad.collapse_to.len() - 1;
+    bad.collapse_to[last] = last as u32;
+    let err = file::from_bytes(&file::to_bytes(&bad), Path::new("x.pm"))
+        .expect_err("self-collapse")
+        .to_string();
+    assert!(err.contains("collapse_to"), "{err}");
+    let mut bad = pm.clone();
+    bad.levels[0].triangles = 5;
+    let err = file::from_bytes(&file::to_bytes(&bad), Path::new("x.pm"))
+        .expect_err("level counts")
+        .to_string();
+    assert!(err.contains("levels.triangles"), "{err}");
+
+    let path = Path::new("models/broken.obj");
+    for (text, needle) in [
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 x\nf 1 2 3\n",
+            ":3: `v` component 3",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n",
+            ":4: vertex index 4 is out of range",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nf 1 2\n",
+            ":3: a face needs at least 3 corners",
+        ),
+        ("v 0 0 0\nfoo 1\n", ":2: unknown statement"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "index 0"),
+        ("v 0 0 nan\n", "not finite"),
+    ] {
+        let err = obj::parse(text, path).expect_err(needle).to_string();
+        assert!(
+            err.starts_with("models/broken.obj") && err.contains(needle),
+            "{err:?} lacks {needle:?}"
+        );
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let empty = dir.path().join("empty.obj");
+    std::fs::write(&empty, "v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n").expect("write");
+    let err = obj::load(&empty).expect_err("all degenerate").to_string();
+    assert!(
+        err.contains("empty.obj") && err.contains("no triangles"),
+        "{err}"
+    );
+}

@@ -1,0 +1,239 @@
+//! The stored error of every prefix: an upper bound on the two-sided Hausdorff distance between
+//! the mesh at that level and the full mesh, computed while replaying the collapse order.
+//!
+//! - **Full mesh to level.** The full mesh is covered by grid samples (every point within `r_a`
+//!   of one, see [`grid_samples`]). Each sample keeps a face of the current level and its
+//!   distance to it; when a collapse changes faces, their samples are reassigned to the nearest
+//!   face around the kept vertex. The distance to one face is at least the distance to the whole
+//!   level, so `max(sample bounds) + r_a` bounds this side (distance is 1-Lipschitz).
+//! - **Level to full mesh.** Each face of the level, when it is created, is sampled on its own
+//!   grid (spacing a quarter of the current error, never under the full mesh's spacing) and every
+//!   sample is measured exactly against the full mesh ([`TriangleBvh`]); the face's bound is the
+//!   largest sample distance plus the face's covering radius.
+//!
+//! The stored value is the larger side. It is never the collapse cost; tests compare it with an
+//! independent dense measurement. A level without triangles draws nothing; it stores the
+//! diagonal of the bounds.
+
+use super::build::CollapseOrder;
+use super::bvh::TriangleBvh;
+use super::geom::{grid_samples, point_triangle_distance_sq, v3};
+use super::mesh::TriMesh;
+use glam::DVec3;
+
+/// Max-segment tree over faces.
+struct MaxTree {
+    n: usize,
+    v: Vec<f64>,
+}
+
+impl MaxTree {
+    fn new(n: usize) -> Self {
+        MaxTree {
+            n,
+            v: vec![f64::NEG_INFINITY; 2 * n.max(1)],
+        }
+    }
+    fn set(&mut self, i: usize, x: f64) {
+        let mut k = i + self.n;
+        self.v[k] = x;
+        while k > 1 {
+            k /= 2;
+            self.v[k] = self.v[2 * k].max(self.v[2 * k + 1]);
+        }
+    }
+    fn max(&self) -> f64 {
+        if self.n == 0 {
+            f64::NEG_INFINITY
+        } else {
+            self.v[1]
+        }
+    }
+}
+
+/// Largest local subset of the full mesh searched directly (beyond it, the hierarchy).
+const LOCAL_LIMIT: usize = 256;
+
+/// Largest distance from `points` to the nearest of `tris` (exact over that subset), measuring
+/// in full only points that could raise the running maximum.
+fn local_max_distance(points: &[DVec3], tris: &[[DVec3; 3]]) -> f64 {
+    let mut worst_sq = 0.0f64;
+    for &p in points {
+        let mut best = f64::INFINITY;
+        for [a, b, c] in tris {
+            best = best.min(point_triangle_distance_sq(p, *a, *b, *c));
+            if best <= worst_sq {
+                break;
+            }
+        }
+        worst_sq = worst_sq.max(best);
+    }
+    worst_sq.sqrt()
+}
+
+/// Per-level error bounds: `errors[s]` is the bound after `s` collapses (`errors[0] == 0`).
+pub fn level_errors(
+    mesh: &TriMesh,
+    order: &CollapseOrder,
+    sample_spacing: f64,
+    progress: &mut dyn FnMut(usize),
+) -> Vec<f64> {
+    let pos: Vec<DVec3> = mesh.positions.iter().map(|&p| v3(p)).collect();
+    let mut tri_p = mesh.position_triangles();
+    let nt = tri_p.len();
+    let diag = mesh.diagonal() as f64;
+    let full: Vec<[DVec3; 3]> = tri_p.iter().map(|t| t.map(|i| pos[i as usize])).collect();
+    let bvh = TriangleBvh::new(full.clone());
+    let mut alive = vec![true; nt];
+    let mut pos_tris = vec![Vec::new(); pos.len()];
+    for (t, tri) in tri_p.iter().enumerate() {
+        for &p in tri {
+            pos_tris[p as usize].push(t as u32);
+        }
+    }
+    let original_ring = pos_tris.clone();
+    // Samples of the full mesh, each with its current face and distance bound.
+    let mut sample_pos = Vec::new();
+    let mut sample_tri: Vec<u32> = Vec::new();
+    let mut face_samples: Vec<Vec<u32>> = vec![Vec::new(); nt];
+    let mut r_a = 0.0f64;
+    for (t, [a, b, c]) in full.iter().enumerate() {
+        r_a = r_a.max(grid_samples(*a, *b, *c, sample_spacing, |p| {
+            face_samples[t].push(sample_pos.len() as u32);
+            sample_pos.push(p);
+            sample_tri.push(t as u32);
+        }));
+    }
+    let mut sample_d = vec![0.0f64; sample_pos.len()];
+    let mut tree_a = MaxTree::new(nt);
+    let mut tree_b = MaxTree::new(nt);
+    for t in 0..nt {
+        tree_a.set(t, 0.0);
+        tree_b.set(t, 0.0);
+    }
+    let mut live_faces = nt;
+    let mut errors = Vec::with_capacity(order.collapses.len() + 1);
+    errors.push(0.0);
+    let mut last = 0.0f64;
+    let face_points = |tri: [u32; 3]| tri.map(|i| pos[i as usize]);
+    let mut scratch: Vec<DVec3> = Vec::new();
+    let mut local: Vec<[DVec3; 3]> = Vec::new();
+    let mut mark = vec![0u32; nt];
+    let mut stamp = 0u32;
+    for (step, c) in order.collapses.iter().enumerate() {
+        let (u, v) = (c.removed, c.kept);
+        let tris_u = std::mem::take(&mut pos_tris[u as usize]);
+        if tris_u.is_empty() {
+            errors.push(if live_faces == 0 { diag } else { last });
+            continue;
+        }
+        let mut orphans: Vec<u32> = Vec::new();
+        let mut moved = Vec::new();
+        for &t in &tris_u {
+            orphans.append(&mut face_samples[t as usize]);
+            if tri_p[t as usize].contains(&v) {
+                alive[t as usize] = false;
+                live_faces -= 1;
+                tree_a.set(t as usize, f64::NEG_INFINITY);
+                tree_b.set(t as usize, f64::NEG_INFINITY);
+                for p in tri_p[t as usize] {
+                    if p != u {
+                        pos_tris[p as usize].retain(|&x| x != t);
+                    }
+                }
+            } else {
+                for p in &mut tri_p[t as usize] {
+                    if *p == u {
+                        *p = v;
+                    }
+                }
+                pos_tris[v as usize].push(t);
+                moved.push(t);
+            }
+        }
+        // Full -> level: reassign the orphaned samples to the nearest face around v.
+        let candidates: Vec<u32> = if pos_tris[v as usize].is_empty() {
+            (0..nt as u32).filter(|&t| alive[t as usize]).collect()
+        } else {
+            pos_tris[v as usize].clone()
+        };
+        let cand_points: Vec<[DVec3; 3]> = candidates
+            .iter()
+            .map(|&t| face_points(tri_p[t as usize]))
+            .collect();
+        let mut touched: Vec<u32> = moved.clone();
+        if !candidates.is_empty() {
+            for &smp in &orphans {
+                let p = sample_pos[smp as usize];
+                let mut best = f64::INFINITY;
+                let mut best_face = candidates[0];
+                for (k, [a, b, cc]) in cand_points.iter().enumerate() {
+                    let d = point_triangle_distance_sq(p, *a, *b, *cc);
+                    if d < best {
+                        best = d;
+                        best_face = candidates[k];
+                    }
+                }
+                sample_d[smp as usize] = best.sqrt();
+                face_samples[best_face as usize].push(smp);
+                if !touched.contains(&best_face) {
+                    touched.push(best_face);
+                }
+            }
+        }
+        for t in touched {
+            let m = face_samples[t as usize]
+                .iter()
+                .map(|&smp| sample_d[smp as usize])
+                .fold(0.0f64, f64::max);
+            tree_a.set(t as usize, m);
+        }
+        // Level -> full: sample each moved face at a spacing tied to the current error and
+        // measure against the full mesh. Near the kept vertex the part of the full mesh that maps
+        // here is the original triangles whose samples the faces around v hold; the distance to
+        // that subset bounds the distance to the whole mesh from above. A large subset (coarse
+        // levels) uses the hierarchy instead.
+        let spacing_b = sample_spacing.max(0.25 * last);
+        stamp += 1;
+        local.clear();
+        let mut add = |o: u32, local: &mut Vec<[DVec3; 3]>| {
+            if mark[o as usize] != stamp && local.len() <= LOCAL_LIMIT {
+                mark[o as usize] = stamp;
+                local.push(full[o as usize]);
+            }
+        };
+        for &f in &pos_tris[v as usize] {
+            // The original triangles around the face's corners (all original vertices) ...
+            for p in tri_p[f as usize] {
+                for &o in &original_ring[p as usize] {
+                    add(o, &mut local);
+                }
+            }
+            // ... and those whose samples the face holds.
+            for &smp in &face_samples[f as usize] {
+                add(sample_tri[smp as usize], &mut local);
+            }
+        }
+        for &t in &moved {
+            let [a, b, cc] = face_points(tri_p[t as usize]);
+            scratch.clear();
+            let r = grid_samples(a, b, cc, spacing_b, |p| scratch.push(p));
+            let worst = if local.len() <= LOCAL_LIMIT {
+                local_max_distance(&scratch, &local)
+            } else {
+                bvh.max_distance(scratch.iter().copied())
+            };
+            tree_b.set(t as usize, worst + r);
+        }
+        last = if live_faces == 0 {
+            diag
+        } else {
+            (tree_a.max() + r_a).max(tree_b.max())
+        };
+        errors.push(last);
+        if step % 256 == 0 {
+            progress(step);
+        }
+    }
+    errors
+}

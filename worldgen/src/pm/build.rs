@@ -1,0 +1,700 @@
+//! The offline collapse order: repeated half-edge collapses u -> v (u's wedges move onto v's
+//! position, which survives unchanged) until one position is left.
+//!
+//! Three costs, chosen per build:
+//! - [`CostKind::LongestEdge`], the seed's: the longest edge of the triangles that vanish; the
+//!   direction (which end survives) keeps the corner: the smoother end (lower [`cornerness`]) is
+//!   removed.
+//! - [`CostKind::Quadric`] (Garland-Heckbert, half-edge form): the squared distance of v from the
+//!   planes accumulated at u, with border and seam edges adding perpendicular constraint planes.
+//! - [`CostKind::Melax`]: edge length x curvature (Melax 1998), borders held by a curvature of 1.
+//!
+//! Every cost forbids collapses that flip a moving triangle's normal while another collapse is
+//! available; such collapses are taken only when nothing else remains (flagged in the output).
+//! When no triangle is left, isolated positions (the last points of disconnected parts) collapse
+//! onto the surviving position, so every mesh reaches one vertex.
+
+use super::geom::{area_normal, v3};
+use super::mesh::TriMesh;
+use glam::DVec3;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// Which cost orders the collapses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CostKind {
+    LongestEdge,
+    Quadric,
+    Melax,
+}
+
+impl CostKind {
+    pub const ALL: [CostKind; 3] = [CostKind::LongestEdge, CostKind::Quadric, CostKind::Melax];
+
+    /// Name used on the command line and in files and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            CostKind::LongestEdge => "longest-edge",
+            CostKind::Quadric => "quadric",
+            CostKind::Melax => "melax",
+        }
+    }
+
+    /// Code stored in PM files.
+    pub fn code(self) -> u8 {
+        match self {
+            CostKind::LongestEdge => 0,
+            CostKind::Quadric => 1,
+            CostKind::Melax => 2,
+        }
+    }
+
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| c.code() == code)
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| c.name() == name)
+    }
+}
+
+/// A moving triangle whose normal turns by more than acos(FLIP_COS) (about 75 degrees) counts as
+/// flipped: such folds are where the surface error jumps.
+const FLIP_COS: f64 = 0.25;
+
+/// Flag of a collapse that had to flip a triangle normal (nothing else was left).
+pub const FLAG_FLIPPED: u8 = 1;
+/// Flag of a collapse of an isolated position (no triangle touched it).
+pub const FLAG_ISOLATED: u8 = 2;
+
+/// One half-edge collapse: position `removed` moves onto `kept`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Collapse {
+    pub removed: u32,
+    pub kept: u32,
+    /// The cost that ordered it (units depend on the cost kind).
+    pub cost: f64,
+    pub flags: u8,
+}
+
+/// The full collapse order of a mesh.
+#[derive(Debug, Clone)]
+pub struct CollapseOrder {
+    pub kind: CostKind,
+    /// `positions - 1` collapses (none for an empty mesh).
+    pub collapses: Vec<Collapse>,
+    /// Where each wedge goes when its position is removed (`u32::MAX` for the survivor's wedges).
+    pub wedge_target: Vec<u32>,
+    /// The step (1-based index into `collapses`) at which each triangle vanishes.
+    pub triangle_step: Vec<u32>,
+    /// The last position standing.
+    pub survivor: u32,
+}
+
+/// Symmetric 4x4 quadric stored as its 10 upper-triangle entries, plus the total weight of its
+/// planes: the cost is the weighted *mean* squared plane distance, so a region of small triangles
+/// is not cheap to move far (a plain area-weighted sum makes thin features vanish early).
+#[derive(Debug, Clone, Copy, Default)]
+struct Quadric([f64; 10], f64);
+
+impl Quadric {
+    /// `w * (n.p + d)^2` for a unit normal `n`.
+    fn plane(n: DVec3, d: f64, w: f64) -> Self {
+        Quadric(
+            [
+                w * n.x * n.x,
+                w * n.x * n.y,
+                w * n.x * n.z,
+                w * n.x * d,
+                w * n.y * n.y,
+                w * n.y * n.z,
+                w * n.y * d,
+                w * n.z * n.z,
+                w * n.z * d,
+                w * d * d,
+            ],
+            w,
+        )
+    }
+    fn add(&mut self, o: &Quadric) {
+        for k in 0..10 {
+            self.0[k] += o.0[k];
+        }
+        self.1 += o.1;
+    }
+    fn eval(&self, p: DVec3) -> f64 {
+        let q = &self.0;
+        let (x, y, z) = (p.x, p.y, p.z);
+        (q[0] * x * x
+            + q[4] * y * y
+            + q[7] * z * z
+            + 2.0 * (q[1] * x * y + q[2] * x * z + q[5] * y * z)
+            + 2.0 * (q[3] * x + q[6] * y + q[8] * z)
+            + q[9])
+            .max(0.0)
+            / self.1.max(f64::MIN_POSITIVE)
+    }
+}
+
+/// Priority key: tier (0 normal, 1 flips a normal), then cost, then the removed end's cornerness.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Key {
+    tier: u8,
+    cost: f64,
+    tie: f64,
+}
+
+impl Key {
+    fn cmp_key(&self, o: &Self) -> Ordering {
+        self.tier
+            .cmp(&o.tier)
+            .then(self.cost.total_cmp(&o.cost))
+            .then(self.tie.total_cmp(&o.tie))
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    key: Key,
+    removed: u32,
+    kept: u32,
+    version: u32,
+}
+
+impl PartialEq for Entry {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o) == Ordering::Equal
+    }
+}
+impl Eq for Entry {}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Entry {
+    /// Reversed so that `BinaryHeap` pops the cheapest; ties broken by position ids so the order
+    /// is deterministic.
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.key
+            .cmp_key(&self.key)
+            .then(o.removed.cmp(&self.removed))
+            .then(o.kept.cmp(&self.kept))
+    }
+}
+
+/// Per-position facts shared by the evaluation of all its candidate collapses.
+struct Context {
+    corner: f64,
+    on_border: bool,
+    on_seam: bool,
+}
+
+/// Reused buffers (no allocation per evaluation).
+#[derive(Default)]
+struct Scratch {
+    neighbours: Vec<u32>,
+    vanish: Vec<DVec3>,
+    moving: Vec<DVec3>,
+}
+
+struct State<'a> {
+    mesh: &'a TriMesh,
+    kind: CostKind,
+    pos: Vec<DVec3>,
+    tri_w: Vec<[u32; 3]>,
+    tri_alive: Vec<bool>,
+    pos_tris: Vec<Vec<u32>>,
+    pos_wedges: Vec<Vec<u32>>,
+    pos_alive: Vec<bool>,
+    quadric: Vec<Quadric>,
+    version: Vec<u32>,
+}
+
+impl State<'_> {
+    fn tri_pos(&self, t: u32) -> [u32; 3] {
+        self.tri_w[t as usize].map(|w| self.mesh.wedge_position[w as usize])
+    }
+
+    fn neighbours(&self, u: u32) -> Vec<u32> {
+        let mut out = Vec::with_capacity(8);
+        self.neighbours_into(u, &mut out);
+        out
+    }
+
+    fn neighbours_into(&self, u: u32, out: &mut Vec<u32>) {
+        out.clear();
+        for &t in &self.pos_tris[u as usize] {
+            for p in self.tri_pos(t) {
+                if p != u && !out.contains(&p) {
+                    out.push(p);
+                }
+            }
+        }
+    }
+
+    /// True when edge (u, x) has exactly one live triangle (an open border).
+    fn is_border_edge(&self, u: u32, x: u32) -> bool {
+        let mut n = 0;
+        for &t in &self.pos_tris[u as usize] {
+            if self.tri_pos(t).contains(&x) {
+                n += 1;
+            }
+        }
+        n == 1
+    }
+
+    /// How much of a corner `u` is: the largest deviation of a triangle normal from the mean
+    /// normal (0 on a plane, up to 2), plus 1 on an open border, plus 1 on a seam.
+    fn cornerness(&self, u: u32) -> f64 {
+        let tris = &self.pos_tris[u as usize];
+        let mut mean = DVec3::ZERO;
+        let mut normals = Vec::with_capacity(tris.len());
+        for &t in tris {
+            let [a, b, c] = self.tri_pos(t).map(|p| self.pos[p as usize]);
+            let n = area_normal(a, b, c);
+            mean += n;
+            normals.push(n.normalize_or_zero());
+        }
+        let mean = mean.normalize_or_zero();
+        let mut c = normals
+            .iter()
+            .map(|n| 1.0 - n.dot(mean))
+            .fold(0.0f64, f64::max);
+        if self
+            .neighbours(u)
+            .into_iter()
+            .any(|x| self.is_border_edge(u, x))
+        {
+            c += 1.0;
+        }
+        if self.pos_wedges[u as usize].len() > 1 {
+            c += 1.0;
+        }
+        c
+    }
+
+    /// The key of collapsing u onto v. `corner_u` is u's [`State::cornerness`] (longest-edge
+    /// cost only), `border_u` whether u lies on an open border, `edge_kind` whether (u, v) is a
+    /// border or seam edge, `seam_u` whether u has several wedges.
+    fn evaluate(&self, u: u32, v: u32, ctx: &Context, scratch: &mut Scratch) -> Key {
+        let pu = self.pos[u as usize];
+        let pv = self.pos[v as usize];
+        let mut flips = false;
+        let mut longest = 0.0f64;
+        scratch.vanish.clear();
+        scratch.moving.clear();
+        let mut vanish_count = 0usize;
+        for &t in &self.pos_tris[u as usize] {
+            let tp = self.tri_pos(t);
+            let [a, b, c] = tp.map(|p| self.pos[p as usize]);
+            let n0 = area_normal(a, b, c);
+            if tp.contains(&v) {
+                vanish_count += 1;
+                if self.kind == CostKind::LongestEdge {
+                    longest = longest
+                        .max((b - a).length_squared())
+                        .max((c - b).length_squared())
+                        .max((a - c).length_squared());
+                }
+                if self.kind == CostKind::Melax {
+                    scratch.vanish.push(n0.normalize_or_zero());
+                }
+            } else {
+                let moved = tp.map(|p| if p == u { pv } else { self.pos[p as usize] });
+                let n1 = area_normal(moved[0], moved[1], moved[2]);
+                let l0 = n0.length_squared();
+                if l0 > 0.0 {
+                    let d = n0.dot(n1);
+                    if d <= 0.0 || d * d <= FLIP_COS * FLIP_COS * l0 * n1.length_squared() {
+                        flips = true;
+                    }
+                }
+                if self.kind == CostKind::Melax {
+                    scratch.moving.push(n0.normalize_or_zero());
+                }
+            }
+        }
+        let mut tier = u8::from(flips);
+        let cost = match self.kind {
+            CostKind::LongestEdge => longest.sqrt(),
+            CostKind::Quadric => {
+                // Border and seam vertices move only along their border or seam (they may
+                // still leave it once nothing else is left).
+                if (ctx.on_border || ctx.on_seam) && !self.is_feature_edge(u, v, vanish_count) {
+                    tier = tier.max(1);
+                }
+                self.quadric[u as usize].eval(pv)
+            }
+            CostKind::Melax => {
+                let mut curvature = 0.0f64;
+                for n in scratch.moving.iter().chain(&scratch.vanish) {
+                    let mut least = 1.0f64;
+                    for s in &scratch.vanish {
+                        least = least.min((1.0 - n.dot(*s)) / 2.0);
+                    }
+                    curvature = curvature.max(least);
+                }
+                // Melax's border rule: a border vertex moving along an interior edge would pull
+                // the border in; treat it as fully curved.
+                if ctx.on_border && vanish_count > 1 {
+                    curvature = 1.0;
+                }
+                (pu - pv).length() * curvature
+            }
+        };
+        Key {
+            tier,
+            cost,
+            tie: ctx.corner,
+        }
+    }
+
+    /// True when (u, v) is an open border edge (one triangle) or a seam edge (u's wedges differ
+    /// between the triangles on either side).
+    fn is_feature_edge(&self, u: u32, v: u32, triangles_on_edge: usize) -> bool {
+        if triangles_on_edge == 1 {
+            return true;
+        }
+        let mut wedge: Option<(u32, u32)> = None;
+        for &t in &self.pos_tris[u as usize] {
+            let tw = self.tri_w[t as usize];
+            let mut wu = None;
+            let mut wv = None;
+            for w in tw {
+                let p = self.mesh.wedge_position[w as usize];
+                if p == u {
+                    wu = Some(w);
+                } else if p == v {
+                    wv = Some(w);
+                }
+            }
+            if let (Some(a), Some(b)) = (wu, wv) {
+                match wedge {
+                    None => wedge = Some((a, b)),
+                    Some(x) if x != (a, b) => return true,
+                    Some(_) => {}
+                }
+            }
+        }
+        false
+    }
+
+    fn best(&self, u: u32, scratch: &mut Scratch) -> Option<(Key, u32)> {
+        self.neighbours_into(u, &mut scratch.neighbours);
+        let neighbours = std::mem::take(&mut scratch.neighbours);
+        let border_u = neighbours.iter().any(|&x| self.is_border_edge(u, x));
+        let ctx = Context {
+            corner: if self.kind == CostKind::LongestEdge {
+                self.cornerness(u)
+            } else {
+                0.0
+            },
+            on_border: border_u,
+            on_seam: self.pos_wedges[u as usize].len() > 1,
+        };
+        let mut best: Option<(Key, u32)> = None;
+        for &v in &neighbours {
+            let k = self.evaluate(u, v, &ctx, scratch);
+            let better = match &best {
+                None => true,
+                Some((b, bv)) => match k.cmp_key(b) {
+                    Ordering::Less => true,
+                    Ordering::Equal => v < *bv,
+                    Ordering::Greater => false,
+                },
+            };
+            if better {
+                best = Some((k, v));
+            }
+        }
+        scratch.neighbours = neighbours;
+        best
+    }
+
+    /// Performs the half-edge collapse u -> v: maps u's wedges, removes the triangles on the
+    /// edge, moves the rest onto v. Returns the vanished triangles.
+    fn collapse(
+        &mut self,
+        u: u32,
+        v: u32,
+        step: u32,
+        wedge_target: &mut [u32],
+        triangle_step: &mut [u32],
+    ) -> Vec<u32> {
+        // Split u's triangles into vanishing and moving.
+        let tris_u = std::mem::take(&mut self.pos_tris[u as usize]);
+        let mut vanish = Vec::new();
+        let mut moving = Vec::new();
+        for &t in &tris_u {
+            if self.tri_pos(t).contains(&v) {
+                vanish.push(t);
+            } else {
+                moving.push(t);
+            }
+        }
+        // Map every wedge of u onto a wedge of v: the one it meets across a vanishing triangle,
+        // else the one with the closest attributeself.
+        let wedges_u = std::mem::take(&mut self.pos_wedges[u as usize]);
+        for &w in &wedges_u {
+            let mut target = None;
+            for &t in &vanish {
+                let tw = self.tri_w[t as usize];
+                if tw.contains(&w) {
+                    target = tw
+                        .iter()
+                        .copied()
+                        .find(|&x| self.mesh.wedge_position[x as usize] == v);
+                    break;
+                }
+            }
+            let target = target.unwrap_or_else(|| {
+                *self.pos_wedges[v as usize]
+                    .iter()
+                    .min_by(|&&a, &&b| {
+                        attribute_distance(self.mesh, w, a)
+                            .total_cmp(&attribute_distance(self.mesh, w, b))
+                            .then(a.cmp(&b))
+                    })
+                    .expect("a live position keeps at least one wedge")
+            });
+            wedge_target[w as usize] = target;
+        }
+        for &t in &vanish {
+            self.tri_alive[t as usize] = false;
+            triangle_step[t as usize] = step;
+            for p in self.tri_pos(t) {
+                if p != u {
+                    self.pos_tris[p as usize].retain(|&x| x != t);
+                }
+            }
+        }
+        for &t in &moving {
+            let tw = &mut self.tri_w[t as usize];
+            for w in tw.iter_mut() {
+                if self.mesh.wedge_position[*w as usize] == u {
+                    *w = wedge_target[*w as usize];
+                }
+            }
+            self.pos_tris[v as usize].push(t);
+        }
+        if self.kind == CostKind::Quadric {
+            let qu = self.quadric[u as usize];
+            self.quadric[v as usize].add(&qu);
+        }
+        self.pos_alive[u as usize] = false;
+        self.version[u as usize] += 1;
+        vanish
+    }
+
+    fn push_best(&mut self, heap: &mut BinaryHeap<Entry>, u: u32, scratch: &mut Scratch) {
+        self.version[u as usize] += 1;
+        if let Some((key, v)) = self.best(u, scratch) {
+            heap.push(Entry {
+                key,
+                removed: u,
+                kept: v,
+                version: self.version[u as usize],
+            });
+        }
+    }
+}
+
+fn attribute_distance(mesh: &TriMesh, a: u32, b: u32) -> f64 {
+    let mut d = 0.0;
+    if !mesh.uvs.is_empty() {
+        let (x, y) = (mesh.uvs[a as usize], mesh.uvs[b as usize]);
+        d += ((x[0] - y[0]) as f64).powi(2) + ((x[1] - y[1]) as f64).powi(2);
+    }
+    if !mesh.normals.is_empty() {
+        let (x, y) = (mesh.normals[a as usize], mesh.normals[b as usize]);
+        d += (0..3).map(|k| ((x[k] - y[k]) as f64).powi(2)).sum::<f64>();
+    }
+    d
+}
+
+/// One triangle's side of an edge: its wedges at the lower and higher position, and its normal.
+type EdgeSide = (u32, u32, DVec3);
+
+/// Initial quadrics: area-weighted face planes plus constraint planes along open borders and
+/// attribute seams (weight `SEAM_WEIGHT` x edge length squared).
+fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> Vec<Quadric> {
+    const SEAM_WEIGHT: f64 = 10.0;
+    let mut q = vec![Quadric::default(); pos.len()];
+    // Edge -> the wedges on each side, to find borders and seams.
+    let mut edges: std::collections::HashMap<(u32, u32), Vec<EdgeSide>> =
+        std::collections::HashMap::new();
+    for t in &mesh.triangles {
+        let p = t.map(|w| mesh.wedge_position[w as usize]);
+        let [a, b, c] = p.map(|i| pos[i as usize]);
+        let n2 = area_normal(a, b, c);
+        let area = n2.length() / 2.0;
+        let n = n2.normalize_or_zero();
+        let plane = Quadric::plane(n, -n.dot(a), area);
+        for &i in &p {
+            q[i as usize].add(&plane);
+        }
+        for k in 0..3 {
+            let (i, j) = (p[k], p[(k + 1) % 3]);
+            let key = (i.min(j), i.max(j));
+            let (wi, wj) = if i < j {
+                (t[k], t[(k + 1) % 3])
+            } else {
+                (t[(k + 1) % 3], t[k])
+            };
+            edges.entry(key).or_default().push((wi, wj, n));
+        }
+    }
+    let mut keys: Vec<_> = edges.keys().copied().collect();
+    keys.sort_unstable();
+    for key in keys {
+        let sides = &edges[&key];
+        let border = sides.len() == 1;
+        let seam = sides.iter().any(|s| s.0 != sides[0].0 || s.1 != sides[0].1);
+        if !border && !seam {
+            continue;
+        }
+        let (a, b) = (pos[key.0 as usize], pos[key.1 as usize]);
+        let e = b - a;
+        for s in sides {
+            let m = e.cross(s.2).normalize_or_zero();
+            if m == DVec3::ZERO {
+                continue;
+            }
+            let plane = Quadric::plane(m, -m.dot(a), SEAM_WEIGHT * e.length_squared());
+            q[key.0 as usize].add(&plane);
+            q[key.1 as usize].add(&plane);
+        }
+    }
+    q
+}
+
+/// Computes the full collapse order of `mesh` with cost `kind`. `progress` is called with the
+/// number of collapses done so far (every 1024).
+pub fn collapse_order(
+    mesh: &TriMesh,
+    kind: CostKind,
+    progress: &mut dyn FnMut(usize),
+) -> CollapseOrder {
+    let np = mesh.positions.len();
+    let pos: Vec<DVec3> = mesh.positions.iter().map(|&p| v3(p)).collect();
+    let mut pos_tris = vec![Vec::new(); np];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for &w in tri {
+            pos_tris[mesh.wedge_position[w as usize] as usize].push(t as u32);
+        }
+    }
+    let mut pos_wedges = vec![Vec::new(); np];
+    for (w, &p) in mesh.wedge_position.iter().enumerate() {
+        pos_wedges[p as usize].push(w as u32);
+    }
+    let quadric = if kind == CostKind::Quadric {
+        initial_quadrics(mesh, &pos)
+    } else {
+        Vec::new()
+    };
+    let mut s = State {
+        mesh,
+        kind,
+        pos,
+        tri_w: mesh.triangles.clone(),
+        tri_alive: vec![true; mesh.triangles.len()],
+        pos_tris,
+        pos_wedges,
+        pos_alive: vec![true; np],
+        quadric,
+        version: vec![0; np],
+    };
+    let mut wedge_target = vec![u32::MAX; mesh.wedge_position.len()];
+    let mut triangle_step = vec![0u32; mesh.triangles.len()];
+    let mut collapses: Vec<Collapse> = Vec::with_capacity(np.saturating_sub(1));
+    let mut heap = BinaryHeap::new();
+    let mut scratch = Scratch::default();
+    for u in 0..np as u32 {
+        s.push_best(&mut heap, u, &mut scratch);
+    }
+    let mut alive = np;
+    while alive > 1 {
+        let Some(e) = heap.pop() else { break };
+        if e.version != s.version[e.removed as usize]
+            || !s.pos_alive[e.removed as usize]
+            || !s.pos_alive[e.kept as usize]
+        {
+            continue;
+        }
+        let (u, v) = (e.removed, e.kept);
+        let step = collapses.len() as u32 + 1;
+        let vanish = s.collapse(u, v, step, &mut wedge_target, &mut triangle_step);
+        alive -= 1;
+        collapses.push(Collapse {
+            removed: u,
+            kept: v,
+            cost: e.key.cost,
+            flags: if e.key.tier > 0 { FLAG_FLIPPED } else { 0 },
+        });
+        // Re-evaluate v and everything around it.
+        let mut touched = s.neighbours(v);
+        for &t in &vanish {
+            for p in s.tri_pos(t) {
+                if p != u && s.pos_alive[p as usize] && !touched.contains(&p) {
+                    touched.push(p);
+                }
+            }
+        }
+        touched.push(v);
+        for p in touched {
+            s.push_best(&mut heap, p, &mut scratch);
+        }
+        if collapses.len().is_multiple_of(1024) {
+            progress(collapses.len());
+        }
+    }
+    // Isolated leftovers (last points of disconnected parts): onto the survivor, farthest first.
+    let mut left: Vec<u32> = (0..np as u32)
+        .filter(|&p| s.pos_alive[p as usize])
+        .collect();
+    let survivor = if left.is_empty() {
+        0
+    } else {
+        let (lo, hi) = mesh.bounds();
+        let centre = (v3(lo) + v3(hi)) / 2.0;
+        let keep = *left
+            .iter()
+            .min_by(|&&a, &&b| {
+                (s.pos[a as usize] - centre)
+                    .length_squared()
+                    .total_cmp(&(s.pos[b as usize] - centre).length_squared())
+                    .then(a.cmp(&b))
+            })
+            .expect("non-empty");
+        left.retain(|&p| p != keep);
+        let pk = s.pos[keep as usize];
+        left.sort_by(|&a, &b| {
+            (s.pos[b as usize] - pk)
+                .length_squared()
+                .total_cmp(&(s.pos[a as usize] - pk).length_squared())
+                .then(a.cmp(&b))
+        });
+        let keep_wedge = s.pos_wedges[keep as usize][0];
+        for u in left {
+            for &w in &s.pos_wedges[u as usize] {
+                wedge_target[w as usize] = keep_wedge;
+            }
+            collapses.push(Collapse {
+                removed: u,
+                kept: keep,
+                cost: (s.pos[u as usize] - pk).length(),
+                flags: FLAG_ISOLATED,
+            });
+        }
+        keep
+    };
+    progress(collapses.len());
+    CollapseOrder {
+        kind,
+        collapses,
+        wedge_target,
+        triangle_step,
+        survivor,
+    }
+}

@@ -1,0 +1,168 @@
+//! Index lists of a progressive mesh at any level: in one pass from the stateless data, or by
+//! per-instance edits from the level it had (the seed's "separate triangle list for each
+//! instance ... edited as they gain and lose detail").
+
+use super::data::PmMesh;
+
+impl PmMesh {
+    /// Wedges alive at level `p` (1-based, clamped to the valid range).
+    pub fn wedges_at(&self, p: usize) -> usize {
+        self.levels[self.clamp_level(p) - 1].wedges as usize
+    }
+
+    /// Triangles drawn at level `p`.
+    pub fn triangles_at(&self, p: usize) -> usize {
+        self.levels[self.clamp_level(p) - 1].triangles as usize
+    }
+
+    /// `p` clamped to `1..=levels`.
+    pub fn clamp_level(&self, p: usize) -> usize {
+        p.clamp(1, self.levels.len().max(1))
+    }
+
+    /// The coarsest level whose stored error is at most `max_error`, at least `min_positions`
+    /// positions. Errors need not be monotone, so this scans from the coarse end.
+    pub fn level_for_error(&self, max_error: f32, min_positions: usize) -> usize {
+        let floor = self.clamp_level(min_positions);
+        // Finest level at or after which every level is within the error.
+        let mut p = self.levels.len();
+        while p > floor && self.levels[p - 2].error <= max_error {
+            p -= 1;
+        }
+        p
+    }
+
+    /// The index list of level `p` in one pass: each corner of the first `triangles_at(p)`
+    /// triangles follows its collapse chain until it reaches a live wedge.
+    pub fn indices_at(&self, p: usize, out: &mut Vec<u32>) {
+        out.clear();
+        let live = self.wedges_at(p) as u32;
+        let n = self.triangles_at(p);
+        out.reserve(n * 3);
+        for tri in &self.triangles[..n] {
+            for &w0 in tri {
+                let mut w = w0;
+                while w >= live {
+                    w = self.collapse_to[w as usize];
+                }
+                out.push(w);
+            }
+        }
+    }
+}
+
+/// The edits between neighbouring levels, derived once per PM (shared by all instances).
+#[derive(Debug, Clone, Default)]
+pub struct PmEdits {
+    /// Edits of the step from level `p` to `p - 1` are `edits[start[p - 2]..start[p - 1]]`
+    /// for `p >= 2`: (slot in the index list, wedge at level p, wedge at level p - 1).
+    start: Vec<u32>,
+    edits: Vec<(u32, u32, u32)>,
+    /// Every triangle's corners at the last level that draws it.
+    last_corners: Vec<u32>,
+}
+
+impl PmEdits {
+    /// Derives the edits by walking from full detail down to one position.
+    pub fn new(pm: &PmMesh) -> Self {
+        let np = pm.level_count();
+        let mut current: Vec<u32> = pm.triangles.iter().flatten().copied().collect();
+        let mut pos_slots: Vec<Vec<u32>> = vec![Vec::new(); np];
+        for (slot, &w) in current.iter().enumerate() {
+            pos_slots[pm.wedge_position[w as usize] as usize].push(slot as u32);
+        }
+        let mut out = PmEdits {
+            start: vec![0; np.saturating_sub(1) + 1],
+            edits: Vec::new(),
+            last_corners: current.clone(),
+        };
+        let mut per_step: Vec<Vec<(u32, u32, u32)>> = vec![Vec::new(); np];
+        for p in (2..=np).rev() {
+            let keep = pm.triangles_at(p - 1) * 3;
+            let slots = std::mem::take(&mut pos_slots[p - 1]);
+            let mut step = Vec::new();
+            for slot in slots {
+                if (slot as usize) >= keep {
+                    continue;
+                }
+                let from = current[slot as usize];
+                let to = pm.collapse_to[from as usize];
+                current[slot as usize] = to;
+                step.push((slot, from, to));
+                pos_slots[pm.wedge_position[to as usize] as usize].push(slot);
+            }
+            // Triangles that vanish here keep their corners of level p (their slots were edited
+            // by every earlier step and are skipped by this one).
+            let drawn = pm.triangles_at(p) * 3;
+            out.last_corners[keep..drawn].copy_from_slice(&current[keep..drawn]);
+            step.sort_unstable();
+            per_step[p - 1] = step;
+        }
+        for p in 2..=np {
+            out.edits.extend_from_slice(&per_step[p - 1]);
+            out.start[p - 1] = out.edits.len() as u32;
+        }
+        out
+    }
+
+    fn step(&self, p: usize) -> &[(u32, u32, u32)] {
+        &self.edits[self.start[p - 2] as usize..self.start[p - 1] as usize]
+    }
+
+    /// Bytes held (for the memory tables).
+    pub fn bytes(&self) -> usize {
+        self.start.len() * 4 + self.edits.len() * 12 + self.last_corners.len() * 4
+    }
+}
+
+/// One drawn object's index list at its current level.
+#[derive(Debug, Clone)]
+pub struct PmInstance {
+    level: usize,
+    indices: Vec<u32>,
+}
+
+impl PmInstance {
+    /// An instance at level `p`, built in one pass.
+    pub fn new(pm: &PmMesh, p: usize) -> Self {
+        let level = pm.clamp_level(p);
+        let mut indices = Vec::new();
+        pm.indices_at(level, &mut indices);
+        PmInstance { level, indices }
+    }
+
+    pub fn level(&self) -> usize {
+        self.level
+    }
+
+    pub fn indices(&self) -> &[u32] {
+        &self.indices
+    }
+
+    /// Moves to level `p` by editing the index list one step at a time; returns the number of
+    /// index writes.
+    pub fn set_level(&mut self, pm: &PmMesh, edits: &PmEdits, p: usize) -> usize {
+        let target = pm.clamp_level(p);
+        let mut writes = 0;
+        while self.level > target {
+            for &(slot, _, to) in edits.step(self.level) {
+                self.indices[slot as usize] = to;
+            }
+            writes += edits.step(self.level).len();
+            self.level -= 1;
+            self.indices.truncate(pm.triangles_at(self.level) * 3);
+        }
+        while self.level < target {
+            let lo = pm.triangles_at(self.level) * 3;
+            let hi = pm.triangles_at(self.level + 1) * 3;
+            self.indices.extend_from_slice(&edits.last_corners[lo..hi]);
+            writes += hi - lo;
+            self.level += 1;
+            for &(slot, from, _) in edits.step(self.level) {
+                self.indices[slot as usize] = from;
+            }
+            writes += edits.step(self.level).len();
+        }
+        writes
+    }
+}
