@@ -68,12 +68,25 @@ elif [ -n "${CI:-}" ]; then
   echo "../shared/data is missing in CI" >&2; exit 1
 fi
 
+step "smoke: worldgen pm (progressive mesh of a shared model)"
+if [ -f ../shared/data/meshes/spot.obj ]; then
+  ./target/debug/worldgen pm ../shared/data/meshes/spot.obj --out "$smoke/spot.pm" --quiet >/dev/null
+  test -s "$smoke/spot.pm"
+  if ./target/debug/worldgen pm maps/tiny/map.toml --out "$smoke/bad.pm" 2>/dev/null; then
+    echo "worldgen pm accepted a file that is not a mesh" >&2; exit 1
+  fi
+fi
+
 step "smoke: nodebench --quick on the tiny map"
-./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" > "$smoke/nodebench.md"
+./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" --pm-plot "$smoke/pm_error.png" > "$smoke/nodebench.md"
 grep -q '"section": "selection"' "$smoke/nodebench.json"
 grep -q '"machine"' "$smoke/nodebench.json"
 grep -q '"section": "gpu"' "$smoke/nodebench.json"
 test -s "$smoke/speed_vs_error.png"
+if [ -d ../shared/data/meshes ]; then
+  grep -q '"section": "pm"' "$smoke/nodebench.json"
+  test -s "$smoke/pm_error.png"
+fi
 if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
   echo "nodebench accepted an unknown section" >&2; exit 1
 fi

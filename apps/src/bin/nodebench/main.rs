@@ -5,6 +5,7 @@ mod error;
 mod gpu;
 mod lighting;
 mod plot;
+mod pm;
 mod report;
 mod selection;
 mod streaming;
@@ -22,13 +23,14 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 9] = [
+const SECTIONS: [&str; 10] = [
     "tiles",
     "terrain",
     "selection",
     "error",
     "vegetation",
     "lighting",
+    "pm",
     "streaming",
     "gpu",
     "textures",
@@ -43,7 +45,9 @@ const SECTIONS: [&str; 9] = [
 /// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
 /// vegetation phase time per node, instances and draw calls per frame on the flight),
 /// `lighting` (light grids: sky and sun visibility against a ray-marched reference, computation
-/// time and bytes per grid, relighting the flight's grids after a sun change), `streaming`
+/// time and bytes per grid, relighting the flight's grids after a sun change), `pm` (progressive
+/// meshes on the shared meshes: build throughput of each cost and of meshoptimizer, measured
+/// error at 50/10/1/0.1 % of the triangles, index rebuild rates, bytes per triangle), `streaming`
 /// (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
 /// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
@@ -59,7 +63,7 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// lighting, streaming, gpu, textures.
+    /// lighting, pm, streaming, gpu, textures.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -75,6 +79,12 @@ struct Cli {
     /// Write the speed-against-error plot (PNG) here.
     #[arg(long, default_value = "target/nodebench/speed_vs_error.png")]
     plot: PathBuf,
+    /// Folder of the OBJ meshes for section pm.
+    #[arg(long, default_value = "../shared/data/meshes")]
+    meshes: PathBuf,
+    /// Write the progressive-mesh error plot (PNG, the bunny) here.
+    #[arg(long, default_value = "target/nodebench/pm_error.png")]
+    pm_plot: PathBuf,
     /// Worker threads for the throughput rows (default: all cores).
     #[arg(long)]
     workers: Option<usize>,
@@ -132,6 +142,19 @@ fn run(cli: &Cli) -> Result<()> {
     }
     if want("lighting") {
         lighting::section_lighting(&world, &tree, &cams, &mut report, cli.quick, workers);
+    }
+    if want("pm") {
+        let curves = pm::section_pm(&cli.meshes, &mut report, cli.quick);
+        let mesh = if cli.quick {
+            "cow.obj"
+        } else {
+            "stanford-bunny.obj"
+        };
+        match plot::write_pm_plot(&cli.pm_plot, mesh, &curves) {
+            Ok(()) if !curves.is_empty() => println!("pm plot: {}", cli.pm_plot.display()),
+            Ok(()) => {}
+            Err(e) => eprintln!("warning: pm plot not written: {e:#}"),
+        }
     }
     // One adapter for the sections that use it (streaming renders ground textures with it).
     let adapter = if want("streaming") || want("gpu") || want("textures") {
