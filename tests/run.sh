@@ -75,6 +75,9 @@ if [ -f ../shared/data/meshes/spot.obj ]; then
   if ./target/debug/worldgen pm maps/tiny/map.toml --out "$smoke/bad.pm" 2>/dev/null; then
     echo "worldgen pm accepted a file that is not a mesh" >&2; exit 1
   fi
+  ./target/debug/lod-error "$smoke/spot.pm" --plot "$smoke/lod_error.png" > "$smoke/lod_error.md"
+  grep -q "stored bound" "$smoke/lod_error.md"
+  test -s "$smoke/lod_error.png"
 fi
 
 step "smoke: nodebench --quick on the tiny map"

@@ -5,6 +5,8 @@ use engine::surface::World;
 use std::path::Path;
 
 /// The map folder used when none is given.
+pub mod plot;
+
 pub const DEFAULT_MAP: &str = "maps/default";
 
 /// A map that cannot be opened (or generated).

@@ -463,3 +463,158 @@ fn malformed_pm_and_obj_files_are_refused_with_the_file_and_the_problem() {
         "{err}"
     );
 }
+
+/// Standard base64 (for a glTF data URI).
+fn base64(bytes: &[u8]) -> String {
+    const ABC: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(ABC[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+/// A bumpy square of `n` x `n` quads as (positions, u16 indices).
+fn bumpy_square(n: usize) -> (Vec<[f32; 3]>, Vec<u16>) {
+    let mut pos = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+            let z = 0.2 * (x * 6.0).sin() * (y * 5.0).cos();
+            pos.push([x, y, z]);
+        }
+    }
+    let mut idx = Vec::new();
+    let at = |i: usize, j: usize| (j * (n + 1) + i) as u16;
+    for j in 0..n {
+        for i in 0..n {
+            idx.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            idx.extend([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    (pos, idx)
+}
+
+/// A glTF whose node 0 (translated by +10 m in x) has an MSFT_lod chain of nodes 1 and 2.
+fn gltf_with_chain(mode: u32, missing_lod: bool) -> String {
+    let mut bin = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut meshes = Vec::new();
+    for (m, n) in [16usize, 4, 1].into_iter().enumerate() {
+        let (pos, idx) = bumpy_square(n);
+        let (p0, i0) = (bin.len(), {
+            for p in &pos {
+                for x in p {
+                    bin.extend_from_slice(&x.to_le_bytes());
+                }
+            }
+            bin.len()
+        });
+        for i in &idx {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        views.push(format!(
+            r#"{{"buffer":0,"byteOffset":{p0},"byteLength":{}}}"#,
+            i0 - p0
+        ));
+        views.push(format!(
+            r#"{{"buffer":0,"byteOffset":{i0},"byteLength":{}}}"#,
+            idx.len() * 2
+        ));
+        accessors.push(format!(
+            r#"{{"bufferView":{},"componentType":5126,"count":{},"type":"VEC3","min":[0,0,-0.3],"max":[1,1,0.3]}}"#,
+            2 * m,
+            pos.len()
+        ));
+        accessors.push(format!(
+            r#"{{"bufferView":{},"componentType":5123,"count":{},"type":"SCALAR"}}"#,
+            2 * m + 1,
+            idx.len()
+        ));
+        meshes.push(format!(
+            r#"{{"primitives":[{{"attributes":{{"POSITION":{}}},"indices":{},"mode":{mode}}}]}}"#,
+            2 * m,
+            2 * m + 1
+        ));
+    }
+    let lods = if missing_lod { "[1, 9]" } else { "[1, 2]" };
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"extensionsUsed":["MSFT_lod"],"scene":0,"scenes":[{{"nodes":[0]}}],
+"nodes":[{{"mesh":0,"translation":[10,0,0],"extensions":{{"MSFT_lod":{{"ids":{lods}}}}}}},{{"mesh":1}},{{"mesh":2}}],
+"meshes":[{}],"accessors":[{}],"bufferViews":[{}],
+"buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}]}}"#,
+        meshes.join(","),
+        accessors.join(","),
+        views.join(","),
+        bin.len(),
+        base64(&bin)
+    )
+}
+
+#[test]
+fn gltf_models_and_their_msft_lod_chains_are_read_and_measured() {
+    use worldgen::pm::gltf_input;
+    use worldgen::pm::measure::{hausdorff, soup};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("chain.gltf");
+    std::fs::write(&path, gltf_with_chain(4, false)).expect("write");
+    let model = gltf_input::load(&path).expect("valid glTF loads");
+    let counts: Vec<usize> = model.levels.iter().map(|l| l.1.len()).collect();
+    assert_eq!(counts, vec![512, 32, 2], "base and two MSFT_lod levels");
+    // The node's translation applies to the base and to the chain levels alike.
+    for (name, tris) in &model.levels {
+        let xs = tris.iter().flatten().map(|c| c.position[0]);
+        let (lo, hi) = xs.fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        assert!(
+            (lo - 10.0).abs() < 1e-6 && (hi - 11.0).abs() < 1e-6,
+            "{name}: x in [{lo}, {hi}]"
+        );
+    }
+    // Each chain level gets a measured error; coarser levels are farther from the base.
+    let welded: Vec<TriMesh> = model.levels.iter().map(|l| TriMesh::weld(&l.1).0).collect();
+    let as_soup = |m: &TriMesh| soup(&m.positions, &m.position_triangles().concat());
+    let base = as_soup(&welded[0]);
+    let errors: Vec<f64> = welded
+        .iter()
+        .map(|m| hausdorff(&base, &as_soup(m), 0.005))
+        .collect();
+    assert!(
+        errors[0] < 1e-9 && errors[1] > 1e-3 && errors[2] > errors[1],
+        "{errors:?}"
+    );
+    // The base level is what `worldgen pm` builds from.
+    let (mesh, _) = worldgen::pm::load_mesh(&path).expect("load_mesh reads glTF");
+    assert_eq!(mesh.triangles.len(), 512);
+    let (pm, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {});
+    check_levels("glTF base", &pm);
+
+    // Broken files name the file and what is wrong.
+    for (text, needle) in [
+        (gltf_with_chain(1, false), "only TRIANGLES"),
+        (gltf_with_chain(4, true), "MSFT_lod names node 9"),
+        ("{ not json".to_string(), "not a valid glTF"),
+    ] {
+        std::fs::write(&path, text).expect("write");
+        let err = gltf_input::load(&path).expect_err(needle).to_string();
+        assert!(
+            err.contains("chain.gltf") && err.contains(needle),
+            "{err:?} lacks {needle:?}"
+        );
+    }
+}

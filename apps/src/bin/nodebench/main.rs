@@ -150,7 +150,14 @@ fn run(cli: &Cli) -> Result<()> {
         } else {
             "stanford-bunny.obj"
         };
-        match plot::write_pm_plot(&cli.pm_plot, mesh, &curves) {
+        let shown: Vec<_> = curves.iter().filter(|c| c.label.contains(mesh)).collect();
+        let title = format!("{mesh}: measured two-sided error against triangles");
+        match apps::plot::write_loglog(
+            &cli.pm_plot,
+            &title,
+            "Hausdorff distance / diagonal",
+            &shown,
+        ) {
             Ok(()) if !curves.is_empty() => println!("pm plot: {}", cli.pm_plot.display()),
             Ok(()) => {}
             Err(e) => eprintln!("warning: pm plot not written: {e:#}"),

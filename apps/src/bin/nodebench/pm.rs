@@ -19,11 +19,7 @@ const MEASURE_FRACTION: f64 = 0.001;
 /// Error-bound sample spacing of the builds (the `worldgen pm` default).
 const BOUND_FRACTION: f64 = 0.005;
 
-/// One curve of the plot: triangles against measured error / diagonal.
-pub(crate) struct PmCurve {
-    pub(crate) label: String,
-    pub(crate) points: Vec<(f64, f64)>,
-}
+pub(crate) use apps::plot::Curve as PmCurve;
 
 fn meshopt_simplify(mesh: &TriMesh, target_triangles: usize) -> (Vec<[f32; 3]>, Vec<u32>, f64) {
     let verts: Vec<[f32; 3]> = (0..mesh.wedge_position.len() as u32)
