@@ -34,6 +34,7 @@ pub mod kinds;
 pub mod lighting;
 #[cfg(feature = "measure")]
 pub mod measure;
+pub mod objects;
 pub mod render;
 pub mod stream;
 pub mod surface;

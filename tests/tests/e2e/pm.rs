@@ -618,3 +618,223 @@ fn gltf_models_and_their_msft_lod_chains_are_read_and_measured() {
         );
     }
 }
+
+mod silhouette {
+    //! A rendered PM object at the level the pixel metric chooses against the full mesh: both
+    //! rasterised on the GPU (lavapipe in CI) as coverage masks, compared in pixels.
+
+    use super::{CostKind, PmMesh, obj};
+    use engine::objects::lod::{PmLodSettings, choose_level, error_budget};
+    use engine::render::{COLOR_FORMAT, Gpu, Target};
+    use worldgen::pm::ErrorIndex;
+
+    const SIZE: u32 = 512;
+    const FOVY_DEG: f64 = 60.0;
+    /// Pixel-centre sampling moves each mask's edge by up to sqrt(2)/2 px: two masks, sqrt(2).
+    const RASTER_PX: f64 = std::f64::consts::SQRT_2;
+
+    const SHADER: &str = "
+@vertex fn vs(@location(0) p: vec2<f32>) -> @builtin(position) vec4<f32> {
+    return vec4<f32>(p, 0.5, 1.0);
+}
+@fragment fn fs() -> @location(0) vec4<f32> { return vec4<f32>(1.0, 1.0, 1.0, 1.0); }
+";
+
+    /// Rasterises triangles given in normalised device coordinates; returns coverage per pixel.
+    fn mask(g: &Gpu, ndc: &[[f32; 2]]) -> Vec<bool> {
+        use wgpu::util::DeviceExt;
+        let d = &g.device;
+        let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("silhouette"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let layout = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("silhouette"),
+            bind_group_layouts: &[],
+            immediate_size: 0,
+        });
+        let attrs = [wgpu::VertexAttribute {
+            format: wgpu::VertexFormat::Float32x2,
+            offset: 0,
+            shader_location: 0,
+        }];
+        let pipeline = d.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("silhouette"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: 8,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attrs,
+                })],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: COLOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let bytes: Vec<u8> = ndc.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+        let vb = d.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("silhouette vertices"),
+            contents: &bytes,
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let target = Target::new(d, [SIZE, SIZE], COLOR_FORMAT);
+        let mut enc = d.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("silhouette"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &target.color_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_vertex_buffer(0, vb.slice(..));
+            pass.draw(0..ndc.len() as u32, 0..1);
+        }
+        g.queue.submit([enc.finish()]);
+        let rgba = target.read_rgba(g).expect("readback");
+        rgba.chunks_exact(4).map(|p| p[0] > 127).collect()
+    }
+
+    /// Largest distance (px) from a pixel covered by one mask to the nearest pixel covered by
+    /// the other, both ways (the masks' Hausdorff distance); searched up to `limit` px.
+    fn mask_distance(a: &[bool], b: &[bool], limit: i64) -> f64 {
+        let n = SIZE as i64;
+        let one_way = |from: &[bool], to: &[bool]| {
+            let mut worst = 0.0f64;
+            for y in 0..n {
+                for x in 0..n {
+                    if !from[(y * n + x) as usize] || to[(y * n + x) as usize] {
+                        continue;
+                    }
+                    let mut best = f64::INFINITY;
+                    for dy in -limit..=limit {
+                        for dx in -limit..=limit {
+                            let (u, v) = (x + dx, y + dy);
+                            if u >= 0 && v >= 0 && u < n && v < n && to[(v * n + u) as usize] {
+                                best = best.min(((dx * dx + dy * dy) as f64).sqrt());
+                            }
+                        }
+                    }
+                    worst = worst.max(best);
+                }
+            }
+            worst
+        };
+        one_way(a, b).max(one_way(b, a))
+    }
+
+    /// Triangles of `pm` at level `p`, scaled and placed `depth_m` in front of a camera looking
+    /// along +y (z up), projected to NDC.
+    fn project(
+        pm: &PmMesh,
+        p: usize,
+        centre: [f64; 3],
+        scale: f64,
+        depth_m: f64,
+        k_px: f64,
+    ) -> Vec<[f32; 2]> {
+        let mut idx = Vec::new();
+        pm.indices_at(p, &mut idx);
+        let half = f64::from(SIZE) / 2.0;
+        idx.iter()
+            .map(|&w| {
+                let q = pm.positions[pm.wedge_position[w as usize] as usize];
+                let x = (q[0] as f64 - centre[0]) * scale;
+                let y = (q[1] as f64 - centre[1]) * scale + depth_m;
+                let z = (q[2] as f64 - centre[2]) * scale;
+                [(k_px * x / y / half) as f32, (k_px * z / y / half) as f32]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_pm_object_at_the_chosen_level_stays_within_tau_of_the_full_silhouette() {
+        let Some(g) = tests::gpu::device() else {
+            return;
+        };
+        let k_px = f64::from(SIZE) / (2.0 * (FOVY_DEG.to_radians() / 2.0).tan());
+        for (name, tau) in [("meshes/stanford-bunny.obj", 1.0), ("meshes/cow.obj", 2.0)] {
+            let Some(path) = tests::shared_data(name) else {
+                return;
+            };
+            let (mesh, _) = obj::load(&path).expect("loads");
+            let (pm, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.005, &mut |_, _, _| {});
+            let index = ErrorIndex::new(&pm);
+            let (lo, hi) = mesh.bounds();
+            let centre = [0, 1, 2].map(|k| f64::from(lo[k] + hi[k]) / 2.0);
+            let diag = f64::from(mesh.diagonal());
+            // The object is 2 m across; its bounding sphere has radius 1 m.
+            let scale = 2.0 / diag;
+            let settings = PmLodSettings {
+                tau_px: tau,
+                min_vertices: 1,
+                ..PmLodSettings::default()
+            };
+            let full = pm.level_count();
+            let mut coarsest_share = 1.0f64;
+            for depth_m in [5.0, 15.0, 45.0] {
+                let near_m = depth_m - 1.0;
+                let p = choose_level(&pm, &index, &settings, near_m, k_px, scale);
+                let stored_px = f64::from(pm.levels[p - 1].error) * scale * k_px / near_m;
+                assert!(
+                    stored_px <= tau + 1e-9,
+                    "{name}: level {p} projects to {stored_px} px, over tau {tau}"
+                );
+                assert!(
+                    error_budget(&settings, near_m, k_px, scale) * scale * k_px / near_m
+                        <= tau + 1e-9
+                );
+                let a = mask(&g, &project(&pm, full, centre, scale, depth_m, k_px));
+                let b = mask(&g, &project(&pm, p, centre, scale, depth_m, k_px));
+                let covered = a.iter().filter(|&&x| x).count();
+                assert!(
+                    covered > 50,
+                    "{name}: the object covers only {covered} px at {depth_m} m"
+                );
+                let d = mask_distance(&a, &b, (tau + 4.0) as i64);
+                let share = pm.triangles_at(p) as f64 / pm.triangles.len() as f64;
+                coarsest_share = coarsest_share.min(share);
+                println!(
+                    "{name} at {depth_m} m, tau {tau}: level {p} of {full} ({:.1} % of the triangles), stored error {stored_px:.2} px, silhouette {d:.2} px",
+                    100.0 * share
+                );
+                assert!(
+                    d <= tau + RASTER_PX,
+                    "{name} at {depth_m} m: silhouettes differ by {d:.2} px > tau {tau} + {RASTER_PX:.2}"
+                );
+            }
+            // The metric must actually simplify: far away a few percent of the triangles.
+            assert!(
+                coarsest_share < 0.1,
+                "{name}: never below {:.1} % of the triangles",
+                100.0 * coarsest_share
+            );
+        }
+    }
+}

@@ -20,18 +20,6 @@ impl PmMesh {
         p.clamp(1, self.levels.len().max(1))
     }
 
-    /// The coarsest level whose stored error is at most `max_error`, at least `min_positions`
-    /// positions. Errors need not be monotone, so this scans from the coarse end.
-    pub fn level_for_error(&self, max_error: f32, min_positions: usize) -> usize {
-        let floor = self.clamp_level(min_positions);
-        // Finest level at or after which every level is within the error.
-        let mut p = self.levels.len();
-        while p > floor && self.levels[p - 2].error <= max_error {
-            p -= 1;
-        }
-        p
-    }
-
     /// The index list of level `p` in one pass: each corner of the first `triangles_at(p)`
     /// triangles follows its collapse chain until it reaches a live wedge.
     pub fn indices_at(&self, p: usize, out: &mut Vec<u32>) {
@@ -164,5 +152,44 @@ impl PmInstance {
             writes += edits.step(self.level).len();
         }
         writes
+    }
+}
+
+/// Level lookup by error in O(log levels): `prefix_min[p - 1]` is the smallest stored error of
+/// levels 1..=p, which never increases with p, so the coarsest level whose own error is within a
+/// bound is found by binary search (errors need not be monotone along the levels).
+#[derive(Debug, Clone, Default)]
+pub struct ErrorIndex {
+    prefix_min: Vec<f32>,
+}
+
+impl ErrorIndex {
+    pub fn new(pm: &PmMesh) -> Self {
+        let mut m = f32::INFINITY;
+        ErrorIndex {
+            prefix_min: pm
+                .levels
+                .iter()
+                .map(|l| {
+                    m = m.min(l.error);
+                    m
+                })
+                .collect(),
+        }
+    }
+
+    /// The coarsest level `p >= min_level` whose stored error is at most `max_error` (the full
+    /// level, error 0, always qualifies).
+    pub fn coarsest_within(&self, pm: &PmMesh, max_error: f32, min_level: usize) -> usize {
+        let floor = pm.clamp_level(min_level);
+        let first = self.prefix_min.partition_point(|&e| e > max_error) + 1;
+        let p = first.clamp(1, pm.level_count().max(1));
+        if p >= floor {
+            return p;
+        }
+        // Below the floor: the coarsest level at or above it within the bound.
+        (floor..=pm.level_count())
+            .find(|&q| pm.levels[q - 1].error <= max_error)
+            .unwrap_or(pm.level_count())
     }
 }

@@ -24,7 +24,7 @@ pub mod obj;
 
 pub use build::CostKind;
 pub use data::{Level, PmMesh};
-pub use lod::{PmEdits, PmInstance};
+pub use lod::{ErrorIndex, PmEdits, PmInstance};
 pub use mesh::TriMesh;
 
 use std::path::Path;
