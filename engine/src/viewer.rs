@@ -56,6 +56,11 @@ pub struct FrameStats {
     pub plant_draw_calls: u32,
     pub plant_items: u32,
     pub plant_triangles: u64,
+    /// Progressive-mesh objects: draw calls (one per instance), triangles drawn and the
+    /// triangles they would have at full detail.
+    pub object_draw_calls: u32,
+    pub object_triangles: u64,
+    pub object_full_triangles: u64,
     /// Of the vegetation instances: group-billboard quads (one per cluster of items).
     pub group_billboards: u64,
     pub drawn_nodes: usize,
@@ -280,6 +285,9 @@ impl Viewer {
             plant_draw_calls: stats.plant_draw_calls,
             plant_items: stats.plant_items,
             plant_triangles: stats.plant_triangles,
+            object_draw_calls: stats.object_draw_calls,
+            object_triangles: stats.object_triangles,
+            object_full_triangles: stats.object_full_triangles,
             group_billboards: stats.group_billboards,
             drawn_nodes: drawn.len(),
             nodes_per_level: per_level,

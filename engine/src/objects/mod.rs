@@ -2,8 +2,13 @@
 //! terrain's pixel metric (seed 001), with the run-time knobs of seed 003 (STRENGTH, MINVERTS,
 //! ZDISP, fixed level). CPU logic only; drawing lives in `render`.
 //!
-//! State of issue 18: the level choice is here and proven against rendered silhouettes
-//! (tests/tests/e2e/pm.rs); streaming PM objects as node content, geomorphing and the viewer's
-//! debug views are not built yet.
+//! - [`set`]: models (`.pm`, or built from `.obj` / glTF at start-up) and placed instances.
+//! - [`content`]: the `objects` kind (a node's payload: the instances inside it).
+//! - [`lod`]: the level per instance (proven against rendered silhouettes in tests/e2e/pm.rs).
+//!
+//! The renderer (`render::objects`) keeps one index list per drawn instance, edited level by
+//! level (seed 000's per-instance triangle lists). Not built yet: geomorphing (MORPH).
 
+pub mod content;
 pub mod lod;
+pub mod set;

@@ -42,6 +42,10 @@ pub struct ViewOptions {
     pub sun: Sun,
     /// Debug view: everything grey, lit by the light grids alone (sky and sun visibility).
     pub lighting_only: bool,
+    /// Level choice of progressive-mesh objects (tau, STRENGTH, MINVERTS, ZDISP, fixed level).
+    pub pm_lod: crate::objects::lod::PmLodSettings,
+    /// Debug view: objects coloured by the share of their positions drawn (MLMODE).
+    pub pm_color_by_lod: bool,
 }
 
 /// Debug views of the ground.
@@ -100,6 +104,8 @@ impl Default for ViewOptions {
             ground_view: GroundView::Shaded,
             sun: Sun::default(),
             lighting_only: false,
+            pm_lod: crate::objects::lod::PmLodSettings::default(),
+            pm_color_by_lod: false,
         }
     }
 }
@@ -121,6 +127,11 @@ pub struct DrawStats {
     pub plant_triangles: u64,
     /// Of the instances: group-billboard quads (each stands for a cluster of items).
     pub group_billboards: u64,
+    /// Progressive-mesh objects: draw calls (one per instance) and triangles.
+    pub object_draw_calls: u32,
+    pub object_triangles: u64,
+    /// Triangles the drawn objects would have at full detail.
+    pub object_full_triangles: u64,
 }
 
 /// The frame uniforms and bind group and the node-table layout, shared by all renderers.

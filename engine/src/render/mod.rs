@@ -31,6 +31,7 @@ pub mod impostors;
 pub mod light_pool;
 pub mod lighting;
 pub mod node_table;
+pub mod objects;
 pub mod reference;
 pub mod scene;
 pub mod shader;
@@ -176,5 +177,6 @@ pub fn shader_sources() -> Vec<(&'static str, String)> {
         ("reference", reference::shader_source()),
         ("terrain", terrain::shader_source()),
         ("vegetation", vegetation::shader_source()),
+        ("objects", objects::shader_source()),
     ]
 }

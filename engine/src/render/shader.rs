@@ -8,7 +8,7 @@
 pub const PRELUDE: &str = include_str!("../../../shaders/prelude.inc.wgsl");
 
 /// The embedded renderer files, by name.
-const FILES: [(&str, &str); 5] = [
+const FILES: [(&str, &str); 6] = [
     ("sky", include_str!("../../../shaders/sky.wgsl")),
     ("ground", include_str!("../../../shaders/ground.wgsl")),
     ("reference", include_str!("../../../shaders/reference.wgsl")),
@@ -17,6 +17,7 @@ const FILES: [(&str, &str); 5] = [
         "vegetation",
         include_str!("../../../shaders/vegetation.wgsl"),
     ),
+    ("objects", include_str!("../../../shaders/objects.wgsl")),
 ];
 
 fn file_text(name: &str, file: &'static str) -> std::borrow::Cow<'static, str> {

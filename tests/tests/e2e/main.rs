@@ -6,6 +6,7 @@ mod dem_import;
 mod ground;
 mod lighting;
 mod map_format;
+mod objects;
 mod pm;
 mod render;
 mod streaming;

@@ -36,7 +36,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
-    let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world);
+    let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size);
+    let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
     viewer.view.merged_draws = !cli.per_item_draws;
     if cli.gpu_reference {
         viewer.view.plants = false;
@@ -126,7 +127,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 18] = [
+    let rows: [(&str, Vec<f64>); 20] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -176,6 +177,14 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "vegetation mesh triangles",
             col(|s| s.plant_triangles as f64),
+        ),
+        (
+            "objects drawn (progressive meshes)",
+            col(|s| f64::from(s.object_draw_calls)),
+        ),
+        (
+            "object triangles, % of full detail",
+            col(|s| 100.0 * s.object_triangles as f64 / s.object_full_triangles.max(1) as f64),
         ),
         (
             "drawn nodes still without their light grid (drawn fully lit)",

@@ -6,7 +6,7 @@ mod headless;
 mod panel;
 mod window;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use apps::DEFAULT_MAP;
 use clap::{CommandFactory, FromArgMatches, Parser};
 use engine::camera::Camera;
@@ -14,6 +14,7 @@ use engine::flight::{CameraPath, auto_flyover};
 use engine::ground::content::GroundContent;
 use engine::lighting::Sun;
 use engine::lighting::content::LightingContent;
+use engine::objects::lod::PmLodSettings;
 use engine::render::Gpu;
 use engine::render::frame::GroundView;
 use engine::stream::StreamSettings;
@@ -126,6 +127,42 @@ pub(crate) struct Cli {
     /// computed (pictures of a settled view; the frames' statistics then start warm).
     #[arg(long)]
     pub(crate) warm_start: bool,
+    /// Place this model as progressive-mesh objects in the world (repeatable): a `.pm` file
+    /// (`worldgen pm`), or an `.obj` / `.gltf` / `.glb` built at start-up with the quadric
+    /// cost. Copies stand in a row ahead of the first camera, on the ground; each instance
+    /// draws the coarsest level whose measured error stays within tau on screen.
+    #[arg(long)]
+    pub(crate) object: Vec<PathBuf>,
+    /// Copies of each --object.
+    #[arg(long, default_value_t = 6)]
+    pub(crate) object_count: usize,
+    /// Size of each copy (its largest extent), metres.
+    #[arg(long, default_value_t = 12.0, value_parser = positive)]
+    pub(crate) object_size_m: f64,
+    /// Progressive meshes: scale of the pixel metric (seed 003's STRENGTH; 2 keeps detail to
+    /// half the distance).
+    #[arg(long, default_value_t = 1.0, value_parser = positive)]
+    pub(crate) pm_strength: f64,
+    /// Progressive meshes: fewest vertices drawn (MINVERTS).
+    #[arg(long, default_value_t = 4)]
+    pub(crate) pm_min_vertices: usize,
+    /// Progressive meshes: metres subtracted from the distance before the metric (ZDISP).
+    #[arg(long, default_value_t = 0.0)]
+    pub(crate) pm_zdisp_m: f64,
+    /// Debug: draw every object with this fraction of its vertices (MLFIX), 0 to 1.
+    #[arg(long, value_parser = fraction)]
+    pub(crate) pm_fixed: Option<f64>,
+    /// Debug: colour objects by the share of their vertices drawn (blue coarse .. red full).
+    #[arg(long)]
+    pub(crate) pm_color_by_lod: bool,
+}
+
+fn fraction(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} must be between 0 and 1")),
+        Err(e) => Err(format!("{s:?} is not a number: {e}")),
+    }
 }
 
 impl Cli {
@@ -173,14 +210,16 @@ impl From<GroundViewArg> for GroundView {
 }
 
 /// The viewer for `cli`: every registered content kind (less ground textures with
-/// `--no-ground-textures`, less light grids with `--no-lighting`), the ground view of
-/// `--ground-view`, the sun of `--sun-*`.
+/// `--no-ground-textures`, less light grids with `--no-lighting`, plus the `--object` models),
+/// the ground view of `--ground-view`, the sun of `--sun-*`. `start` is the first camera (the
+/// objects stand ahead of it).
 pub(crate) fn make_viewer(
     cli: &Cli,
     gpu: &Gpu,
     format: wgpu::TextureFormat,
     world: World,
-) -> Viewer {
+    start: &Camera,
+) -> anyhow::Result<Viewer> {
     let mut kinds = engine::kinds::registered(&world);
     if cli.no_ground_textures {
         kinds.retain(|k| k.kind.name() != GroundContent::NAME);
@@ -188,11 +227,64 @@ pub(crate) fn make_viewer(
     if cli.no_lighting {
         kinds.retain(|k| k.kind.name() != LightingContent::NAME);
     }
+    if !cli.object.is_empty() {
+        kinds.push(objects_registration(cli, &world, start)?);
+    }
     let mut viewer = Viewer::with_kinds(gpu, format, world, settings(cli), &kinds);
     viewer.view.ground_view = cli.ground_view.into();
     viewer.view.lighting_only = cli.lighting_only;
+    viewer.view.pm_lod = PmLodSettings {
+        tau_px: cli.tau,
+        strength: cli.pm_strength,
+        min_vertices: cli.pm_min_vertices,
+        z_disp_m: cli.pm_zdisp_m,
+        fixed_fraction: cli.pm_fixed,
+    };
+    viewer.view.pm_color_by_lod = cli.pm_color_by_lod;
     viewer.set_sun(cli.sun(), glam::DVec3::ZERO);
-    viewer
+    Ok(viewer)
+}
+
+/// The objects kind for `--object`: the models, copies in a row ahead of `start`.
+fn objects_registration(
+    cli: &Cli,
+    world: &World,
+    start: &Camera,
+) -> anyhow::Result<engine::kinds::Registration> {
+    use engine::objects::content::ObjectsContent;
+    use engine::objects::set::{ObjectSet, PmModel};
+    let mut models = Vec::new();
+    for p in &cli.object {
+        eprintln!("loading object {}", p.display());
+        models.push(PmModel::load(p).with_context(|| format!("--object {}", p.display()))?);
+    }
+    let f = start.forward;
+    let dir = if f.x.hypot(f.y) > 1e-6 {
+        [f.x, f.y]
+    } else {
+        [1.0, 0.0]
+    };
+    let len = dir[0].hypot(dir[1]);
+    let ahead_m = 3.0 * cli.object_size_m;
+    let from = [
+        start.position_m.x + dir[0] / len * ahead_m,
+        start.position_m.y + dir[1] / len * ahead_m,
+    ];
+    let set = ObjectSet::place_row(
+        models,
+        from,
+        dir,
+        cli.object_count,
+        2.5 * cli.object_size_m,
+        cli.object_size_m,
+        |x, y| world.height_m(x, y),
+    );
+    Ok(engine::kinds::Registration {
+        kind: std::sync::Arc::new(ObjectsContent {
+            set: std::sync::Arc::new(set),
+        }),
+        renderer: Some(engine::render::objects::ObjectsRenderer::create),
+    })
 }
 
 /// A finite number above zero (thresholds, rates, durations).

@@ -77,6 +77,27 @@ pub(crate) fn panel(
         "merged draws (off: one draw per item)",
     );
     ui.checkbox(&mut st_ui.occlusion, "split less behind dense vegetation");
+    ui.label("progressive-mesh objects:");
+    ui.checkbox(
+        &mut view.pm_color_by_lod,
+        "colour objects by LOD (blue coarse .. red full)",
+    );
+    let mut pm_fixed = view.pm_lod.fixed_fraction.is_some();
+    ui.checkbox(&mut pm_fixed, "fixed object LOD");
+    if pm_fixed {
+        let mut f = view.pm_lod.fixed_fraction.unwrap_or(0.5);
+        ui.add(egui::Slider::new(&mut f, 0.0..=1.0).text("share of vertices"));
+        view.pm_lod.fixed_fraction = Some(f);
+    } else {
+        view.pm_lod.fixed_fraction = None;
+    }
+    ui.add(
+        egui::Slider::new(&mut view.pm_lod.strength, 0.1..=10.0)
+            .logarithmic(true)
+            .text("object LOD strength"),
+    );
+    ui.add(egui::Slider::new(&mut view.pm_lod.min_vertices, 1..=500).text("object min vertices"));
+    ui.add(egui::Slider::new(&mut view.pm_lod.z_disp_m, 0.0..=500.0).text("object ZDISP (m)"));
     ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
     ui.checkbox(&mut fixed, "fixed level");
     if fixed {
@@ -108,6 +129,15 @@ pub(crate) fn panel(
         "vegetation: {} instances, {} draw calls ({} groups), {} mesh triangles",
         s.plant_instances, s.plant_draw_calls, s.plant_items, s.plant_triangles
     ));
+    if s.object_draw_calls > 0 {
+        ui.label(format!(
+            "objects: {} drawn, {} triangles ({:.1} % of {} at full detail)",
+            s.object_draw_calls,
+            s.object_triangles,
+            100.0 * s.object_triangles as f64 / s.object_full_triangles.max(1) as f64,
+            s.object_full_triangles
+        ));
+    }
     ui.label(format!("nodes per level {:?}", s.nodes_per_level));
     ui.label(format!(
         "jobs: queued {} running {} waiting GPU {} cancelled {}",

@@ -116,7 +116,7 @@ impl App {
             .context("the window was initialised twice")?;
         let vp = [config.width, config.height];
         let cam = scripted_camera(cli, self.path.as_ref(), &world, 0.0, vp);
-        let viewer = make_viewer(cli, &gpu, config.format.add_srgb_suffix(), world);
+        let viewer = make_viewer(cli, &gpu, config.format.add_srgb_suffix(), world, &cam)?;
         let egui_ctx = egui::Context::default();
         let egui_state = egui_winit::State::new(
             egui_ctx.clone(),
@@ -313,6 +313,7 @@ fn apply_panel(st: &mut State) {
     {
         let s = &mut st.viewer.streamer.settings;
         s.tau_px = st.ui.tau;
+        st.viewer.view.pm_lod.tau_px = st.ui.tau;
         s.cache_budget_bytes = st.ui.budget_mib << 20;
         s.fixed_level = st.ui.fixed_level;
         s.vegetation_occlusion = st.ui.occlusion;

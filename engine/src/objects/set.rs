@@ -1,0 +1,178 @@
+//! The progressive-mesh models of a run and their placed instances.
+//!
+//! Models are read from `.pm` files or built at start-up from `.obj` / `.gltf` / `.glb` (quadric
+//! cost). Model files are taken as Y-up (glTF's convention, and that of the shared OBJ meshes);
+//! the world is Z-up, so a model's +Y becomes the world's +Z and its +Z the world's -Y.
+
+use glam::DVec3;
+use std::path::{Path, PathBuf};
+use worldgen::pm::{CostKind, ErrorIndex, PmEdits, PmMesh, file, load_mesh};
+
+/// Why a model could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ObjectError {
+    #[error(transparent)]
+    Pm(#[from] worldgen::pm::file::PmError),
+    #[error(transparent)]
+    Mesh(#[from] worldgen::pm::MeshInputError),
+    #[error("{path}: the model has no triangles")]
+    Empty { path: PathBuf },
+}
+
+/// One progressive mesh with everything instances share.
+#[derive(Debug)]
+pub struct PmModel {
+    pub name: String,
+    pub pm: PmMesh,
+    pub edits: PmEdits,
+    pub index: ErrorIndex,
+    /// Per-wedge unit normals (from the file, else area-weighted over each position's faces).
+    pub normals: Vec<[f32; 3]>,
+    /// Bounds of the full mesh, model units.
+    pub lo: DVec3,
+    pub hi: DVec3,
+}
+
+/// The world position of model point `p` (model units, Y-up) for an instance.
+pub fn model_to_world(p: DVec3, inst: &ObjectInstance, model: &PmModel) -> DVec3 {
+    // Centre the footprint on the instance position, base on the ground.
+    let c = (model.lo + model.hi) * 0.5;
+    let local = DVec3::new(p.x - c.x, -(p.z - c.z), p.y - model.lo.y) * inst.scale;
+    let (s, co) = inst.yaw_rad.sin_cos();
+    inst.position_m
+        + DVec3::new(
+            co * local.x - s * local.y,
+            s * local.x + co * local.y,
+            local.z,
+        )
+}
+
+impl PmModel {
+    /// Reads a `.pm` file, or builds one from a mesh file.
+    pub fn load(path: &Path) -> Result<Self, ObjectError> {
+        let is_pm = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("pm"));
+        let pm = if is_pm {
+            file::read(path)?
+        } else {
+            let (mesh, _) = load_mesh(path)?;
+            PmMesh::build(&mesh, CostKind::Quadric, 0.005, &mut |_, _, _| {}).0
+        };
+        if pm.triangles.is_empty() {
+            return Err(ObjectError::Empty {
+                path: path.to_path_buf(),
+            });
+        }
+        let name = path
+            .file_stem()
+            .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+        Ok(Self::from_pm(name, pm))
+    }
+
+    pub fn from_pm(name: String, pm: PmMesh) -> Self {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = -lo;
+        for p in &pm.positions {
+            let v = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        let normals = if pm.normals.is_empty() {
+            let mut acc = vec![DVec3::ZERO; pm.positions.len()];
+            for t in &pm.triangles {
+                let p = t.map(|w| pm.wedge_position[w as usize] as usize);
+                let v = p.map(|i| {
+                    let q = pm.positions[i];
+                    DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64)
+                });
+                let n = (v[1] - v[0]).cross(v[2] - v[0]);
+                for i in p {
+                    acc[i] += n;
+                }
+            }
+            pm.wedge_position
+                .iter()
+                .map(|&p| acc[p as usize].normalize_or_zero().as_vec3().to_array())
+                .collect()
+        } else {
+            pm.normals.clone()
+        };
+        PmModel {
+            name,
+            edits: PmEdits::new(&pm),
+            index: ErrorIndex::new(&pm),
+            normals,
+            pm,
+            lo,
+            hi,
+        }
+    }
+
+    /// Radius of the bounding sphere around the bounds' centre, model units.
+    pub fn radius(&self) -> f64 {
+        (self.hi - self.lo).length() * 0.5
+    }
+}
+
+/// One placed object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectInstance {
+    pub model: u32,
+    /// Where the middle of the model's base stands, world metres.
+    pub position_m: DVec3,
+    pub yaw_rad: f64,
+    /// Metres per model unit.
+    pub scale: f64,
+}
+
+/// Models and instances of a run.
+#[derive(Debug, Default)]
+pub struct ObjectSet {
+    pub models: Vec<PmModel>,
+    pub instances: Vec<ObjectInstance>,
+}
+
+impl ObjectSet {
+    /// The centre and radius (m) of an instance's bounding sphere.
+    pub fn sphere(&self, inst: &ObjectInstance) -> (DVec3, f64) {
+        let m = &self.models[inst.model as usize];
+        let c = model_to_world((m.lo + m.hi) * 0.5, inst, m);
+        (c, m.radius() * inst.scale)
+    }
+
+    /// Places `count` instances of every model in a row: from `start_m` along `dir`, `spacing_m`
+    /// apart, each `size_m` across, standing on the ground given by `ground_m`.
+    pub fn place_row(
+        models: Vec<PmModel>,
+        start_m: [f64; 2],
+        dir: [f64; 2],
+        count: usize,
+        spacing_m: f64,
+        size_m: f64,
+        ground_m: impl Fn(f64, f64) -> f64,
+    ) -> Self {
+        let len = dir[0].hypot(dir[1]).max(1e-9);
+        let (dx, dy) = (dir[0] / len, dir[1] / len);
+        let mut instances = Vec::new();
+        let mut k = 0usize;
+        for i in 0..count {
+            for (m, model) in models.iter().enumerate() {
+                let along = spacing_m * k as f64;
+                // Alternate sides of the line so the row does not block itself.
+                let side = if k.is_multiple_of(2) { 1.0 } else { -1.0 } * spacing_m * 0.4;
+                let x = start_m[0] + dx * along - dy * side;
+                let y = start_m[1] + dy * along + dx * side;
+                let extent = (model.hi - model.lo).max_element().max(1e-9);
+                instances.push(ObjectInstance {
+                    model: m as u32,
+                    position_m: DVec3::new(x, y, ground_m(x, y)),
+                    yaw_rad: (i as f64 * 0.9 + m as f64 * 2.1) % std::f64::consts::TAU,
+                    scale: size_m / extent,
+                });
+                k += 1;
+            }
+        }
+        ObjectSet { models, instances }
+    }
+}

@@ -1,0 +1,169 @@
+//! Progressive-mesh objects as node content (issue 18): streamed with their nodes, drawn at the
+//! level the pixel metric chooses, with the debug views (colour by LOD, fixed LOD).
+
+use engine::camera::Camera;
+use engine::kinds::{Registration, registered};
+use engine::objects::content::{NodeObjects, ObjectsContent};
+use engine::objects::set::{ObjectSet, PmModel};
+use engine::render::objects::ObjectsRenderer;
+use engine::render::{COLOR_FORMAT, Target};
+use engine::stream::StreamSettings;
+use engine::viewer::Viewer;
+use glam::DVec3;
+use std::sync::Arc;
+use tests::gpu::{device, frame, settle};
+use tests::terrain::tiny_world;
+use worldgen::pm::mesh::Corner;
+use worldgen::pm::{CostKind, PmMesh, TriMesh};
+
+/// A closed, bumpy box (a few hundred triangles): simple enough to build in a test, with detail
+/// for the metric to drop.
+fn bumpy_box() -> PmMesh {
+    let n = 8;
+    let mut tris = Vec::new();
+    let point = |face: usize, i: usize, j: usize| -> [f32; 3] {
+        let (u, v) = (
+            i as f32 / n as f32 * 2.0 - 1.0,
+            j as f32 / n as f32 * 2.0 - 1.0,
+        );
+        let bump = 1.0 + 0.05 * ((u * 7.0).sin() * (v * 5.0).cos());
+        let p = match face {
+            0 => [1.0, u, v],
+            1 => [-1.0, v, u],
+            2 => [v, 1.0, u],
+            3 => [u, -1.0, v],
+            4 => [u, v, 1.0],
+            _ => [v, u, -1.0],
+        };
+        p.map(|x| x * bump)
+    };
+    let c = |p: [f32; 3]| Corner {
+        position: p,
+        uv: None,
+        normal: None,
+    };
+    for face in 0..6 {
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b) = (point(face, i, j), point(face, i + 1, j));
+                let (cc, d) = (point(face, i + 1, j + 1), point(face, i, j + 1));
+                tris.push([c(a), c(b), c(cc)]);
+                tris.push([c(a), c(cc), c(d)]);
+            }
+        }
+    }
+    let (mesh, _) = TriMesh::weld(&tris);
+    PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {}).0
+}
+
+#[test]
+fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
+    let Some(g) = device() else { return };
+    let world = tiny_world();
+    let ground = |x: f64, y: f64| world.height_m(x, y);
+    let eye = DVec3::new(150.0, 200.0, ground(150.0, 200.0) + 12.0);
+    let cam = Camera::look_at(
+        eye,
+        eye + DVec3::new(1.0, 0.0, -0.15),
+        60f64.to_radians(),
+        [320, 180],
+    );
+    let model = PmModel::from_pm("box".into(), bumpy_box());
+    let full = model.pm.triangles.len();
+    let set = ObjectSet::place_row(
+        vec![model],
+        [180.0, 200.0],
+        [1.0, 0.0],
+        5,
+        30.0,
+        8.0,
+        ground,
+    );
+    let positions: Vec<DVec3> = set.instances.iter().map(|i| i.position_m).collect();
+    let set = Arc::new(set);
+    let mut kinds = registered(&world);
+    kinds.push(Registration {
+        kind: Arc::new(ObjectsContent {
+            set: Arc::clone(&set),
+        }),
+        renderer: Some(ObjectsRenderer::create),
+    });
+    let settings = StreamSettings {
+        workers: 1,
+        tau_px: 1.0,
+        ..StreamSettings::default()
+    };
+    let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world, settings, &kinds);
+    v.view.pm_lod.tau_px = 1.0;
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let st = settle(&g, &mut v, &target, &cam);
+
+    // Every instance belongs to exactly one drawn node, the one whose rectangle holds it.
+    let mut seen = vec![0; positions.len()];
+    for d in v.streamer.draw_list() {
+        let work = &v
+            .streamer
+            .resident(d.key)
+            .expect("drawn nodes are resident")
+            .work;
+        if let Some(objs) = work.get::<NodeObjects>() {
+            let r = v.streamer.tree().rect(d.key);
+            for &i in &objs.instances {
+                let p = positions[i as usize];
+                assert!(p.x >= r.min[0] && p.x < r.max[0] && p.y >= r.min[1] && p.y < r.max[1]);
+                seen[i as usize] += 1;
+            }
+        }
+    }
+    assert!(
+        seen.iter().all(|&n| n == 1),
+        "instances per drawn node: {seen:?}"
+    );
+
+    // Each drawn instance shows a level whose stored error projects within tau, and the far
+    // ones drop detail.
+    let renderer = v
+        .scene
+        .renderer::<ObjectsRenderer>()
+        .expect("objects renderer");
+    let levels = renderer.levels();
+    assert!(levels.len() >= 3, "only {} objects drawn", levels.len());
+    assert_eq!(st.object_draw_calls as usize, levels.len());
+    let k = cam.k_px();
+    let mut coarsest = 1.0f64;
+    for &(id, level) in &levels {
+        let inst = &set.instances[id as usize];
+        let (c, r) = set.sphere(inst);
+        let d = (c - cam.position_m).length() - r;
+        let m = &set.models[inst.model as usize];
+        let px = f64::from(m.pm.levels[level - 1].error) * inst.scale * k / d.max(1.0);
+        assert!(
+            px <= 1.0 + 1e-6,
+            "instance {id} at level {level} projects to {px:.3} px"
+        );
+        coarsest = coarsest.min(m.pm.triangles_at(level) as f64 / full as f64);
+    }
+    assert!(
+        coarsest < 0.5,
+        "no drawn object dropped detail (coarsest {coarsest:.2})"
+    );
+    assert!(st.object_triangles < st.object_full_triangles);
+
+    // Debug views: colour by LOD changes exactly the object pixels; fixed LOD 1.0 draws full
+    // detail.
+    let base = target.read_rgba(&g).expect("read");
+    v.view.pm_color_by_lod = true;
+    frame(&g, &mut v, &target, &cam, 0.0);
+    let coloured = target.read_rgba(&g).expect("read");
+    let changed = base
+        .chunks_exact(4)
+        .zip(coloured.chunks_exact(4))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(changed > 100, "colour by LOD changed {changed} pixels");
+    v.view.pm_color_by_lod = false;
+    v.view.pm_lod.fixed_fraction = Some(1.0);
+    let st = frame(&g, &mut v, &target, &cam, 0.0);
+    assert_eq!(st.object_triangles, st.object_full_triangles);
+    assert_eq!(st.object_full_triangles, (full * levels.len()) as u64);
+}
