@@ -11,9 +11,16 @@ struct Draw {
     fade: vec4<f32>,
     // rgb: albedo, or the level colour when fade.w is 1; w: unused.
     albedo: vec4<f32>,
+    // Geomorph: vertices with index in [x, y) move between their position and `morph_to`'s
+    // (the vertex they collapse onto): z the progress in [0, 1], w 1 when growing out
+    // (refining), 0 when shrinking in (coarsening).
+    morph: vec4<f32>,
 };
 
 @group(2) @binding(0) var<uniform> draw: Draw;
+// Per instance: for each morphing vertex, the position and normal of the vertex it collapses
+// onto (two entries per vertex).
+@group(3) @binding(0) var<storage, read> morph_to: array<vec4<f32>>;
 
 struct ObjectIn {
     @location(0) position: vec3<f32>,
@@ -21,12 +28,20 @@ struct ObjectIn {
 };
 
 @vertex
-fn vs_main(v: ObjectIn) -> VertexOut {
+fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> VertexOut {
     var out: VertexOut;
-    let rel = (draw.rel_from_model * vec4<f32>(v.position, 1.0)).xyz;
+    var p = v.position;
+    var n = v.normal;
+    if (f32(vi) >= draw.morph.x && f32(vi) < draw.morph.y) {
+        // Growing out: from the parent (t = 0) to the vertex; shrinking: the other way.
+        let t = select(1.0 - draw.morph.z, draw.morph.z, draw.morph.w > 0.5);
+        p = mix(morph_to[2u * vi].xyz, p, t);
+        n = mix(morph_to[2u * vi + 1u].xyz, n, t);
+    }
+    let rel = (draw.rel_from_model * vec4<f32>(p, 1.0)).xyz;
     out.rel = rel;
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
-    out.normal = normalize((draw.normal_from_model * vec4<f32>(v.normal, 0.0)).xyz);
+    out.normal = normalize((draw.normal_from_model * vec4<f32>(n, 0.0)).xyz);
     out.albedo = draw.albedo.rgb;
     out.fade = draw.fade.xyz;
     out.light = vec2<f32>(1.0, 1.0);

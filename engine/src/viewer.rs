@@ -239,6 +239,7 @@ impl Viewer {
             tree: self.streamer.tree(),
             drawn: &drawn,
             ancestors: &ancestors,
+            dt_s,
         };
         let stats: DrawStats = self.scene.render(gpu, encoder, color, depth, &draws);
         if timed && let Some(t) = &self.timer {

@@ -23,6 +23,10 @@ pub struct PmLodSettings {
     pub z_disp_m: f64,
     /// Draw this fraction of the positions regardless of distance (MLFIX), when set.
     pub fixed_fraction: Option<f64>,
+    /// Geomorph (MORPH) over this many seconds when an instance's level changes: vertices a
+    /// finer level adds grow out of the vertex they collapse onto, and vertices a coarser level
+    /// drops shrink into it before they go. 0: levels switch at once.
+    pub morph_s: f64,
 }
 
 impl Default for PmLodSettings {
@@ -33,6 +37,7 @@ impl Default for PmLodSettings {
             min_vertices: 4,
             z_disp_m: 0.0,
             fixed_fraction: None,
+            morph_s: 0.0,
         }
     }
 }

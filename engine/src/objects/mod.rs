@@ -7,7 +7,8 @@
 //! - [`lod`]: the level per instance (proven against rendered silhouettes in tests/e2e/pm.rs).
 //!
 //! The renderer (`render::objects`) keeps one index list per drawn instance, edited level by
-//! level (seed 000's per-instance triangle lists). Not built yet: geomorphing (MORPH).
+//! level (seed 000's per-instance triangle lists), and geomorphs level changes over
+//! `PmLodSettings::morph_s` (MORPH).
 
 pub mod content;
 pub mod lod;

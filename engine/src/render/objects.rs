@@ -8,7 +8,7 @@ use super::frame::{DrawStats, FrameResources, PipelineSpec, pipeline, uniform_en
 use super::scene::{FrameDraws, NodeRenderer};
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::lod::choose_level;
-use crate::objects::set::{ObjectSet, model_to_world};
+use crate::objects::set::{ObjectSet, PmModel, model_to_world};
 use crate::stream::Shared;
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
@@ -28,6 +28,20 @@ struct DrawUniform {
     normal_from_model: [[f32; 4]; 4],
     fade: [f32; 4],
     albedo: [f32; 4],
+    morph: [f32; 4],
+}
+
+/// A geomorph in progress: wedges `lo..hi` move between their own position and that of the
+/// wedge they collapse onto at the coarser of the two levels.
+#[derive(Debug, Clone, Copy)]
+struct Morph {
+    lo: u32,
+    hi: u32,
+    /// Progress, 0 to 1.
+    t: f32,
+    /// Growing out to a finer level (its list is shown), else shrinking into `target`.
+    refine: bool,
+    target: usize,
 }
 
 struct InstanceGpu {
@@ -35,6 +49,93 @@ struct InstanceGpu {
     indices: wgpu::Buffer,
     uploaded_level: usize,
     last_frame: u64,
+    morph: Option<Morph>,
+    /// Per-wedge "collapse onto" positions and their bind group (made on the first morph).
+    morph_to: Option<(wgpu::Buffer, wgpu::BindGroup)>,
+}
+
+impl InstanceGpu {
+    /// Moves the instance towards `level`: at once, or by a geomorph of `morph_s` seconds
+    /// (advanced by `dt_s`); rewrites the GPU index list when the shown level changed (returns
+    /// whether it did).
+    fn update_level(
+        &mut self,
+        gpu: &Gpu,
+        model: &PmModel,
+        level: usize,
+        morph_s: f64,
+        dt_s: f64,
+        morph_layout: &wgpu::BindGroupLayout,
+    ) -> bool {
+        let pm = &model.pm;
+        // Advance a geomorph; a finished shrink switches to its coarser list.
+        if let Some(m) = self.morph.as_mut() {
+            m.t += (dt_s / morph_s.max(1e-9)) as f32;
+            if m.t >= 1.0 || morph_s <= 0.0 {
+                if !m.refine {
+                    self.lod.set_level(pm, &model.edits, m.target);
+                }
+                self.morph = None;
+            }
+        }
+        if self.morph.is_none() && level != self.lod.level() {
+            if morph_s > 0.0 {
+                let refine = level > self.lod.level();
+                let coarse = level.min(self.lod.level());
+                let lo = pm.wedges_at(coarse) as u32;
+                let hi = pm.wedges_at(level.max(self.lod.level())) as u32;
+                let (buffer, _) = self.morph_to.get_or_insert_with(|| {
+                    let b = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("object morph targets"),
+                        size: (pm.wedge_position.len().max(1) * 32) as u64,
+                        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    });
+                    let g = morph_group(&gpu.device, morph_layout, &b);
+                    (b, g)
+                });
+                let live = lo;
+                let to: Vec<[f32; 4]> = (lo..hi)
+                    .flat_map(|w0| {
+                        let mut w = w0;
+                        while w >= live {
+                            w = pm.collapse_to[w as usize];
+                        }
+                        let q = pm.positions[pm.wedge_position[w as usize] as usize];
+                        let n = model.normals[w as usize];
+                        [[q[0], q[1], q[2], 1.0], [n[0], n[1], n[2], 0.0]]
+                    })
+                    .collect();
+                if !to.is_empty() {
+                    gpu.queue
+                        .write_buffer(buffer, u64::from(lo) * 32, bytemuck::cast_slice(&to));
+                }
+                if refine {
+                    self.lod.set_level(pm, &model.edits, level);
+                }
+                self.morph = Some(Morph {
+                    lo,
+                    hi,
+                    t: 0.0,
+                    refine,
+                    target: level,
+                });
+            } else {
+                self.lod.set_level(pm, &model.edits, level);
+            }
+        }
+        let shown = self.lod.level();
+        if self.uploaded_level == shown {
+            return false;
+        }
+        let indices = self.lod.indices();
+        if !indices.is_empty() {
+            gpu.queue
+                .write_buffer(&self.indices, 0, bytemuck::cast_slice(indices));
+        }
+        self.uploaded_level = shown;
+        true
+    }
 }
 
 struct DrawItem {
@@ -60,6 +161,9 @@ pub struct ObjectsRenderer {
     pipeline: wgpu::RenderPipeline,
     vertex_buffers: Vec<wgpu::Buffer>,
     draw_layout: wgpu::BindGroupLayout,
+    morph_layout: wgpu::BindGroupLayout,
+    /// Bound for instances that are not morphing (the shader reads nothing from it).
+    no_morph: wgpu::BindGroup,
     draw_buffer: wgpu::Buffer,
     draw_group: wgpu::BindGroup,
     draw_capacity: u64,
@@ -93,6 +197,21 @@ fn draw_group(
     })
 }
 
+fn morph_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    buffer: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("object morph"),
+        layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: buffer.as_entire_binding(),
+        }],
+    })
+}
+
 fn draw_buffer(device: &wgpu::Device, draws: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("object draw uniforms"),
@@ -118,11 +237,34 @@ impl ObjectsRenderer {
             label: Some("object draw layout"),
             entries: &[uniform_entry(0, true, wgpu::ShaderStages::VERTEX)],
         });
+        let morph_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("object morph layout"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
+        });
+        let no_morph = morph_group(
+            device,
+            &morph_layout,
+            &device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("no morph"),
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
+        );
         let layout = frame.pipeline_layout(
             device,
             "objects pipeline layout",
             false,
-            &[Some(&draw_layout)],
+            &[Some(&draw_layout), Some(&morph_layout)],
         );
         let attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
         let buffers = [Some(wgpu::VertexBufferLayout {
@@ -162,6 +304,8 @@ impl ObjectsRenderer {
             pipeline,
             vertex_buffers,
             draw_layout,
+            morph_layout,
+            no_morph,
             draw_buffer,
             draw_group,
             draw_capacity,
@@ -170,6 +314,14 @@ impl ObjectsRenderer {
             frame_no: 0,
             stats: ObjectStats::default(),
         }
+    }
+
+    /// The geomorph progress (0 to 1) of each drawn instance that is morphing.
+    pub fn morphs(&self) -> Vec<(u32, f32)> {
+        self.items
+            .iter()
+            .filter_map(|i| Some((i.instance, self.instances[&i.instance].morph?.t)))
+            .collect()
     }
 
     /// The level each drawn instance showed last frame (tests and statistics).
@@ -242,18 +394,29 @@ impl NodeRenderer for ObjectsRenderer {
                     }),
                     uploaded_level: 0,
                     last_frame: 0,
+                    morph: None,
+                    morph_to: None,
                 });
                 entry.last_frame = self.frame_no;
-                entry.lod.set_level(&model.pm, &model.edits, level);
+                let changed = entry.update_level(
+                    gpu,
+                    model,
+                    level,
+                    settings.morph_s,
+                    draws.dt_s,
+                    &self.morph_layout,
+                );
+                self.stats.level_changes += u32::from(changed);
+                let shown = entry.lod.level();
                 let indices = entry.lod.indices();
-                if entry.uploaded_level != level {
-                    if !indices.is_empty() {
-                        gpu.queue
-                            .write_buffer(&entry.indices, 0, bytemuck::cast_slice(indices));
-                    }
-                    entry.uploaded_level = level;
-                    self.stats.level_changes += 1;
-                }
+                let morph = entry.morph.map_or([0.0; 4], |m| {
+                    [
+                        m.lo as f32,
+                        m.hi as f32,
+                        m.t.min(1.0),
+                        f32::from(u8::from(m.refine)),
+                    ]
+                });
                 if indices.is_empty() {
                     continue;
                 }
@@ -262,7 +425,7 @@ impl NodeRenderer for ObjectsRenderer {
                 rel.w_axis -= camera.position_m.extend(0.0);
                 let lin = glam::DMat3::from_mat4(world);
                 let normal = DMat4::from_mat3(lin.inverse().transpose());
-                let share = level as f32 / model.pm.level_count().max(1) as f32;
+                let share = shown as f32 / model.pm.level_count().max(1) as f32;
                 let by_lod = settings_color(draws);
                 let albedo = if by_lod {
                     lod_color(share)
@@ -279,6 +442,7 @@ impl NodeRenderer for ObjectsRenderer {
                         f32::from(u8::from(by_lod)),
                     ],
                     albedo: [albedo[0], albedo[1], albedo[2], 1.0],
+                    morph,
                 });
                 self.items.push(DrawItem {
                     instance: id,
@@ -327,6 +491,12 @@ impl NodeRenderer for ObjectsRenderer {
                 continue;
             };
             pass.set_bind_group(2, &self.draw_group, &[(k as u64 * DRAW_STRIDE) as u32]);
+            let morph = inst
+                .morph_to
+                .as_ref()
+                .filter(|_| inst.morph.is_some())
+                .map_or(&self.no_morph, |(_, g)| g);
+            pass.set_bind_group(3, morph, &[]);
             pass.set_vertex_buffer(0, self.vertex_buffers[item.model as usize].slice(..));
             pass.set_index_buffer(inst.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..item.index_count, 0, 0..1);

@@ -28,6 +28,8 @@ pub struct FrameDraws<'a> {
     pub tree: &'a QuadTree,
     pub drawn: &'a [DrawnNode<'a>],
     pub ancestors: &'a [DrawnNode<'a>],
+    /// Simulated seconds since the previous frame (time-based effects such as geomorphs).
+    pub dt_s: f64,
 }
 
 /// The GPU side of one kind of thing drawn.

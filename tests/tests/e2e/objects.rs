@@ -167,3 +167,88 @@ fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
     assert_eq!(st.object_triangles, st.object_full_triangles);
     assert_eq!(st.object_full_triangles, (full * levels.len()) as u64);
 }
+
+#[test]
+fn a_level_change_geomorphs_over_the_morph_window_and_ends_on_the_exact_level() {
+    let Some(g) = device() else { return };
+    let world = tiny_world();
+    let ground = |x: f64, y: f64| world.height_m(x, y);
+    let eye = DVec3::new(150.0, 200.0, ground(150.0, 200.0) + 6.0);
+    let target_xy = [175.0, 200.0];
+    let look = DVec3::new(
+        target_xy[0],
+        target_xy[1],
+        ground(target_xy[0], target_xy[1]) + 4.0,
+    );
+    let cam = Camera::look_at(eye, look, 50f64.to_radians(), [200, 150]);
+    let model = PmModel::from_pm("box".into(), bumpy_box());
+    let set = Arc::new(ObjectSet::place_row(
+        vec![model],
+        target_xy,
+        [1.0, 0.0],
+        1,
+        30.0,
+        10.0,
+        ground,
+    ));
+    let mut kinds = registered(&world);
+    kinds.push(Registration {
+        kind: Arc::new(ObjectsContent { set }),
+        renderer: Some(ObjectsRenderer::create),
+    });
+    let settings = StreamSettings {
+        workers: 1,
+        ..StreamSettings::default()
+    };
+    let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world, settings, &kinds);
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    v.view.pm_lod.fixed_fraction = Some(0.05);
+    settle(&g, &mut v, &target, &cam);
+    let read = |v: &mut Viewer, dt: f64| {
+        frame(&g, v, &target, &cam, dt);
+        target.read_rgba(&g).expect("read")
+    };
+    let coarse = read(&mut v, 0.0);
+    v.view.pm_lod.fixed_fraction = Some(1.0);
+    let full_at_once = read(&mut v, 0.0);
+    assert_ne!(coarse, full_at_once, "the two levels must look different");
+    let renderer = |v: &Viewer| -> Vec<(u32, f32)> {
+        v.scene
+            .renderer::<ObjectsRenderer>()
+            .expect("renderer")
+            .morphs()
+    };
+    for (from, to, start, end) in [
+        (Some(0.05), Some(1.0), &coarse, &full_at_once),
+        (Some(1.0), Some(0.05), &full_at_once, &coarse),
+    ] {
+        v.view.pm_lod.morph_s = 0.0;
+        v.view.pm_lod.fixed_fraction = from;
+        assert_eq!(&read(&mut v, 0.0), start);
+        v.view.pm_lod.morph_s = 1.0;
+        v.view.pm_lod.fixed_fraction = to;
+        let first = read(&mut v, 0.0);
+        assert_eq!(renderer(&v).len(), 1, "a morph starts");
+        let middle = read(&mut v, 0.5);
+        let progress = renderer(&v);
+        assert!(
+            progress.len() == 1 && (progress[0].1 - 0.5).abs() < 1e-6,
+            "half way after half the window: {progress:?}"
+        );
+        let differs = |a: &[u8], b: &[u8]| a.iter().zip(b).filter(|(x, y)| x != y).count();
+        assert!(
+            differs(&middle, start) > 20 && differs(&middle, end) > 20,
+            "the middle of a morph is in between"
+        );
+        let last = read(&mut v, 0.6);
+        assert!(renderer(&v).is_empty(), "the morph ends with its window");
+        assert_eq!(&last, end, "a finished morph shows exactly the new level");
+        // The first frame of a morph shows the old shape (new vertices sit on their parents,
+        // with their parents' normals): far closer to the old level than to the new one.
+        let (near, far) = (differs(&first, start), differs(&first, end));
+        println!(
+            "first frame of the morph: {near} pixels differ from the old level, {far} from the new"
+        );
+        assert!(near * 10 <= far, "{near} vs {far}");
+    }
+}

@@ -245,6 +245,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
             tree: &tree,
             drawn: &drawn,
             ancestors: &[],
+            dt_s: 0.0,
         };
         let mut enc = g
             .device

@@ -149,6 +149,10 @@ pub(crate) struct Cli {
     /// Progressive meshes: metres subtracted from the distance before the metric (ZDISP).
     #[arg(long, default_value_t = 0.0)]
     pub(crate) pm_zdisp_m: f64,
+    /// Progressive meshes: geomorph over this many seconds when an object's level changes
+    /// (MORPH; 0 switches at once).
+    #[arg(long, default_value_t = 0.25)]
+    pub(crate) pm_morph_s: f64,
     /// Debug: draw every object with this fraction of its vertices (MLFIX), 0 to 1.
     #[arg(long, value_parser = fraction)]
     pub(crate) pm_fixed: Option<f64>,
@@ -239,6 +243,7 @@ pub(crate) fn make_viewer(
         min_vertices: cli.pm_min_vertices,
         z_disp_m: cli.pm_zdisp_m,
         fixed_fraction: cli.pm_fixed,
+        morph_s: cli.pm_morph_s.max(0.0),
     };
     viewer.view.pm_color_by_lod = cli.pm_color_by_lod;
     viewer.set_sun(cli.sun(), glam::DVec3::ZERO);

@@ -98,6 +98,7 @@ pub(crate) fn panel(
     );
     ui.add(egui::Slider::new(&mut view.pm_lod.min_vertices, 1..=500).text("object min vertices"));
     ui.add(egui::Slider::new(&mut view.pm_lod.z_disp_m, 0.0..=500.0).text("object ZDISP (m)"));
+    ui.add(egui::Slider::new(&mut view.pm_lod.morph_s, 0.0..=2.0).text("object geomorph (s)"));
     ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
     ui.checkbox(&mut fixed, "fixed level");
     if fixed {
