@@ -18,7 +18,6 @@ use super::geom::{area_normal, v3};
 use super::mesh::TriMesh;
 use glam::DVec3;
 use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 
 /// Which cost orders the collapses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -153,33 +152,118 @@ impl Key {
     }
 }
 
-#[derive(Debug, Clone, Copy)]
-struct Entry {
-    key: Key,
-    removed: u32,
-    kept: u32,
-    version: u32,
+/// Tier of a collapse that moves a border or seam vertex off its feature (quadric).
+const TIER_FEATURE: u8 = 1;
+/// Tier of a collapse that flips a moving triangle.
+const TIER_FLIP: u8 = 2;
+
+/// An indexed binary min-heap of positions by their best collapse: one entry per position,
+/// updated in place (no stale entries to skip).
+struct PosHeap {
+    heap: Vec<u32>,
+    slot: Vec<u32>,
+    key: Vec<Key>,
+    target: Vec<u32>,
 }
 
-impl PartialEq for Entry {
-    fn eq(&self, o: &Self) -> bool {
-        self.cmp(o) == Ordering::Equal
+const NO_SLOT: u32 = u32::MAX;
+
+impl PosHeap {
+    fn new(n: usize) -> Self {
+        PosHeap {
+            heap: Vec::with_capacity(n),
+            slot: vec![NO_SLOT; n],
+            key: vec![
+                Key {
+                    tier: 0,
+                    cost: 0.0,
+                    tie: 0.0,
+                };
+                n
+            ],
+            target: vec![0; n],
+        }
     }
-}
-impl Eq for Entry {}
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
+
+    /// Heap order: key, then the lower position (deterministic).
+    fn less(&self, a: u32, b: u32) -> bool {
+        match self.key[a as usize].cmp_key(&self.key[b as usize]) {
+            Ordering::Less => true,
+            Ordering::Greater => false,
+            Ordering::Equal => (a, self.target[a as usize]) < (b, self.target[b as usize]),
+        }
     }
-}
-impl Ord for Entry {
-    /// Reversed so that `BinaryHeap` pops the cheapest; ties broken by position ids so the order
-    /// is deterministic.
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.key
-            .cmp_key(&self.key)
-            .then(o.removed.cmp(&self.removed))
-            .then(o.kept.cmp(&self.kept))
+
+    fn swap(&mut self, i: usize, j: usize) {
+        self.heap.swap(i, j);
+        self.slot[self.heap[i] as usize] = i as u32;
+        self.slot[self.heap[j] as usize] = j as u32;
+    }
+
+    fn up(&mut self, mut i: usize) {
+        while i > 0 {
+            let parent = (i - 1) / 2;
+            if !self.less(self.heap[i], self.heap[parent]) {
+                break;
+            }
+            self.swap(i, parent);
+            i = parent;
+        }
+    }
+
+    fn down(&mut self, mut i: usize) {
+        loop {
+            let (l, r) = (2 * i + 1, 2 * i + 2);
+            let mut m = i;
+            if l < self.heap.len() && self.less(self.heap[l], self.heap[m]) {
+                m = l;
+            }
+            if r < self.heap.len() && self.less(self.heap[r], self.heap[m]) {
+                m = r;
+            }
+            if m == i {
+                break;
+            }
+            self.swap(i, m);
+            i = m;
+        }
+    }
+
+    /// Inserts or updates position `p`'s entry.
+    fn set(&mut self, p: u32, key: Key, target: u32) {
+        self.key[p as usize] = key;
+        self.target[p as usize] = target;
+        let s = self.slot[p as usize];
+        if s == NO_SLOT {
+            self.heap.push(p);
+            let i = self.heap.len() - 1;
+            self.slot[p as usize] = i as u32;
+            self.up(i);
+        } else {
+            self.up(s as usize);
+            self.down(self.slot[p as usize] as usize);
+        }
+    }
+
+    fn remove(&mut self, p: u32) {
+        let s = self.slot[p as usize];
+        if s == NO_SLOT {
+            return;
+        }
+        let i = s as usize;
+        let last = self.heap.len() - 1;
+        self.swap(i, last);
+        self.heap.pop();
+        self.slot[p as usize] = NO_SLOT;
+        if i < self.heap.len() {
+            self.up(i);
+            self.down(self.slot[self.heap[i] as usize] as usize);
+        }
+    }
+
+    fn peek(&self) -> Option<(u32, Key, u32)> {
+        let &p = self.heap.first()?;
+        Some((p, self.key[p as usize], self.target[p as usize]))
     }
 }
 
@@ -194,6 +278,7 @@ struct Context {
 #[derive(Default)]
 struct Scratch {
     neighbours: Vec<u32>,
+    uses: Vec<u32>,
     vanish: Vec<DVec3>,
     moving: Vec<DVec3>,
 }
@@ -203,17 +288,18 @@ struct State<'a> {
     kind: CostKind,
     pos: Vec<DVec3>,
     tri_w: Vec<[u32; 3]>,
+    /// The positions of `tri_w` (kept in step: read far more often than written).
+    tri_p: Vec<[u32; 3]>,
     tri_alive: Vec<bool>,
     pos_tris: Vec<Vec<u32>>,
     pos_wedges: Vec<Vec<u32>>,
     pos_alive: Vec<bool>,
     quadric: Vec<Quadric>,
-    version: Vec<u32>,
 }
 
 impl State<'_> {
     fn tri_pos(&self, t: u32) -> [u32; 3] {
-        self.tri_w[t as usize].map(|w| self.mesh.wedge_position[w as usize])
+        self.tri_p[t as usize]
     }
 
     fn neighbours(&self, u: u32) -> Vec<u32> {
@@ -233,20 +319,30 @@ impl State<'_> {
         }
     }
 
-    /// True when edge (u, x) has exactly one live triangle (an open border).
-    fn is_border_edge(&self, u: u32, x: u32) -> bool {
-        let mut n = 0;
+    /// The neighbours of `u` into `out`, and whether one of u's edges is an open border (used
+    /// by exactly one triangle), in one pass over u's triangles.
+    fn neighbours_and_border(&self, u: u32, out: &mut Vec<u32>, uses: &mut Vec<u32>) -> bool {
+        out.clear();
+        uses.clear();
         for &t in &self.pos_tris[u as usize] {
-            if self.tri_pos(t).contains(&x) {
-                n += 1;
+            for p in self.tri_pos(t) {
+                if p == u {
+                    continue;
+                }
+                if let Some(i) = out.iter().position(|&x| x == p) {
+                    uses[i] += 1;
+                } else {
+                    out.push(p);
+                    uses.push(1);
+                }
             }
         }
-        n == 1
+        uses.contains(&1)
     }
 
     /// How much of a corner `u` is: the largest deviation of a triangle normal from the mean
     /// normal (0 on a plane, up to 2), plus 1 on an open border, plus 1 on a seam.
-    fn cornerness(&self, u: u32) -> f64 {
+    fn cornerness(&self, u: u32, on_border: bool) -> f64 {
         let tris = &self.pos_tris[u as usize];
         let mut mean = DVec3::ZERO;
         let mut normals = Vec::with_capacity(tris.len());
@@ -261,11 +357,7 @@ impl State<'_> {
             .iter()
             .map(|n| 1.0 - n.dot(mean))
             .fold(0.0f64, f64::max);
-        if self
-            .neighbours(u)
-            .into_iter()
-            .any(|x| self.is_border_edge(u, x))
-        {
+        if on_border {
             c += 1.0;
         }
         if self.pos_wedges[u as usize].len() > 1 {
@@ -277,7 +369,14 @@ impl State<'_> {
     /// The key of collapsing u onto v. `corner_u` is u's [`State::cornerness`] (longest-edge
     /// cost only), `border_u` whether u lies on an open border, `edge_kind` whether (u, v) is a
     /// border or seam edge, `seam_u` whether u has several wedges.
-    fn evaluate(&self, u: u32, v: u32, ctx: &Context, scratch: &mut Scratch) -> Key {
+    fn evaluate(
+        &self,
+        u: u32,
+        v: u32,
+        ctx: &Context,
+        scratch: &mut Scratch,
+        check_flips: bool,
+    ) -> Key {
         let pu = self.pos[u as usize];
         let pv = self.pos[v as usize];
         let mut flips = false;
@@ -285,7 +384,14 @@ impl State<'_> {
         scratch.vanish.clear();
         scratch.moving.clear();
         let mut vanish_count = 0usize;
-        for &t in &self.pos_tris[u as usize] {
+        // The quadric needs the triangles only for the flip test and the feature rule.
+        let scan = check_flips || self.kind != CostKind::Quadric || ctx.on_border || ctx.on_seam;
+        let tris: &[u32] = if scan {
+            &self.pos_tris[u as usize]
+        } else {
+            &[]
+        };
+        for &t in tris {
             let tp = self.tri_pos(t);
             let [a, b, c] = tp.map(|p| self.pos[p as usize]);
             let n0 = area_normal(a, b, c);
@@ -301,13 +407,15 @@ impl State<'_> {
                     scratch.vanish.push(n0.normalize_or_zero());
                 }
             } else {
-                let moved = tp.map(|p| if p == u { pv } else { self.pos[p as usize] });
-                let n1 = area_normal(moved[0], moved[1], moved[2]);
-                let l0 = n0.length_squared();
-                if l0 > 0.0 {
-                    let d = n0.dot(n1);
-                    if d <= 0.0 || d * d <= FLIP_COS * FLIP_COS * l0 * n1.length_squared() {
-                        flips = true;
+                if check_flips && !flips {
+                    let moved = tp.map(|p| if p == u { pv } else { self.pos[p as usize] });
+                    let n1 = area_normal(moved[0], moved[1], moved[2]);
+                    let l0 = n0.length_squared();
+                    if l0 > 0.0 {
+                        let d = n0.dot(n1);
+                        if d <= 0.0 || d * d <= FLIP_COS * FLIP_COS * l0 * n1.length_squared() {
+                            flips = true;
+                        }
                     }
                 }
                 if self.kind == CostKind::Melax {
@@ -315,14 +423,14 @@ impl State<'_> {
                 }
             }
         }
-        let mut tier = u8::from(flips);
+        let mut tier = if flips { TIER_FLIP } else { 0 };
         let cost = match self.kind {
             CostKind::LongestEdge => longest.sqrt(),
             CostKind::Quadric => {
                 // Border and seam vertices move only along their border or seam (they may
                 // still leave it once nothing else is left).
                 if (ctx.on_border || ctx.on_seam) && !self.is_feature_edge(u, v, vanish_count) {
-                    tier = tier.max(1);
+                    tier = tier.max(TIER_FEATURE);
                 }
                 self.quadric[u as usize].eval(pv)
             }
@@ -380,13 +488,14 @@ impl State<'_> {
         false
     }
 
-    fn best(&self, u: u32, scratch: &mut Scratch) -> Option<(Key, u32)> {
-        self.neighbours_into(u, &mut scratch.neighbours);
-        let neighbours = std::mem::take(&mut scratch.neighbours);
-        let border_u = neighbours.iter().any(|&x| self.is_border_edge(u, x));
+    /// The cheapest collapse of `u`; flips are tested only with `check_flips` (otherwise when
+    /// the collapse is about to be made).
+    fn best(&self, u: u32, scratch: &mut Scratch, check_flips: bool) -> Option<(Key, u32)> {
+        let mut neighbours = std::mem::take(&mut scratch.neighbours);
+        let border_u = self.neighbours_and_border(u, &mut neighbours, &mut scratch.uses);
         let ctx = Context {
             corner: if self.kind == CostKind::LongestEdge {
-                self.cornerness(u)
+                self.cornerness(u, border_u)
             } else {
                 0.0
             },
@@ -395,7 +504,7 @@ impl State<'_> {
         };
         let mut best: Option<(Key, u32)> = None;
         for &v in &neighbours {
-            let k = self.evaluate(u, v, &ctx, scratch);
+            let k = self.evaluate(u, v, &ctx, scratch, check_flips);
             let better = match &best {
                 None => true,
                 Some((b, bv)) => match k.cmp_key(b) {
@@ -476,6 +585,11 @@ impl State<'_> {
                     *w = wedge_target[*w as usize];
                 }
             }
+            for p in &mut self.tri_p[t as usize] {
+                if *p == u {
+                    *p = v;
+                }
+            }
             self.pos_tris[v as usize].push(t);
         }
         if self.kind == CostKind::Quadric {
@@ -483,20 +597,25 @@ impl State<'_> {
             self.quadric[v as usize].add(&qu);
         }
         self.pos_alive[u as usize] = false;
-        self.version[u as usize] += 1;
         vanish
     }
 
-    fn push_best(&mut self, heap: &mut BinaryHeap<Entry>, u: u32, scratch: &mut Scratch) {
-        self.version[u as usize] += 1;
-        if let Some((key, v)) = self.best(u, scratch) {
-            heap.push(Entry {
-                key,
-                removed: u,
-                kept: v,
-                version: self.version[u as usize],
-            });
-        }
+    /// Whether collapsing u onto v turns a moving triangle by more than the flip angle.
+    fn flips(&self, u: u32, v: u32) -> bool {
+        let pv = self.pos[v as usize];
+        self.pos_tris[u as usize].iter().any(|&t| {
+            let tp = self.tri_pos(t);
+            if tp.contains(&v) {
+                return false;
+            }
+            let [a, b, c] = tp.map(|p| self.pos[p as usize]);
+            let n0 = area_normal(a, b, c);
+            let moved = tp.map(|p| if p == u { pv } else { self.pos[p as usize] });
+            let n1 = area_normal(moved[0], moved[1], moved[2]);
+            let l0 = n0.length_squared();
+            let d = n0.dot(n1);
+            l0 > 0.0 && (d <= 0.0 || d * d <= FLIP_COS * FLIP_COS * l0 * n1.length_squared())
+        })
     }
 }
 
@@ -605,39 +724,55 @@ pub fn collapse_order(
         kind,
         pos,
         tri_w: mesh.triangles.clone(),
+        tri_p: mesh.position_triangles(),
         tri_alive: vec![true; mesh.triangles.len()],
         pos_tris,
         pos_wedges,
         pos_alive: vec![true; np],
         quadric,
-        version: vec![0; np],
     };
     let mut wedge_target = vec![u32::MAX; mesh.wedge_position.len()];
     let mut triangle_step = vec![0u32; mesh.triangles.len()];
     let mut collapses: Vec<Collapse> = Vec::with_capacity(np.saturating_sub(1));
-    let mut heap = BinaryHeap::new();
+    let mut heap = PosHeap::new(np);
     let mut scratch = Scratch::default();
+    // Whether a position's entry was evaluated with flip tests (else they run on pop).
+    let mut checked = vec![false; np];
+    let refresh =
+        |s: &State<'_>, heap: &mut PosHeap, scratch: &mut Scratch, p: u32, check: bool| match s
+            .best(p, scratch, check)
+        {
+            Some((key, v)) => heap.set(p, key, v),
+            None => heap.remove(p),
+        };
     for u in 0..np as u32 {
-        s.push_best(&mut heap, u, &mut scratch);
+        refresh(&s, &mut heap, &mut scratch, u, false);
     }
     let mut alive = np;
     while alive > 1 {
-        let Some(e) = heap.pop() else { break };
-        if e.version != s.version[e.removed as usize]
-            || !s.pos_alive[e.removed as usize]
-            || !s.pos_alive[e.kept as usize]
-        {
+        let Some((u, key, v)) = heap.peek() else {
+            break;
+        };
+        if !checked[u as usize] && s.flips(u, v) {
+            // The cheapest collapse of u flips a triangle: rank u by its best collapse with
+            // flips tested (a flipping one only when every one of u's flips).
+            checked[u as usize] = true;
+            refresh(&s, &mut heap, &mut scratch, u, true);
             continue;
         }
-        let (u, v) = (e.removed, e.kept);
+        heap.remove(u);
         let step = collapses.len() as u32 + 1;
         let vanish = s.collapse(u, v, step, &mut wedge_target, &mut triangle_step);
         alive -= 1;
         collapses.push(Collapse {
             removed: u,
             kept: v,
-            cost: e.key.cost,
-            flags: if e.key.tier > 0 { FLAG_FLIPPED } else { 0 },
+            cost: key.cost,
+            flags: if key.tier >= TIER_FLIP {
+                FLAG_FLIPPED
+            } else {
+                0
+            },
         });
         // Re-evaluate v and everything around it.
         let mut touched = s.neighbours(v);
@@ -650,7 +785,8 @@ pub fn collapse_order(
         }
         touched.push(v);
         for p in touched {
-            s.push_best(&mut heap, p, &mut scratch);
+            checked[p as usize] = false;
+            refresh(&s, &mut heap, &mut scratch, p, false);
         }
         if collapses.len().is_multiple_of(1024) {
             progress(collapses.len());
