@@ -156,6 +156,20 @@ impl std::fmt::Debug for FrameResources {
 }
 
 /// A uniform-buffer layout entry.
+/// A read-only storage-buffer binding.
+pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
 pub fn uniform_entry(
     binding: u32,
     dynamic: bool,
@@ -252,16 +266,7 @@ impl FrameResources {
         });
         let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("node table layout"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
+            entries: &[storage_entry(0, wgpu::ShaderStages::VERTEX)],
         });
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame uniforms"),

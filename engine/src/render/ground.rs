@@ -773,8 +773,9 @@ fn gpu_areas(
     (areas, points)
 }
 
-/// A render pass into `view` alone, cleared first (every texel is then written by the pass).
-fn clear_pass<'e>(
+/// A render pass into `view` alone, cleared to black first (every texel is then written by the
+/// pass).
+pub fn clear_pass<'e>(
     enc: &'e mut wgpu::CommandEncoder,
     view: &wgpu::TextureView,
     label: &str,

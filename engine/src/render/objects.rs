@@ -4,7 +4,9 @@
 //! on the GPU only when the level changes. One draw per visible instance.
 
 use super::Gpu;
-use super::frame::{DrawStats, FrameResources, PipelineSpec, pipeline, uniform_entry};
+use super::frame::{
+    DrawStats, FrameResources, PipelineSpec, pipeline, storage_entry, uniform_entry,
+};
 use super::scene::{FrameDraws, NodeRenderer};
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::lod::choose_level;
@@ -239,16 +241,7 @@ impl ObjectsRenderer {
         });
         let morph_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("object morph layout"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
+            entries: &[storage_entry(0, wgpu::ShaderStages::VERTEX)],
         });
         let no_morph = morph_group(
             device,

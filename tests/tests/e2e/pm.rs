@@ -625,6 +625,7 @@ mod silhouette {
 
     use super::{CostKind, PmMesh, obj};
     use engine::objects::lod::{PmLodSettings, choose_level, error_budget};
+    use engine::render::ground::clear_pass;
     use engine::render::{COLOR_FORMAT, Gpu, Target};
     use worldgen::pm::ErrorIndex;
 
@@ -696,22 +697,7 @@ mod silhouette {
         let target = Target::new(d, [SIZE, SIZE], COLOR_FORMAT);
         let mut enc = d.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("silhouette"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &target.color_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = clear_pass(&mut enc, &target.color_view, "silhouette");
             pass.set_pipeline(&pipeline);
             pass.set_vertex_buffer(0, vb.slice(..));
             pass.draw(0..ndc.len() as u32, 0..1);

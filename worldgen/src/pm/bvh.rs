@@ -105,25 +105,44 @@ impl TriangleBvh {
         self.distance_sq_below(p, f64::INFINITY).sqrt()
     }
 
-    /// Squared distance to the nearest triangle if it is below `bound_sq`, else `bound_sq`.
+    /// Squared distance to the nearest triangle if it is at most `bound_sq`, else `bound_sq`.
     pub fn distance_sq_below(&self, p: DVec3, bound_sq: f64) -> f64 {
+        self.walk(p, bound_sq, false).0
+    }
+
+    /// True when some triangle lies within `r_sq` (squared) of `p`: stops at the first one.
+    pub fn any_within(&self, p: DVec3, r_sq: f64) -> bool {
+        self.walk(p, r_sq, true).1
+    }
+
+    /// Nearest-first traversal: the smallest squared distance at most `bound_sq` (else
+    /// `bound_sq`) and whether one was found; with `first`, stops at the first one found.
+    fn walk(&self, p: DVec3, bound_sq: f64, first: bool) -> (f64, bool) {
         let mut best = bound_sq;
+        let mut found = false;
         if self.nodes.is_empty() {
-            return best;
+            return (best, found);
         }
         let mut stack = [0u32; 64];
         let mut top = 1usize;
         while top > 0 {
             top -= 1;
             let node = self.nodes[stack[top] as usize];
-            if box_distance_sq(p, node.lo, node.hi) >= best {
+            if box_distance_sq(p, node.lo, node.hi) > best {
                 continue;
             }
             if node.count > 0 {
                 let s = node.first as usize;
                 for &t in &self.order[s..s + node.count as usize] {
                     let [a, b, c] = self.tris[t as usize];
-                    best = best.min(point_triangle_distance_sq(p, a, b, c));
+                    let d = point_triangle_distance_sq(p, a, b, c);
+                    if d <= best {
+                        best = d;
+                        found = true;
+                        if first {
+                            return (best, found);
+                        }
+                    }
                 }
                 continue;
             }
@@ -138,43 +157,7 @@ impl TriangleBvh {
                 top += 2;
             }
         }
-        best
-    }
-
-    /// True when some triangle lies within `r_sq` (squared) of `p`: stops at the first one.
-    pub fn any_within(&self, p: DVec3, r_sq: f64) -> bool {
-        if self.nodes.is_empty() {
-            return false;
-        }
-        let mut stack = [0u32; 64];
-        let mut top = 1usize;
-        while top > 0 {
-            top -= 1;
-            let node = self.nodes[stack[top] as usize];
-            if box_distance_sq(p, node.lo, node.hi) > r_sq {
-                continue;
-            }
-            if node.count > 0 {
-                let s = node.first as usize;
-                for &t in &self.order[s..s + node.count as usize] {
-                    let [a, b, c] = self.tris[t as usize];
-                    if point_triangle_distance_sq(p, a, b, c) <= r_sq {
-                        return true;
-                    }
-                }
-                continue;
-            }
-            let l = node.first as usize;
-            let dl = box_distance_sq(p, self.nodes[l].lo, self.nodes[l].hi);
-            let dr = box_distance_sq(p, self.nodes[l + 1].lo, self.nodes[l + 1].hi);
-            let (near, far) = if dl <= dr { (l, l + 1) } else { (l + 1, l) };
-            if top + 2 <= stack.len() {
-                stack[top] = far as u32;
-                stack[top + 1] = near as u32;
-                top += 2;
-            }
-        }
-        false
+        (best, found)
     }
 
     /// The largest distance from any of `points` to the triangles: exact, but only the points
