@@ -3,7 +3,7 @@
 //!
 //! Three costs, chosen per build:
 //! - [`CostKind::LongestEdge`], the seed's: the longest edge of the triangles that vanish; the
-//!   direction (which end survives) keeps the corner: the smoother end (lower [`cornerness`]) is
+//!   direction (which end survives) keeps the corner: the smoother end (lower `State::cornerness`) is
 //!   removed.
 //! - [`CostKind::Quadric`] (Garland-Heckbert, half-edge form): the squared distance of v from the
 //!   planes accumulated at u, with border and seam edges adding perpendicular constraint planes.

@@ -7,7 +7,7 @@
 //! - [`build`]: the collapse order under three costs (the seed's longest edge, quadric, Melax).
 //! - [`bound`]: the stored per-level error, a measured upper bound of the two-sided Hausdorff
 //!   distance to the full mesh (never the cost).
-//! - [`data`]: the level layout; [`lod`]: index lists per level; [`file`]: the `.pm` format.
+//! - [`data`]: the level layout; [`lod`]: index lists per level; [`mod@file`]: the `.pm` format.
 //! - [`measure`]: dense two-sided Hausdorff measurement between any two meshes.
 
 pub mod bound;
