@@ -15,6 +15,12 @@ struct Draw {
     // (the vertex they collapse onto): z the progress in [0, 1], w 1 when growing out
     // (refining), 0 when shrinking in (coarsening).
     morph: vec4<f32>,
+    // The drawing node's light grid (`Node.light`, see the prelude).
+    light: vec4<f32>,
+    // xy: the instance's base relative to the node's south-west corner (m).
+    base_local: vec4<f32>,
+    // xyz: the instance's base relative to the camera (m).
+    base_rel: vec4<f32>,
 };
 
 @group(2) @binding(0) var<uniform> draw: Draw;
@@ -44,7 +50,11 @@ fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> VertexOut {
     out.normal = normalize((draw.normal_from_model * vec4<f32>(n, 0.0)).xyz);
     out.albedo = draw.albedo.rgb;
     out.fade = draw.fade.xyz;
-    out.light = vec2<f32>(1.0, 1.0);
+    // Light-grid samples at the vertex: across the node from the base, height above the base.
+    var node: Node;
+    node.light = draw.light;
+    let local = draw.base_local.xy + (rel.xy - draw.base_rel.xy);
+    out.light = light_at(light_coords(node, local, max(rel.z - draw.base_rel.z, 0.0)));
     return out;
 }
 

@@ -7,6 +7,7 @@ use super::Gpu;
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, storage_entry, uniform_entry,
 };
+use super::lighting::light_entry;
 use super::scene::{FrameDraws, NodeRenderer};
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::lod::choose_level;
@@ -31,6 +32,9 @@ struct DrawUniform {
     fade: [f32; 4],
     albedo: [f32; 4],
     morph: [f32; 4],
+    light: [f32; 4],
+    base_local: [f32; 4],
+    base_rel: [f32; 4],
 }
 
 /// A geomorph in progress: wedges `lo..hi` move between their own position and that of the
@@ -357,6 +361,9 @@ impl NodeRenderer for ObjectsRenderer {
             let Some(objects) = node.work.get::<NodeObjects>() else {
                 continue;
             };
+            // Objects are lit by the drawing node's light grid (sky and sun visibility).
+            let light = light_entry(draws.tree, node.work);
+            let corner = draws.tree.rect(node.key).min;
             for &id in &objects.instances {
                 let inst = &self.set.instances[id as usize];
                 let model = &self.set.models[inst.model as usize];
@@ -436,6 +443,17 @@ impl NodeRenderer for ObjectsRenderer {
                     ],
                     albedo: [albedo[0], albedo[1], albedo[2], 1.0],
                     morph,
+                    light,
+                    base_local: [
+                        (inst.position_m.x - corner[0]) as f32,
+                        (inst.position_m.y - corner[1]) as f32,
+                        0.0,
+                        0.0,
+                    ],
+                    base_rel: (inst.position_m - camera.position_m)
+                        .as_vec3()
+                        .extend(0.0)
+                        .to_array(),
                 });
                 self.items.push(DrawItem {
                     instance: id,

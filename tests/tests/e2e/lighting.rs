@@ -53,7 +53,7 @@ fn canopy_of(world: &World) -> Canopy {
 
 /// A map with the tiny map's extent whose surface is `height(x_index, y_index)` on its samples,
 /// all water (no procedural detail), with no vegetation and no decals.
-fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
+pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
     let mut map = worldgen::Map::load(&tests::tiny_map_dir()).expect("tiny map loads");
     let (w, h) = (map.heights.width(), map.heights.height());
     for y in 0..h {

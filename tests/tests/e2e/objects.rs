@@ -252,3 +252,108 @@ fn a_level_change_geomorphs_over_the_morph_window_and_ends_on_the_exact_level() 
         assert!(near * 10 <= far, "{near} vs {far}");
     }
 }
+
+#[test]
+fn an_object_in_a_cliff_shadow_is_darker_than_one_in_the_sun() {
+    use engine::lighting::content::LightingContent;
+    use engine::lighting::grid::Sun;
+    let Some(g) = device() else { return };
+    let step_x = 100usize;
+    let world = crate::lighting::bare_world(|x, _| if x >= step_x { 100.0 } else { 0.0 });
+    let spacing = world.map.manifest.heights.spacing_m;
+    let o = world.origin_m();
+    let cliff_x = o[0] + (step_x as f64 - 0.5) * spacing;
+    let y = o[1] + 0.5 * world.size_m()[1];
+    // A 45 degree sun from the east: the 100 m cliff shades 100 m of lowland west of it.
+    let sun = Sun {
+        azimuth_deg: 90.0,
+        elevation_deg: 45.0,
+    };
+    let eye = DVec3::new(cliff_x - 100.0, y - 70.0, 12.0);
+    let cam = Camera::look_at(
+        eye,
+        DVec3::new(cliff_x - 100.0, y, 4.0),
+        60f64.to_radians(),
+        [320, 200],
+    );
+    let mut means = Vec::new();
+    for with_lighting in [true, false] {
+        // Left of the view: 150 m from the cliff (sunlit); right: 50 m (in its shadow).
+        let model = PmModel::from_pm("box".into(), bumpy_box());
+        let scale = 8.0 / (model.hi - model.lo).max_element();
+        let at = |x: f64| engine::objects::set::ObjectInstance {
+            model: 0,
+            position_m: DVec3::new(x, y, 0.0),
+            yaw_rad: 0.0,
+            scale,
+        };
+        let set = Arc::new(ObjectSet {
+            models: vec![model],
+            instances: vec![at(cliff_x - 150.0), at(cliff_x - 50.0)],
+        });
+        let mut kinds = registered(&world);
+        if !with_lighting {
+            kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+        }
+        kinds.push(Registration {
+            kind: Arc::new(ObjectsContent { set }),
+            renderer: Some(ObjectsRenderer::create),
+        });
+        let settings = StreamSettings {
+            workers: 1,
+            ..StreamSettings::default()
+        };
+        let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, &kinds);
+        v.view.lighting_only = true;
+        v.view.fog_per_m = 0.0;
+        v.set_sun(sun, cam.position_m);
+        let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+        settle(&g, &mut v, &target, &cam);
+        let shaded = target.read_rgba(&g).expect("read");
+        // The object pixels: those the colour-by-LOD view changes (in the lit view: the
+        // lighting-only view greys every albedo).
+        v.view.lighting_only = false;
+        let mut read = |color_by_lod: bool| {
+            v.view.pm_color_by_lod = color_by_lod;
+            frame(&g, &mut v, &target, &cam, 0.0);
+            target.read_rgba(&g).expect("read")
+        };
+        let (plain, marked) = (read(false), read(true));
+        let (mut left, mut right) = ((0.0, 0usize), (0.0, 0usize));
+        let w = cam.viewport_px[0] as usize;
+        for (i, a) in shaded.chunks_exact(4).enumerate() {
+            if plain[4 * i..4 * i + 4] == marked[4 * i..4 * i + 4] {
+                continue;
+            }
+            let lum = (0..3)
+                .map(|c| engine::color::srgb_to_linear(a[c]))
+                .sum::<f64>()
+                / 3.0;
+            if i % w < w / 2 {
+                left = (left.0 + lum, left.1 + 1);
+            } else {
+                right = (right.0 + lum, right.1 + 1);
+            }
+        }
+        assert!(
+            left.1 > 100 && right.1 > 100,
+            "object pixels: {left:?} {right:?}"
+        );
+        means.push((left.0 / left.1 as f64, right.0 / right.1 as f64));
+    }
+    let ((lit, shadow), (c_lit, c_shadow)) = (means[0], means[1]);
+    println!(
+        "objects: sunlit {lit:.3}, in the cliff shadow {shadow:.3} (control without grids {c_lit:.3} {c_shadow:.3})"
+    );
+    // Each object against itself without light grids (the two show different faces to the
+    // camera, so they are not compared with each other): the grid darkens the shaded one and
+    // leaves the sunlit one.
+    assert!(
+        shadow < 0.6 * c_shadow,
+        "shaded object: {shadow:.3} with grids, {c_shadow:.3} without"
+    );
+    assert!(
+        lit > 0.85 * c_lit,
+        "sunlit object: {lit:.3} with grids, {c_lit:.3} without"
+    );
+}
