@@ -51,6 +51,32 @@ fn canopy_of(world: &World) -> Canopy {
     Canopy::new(world, &Placer::new(world))
 }
 
+/// The rendered shadow tests' scene: a 100 m step (lowland west, plateau east of `cliff_x`)
+/// across the map, `y` its middle, and a 45 degree sun from the east, whose shadow covers the
+/// 100 m of lowland west of the cliff.
+pub(crate) struct CliffScene {
+    pub(crate) world: World,
+    pub(crate) cliff_x: f64,
+    pub(crate) y: f64,
+    pub(crate) sun: Sun,
+}
+
+pub(crate) fn cliff_scene() -> CliffScene {
+    let step_x = 100usize;
+    let world = bare_world(|x, _| if x >= step_x { 100.0 } else { 0.0 });
+    let spacing = world.map.manifest.heights.spacing_m;
+    let o = world.origin_m();
+    CliffScene {
+        cliff_x: o[0] + (step_x as f64 - 0.5) * spacing,
+        y: o[1] + 0.5 * world.size_m()[1],
+        world,
+        sun: Sun {
+            azimuth_deg: 90.0,
+            elevation_deg: 45.0,
+        },
+    }
+}
+
 /// A map with the tiny map's extent whose surface is `height(x_index, y_index)` on its samples,
 /// all water (no procedural detail), with no vegetation and no decals.
 pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
@@ -411,16 +437,12 @@ fn rendered_terrain_is_dark_in_the_cliff_shadow_and_lit_beyond_it() {
     let Some(g) = tests::gpu::device() else {
         return;
     };
-    let step_x = 100usize;
-    let world = bare_world(|x, _| if x >= step_x { 100.0 } else { 0.0 });
-    let spacing = world.map.manifest.heights.spacing_m;
-    let o = world.origin_m();
-    let cliff_x = o[0] + (step_x as f64 - 0.5) * spacing;
-    let y = o[1] + 0.5 * world.size_m()[1];
-    let sun = Sun {
-        azimuth_deg: 90.0,
-        elevation_deg: 45.0,
-    };
+    let CliffScene {
+        world,
+        cliff_x,
+        y,
+        sun,
+    } = cliff_scene();
     let eye = DVec3::new(cliff_x - 100.0, y - 40.0, 110.0);
     let cam = Camera::look_at(
         eye,

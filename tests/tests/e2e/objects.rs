@@ -3,11 +3,13 @@
 
 use engine::camera::Camera;
 use engine::kinds::{Registration, registered};
+use engine::lighting::content::LightingContent;
 use engine::objects::content::{NodeObjects, ObjectsContent};
 use engine::objects::set::{ObjectSet, PmModel};
 use engine::render::objects::ObjectsRenderer;
-use engine::render::{COLOR_FORMAT, Target};
+use engine::render::{COLOR_FORMAT, Gpu, Target};
 use engine::stream::StreamSettings;
+use engine::surface::World;
 use engine::viewer::Viewer;
 use glam::DVec3;
 use std::sync::Arc;
@@ -56,6 +58,33 @@ fn bumpy_box() -> PmMesh {
     PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {}).0
 }
 
+/// A viewer of `world` with every registered kind (less the light grids without `lighting`)
+/// plus the objects of `set`, one worker, threshold `tau_px` for terrain and objects.
+fn objects_viewer(
+    g: &Gpu,
+    world: &World,
+    set: Arc<ObjectSet>,
+    lighting: bool,
+    tau_px: f64,
+) -> Viewer {
+    let mut kinds = registered(world);
+    if !lighting {
+        kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+    }
+    kinds.push(Registration {
+        kind: Arc::new(ObjectsContent { set }),
+        renderer: Some(ObjectsRenderer::create),
+    });
+    let settings = StreamSettings {
+        workers: 1,
+        tau_px,
+        ..StreamSettings::default()
+    };
+    let mut v = Viewer::with_kinds(g, COLOR_FORMAT, world.clone(), settings, &kinds);
+    v.view.pm_lod.tau_px = tau_px;
+    v
+}
+
 #[test]
 fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
     let Some(g) = device() else { return };
@@ -81,20 +110,7 @@ fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
     );
     let positions: Vec<DVec3> = set.instances.iter().map(|i| i.position_m).collect();
     let set = Arc::new(set);
-    let mut kinds = registered(&world);
-    kinds.push(Registration {
-        kind: Arc::new(ObjectsContent {
-            set: Arc::clone(&set),
-        }),
-        renderer: Some(ObjectsRenderer::create),
-    });
-    let settings = StreamSettings {
-        workers: 1,
-        tau_px: 1.0,
-        ..StreamSettings::default()
-    };
-    let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world, settings, &kinds);
-    v.view.pm_lod.tau_px = 1.0;
+    let mut v = objects_viewer(&g, &world, Arc::clone(&set), true, 1.0);
     let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
     let st = settle(&g, &mut v, &target, &cam);
 
@@ -191,16 +207,7 @@ fn a_level_change_geomorphs_over_the_morph_window_and_ends_on_the_exact_level() 
         10.0,
         ground,
     ));
-    let mut kinds = registered(&world);
-    kinds.push(Registration {
-        kind: Arc::new(ObjectsContent { set }),
-        renderer: Some(ObjectsRenderer::create),
-    });
-    let settings = StreamSettings {
-        workers: 1,
-        ..StreamSettings::default()
-    };
-    let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world, settings, &kinds);
+    let mut v = objects_viewer(&g, &world, set, true, 2.0);
     let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
     v.view.pm_lod.fixed_fraction = Some(0.05);
     settle(&g, &mut v, &target, &cam);
@@ -255,20 +262,14 @@ fn a_level_change_geomorphs_over_the_morph_window_and_ends_on_the_exact_level() 
 
 #[test]
 fn an_object_in_a_cliff_shadow_is_darker_than_one_in_the_sun() {
-    use engine::lighting::content::LightingContent;
-    use engine::lighting::grid::Sun;
     let Some(g) = device() else { return };
-    let step_x = 100usize;
-    let world = crate::lighting::bare_world(|x, _| if x >= step_x { 100.0 } else { 0.0 });
-    let spacing = world.map.manifest.heights.spacing_m;
-    let o = world.origin_m();
-    let cliff_x = o[0] + (step_x as f64 - 0.5) * spacing;
-    let y = o[1] + 0.5 * world.size_m()[1];
-    // A 45 degree sun from the east: the 100 m cliff shades 100 m of lowland west of it.
-    let sun = Sun {
-        azimuth_deg: 90.0,
-        elevation_deg: 45.0,
-    };
+    // The 100 m cliff's shadow covers 100 m of lowland west of it.
+    let crate::lighting::CliffScene {
+        world,
+        cliff_x,
+        y,
+        sun,
+    } = crate::lighting::cliff_scene();
     let eye = DVec3::new(cliff_x - 100.0, y - 70.0, 12.0);
     let cam = Camera::look_at(
         eye,
@@ -291,19 +292,7 @@ fn an_object_in_a_cliff_shadow_is_darker_than_one_in_the_sun() {
             models: vec![model],
             instances: vec![at(cliff_x - 150.0), at(cliff_x - 50.0)],
         });
-        let mut kinds = registered(&world);
-        if !with_lighting {
-            kinds.retain(|k| k.kind.name() != LightingContent::NAME);
-        }
-        kinds.push(Registration {
-            kind: Arc::new(ObjectsContent { set }),
-            renderer: Some(ObjectsRenderer::create),
-        });
-        let settings = StreamSettings {
-            workers: 1,
-            ..StreamSettings::default()
-        };
-        let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, &kinds);
+        let mut v = objects_viewer(&g, &world, set, with_lighting, 2.0);
         v.view.lighting_only = true;
         v.view.fog_per_m = 0.0;
         v.set_sun(sun, cam.position_m);
