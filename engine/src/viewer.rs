@@ -240,6 +240,7 @@ impl Viewer {
             drawn: &drawn,
             ancestors: &ancestors,
             dt_s,
+            tau_px: self.streamer.settings.tau_px,
         };
         let stats: DrawStats = self.scene.render(gpu, encoder, color, depth, &draws);
         if timed && let Some(t) = &self.timer {

@@ -8,7 +8,7 @@ use apps::plot::{Curve, write_loglog};
 use clap::Parser;
 use std::path::{Path, PathBuf};
 use worldgen::pm::gltf_input;
-use worldgen::pm::measure::{Soup, hausdorff, soup};
+use worldgen::pm::measure::{Soup, hausdorff, level_soup, mesh_soup};
 use worldgen::pm::{CostKind, PmMesh, TriMesh, file, load_mesh};
 
 /// Print the LOD error table of a `.pm` file, or of an `.obj` / `.gltf` / `.glb` model built
@@ -33,17 +33,6 @@ struct Cli {
 
 const SHARES: [f64; 8] = [1.0, 0.5, 0.25, 0.1, 0.03, 0.01, 0.003, 0.001];
 
-fn pm_soup(pm: &PmMesh, p: usize) -> Soup {
-    let mut idx = Vec::new();
-    pm.indices_at(p, &mut idx);
-    let pos: Vec<u32> = idx.iter().map(|&w| pm.wedge_position[w as usize]).collect();
-    soup(&pm.positions, &pos)
-}
-
-fn mesh_soup(mesh: &TriMesh) -> Soup {
-    soup(&mesh.positions, &mesh.position_triangles().concat())
-}
-
 fn diagonal(s: &Soup) -> f64 {
     let mut lo = glam::DVec3::splat(f64::INFINITY);
     let mut hi = -lo;
@@ -58,7 +47,7 @@ fn diagonal(s: &Soup) -> f64 {
 
 /// Rows for a PM at the shares of its triangles; returns the plot curves (measured, stored).
 fn pm_table(pm: &PmMesh, label: &str, spacing_fraction: f64) -> (Curve, Curve) {
-    let full = pm_soup(pm, pm.level_count());
+    let full = level_soup(pm, pm.level_count());
     let diag = diagonal(&full).max(f64::MIN_POSITIVE);
     let total = pm.triangles.len();
     let mut measured = Curve {
@@ -75,17 +64,13 @@ fn pm_table(pm: &PmMesh, label: &str, spacing_fraction: f64) -> (Curve, Curve) {
     let mut last = usize::MAX;
     for share in SHARES {
         let target = (total as f64 * share).round() as usize;
-        let p = pm
-            .levels
-            .iter()
-            .rposition(|l| l.triangles as usize <= target.max(1))
-            .map_or(1, |i| i + 1);
+        let p = pm.finest_with_at_most(target.max(1));
         if p == last {
             continue;
         }
         last = p;
         let level = pm.levels[p - 1];
-        let m = hausdorff(&full, &pm_soup(pm, p), diag * spacing_fraction);
+        let m = hausdorff(&full, &level_soup(pm, p), diag * spacing_fraction);
         println!(
             "| {p} | {} | {} | {:.1} % | {:.4e} | {m:.4e} | {:.3} % |",
             level.wedges,

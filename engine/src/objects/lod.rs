@@ -4,17 +4,17 @@
 //! bound of the two-sided Hausdorff distance to the full mesh, model units) is `e` moves no
 //! surface point by more than `e x scale` metres, which at distance `d` projects to at most
 //! `e x scale x K / d` pixels near the view axis (`K` = [`Camera::k_px`]). The instance draws the
-//! coarsest level with `e x scale x K x strength / max(d - z_disp, 1 m) <= tau`.
+//! coarsest level with `e x scale x K x strength / max(d - z_disp, 1 m) <= tau`, tau being the
+//! terrain's (one threshold for everything drawn).
 //!
 //! [`Camera::k_px`]: crate::camera::Camera::k_px
 
 use worldgen::pm::{ErrorIndex, PmMesh};
 
 /// Run-time level-of-detail settings for progressive meshes (seed 003's names in brackets).
+/// The pixel threshold is not among them: objects use the terrain's tau (the streamer's).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PmLodSettings {
-    /// Largest on-screen error of a drawn level, pixels (the terrain's tau).
-    pub tau_px: f64,
     /// Scales the metric: 2 halves the distance at which detail is kept (STRENGTH).
     pub strength: f64,
     /// Fewest positions ever drawn (MINVERTS).
@@ -32,7 +32,6 @@ pub struct PmLodSettings {
 impl Default for PmLodSettings {
     fn default() -> Self {
         PmLodSettings {
-            tau_px: 2.0,
             strength: 1.0,
             min_vertices: 4,
             z_disp_m: 0.0,
@@ -43,18 +42,25 @@ impl Default for PmLodSettings {
 }
 
 /// The largest stored error (model units) allowed at `distance_m` for an object drawn at
-/// `scale` metres per model unit.
-pub fn error_budget(settings: &PmLodSettings, distance_m: f64, k_px: f64, scale: f64) -> f64 {
+/// `scale` metres per model unit, at threshold `tau_px`.
+pub fn error_budget(
+    settings: &PmLodSettings,
+    tau_px: f64,
+    distance_m: f64,
+    k_px: f64,
+    scale: f64,
+) -> f64 {
     let d = (distance_m - settings.z_disp_m).max(1.0);
-    settings.tau_px * d / (k_px * settings.strength.max(1e-6) * scale.max(1e-12))
+    tau_px * d / (k_px * settings.strength.max(1e-6) * scale.max(1e-12))
 }
 
-/// The level (number of positions) an instance draws. `distance_m` is the distance from the
-/// camera to the nearest point of the object's bounds.
+/// The level (number of positions) an instance draws at threshold `tau_px`. `distance_m` is the
+/// distance from the camera to the nearest point of the object's bounds.
 pub fn choose_level(
     pm: &PmMesh,
     index: &ErrorIndex,
     settings: &PmLodSettings,
+    tau_px: f64,
     distance_m: f64,
     k_px: f64,
     scale: f64,
@@ -63,6 +69,6 @@ pub fn choose_level(
     if let Some(f) = settings.fixed_fraction {
         return pm.clamp_level((f.clamp(0.0, 1.0) * n as f64).ceil() as usize);
     }
-    let budget = error_budget(settings, distance_m, k_px, scale) as f32;
+    let budget = error_budget(settings, tau_px, distance_m, k_px, scale) as f32;
     index.coarsest_within(pm, budget, settings.min_vertices)
 }

@@ -42,7 +42,8 @@ pub struct ViewOptions {
     pub sun: Sun,
     /// Debug view: everything grey, lit by the light grids alone (sky and sun visibility).
     pub lighting_only: bool,
-    /// Level choice of progressive-mesh objects (tau, STRENGTH, MINVERTS, ZDISP, fixed level).
+    /// Level choice of progressive-mesh objects (STRENGTH, MINVERTS, ZDISP, fixed level, MORPH;
+    /// their tau is the streamer's).
     pub pm_lod: crate::objects::lod::PmLodSettings,
     /// Debug view: objects coloured by the share of their positions drawn (MLMODE).
     pub pm_color_by_lod: bool,

@@ -100,13 +100,9 @@ impl InstanceGpu {
                     let g = morph_group(&gpu.device, morph_layout, &b);
                     (b, g)
                 });
-                let live = lo;
                 let to: Vec<[f32; 4]> = (lo..hi)
                     .flat_map(|w0| {
-                        let mut w = w0;
-                        while w >= live {
-                            w = pm.collapse_to[w as usize];
-                        }
+                        let w = pm.live_wedge(w0, lo);
                         let q = pm.positions[pm.wedge_position[w as usize] as usize];
                         let n = model.normals[w as usize];
                         [[q[0], q[1], q[2], 1.0], [n[0], n[1], n[2], 0.0]]
@@ -379,6 +375,7 @@ impl NodeRenderer for ObjectsRenderer {
                     &model.pm,
                     &model.index,
                     &settings,
+                    draws.tau_px,
                     distance_m,
                     k_px,
                     inst.scale,
@@ -426,7 +423,7 @@ impl NodeRenderer for ObjectsRenderer {
                 let lin = glam::DMat3::from_mat4(world);
                 let normal = DMat4::from_mat3(lin.inverse().transpose());
                 let share = shown as f32 / model.pm.level_count().max(1) as f32;
-                let by_lod = settings_color(draws);
+                let by_lod = draws.view.pm_color_by_lod;
                 let albedo = if by_lod {
                     lod_color(share)
                 } else {
@@ -516,10 +513,6 @@ impl NodeRenderer for ObjectsRenderer {
             stats.object_full_triangles += u64::from(item.full_triangles);
         }
     }
-}
-
-fn settings_color(draws: &FrameDraws<'_>) -> bool {
-    draws.view.pm_color_by_lod
 }
 
 /// Colour of a level drawing `share` of the positions: blue (coarse) through green to red (full).

@@ -30,6 +30,8 @@ pub struct FrameDraws<'a> {
     pub ancestors: &'a [DrawnNode<'a>],
     /// Simulated seconds since the previous frame (time-based effects such as geomorphs).
     pub dt_s: f64,
+    /// The pixel-error threshold the streamer selects with (objects choose their levels by it).
+    pub tau_px: f64,
 }
 
 /// The GPU side of one kind of thing drawn.

@@ -80,9 +80,7 @@ fn objects_viewer(
         tau_px,
         ..StreamSettings::default()
     };
-    let mut v = Viewer::with_kinds(g, COLOR_FORMAT, world.clone(), settings, &kinds);
-    v.view.pm_lod.tau_px = tau_px;
-    v
+    Viewer::with_kinds(g, COLOR_FORMAT, world.clone(), settings, &kinds)
 }
 
 #[test]

@@ -246,6 +246,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
             drawn: &drawn,
             ancestors: &[],
             dt_s: 0.0,
+            tau_px: 2.0,
         };
         let mut enc = g
             .device

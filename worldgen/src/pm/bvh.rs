@@ -100,11 +100,6 @@ impl TriangleBvh {
         bvh
     }
 
-    /// Distance from `p` to the nearest triangle, `f64::INFINITY` when there is none.
-    pub fn distance(&self, p: DVec3) -> f64 {
-        self.distance_sq_below(p, f64::INFINITY).sqrt()
-    }
-
     /// Squared distance to the nearest triangle if it is at most `bound_sq`, else `bound_sq`.
     pub fn distance_sq_below(&self, p: DVec3, bound_sq: f64) -> f64 {
         self.walk(p, bound_sq, false).0

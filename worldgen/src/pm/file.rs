@@ -396,13 +396,7 @@ impl PmMesh {
                 p += 1;
             }
             let live = self.levels[p - 1].wedges;
-            let pos = tri.map(|w0| {
-                let mut w = w0;
-                while w >= live {
-                    w = self.collapse_to[w as usize];
-                }
-                self.wedge_position[w as usize]
-            });
+            let pos = tri.map(|w| self.wedge_position[self.live_wedge(w, live) as usize]);
             if pos[0] == pos[1] || pos[1] == pos[2] || pos[0] == pos[2] {
                 return Err((
                     "triangles",

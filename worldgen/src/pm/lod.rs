@@ -15,9 +15,26 @@ impl PmMesh {
         self.levels[self.clamp_level(p) - 1].triangles as usize
     }
 
+    /// The finest level that draws at most `triangles` triangles (level 1 draws none).
+    pub fn finest_with_at_most(&self, triangles: usize) -> usize {
+        self.levels
+            .iter()
+            .rposition(|l| l.triangles as usize <= triangles)
+            .map_or(1, |i| i + 1)
+    }
+
     /// `p` clamped to `1..=levels`.
     pub fn clamp_level(&self, p: usize) -> usize {
         p.clamp(1, self.levels.len().max(1))
+    }
+
+    /// The wedge that stands for wedge `w` while only the first `live` wedges are alive: `w`'s
+    /// collapse chain followed until it reaches one.
+    pub fn live_wedge(&self, mut w: u32, live: u32) -> u32 {
+        while w >= live {
+            w = self.collapse_to[w as usize];
+        }
+        w
     }
 
     /// The index list of level `p` in one pass: each corner of the first `triangles_at(p)`
@@ -26,16 +43,12 @@ impl PmMesh {
         out.clear();
         let live = self.wedges_at(p) as u32;
         let n = self.triangles_at(p);
-        out.reserve(n * 3);
-        for tri in &self.triangles[..n] {
-            for &w0 in tri {
-                let mut w = w0;
-                while w >= live {
-                    w = self.collapse_to[w as usize];
-                }
-                out.push(w);
-            }
-        }
+        out.extend(
+            self.triangles[..n]
+                .iter()
+                .flatten()
+                .map(|&w| self.live_wedge(w, live)),
+        );
     }
 }
 

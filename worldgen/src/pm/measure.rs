@@ -18,6 +18,21 @@ pub fn soup(positions: &[[f32; 3]], indices: &[u32]) -> Soup {
         .collect()
 }
 
+/// Triangles of level `p` of a progressive mesh.
+pub fn level_soup(pm: &super::PmMesh, p: usize) -> Soup {
+    let mut idx = Vec::new();
+    pm.indices_at(p, &mut idx);
+    for w in &mut idx {
+        *w = pm.wedge_position[*w as usize];
+    }
+    soup(&pm.positions, &idx)
+}
+
+/// Triangles of a welded mesh.
+pub fn mesh_soup(mesh: &super::TriMesh) -> Soup {
+    soup(&mesh.positions, &mesh.position_triangles().concat())
+}
+
 /// One direction: the largest distance from a sample of `from` to `to`.
 pub fn one_sided(from: &Soup, to: &TriangleBvh, spacing: f64) -> f64 {
     let mut points = Vec::new();

@@ -238,7 +238,6 @@ pub(crate) fn make_viewer(
     viewer.view.ground_view = cli.ground_view.into();
     viewer.view.lighting_only = cli.lighting_only;
     viewer.view.pm_lod = PmLodSettings {
-        tau_px: cli.tau,
         strength: cli.pm_strength,
         min_vertices: cli.pm_min_vertices,
         z_disp_m: cli.pm_zdisp_m,

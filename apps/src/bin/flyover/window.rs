@@ -313,7 +313,6 @@ fn apply_panel(st: &mut State) {
     {
         let s = &mut st.viewer.streamer.settings;
         s.tau_px = st.ui.tau;
-        st.viewer.view.pm_lod.tau_px = st.ui.tau;
         s.cache_budget_bytes = st.ui.budget_mib << 20;
         s.fixed_level = st.ui.fixed_level;
         s.vegetation_occlusion = st.ui.occlusion;

@@ -7,7 +7,7 @@
 use crate::report::{Report, bar};
 use std::path::Path;
 use std::time::Instant;
-use worldgen::pm::measure::{hausdorff, soup};
+use worldgen::pm::measure::{hausdorff, level_soup, mesh_soup, soup};
 use worldgen::pm::{CostKind, PmEdits, PmInstance, PmMesh, TriMesh, file, obj};
 
 /// Shares of the input triangles at which errors are compared (the table rows).
@@ -67,7 +67,7 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
         let tris = mesh.triangles.len();
         let diag = mesh.diagonal() as f64;
         let spacing = diag * MEASURE_FRACTION;
-        let full = soup(&mesh.positions, &mesh.position_triangles().concat());
+        let full = mesh_soup(&mesh);
         let mut shares: Vec<f64> = TABLE_SHARES.iter().chain(&PLOT_SHARES).copied().collect();
         shares.sort_by(|a, b| b.total_cmp(a));
         let b = bar((CostKind::ALL.len() + 1) as u64, &format!("pm {name}"));
@@ -94,22 +94,10 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
             let mut points = Vec::new();
             for &share in &shares {
                 let target = ((tris as f64 * share).round() as usize).max(1);
-                // The finest level that draws at most the target.
-                let p = pm
-                    .levels
-                    .iter()
-                    .rposition(|l| l.triangles as usize <= target)
-                    .map_or(1, |i| i + 1);
-                let mut idx = Vec::new();
-                pm.indices_at(p, &mut idx);
-                let level = soup(
-                    &pm.positions,
-                    &idx.iter()
-                        .map(|&w| pm.wedge_position[w as usize])
-                        .collect::<Vec<_>>(),
-                );
-                let e = hausdorff(&full, &level, spacing) / diag;
-                points.push((idx.len() as f64 / 3.0, e));
+                let p = pm.finest_with_at_most(target);
+                let drawn = pm.triangles_at(p);
+                let e = hausdorff(&full, &level_soup(&pm, p), spacing) / diag;
+                points.push((drawn as f64, e));
                 if TABLE_SHARES.contains(&share) {
                     r.add(
                         "pm",
@@ -118,7 +106,7 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
                         "% of diagonal",
                         &format!(
                             "{} of {tris} triangles, measured two-sided Hausdorff (samples every {MEASURE_FRACTION} x diagonal); stored bound {:.3} %",
-                            idx.len() / 3,
+                            drawn,
                             100.0 * pm.levels[p - 1].error as f64 / diag
                         ),
                     );
@@ -177,15 +165,8 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
         // reached (it may stop short of a target).
         if let Some(pm) = &quadric_pm {
             for (share, m, mn) in &meshopt_err {
-                let p = pm
-                    .levels
-                    .iter()
-                    .rposition(|l| l.triangles as usize <= *mn)
-                    .map_or(1, |i| i + 1);
-                let mut idx = Vec::new();
-                pm.indices_at(p, &mut idx);
-                let pos: Vec<u32> = idx.iter().map(|&w| pm.wedge_position[w as usize]).collect();
-                let q = hausdorff(&full, &soup(&pm.positions, &pos), spacing) / diag;
+                let p = pm.finest_with_at_most(*mn);
+                let q = hausdorff(&full, &level_soup(pm, p), spacing) / diag;
                 r.add(
                     "pm",
                     &format!(
@@ -194,7 +175,7 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
                     ),
                     q / m,
                     "x",
-                    &format!("{} vs {mn} triangles; target <= 1.2", idx.len() / 3),
+                    &format!("{} vs {mn} triangles; target <= 1.2", pm.triangles_at(p)),
                 );
             }
         }
