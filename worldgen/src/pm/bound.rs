@@ -17,7 +17,7 @@
 
 use super::build::CollapseOrder;
 use super::bvh::TriangleBvh;
-use super::geom::{grid_samples, point_triangle_distance_sq, v3};
+use super::geom::{TriangleBall, grid_samples, point_triangle_distance_sq, v3};
 use super::mesh::TriMesh;
 use glam::DVec3;
 
@@ -54,21 +54,64 @@ impl MaxTree {
 /// Largest local subset of the full mesh searched directly (beyond it, the hierarchy).
 const LOCAL_LIMIT: usize = 256;
 
+/// A triangle of the full mesh with its bounding ball.
+type BallTriangle = ([DVec3; 3], TriangleBall);
+
 /// Largest distance from `points` to the nearest of `tris` (exact over that subset), measuring
-/// in full only points that could raise the running maximum.
-fn local_max_distance(points: &[DVec3], tris: &[[DVec3; 3]]) -> f64 {
+/// in full only points that could raise the running maximum. Each point starts from the triangle
+/// nearest to the previous point (neighbouring samples), and triangles whose ball is already
+/// farther than the best distance found are skipped: the result is the same as a full scan.
+fn local_max_distance(points: &[DVec3], tris: &[BallTriangle]) -> f64 {
+    if tris.is_empty() {
+        return if points.is_empty() {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+    }
     let mut worst_sq = 0.0f64;
+    let mut hint = 0usize;
     for &p in points {
-        let mut best = f64::INFINITY;
-        for [a, b, c] in tris {
-            best = best.min(point_triangle_distance_sq(p, *a, *b, *c));
-            if best <= worst_sq {
-                break;
+        let [a, b, c] = tris[hint].0;
+        let mut best = point_triangle_distance_sq(p, a, b, c);
+        let mut best_i = hint;
+        if best > worst_sq {
+            for (i, ([a, b, c], ball)) in tris.iter().enumerate() {
+                if i == hint || ball.lower_bound_sq(p) >= best {
+                    continue;
+                }
+                let d = point_triangle_distance_sq(p, *a, *b, *c);
+                if d < best {
+                    best = d;
+                    best_i = i;
+                    if best <= worst_sq {
+                        break;
+                    }
+                }
             }
         }
+        hint = best_i;
         worst_sq = worst_sq.max(best);
     }
     worst_sq.sqrt()
+}
+
+/// The nearest of `cands` to `p` (lowest index among equal distances, as a scan in order would
+/// find), starting from `hint`: candidates whose ball is farther than the best so far are skipped.
+/// Returns (squared distance, index).
+fn nearest_candidate(p: DVec3, cands: &[BallTriangle], hint: usize) -> (f64, usize) {
+    let [a, b, c] = cands[hint].0;
+    let mut best = (point_triangle_distance_sq(p, a, b, c), hint);
+    for (k, ([a, b, c], ball)) in cands.iter().enumerate() {
+        if k == hint || ball.lower_bound_sq(p) > best.0 {
+            continue;
+        }
+        let d = point_triangle_distance_sq(p, *a, *b, *c);
+        if d < best.0 || (d == best.0 && k < best.1) {
+            best = (d, k);
+        }
+    }
+    best
 }
 
 /// Per-level error bounds: `errors[s]` is the bound after `s` collapses (`errors[0] == 0`).
@@ -83,6 +126,10 @@ pub fn level_errors(
     let nt = tri_p.len();
     let diag = mesh.diagonal() as f64;
     let full: Vec<[DVec3; 3]> = tri_p.iter().map(|t| t.map(|i| pos[i as usize])).collect();
+    let full_balls: Vec<BallTriangle> = full
+        .iter()
+        .map(|&[a, b, c]| ([a, b, c], TriangleBall::new(a, b, c)))
+        .collect();
     let bvh = TriangleBvh::new(full.clone());
     let mut alive = vec![true; nt];
     let mut pos_tris = vec![Vec::new(); pos.len()];
@@ -117,7 +164,9 @@ pub fn level_errors(
     let mut last = 0.0f64;
     let face_points = |tri: [u32; 3]| tri.map(|i| pos[i as usize]);
     let mut scratch: Vec<DVec3> = Vec::new();
-    let mut local: Vec<[DVec3; 3]> = Vec::new();
+    let mut local: Vec<BallTriangle> = Vec::new();
+    // Orphaned samples with the face that held them.
+    let mut orphans: Vec<(u32, u32)> = Vec::new();
     let mut mark = vec![0u32; nt];
     let mut stamp = 0u32;
     for (step, c) in order.collapses.iter().enumerate() {
@@ -127,10 +176,10 @@ pub fn level_errors(
             errors.push(if live_faces == 0 { diag } else { last });
             continue;
         }
-        let mut orphans: Vec<u32> = Vec::new();
+        orphans.clear();
         let mut moved = Vec::new();
         for &t in &tris_u {
-            orphans.append(&mut face_samples[t as usize]);
+            orphans.extend(face_samples[t as usize].drain(..).map(|smp| (smp, t)));
             if tri_p[t as usize].contains(&v) {
                 alive[t as usize] = false;
                 live_faces -= 1;
@@ -157,23 +206,29 @@ pub fn level_errors(
         } else {
             pos_tris[v as usize].clone()
         };
-        let cand_points: Vec<[DVec3; 3]> = candidates
+        let cand_points: Vec<BallTriangle> = candidates
             .iter()
-            .map(|&t| face_points(tri_p[t as usize]))
+            .map(|&t| {
+                let [a, b, c] = face_points(tri_p[t as usize]);
+                ([a, b, c], TriangleBall::new(a, b, c))
+            })
             .collect();
         let mut touched: Vec<u32> = moved.clone();
         if !candidates.is_empty() {
-            for &smp in &orphans {
-                let p = sample_pos[smp as usize];
-                let mut best = f64::INFINITY;
-                let mut best_face = candidates[0];
-                for (k, [a, b, cc]) in cand_points.iter().enumerate() {
-                    let d = point_triangle_distance_sq(p, *a, *b, *cc);
-                    if d < best {
-                        best = d;
-                        best_face = candidates[k];
+            // Start from the sample's old face when it survived (moved), else from the previous
+            // orphan's face (samples of one face are neighbours).
+            let mut hint = 0usize;
+            let mut last_face = u32::MAX;
+            for &(smp, old_face) in &orphans {
+                if old_face != last_face {
+                    last_face = old_face;
+                    if let Some(k) = candidates.iter().position(|&t| t == old_face) {
+                        hint = k;
                     }
                 }
+                let (best, k) = nearest_candidate(sample_pos[smp as usize], &cand_points, hint);
+                hint = k;
+                let best_face = candidates[k];
                 sample_d[smp as usize] = best.sqrt();
                 face_samples[best_face as usize].push(smp);
                 if !touched.contains(&best_face) {
@@ -196,22 +251,28 @@ pub fn level_errors(
         let spacing_b = sample_spacing.max(0.25 * last);
         stamp += 1;
         local.clear();
-        let mut add = |o: u32, local: &mut Vec<[DVec3; 3]>| {
-            if mark[o as usize] != stamp && local.len() <= LOCAL_LIMIT {
+        let mut add = |o: u32, local: &mut Vec<BallTriangle>| {
+            if mark[o as usize] != stamp {
                 mark[o as usize] = stamp;
-                local.push(full[o as usize]);
+                local.push(full_balls[o as usize]);
             }
+            // Past the limit the hierarchy is used whatever else the subset would hold.
+            local.len() > LOCAL_LIMIT
         };
-        for &f in &pos_tris[v as usize] {
+        'gather: for &f in &pos_tris[v as usize] {
             // The original triangles around the face's corners (all original vertices) ...
             for p in tri_p[f as usize] {
                 for &o in &original_ring[p as usize] {
-                    add(o, &mut local);
+                    if add(o, &mut local) {
+                        break 'gather;
+                    }
                 }
             }
             // ... and those whose samples the face holds.
             for &smp in &face_samples[f as usize] {
-                add(sample_tri[smp as usize], &mut local);
+                if add(sample_tri[smp as usize], &mut local) {
+                    break 'gather;
+                }
             }
         }
         for &t in &moved {

@@ -157,13 +157,31 @@ const TIER_FEATURE: u8 = 1;
 /// Tier of a collapse that flips a moving triangle.
 const TIER_FLIP: u8 = 2;
 
+/// One heap entry: a position, its best collapse target and that collapse's key.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct HeapEntry {
+    key: Key,
+    pos: u32,
+    target: u32,
+}
+
+impl HeapEntry {
+    /// Heap order: key, then the lower position (deterministic).
+    fn less(&self, o: &Self) -> bool {
+        match self.key.cmp_key(&o.key) {
+            Ordering::Less => true,
+            Ordering::Greater => false,
+            Ordering::Equal => (self.pos, self.target) < (o.pos, o.target),
+        }
+    }
+}
+
 /// An indexed binary min-heap of positions by their best collapse: one entry per position,
-/// updated in place (no stale entries to skip).
+/// updated in place (no stale entries to skip). Entries hold their keys, so sifting reads the
+/// heap array only.
 struct PosHeap {
-    heap: Vec<u32>,
+    heap: Vec<HeapEntry>,
     slot: Vec<u32>,
-    key: Vec<Key>,
-    target: Vec<u32>,
 }
 
 const NO_SLOT: u32 = u32::MAX;
@@ -173,37 +191,19 @@ impl PosHeap {
         PosHeap {
             heap: Vec::with_capacity(n),
             slot: vec![NO_SLOT; n],
-            key: vec![
-                Key {
-                    tier: 0,
-                    cost: 0.0,
-                    tie: 0.0,
-                };
-                n
-            ],
-            target: vec![0; n],
-        }
-    }
-
-    /// Heap order: key, then the lower position (deterministic).
-    fn less(&self, a: u32, b: u32) -> bool {
-        match self.key[a as usize].cmp_key(&self.key[b as usize]) {
-            Ordering::Less => true,
-            Ordering::Greater => false,
-            Ordering::Equal => (a, self.target[a as usize]) < (b, self.target[b as usize]),
         }
     }
 
     fn swap(&mut self, i: usize, j: usize) {
         self.heap.swap(i, j);
-        self.slot[self.heap[i] as usize] = i as u32;
-        self.slot[self.heap[j] as usize] = j as u32;
+        self.slot[self.heap[i].pos as usize] = i as u32;
+        self.slot[self.heap[j].pos as usize] = j as u32;
     }
 
     fn up(&mut self, mut i: usize) {
         while i > 0 {
             let parent = (i - 1) / 2;
-            if !self.less(self.heap[i], self.heap[parent]) {
+            if !self.heap[i].less(&self.heap[parent]) {
                 break;
             }
             self.swap(i, parent);
@@ -215,10 +215,10 @@ impl PosHeap {
         loop {
             let (l, r) = (2 * i + 1, 2 * i + 2);
             let mut m = i;
-            if l < self.heap.len() && self.less(self.heap[l], self.heap[m]) {
+            if l < self.heap.len() && self.heap[l].less(&self.heap[m]) {
                 m = l;
             }
-            if r < self.heap.len() && self.less(self.heap[r], self.heap[m]) {
+            if r < self.heap.len() && self.heap[r].less(&self.heap[m]) {
                 m = r;
             }
             if m == i {
@@ -229,17 +229,21 @@ impl PosHeap {
         }
     }
 
-    /// Inserts or updates position `p`'s entry.
+    /// Inserts or updates position `p`'s entry (nothing moves when it is unchanged).
     fn set(&mut self, p: u32, key: Key, target: u32) {
-        self.key[p as usize] = key;
-        self.target[p as usize] = target;
+        let entry = HeapEntry {
+            key,
+            pos: p,
+            target,
+        };
         let s = self.slot[p as usize];
         if s == NO_SLOT {
-            self.heap.push(p);
+            self.heap.push(entry);
             let i = self.heap.len() - 1;
             self.slot[p as usize] = i as u32;
             self.up(i);
-        } else {
+        } else if self.heap[s as usize] != entry {
+            self.heap[s as usize] = entry;
             self.up(s as usize);
             self.down(self.slot[p as usize] as usize);
         }
@@ -257,13 +261,13 @@ impl PosHeap {
         self.slot[p as usize] = NO_SLOT;
         if i < self.heap.len() {
             self.up(i);
-            self.down(self.slot[self.heap[i] as usize] as usize);
+            self.down(self.slot[self.heap[i].pos as usize] as usize);
         }
     }
 
     fn peek(&self) -> Option<(u32, Key, u32)> {
-        let &p = self.heap.first()?;
-        Some((p, self.key[p as usize], self.target[p as usize]))
+        let e = self.heap.first()?;
+        Some((e.pos, e.key, e.target))
     }
 }
 
@@ -522,7 +526,7 @@ impl State<'_> {
     }
 
     /// Performs the half-edge collapse u -> v: maps u's wedges, removes the triangles on the
-    /// edge, moves the rest onto v. Returns the vanished triangles.
+    /// edge, moves the rest onto v.
     fn collapse(
         &mut self,
         u: u32,
@@ -530,7 +534,7 @@ impl State<'_> {
         step: u32,
         wedge_target: &mut [u32],
         triangle_step: &mut [u32],
-    ) -> Vec<u32> {
+    ) {
         // Split u's triangles into vanishing and moving.
         let tris_u = std::mem::take(&mut self.pos_tris[u as usize]);
         let mut vanish = Vec::new();
@@ -597,7 +601,6 @@ impl State<'_> {
             self.quadric[v as usize].add(&qu);
         }
         self.pos_alive[u as usize] = false;
-        vanish
     }
 
     /// Whether collapsing u onto v turns a moving triangle by more than the flip angle.
@@ -646,9 +649,9 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> Vec<Quadric> {
     const BORDER_WEIGHT: f64 = 10.0;
     const SEAM_WEIGHT: f64 = 0.1;
     let mut q = vec![Quadric::default(); pos.len()];
-    // Edge -> the wedges on each side, to find borders and seams.
-    let mut edges: std::collections::HashMap<(u32, u32), Vec<EdgeSide>> =
-        std::collections::HashMap::new();
+    // (edge, the wedges and normal of one side) for every triangle side; sorted by edge below
+    // (stably, so each edge's sides keep triangle order) to find borders and seams.
+    let mut edges: Vec<((u32, u32), EdgeSide)> = Vec::with_capacity(3 * mesh.triangles.len());
     for t in &mesh.triangles {
         let p = t.map(|w| mesh.wedge_position[w as usize]);
         let [a, b, c] = p.map(|i| pos[i as usize]);
@@ -667,21 +670,21 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> Vec<Quadric> {
             } else {
                 (t[(k + 1) % 3], t[k])
             };
-            edges.entry(key).or_default().push((wi, wj, n));
+            edges.push((key, (wi, wj, n)));
         }
     }
-    let mut keys: Vec<_> = edges.keys().copied().collect();
-    keys.sort_unstable();
-    for key in keys {
-        let sides = &edges[&key];
-        let border = sides.len() == 1;
-        let seam = sides.iter().any(|s| s.0 != sides[0].0 || s.1 != sides[0].1);
+    edges.sort_by_key(|e| e.0);
+    for group in edges.chunk_by(|x, y| x.0 == y.0) {
+        let key = group[0].0;
+        let side0 = group[0].1;
+        let border = group.len() == 1;
+        let seam = group.iter().any(|(_, s)| s.0 != side0.0 || s.1 != side0.1);
         if !border && !seam {
             continue;
         }
         let (a, b) = (pos[key.0 as usize], pos[key.1 as usize]);
         let e = b - a;
-        for s in sides {
+        for (_, s) in group {
             let m = e.cross(s.2).normalize_or_zero();
             if m == DVec3::ZERO {
                 continue;
@@ -748,6 +751,7 @@ pub fn collapse_order(
     for u in 0..np as u32 {
         refresh(&s, &mut heap, &mut scratch, u, false);
     }
+
     let mut alive = np;
     while alive > 1 {
         let Some((u, key, v)) = heap.peek() else {
@@ -762,7 +766,11 @@ pub fn collapse_order(
         }
         heap.remove(u);
         let step = collapses.len() as u32 + 1;
-        let vanish = s.collapse(u, v, step, &mut wedge_target, &mut triangle_step);
+        // Only v and u's neighbours see their triangles change: every other position keeps its
+        // triangles, its quadric and its neighbours' positions (v does not move), so its best
+        // collapse stays what it was and is not evaluated again.
+        let touched = s.neighbours(u);
+        s.collapse(u, v, step, &mut wedge_target, &mut triangle_step);
         alive -= 1;
         collapses.push(Collapse {
             removed: u,
@@ -774,16 +782,6 @@ pub fn collapse_order(
                 0
             },
         });
-        // Re-evaluate v and everything around it.
-        let mut touched = s.neighbours(v);
-        for &t in &vanish {
-            for p in s.tri_pos(t) {
-                if p != u && s.pos_alive[p as usize] && !touched.contains(&p) {
-                    touched.push(p);
-                }
-            }
-        }
-        touched.push(v);
         for p in touched {
             checked[p as usize] = false;
             refresh(&s, &mut heap, &mut scratch, p, false);

@@ -32,6 +32,35 @@ pub fn point_triangle_distance_sq(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64
         .min(point_segment_distance_sq(p, c, a))
 }
 
+/// A ball around a triangle (its centroid and the distance to the farthest corner): a cheap
+/// lower bound of point-triangle distances, so most exact distances can be skipped.
+#[derive(Debug, Clone, Copy)]
+pub struct TriangleBall {
+    centre: DVec3,
+    radius: f64,
+}
+
+impl TriangleBall {
+    pub fn new(a: DVec3, b: DVec3, c: DVec3) -> Self {
+        let centre = (a + b + c) / 3.0;
+        let radius = (a - centre)
+            .length()
+            .max((b - centre).length())
+            .max((c - centre).length());
+        TriangleBall { centre, radius }
+    }
+
+    /// A lower bound of [`point_triangle_distance_sq`] from `p` to the triangle: every point of
+    /// the triangle lies in the ball, so the distance is at least `|p - centre| - radius`. The
+    /// bound is lowered by a relative 1e-9 so that rounding never lifts it above the exact
+    /// distance as computed.
+    pub fn lower_bound_sq(&self, p: DVec3) -> f64 {
+        let to_centre = (p - self.centre).length();
+        let d = to_centre - self.radius - 1e-9 * (to_centre + self.radius);
+        if d > 0.0 { d * d } else { 0.0 }
+    }
+}
+
 /// Squared distance from `p` to the segment `[a, b]`.
 pub fn point_segment_distance_sq(p: DVec3, a: DVec3, b: DVec3) -> f64 {
     let ab = b - a;
