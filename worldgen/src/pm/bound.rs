@@ -114,6 +114,81 @@ fn nearest_candidate(p: DVec3, cands: &[BallTriangle], hint: usize) -> (f64, usi
     best
 }
 
+/// Moves each orphaned sample (with the face that held it) to its nearest candidate face,
+/// recording its distance (`samples`: positions and distances); faces that receive samples are
+/// added to `touched`.
+fn reassign(
+    orphans: &[(u32, u32)],
+    candidates: &[u32],
+    cand_points: &[BallTriangle],
+    samples: (&[DVec3], &mut [f64]),
+    face_samples: &mut [Vec<u32>],
+    touched: &mut Vec<u32>,
+) {
+    let (sample_pos, sample_d) = samples;
+    // Start from the sample's old face when it survived (moved), else from the previous
+    // orphan's face (samples of one face are neighbours).
+    let mut hint = 0usize;
+    let mut last_face = u32::MAX;
+    for &(smp, old_face) in orphans {
+        if old_face != last_face {
+            last_face = old_face;
+            if let Some(k) = candidates.iter().position(|&t| t == old_face) {
+                hint = k;
+            }
+        }
+        let (best, k) = nearest_candidate(sample_pos[smp as usize], cand_points, hint);
+        hint = k;
+        let best_face = candidates[k];
+        sample_d[smp as usize] = best.sqrt();
+        face_samples[best_face as usize].push(smp);
+        if !touched.contains(&best_face) {
+            touched.push(best_face);
+        }
+    }
+}
+
+/// The original triangles near `faces` (the faces around the kept vertex) into `local`: those
+/// around the faces' corners (`mesh`: the level's faces by position, and each original
+/// position's original triangles), then those whose samples the faces hold (`samples`: each
+/// face's samples, each sample's original triangle). Stops past [`LOCAL_LIMIT`], where the
+/// caller uses the hierarchy whatever else the subset would hold. `marks` (per original
+/// triangle, and this call's stamp) keeps each triangle once.
+fn gather_local(
+    faces: &[u32],
+    mesh: (&[[u32; 3]], &[Vec<u32>]),
+    samples: (&[Vec<u32>], &[u32]),
+    full_balls: &[BallTriangle],
+    marks: (&mut [u32], u32),
+    local: &mut Vec<BallTriangle>,
+) {
+    let (tri_p, original_ring) = mesh;
+    let (face_samples, sample_tri) = samples;
+    let (mark, stamp) = marks;
+    local.clear();
+    let mut add = |o: u32, local: &mut Vec<BallTriangle>| {
+        if mark[o as usize] != stamp {
+            mark[o as usize] = stamp;
+            local.push(full_balls[o as usize]);
+        }
+        local.len() > LOCAL_LIMIT
+    };
+    for &f in faces {
+        for p in tri_p[f as usize] {
+            for &o in &original_ring[p as usize] {
+                if add(o, local) {
+                    return;
+                }
+            }
+        }
+        for &smp in &face_samples[f as usize] {
+            if add(sample_tri[smp as usize], local) {
+                return;
+            }
+        }
+    }
+}
+
 /// Per-level error bounds: `errors[s]` is the bound after `s` collapses (`errors[0] == 0`).
 pub fn level_errors(
     mesh: &TriMesh,
@@ -215,26 +290,15 @@ pub fn level_errors(
             .collect();
         let mut touched: Vec<u32> = moved.clone();
         if !candidates.is_empty() {
-            // Start from the sample's old face when it survived (moved), else from the previous
-            // orphan's face (samples of one face are neighbours).
-            let mut hint = 0usize;
-            let mut last_face = u32::MAX;
-            for &(smp, old_face) in &orphans {
-                if old_face != last_face {
-                    last_face = old_face;
-                    if let Some(k) = candidates.iter().position(|&t| t == old_face) {
-                        hint = k;
-                    }
-                }
-                let (best, k) = nearest_candidate(sample_pos[smp as usize], &cand_points, hint);
-                hint = k;
-                let best_face = candidates[k];
-                sample_d[smp as usize] = best.sqrt();
-                face_samples[best_face as usize].push(smp);
-                if !touched.contains(&best_face) {
-                    touched.push(best_face);
-                }
-            }
+            let samples = (&sample_pos[..], &mut sample_d[..]);
+            reassign(
+                &orphans,
+                &candidates,
+                &cand_points,
+                samples,
+                &mut face_samples,
+                &mut touched,
+            );
         }
         for t in touched {
             let m = face_samples[t as usize]
@@ -250,31 +314,14 @@ pub fn level_errors(
         // levels) uses the hierarchy instead.
         let spacing_b = sample_spacing.max(0.25 * last);
         stamp += 1;
-        local.clear();
-        let mut add = |o: u32, local: &mut Vec<BallTriangle>| {
-            if mark[o as usize] != stamp {
-                mark[o as usize] = stamp;
-                local.push(full_balls[o as usize]);
-            }
-            // Past the limit the hierarchy is used whatever else the subset would hold.
-            local.len() > LOCAL_LIMIT
-        };
-        'gather: for &f in &pos_tris[v as usize] {
-            // The original triangles around the face's corners (all original vertices) ...
-            for p in tri_p[f as usize] {
-                for &o in &original_ring[p as usize] {
-                    if add(o, &mut local) {
-                        break 'gather;
-                    }
-                }
-            }
-            // ... and those whose samples the face holds.
-            for &smp in &face_samples[f as usize] {
-                if add(sample_tri[smp as usize], &mut local) {
-                    break 'gather;
-                }
-            }
-        }
+        gather_local(
+            &pos_tris[v as usize],
+            (&tri_p, &original_ring),
+            (&face_samples, &sample_tri),
+            &full_balls,
+            (&mut mark, stamp),
+            &mut local,
+        );
         for &t in &moved {
             let [a, b, cc] = face_points(tri_p[t as usize]);
             scratch.clear();
