@@ -61,6 +61,8 @@ pub struct FrameStats {
     pub object_draw_calls: u32,
     pub object_triangles: u64,
     pub object_full_triangles: u64,
+    /// Objects drawn from an artist (`MSFT_lod`) chain level instead of the base mesh.
+    pub object_chain_draws: u32,
     /// Of the vegetation instances: group-billboard quads (one per cluster of items).
     pub group_billboards: u64,
     pub drawn_nodes: usize,
@@ -290,6 +292,7 @@ impl Viewer {
             object_draw_calls: stats.object_draw_calls,
             object_triangles: stats.object_triangles,
             object_full_triangles: stats.object_full_triangles,
+            object_chain_draws: stats.object_chain_draws,
             group_billboards: stats.group_billboards,
             drawn_nodes: drawn.len(),
             nodes_per_level: per_level,

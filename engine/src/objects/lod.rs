@@ -9,6 +9,7 @@
 //!
 //! [`Camera::k_px`]: crate::camera::Camera::k_px
 
+use super::set::PmModel;
 use worldgen::pm::{ErrorIndex, PmMesh};
 
 /// Run-time level-of-detail settings for progressive meshes (seed 003's names in brackets).
@@ -71,4 +72,63 @@ pub fn choose_level(
     }
     let budget = error_budget(settings, tau_px, distance_m, k_px, scale) as f32;
     index.coarsest_within(pm, budget, settings.min_vertices)
+}
+
+/// What an instance of a model draws: chain option `option` (0 the base progressive mesh, `k`
+/// the `MSFT_lod` chain level `k`) at `level` of that option's progressive mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Choice {
+    pub option: usize,
+    pub level: usize,
+}
+
+/// The fewest triangles within the metric over the base and its artist chain: an option's
+/// error is its chain bound plus the stored error of its level (the Hausdorff distance obeys the
+/// triangle inequality), and the option whose coarsest level within the budget draws the fewest
+/// triangles wins (ties: the finer option). A fixed fraction (MLFIX) applies to the base.
+pub fn choose(
+    model: &PmModel,
+    settings: &PmLodSettings,
+    tau_px: f64,
+    distance_m: f64,
+    k_px: f64,
+    scale: f64,
+) -> Choice {
+    let base = choose_level(
+        &model.pm,
+        &model.index,
+        settings,
+        tau_px,
+        distance_m,
+        k_px,
+        scale,
+    );
+    let mut best = Choice {
+        option: 0,
+        level: base,
+    };
+    if settings.fixed_fraction.is_some() {
+        return best;
+    }
+    let mut fewest = model.pm.triangles_at(base);
+    let budget = error_budget(settings, tau_px, distance_m, k_px, scale);
+    for (k, chain) in model.chain.iter().enumerate() {
+        let left = budget - f64::from(chain.error);
+        if left < 0.0 {
+            continue;
+        }
+        let m = &chain.model;
+        let level = m
+            .index
+            .coarsest_within(&m.pm, left as f32, settings.min_vertices);
+        let tris = m.pm.triangles_at(level);
+        if tris < fewest {
+            fewest = tris;
+            best = Choice {
+                option: k + 1,
+                level,
+            };
+        }
+    }
+    best
 }

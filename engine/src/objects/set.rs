@@ -3,10 +3,20 @@
 //! Models are read from `.pm` files or built at start-up from `.obj` / `.gltf` / `.glb` (quadric
 //! cost). Model files are taken as Y-up (glTF's convention, and that of the shared OBJ meshes);
 //! the world is Z-up, so a model's +Y becomes the world's +Z and its +Z the world's -Y.
+//!
+//! A glTF model with an `MSFT_lod` chain (seed 001's artist LOD chains) keeps every chain level
+//! as a progressive mesh of its own, with a bound of its two-sided Hausdorff distance to the base
+//! model ([`ChainLevel::error`]); the level choice ([`crate::objects::lod::choose`]) adds that
+//! bound to the chain level's stored PM error, so artist levels and PM levels meet the same
+//! pixel metric.
 
 use glam::DVec3;
 use std::path::{Path, PathBuf};
-use worldgen::pm::{CostKind, ErrorIndex, PmEdits, PmMesh, file, load_mesh};
+use worldgen::pm::measure::{hausdorff_bound, mesh_soup};
+use worldgen::pm::{CostKind, ErrorIndex, PmEdits, PmMesh, TriMesh, file, gltf_input, load_mesh};
+
+/// Sample spacing of the stored PM errors and of the chain bounds, fraction of the diagonal.
+const BOUND_FRACTION: f64 = 0.005;
 
 /// Why a model could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -17,6 +27,22 @@ pub enum ObjectError {
     Mesh(#[from] worldgen::pm::MeshInputError),
     #[error("{path}: the model has no triangles")]
     Empty { path: PathBuf },
+    #[error("{path}: MSFT_lod level {level} ({name}) has no triangles")]
+    EmptyChainLevel {
+        path: PathBuf,
+        level: usize,
+        name: String,
+    },
+}
+
+/// One level of an artist LOD chain: its own progressive mesh (in the base model's space) and
+/// an upper bound of its full mesh's two-sided Hausdorff distance to the base model.
+#[derive(Debug)]
+pub struct ChainLevel {
+    pub model: PmModel,
+    /// Model units; a PM level of this chain level is within `error` + its stored error of the
+    /// base model (the triangle inequality of the Hausdorff distance).
+    pub error: f32,
 }
 
 /// One progressive mesh with everything instances share.
@@ -31,6 +57,8 @@ pub struct PmModel {
     /// Bounds of the full mesh, model units.
     pub lo: DVec3,
     pub hi: DVec3,
+    /// Coarser artist levels (`MSFT_lod`), finest first; empty for most models.
+    pub chain: Vec<ChainLevel>,
 }
 
 /// The world position of model point `p` (model units, Y-up) for an instance.
@@ -48,26 +76,77 @@ pub fn model_to_world(p: DVec3, inst: &ObjectInstance, model: &PmModel) -> DVec3
 }
 
 impl PmModel {
-    /// Reads a `.pm` file, or builds one from a mesh file.
+    /// Reads a `.pm` file, or builds one from a mesh file (with a glTF file's `MSFT_lod`
+    /// chain, if it has one).
     pub fn load(path: &Path) -> Result<Self, ObjectError> {
-        let is_pm = path
+        let ext = path
             .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("pm"));
-        let pm = if is_pm {
-            file::read(path)?
-        } else {
-            let (mesh, _) = load_mesh(path)?;
-            PmMesh::build(&mesh, CostKind::Quadric, 0.005, &mut |_, _, _| {}).0
-        };
-        if pm.triangles.is_empty() {
-            return Err(ObjectError::Empty {
-                path: path.to_path_buf(),
-            });
-        }
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
         let name = path
             .file_stem()
             .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+        let empty = || ObjectError::Empty {
+            path: path.to_path_buf(),
+        };
+        if ext == "gltf" || ext == "glb" {
+            let model = gltf_input::load(path).map_err(worldgen::pm::MeshInputError::from)?;
+            let mut meshes = Vec::with_capacity(model.levels.len());
+            for (level, (level_name, tris)) in model.levels.iter().enumerate() {
+                let (mesh, _) = TriMesh::weld(tris);
+                if mesh.triangles.is_empty() {
+                    return Err(if level == 0 {
+                        empty()
+                    } else {
+                        ObjectError::EmptyChainLevel {
+                            path: path.to_path_buf(),
+                            level,
+                            name: level_name.clone(),
+                        }
+                    });
+                }
+                meshes.push(mesh);
+            }
+            return Ok(Self::with_chain(&name, &meshes));
+        }
+        let pm = if ext == "pm" {
+            file::read(path)?
+        } else {
+            let (mesh, _) = load_mesh(path)?;
+            PmMesh::build(&mesh, CostKind::Quadric, BOUND_FRACTION, &mut |_, _, _| {}).0
+        };
+        if pm.triangles.is_empty() {
+            return Err(empty());
+        }
         Ok(Self::from_pm(name, pm))
+    }
+
+    /// A model from its base mesh (`meshes[0]`) and artist chain levels (the rest, finest
+    /// first, non-empty): a progressive mesh each (quadric cost), every chain level with its
+    /// Hausdorff bound to the base, sampled at the stored errors' spacing (base diagonal).
+    pub fn with_chain(name: &str, meshes: &[TriMesh]) -> Self {
+        let build =
+            |m: &TriMesh| PmMesh::build(m, CostKind::Quadric, BOUND_FRACTION, &mut |_, _, _| {}).0;
+        let mut model = Self::from_pm(name.to_string(), build(&meshes[0]));
+        let base = mesh_soup(&meshes[0]);
+        let spacing = (meshes[0].diagonal() as f64 * BOUND_FRACTION).max(f64::MIN_POSITIVE);
+        for (k, mesh) in meshes.iter().enumerate().skip(1) {
+            let error = hausdorff_bound(&base, &mesh_soup(mesh), spacing) as f32;
+            model.chain.push(ChainLevel {
+                model: Self::from_pm(format!("{name} lod {k}"), build(mesh)),
+                error,
+            });
+        }
+        model
+    }
+
+    /// The progressive mesh of chain option `option`: 0 the base, `k` chain level `k`.
+    pub fn option(&self, option: usize) -> &PmModel {
+        if option == 0 {
+            self
+        } else {
+            &self.chain[option - 1].model
+        }
     }
 
     pub fn from_pm(name: String, pm: PmMesh) -> Self {
@@ -106,6 +185,7 @@ impl PmModel {
             pm,
             lo,
             hi,
+            chain: Vec::new(),
         }
     }
 

@@ -133,6 +133,8 @@ pub struct DrawStats {
     pub object_triangles: u64,
     /// Triangles the drawn objects would have at full detail.
     pub object_full_triangles: u64,
+    /// Objects drawn from an `MSFT_lod` chain level.
+    pub object_chain_draws: u32,
 }
 
 /// The frame uniforms and bind group and the node-table layout, shared by all renderers.

@@ -1,7 +1,9 @@
 //! The objects renderer: progressive meshes (one vertex buffer per model, wedges in level order)
 //! drawn per instance with an index list kept at the level the pixel metric chooses
 //! ([`crate::objects::lod`]), edited level by level on the CPU ([`PmInstance`]) and rewritten
-//! on the GPU only when the level changes. One draw per visible instance.
+//! on the GPU only when the level changes. One draw per visible instance. A model with an
+//! `MSFT_lod` chain has a vertex buffer per chain level; an instance that moves to another chain
+//! level starts a new index list there (no geomorph across chain levels: they share no vertices).
 
 use super::Gpu;
 use super::frame::{
@@ -10,7 +12,7 @@ use super::frame::{
 use super::lighting::light_entry;
 use super::scene::{FrameDraws, NodeRenderer};
 use crate::objects::content::{NodeObjects, ObjectsContent};
-use crate::objects::lod::choose_level;
+use crate::objects::lod::{Choice, choose};
 use crate::objects::set::{ObjectSet, PmModel, model_to_world};
 use crate::stream::Shared;
 use glam::{DMat4, DVec3};
@@ -51,6 +53,8 @@ struct Morph {
 }
 
 struct InstanceGpu {
+    /// The chain option drawn (0: the base progressive mesh).
+    option: usize,
     lod: PmInstance,
     indices: wgpu::Buffer,
     uploaded_level: usize,
@@ -143,6 +147,7 @@ impl InstanceGpu {
 struct DrawItem {
     instance: u32,
     model: u32,
+    option: usize,
     index_count: u32,
     full_triangles: u32,
 }
@@ -156,12 +161,15 @@ pub struct ObjectStats {
     pub full_triangles: u64,
     /// Index lists rewritten this frame (level changes).
     pub level_changes: u32,
+    /// Instances drawn from an `MSFT_lod` chain level rather than the base mesh.
+    pub chain_drawn: u32,
 }
 
 pub struct ObjectsRenderer {
     set: Arc<ObjectSet>,
     pipeline: wgpu::RenderPipeline,
-    vertex_buffers: Vec<wgpu::Buffer>,
+    /// Per model, per chain option (0 the base).
+    vertex_buffers: Vec<Vec<wgpu::Buffer>>,
     draw_layout: wgpu::BindGroupLayout,
     morph_layout: wgpu::BindGroupLayout,
     /// Bound for instances that are not morphing (the shader reads nothing from it).
@@ -276,17 +284,22 @@ impl ObjectsRenderer {
         let vertex_buffers = set
             .models
             .iter()
-            .map(|m| {
-                let mut data: Vec<f32> = Vec::with_capacity(m.pm.wedge_position.len() * 6);
-                for (w, &p) in m.pm.wedge_position.iter().enumerate() {
-                    data.extend_from_slice(&m.pm.positions[p as usize]);
-                    data.extend_from_slice(&m.normals[w]);
-                }
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("object vertices"),
-                    contents: bytemuck::cast_slice(&data),
-                    usage: wgpu::BufferUsages::VERTEX,
-                })
+            .map(|model| {
+                (0..=model.chain.len())
+                    .map(|option| {
+                        let m = model.option(option);
+                        let mut data: Vec<f32> = Vec::with_capacity(m.pm.wedge_position.len() * 6);
+                        for (w, &p) in m.pm.wedge_position.iter().enumerate() {
+                            data.extend_from_slice(&m.pm.positions[p as usize]);
+                            data.extend_from_slice(&m.normals[w]);
+                        }
+                        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                            label: Some("object vertices"),
+                            contents: bytemuck::cast_slice(&data),
+                            usage: wgpu::BufferUsages::VERTEX,
+                        })
+                    })
+                    .collect()
             })
             .collect();
         let draw_capacity = 64;
@@ -325,6 +338,26 @@ impl ObjectsRenderer {
             .map(|i| (i.instance, self.instances[&i.instance].lod.level()))
             .collect();
         v.sort_unstable();
+        v
+    }
+
+    /// The chain option and level each drawn instance showed last frame.
+    pub fn choices(&self) -> Vec<(u32, Choice)> {
+        let mut v: Vec<(u32, Choice)> = self
+            .items
+            .iter()
+            .map(|i| {
+                let inst = &self.instances[&i.instance];
+                (
+                    i.instance,
+                    Choice {
+                        option: inst.option,
+                        level: inst.lod.level(),
+                    },
+                )
+            })
+            .collect();
+        v.sort_unstable_by_key(|&(i, _)| i);
         v
     }
 }
@@ -371,34 +404,41 @@ impl NodeRenderer for ObjectsRenderer {
                     continue;
                 }
                 let distance_m = (c - camera.position_m).length() - r;
-                let level = choose_level(
-                    &model.pm,
-                    &model.index,
-                    &settings,
-                    draws.tau_px,
-                    distance_m,
-                    k_px,
-                    inst.scale,
-                );
+                let choice = choose(model, &settings, draws.tau_px, distance_m, k_px, inst.scale);
                 let full = model.pm.triangles.len();
-                let entry = self.instances.entry(id).or_insert_with(|| InstanceGpu {
-                    lod: PmInstance::new(&model.pm, model.pm.level_count()),
-                    indices: gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some("object indices"),
-                        size: (full * 12).max(4) as u64,
-                        usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_DST,
-                        mapped_at_creation: false,
-                    }),
-                    uploaded_level: 0,
-                    last_frame: 0,
-                    morph: None,
-                    morph_to: None,
-                });
+                let drawn_model = model.option(choice.option);
+                // A new instance starts at full detail (and geomorphs down when MORPH is on);
+                // a switch of chain level starts at the chosen level.
+                let new_entry = |level: usize| {
+                    let pm = &drawn_model.pm;
+                    InstanceGpu {
+                        option: choice.option,
+                        lod: PmInstance::new(pm, level),
+                        indices: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                            label: Some("object indices"),
+                            size: (pm.triangles.len() * 12).max(4) as u64,
+                            usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_DST,
+                            mapped_at_creation: false,
+                        }),
+                        uploaded_level: 0,
+                        last_frame: 0,
+                        morph: None,
+                        morph_to: None,
+                    }
+                };
+                let entry = self
+                    .instances
+                    .entry(id)
+                    .or_insert_with(|| new_entry(drawn_model.pm.level_count()));
+                if entry.option != choice.option {
+                    // Another chain level: its own vertices, so a new list (switched at once).
+                    *entry = new_entry(choice.level);
+                }
                 entry.last_frame = self.frame_no;
                 let changed = entry.update_level(
                     gpu,
-                    model,
-                    level,
+                    drawn_model,
+                    choice.level,
                     settings.morph_s,
                     draws.dt_s,
                     &self.morph_layout,
@@ -422,6 +462,7 @@ impl NodeRenderer for ObjectsRenderer {
                 rel.w_axis -= camera.position_m.extend(0.0);
                 let lin = glam::DMat3::from_mat4(world);
                 let normal = DMat4::from_mat3(lin.inverse().transpose());
+                // Share of the base model's positions (a chain level counts its own).
                 let share = shown as f32 / model.pm.level_count().max(1) as f32;
                 let by_lod = draws.view.pm_color_by_lod;
                 let albedo = if by_lod {
@@ -452,9 +493,11 @@ impl NodeRenderer for ObjectsRenderer {
                         .extend(0.0)
                         .to_array(),
                 });
+                self.stats.chain_drawn += u32::from(choice.option > 0);
                 self.items.push(DrawItem {
                     instance: id,
                     model: inst.model,
+                    option: choice.option,
                     index_count: indices.len() as u32,
                     full_triangles: full as u32,
                 });
@@ -505,12 +548,16 @@ impl NodeRenderer for ObjectsRenderer {
                 .filter(|_| inst.morph.is_some())
                 .map_or(&self.no_morph, |(_, g)| g);
             pass.set_bind_group(3, morph, &[]);
-            pass.set_vertex_buffer(0, self.vertex_buffers[item.model as usize].slice(..));
+            pass.set_vertex_buffer(
+                0,
+                self.vertex_buffers[item.model as usize][item.option].slice(..),
+            );
             pass.set_index_buffer(inst.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..item.index_count, 0, 0..1);
             stats.object_draw_calls += 1;
             stats.object_triangles += u64::from(item.index_count / 3);
             stats.object_full_triangles += u64::from(item.full_triangles);
+            stats.object_chain_draws += u32::from(item.option > 0);
         }
     }
 }

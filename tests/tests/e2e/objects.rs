@@ -5,7 +5,8 @@ use engine::camera::Camera;
 use engine::kinds::{Registration, registered};
 use engine::lighting::content::LightingContent;
 use engine::objects::content::{NodeObjects, ObjectsContent};
-use engine::objects::set::{ObjectSet, PmModel};
+use engine::objects::lod::{PmLodSettings, choose, choose_level, error_budget};
+use engine::objects::set::{ChainLevel, ObjectSet, PmModel};
 use engine::render::objects::ObjectsRenderer;
 use engine::render::{COLOR_FORMAT, Gpu, Target};
 use engine::stream::StreamSettings;
@@ -15,6 +16,7 @@ use glam::DVec3;
 use std::sync::Arc;
 use tests::gpu::{device, frame, settle};
 use tests::terrain::tiny_world;
+use worldgen::pm::measure::{hausdorff_bound, level_soup, mesh_soup};
 use worldgen::pm::mesh::Corner;
 use worldgen::pm::{CostKind, PmMesh, TriMesh};
 
@@ -56,6 +58,89 @@ fn bumpy_box() -> PmMesh {
     }
     let (mesh, _) = TriMesh::weld(&tris);
     PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {}).0
+}
+
+/// A bumpy unit square of `n` x `n` quads (z = 0.2 sin 6x cos 5y).
+fn bumpy_square(n: usize) -> TriMesh {
+    let c = |i: usize, j: usize| {
+        let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+        Corner {
+            position: [x, y, 0.2 * (x * 6.0).sin() * (y * 5.0).cos()],
+            uv: None,
+            normal: None,
+        }
+    };
+    let mut tris = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            tris.push([c(i, j), c(i + 1, j), c(i + 1, j + 1)]);
+            tris.push([c(i, j), c(i + 1, j + 1), c(i, j + 1)]);
+        }
+    }
+    TriMesh::weld(&tris).0
+}
+
+/// A model whose base progressive mesh is poor (the seed's longest-edge cost on a fine bumpy
+/// square) with one good artist chain level (a coarser square of the same surface, quadric
+/// cost), its Hausdorff bound to the base as `PmModel::load` computes it for `MSFT_lod`. Also
+/// returns the base's triangles.
+fn poor_base_with_chain() -> (PmModel, Vec<[DVec3; 3]>) {
+    let (fine, coarse) = (bumpy_square(32), bumpy_square(8));
+    let build = |m: &TriMesh, cost| PmMesh::build(m, cost, 0.005, &mut |_, _, _| {}).0;
+    let mut model = PmModel::from_pm("fine".into(), build(&fine, CostKind::LongestEdge));
+    let spacing = f64::from(fine.diagonal()) * 0.005;
+    let error = hausdorff_bound(&mesh_soup(&fine), &mesh_soup(&coarse), spacing) as f32;
+    model.chain.push(ChainLevel {
+        model: PmModel::from_pm("coarse".into(), build(&coarse, CostKind::Quadric)),
+        error,
+    });
+    (model, mesh_soup(&fine))
+}
+
+#[test]
+fn chain_levels_meet_the_pixel_metric_and_are_drawn_where_they_need_fewer_triangles() {
+    let (model, full) = poor_base_with_chain();
+    let settings = PmLodSettings::default();
+    let (tau_px, k_px) = (1.0, 1000.0);
+    let (mut chain_picks, mut base_picks) = (0, 0);
+    let mut measured: Vec<((usize, usize), f64)> = Vec::new();
+    for step in 0..24 {
+        let d = 0.5 * 1.5f64.powi(step);
+        let c = choose(&model, &settings, tau_px, d, k_px, 1.0);
+        let base_only = choose_level(&model.pm, &model.index, &settings, tau_px, d, k_px, 1.0);
+        let m = model.option(c.option);
+        assert!(
+            m.pm.triangles_at(c.level) <= model.pm.triangles_at(base_only),
+            "at {d} m the choice draws more triangles than the base alone"
+        );
+        if c.option > 0 {
+            chain_picks += 1;
+        } else {
+            base_picks += 1;
+        }
+        // Independently measured, the drawn mesh stays within the budget of the base.
+        let key = (c.option, c.level);
+        let e = if let Some(&(_, e)) = measured.iter().find(|(k, _)| *k == key) {
+            e
+        } else {
+            let drawn = level_soup(&m.pm, c.level);
+            let e = crate::pm::reference_distance(&full, &drawn, 600, 5)
+                .max(crate::pm::reference_distance(&drawn, &full, 600, 9));
+            measured.push((key, e));
+            e
+        };
+        let budget = error_budget(&settings, tau_px, d, k_px, 1.0);
+        assert!(
+            e <= budget * (1.0 + 1e-5),
+            "at {d} m option {} level {}: measured {e:.4e} over the budget {budget:.4e}",
+            c.option,
+            c.level
+        );
+    }
+    assert!(
+        chain_picks > 0 && base_picks > 0,
+        "chain level chosen {chain_picks} times, base {base_picks} times"
+    );
 }
 
 /// A viewer of `world` with every registered kind (less the light grids without `lighting`)
@@ -343,4 +428,62 @@ fn an_object_in_a_cliff_shadow_is_darker_than_one_in_the_sun() {
         lit > 0.85 * c_lit,
         "sunlit object: {lit:.3} with grids, {c_lit:.3} without"
     );
+}
+
+#[test]
+fn instances_draw_an_msft_lod_chain_level_where_it_needs_fewer_triangles() {
+    let Some(g) = device() else { return };
+    let world = tiny_world();
+    let ground = |x: f64, y: f64| world.height_m(x, y);
+    let eye = DVec3::new(150.0, 200.0, ground(150.0, 200.0) + 12.0);
+    let cam = Camera::look_at(
+        eye,
+        eye + DVec3::new(1.0, 0.0, -0.15),
+        60f64.to_radians(),
+        [320, 180],
+    );
+    let (model, _) = poor_base_with_chain();
+    let set = Arc::new(ObjectSet::place_row(
+        vec![model],
+        [170.0, 200.0],
+        [1.0, 0.0],
+        8,
+        25.0,
+        8.0,
+        ground,
+    ));
+    let mut v = objects_viewer(&g, &world, Arc::clone(&set), false, 1.0);
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let st = settle(&g, &mut v, &target, &cam);
+    let renderer = v
+        .scene
+        .renderer::<ObjectsRenderer>()
+        .expect("objects renderer");
+    let choices = renderer.choices();
+    assert!(choices.len() >= 3, "only {} objects drawn", choices.len());
+    let k = cam.k_px();
+    let mut chain = 0;
+    for &(id, c) in &choices {
+        let inst = &set.instances[id as usize];
+        let (centre, r) = set.sphere(inst);
+        let d = (centre - cam.position_m).length() - r;
+        let model = &set.models[inst.model as usize];
+        let offset = if c.option == 0 {
+            0.0
+        } else {
+            model.chain[c.option - 1].error
+        };
+        let error = offset + model.option(c.option).pm.levels[c.level - 1].error;
+        let px = f64::from(error) * inst.scale * k / d.max(1.0);
+        assert!(
+            px <= 1.0 + 1e-6,
+            "instance {id} (option {}, level {}) projects to {px:.3} px",
+            c.option,
+            c.level
+        );
+        chain += usize::from(c.option > 0);
+    }
+    assert!(chain > 0, "no instance drew the chain level: {choices:?}");
+    assert_eq!(st.object_chain_draws as usize, chain);
+    assert!(st.object_triangles < st.object_full_triangles);
 }

@@ -224,7 +224,12 @@ fn disconnected_parts_end_in_isolated_collapses() {
 
 /// Independent reference: points drawn uniformly by area on one mesh (a seeded generator, not the
 /// builder's lattice), each measured by brute force against every triangle of the other.
-fn reference_distance(from: &[[DVec3; 3]], to: &[[DVec3; 3]], points: usize, seed: u64) -> f64 {
+pub(crate) fn reference_distance(
+    from: &[[DVec3; 3]],
+    to: &[[DVec3; 3]],
+    points: usize,
+    seed: u64,
+) -> f64 {
     let areas: Vec<f64> = from
         .iter()
         .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).length() / 2.0)
@@ -602,6 +607,38 @@ fn gltf_models_and_their_msft_lod_chains_are_read_and_measured() {
         assert!(
             err.contains("chain.gltf") && err.contains(needle),
             "{err:?} lacks {needle:?}"
+        );
+    }
+}
+
+#[test]
+fn a_gltf_chain_loads_as_an_object_whose_chain_levels_carry_bounds() {
+    use engine::objects::set::PmModel;
+    use worldgen::pm::gltf_input;
+    use worldgen::pm::measure::mesh_soup;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("chain.gltf");
+    std::fs::write(&path, gltf_with_chain(4, false)).expect("write");
+    let model = PmModel::load(&path).expect("a glTF chain loads as an object");
+    let tris: Vec<usize> = std::iter::once(&model)
+        .chain(model.chain.iter().map(|c| &c.model))
+        .map(|m| m.pm.triangles.len())
+        .collect();
+    assert_eq!(tris, vec![512, 32, 2], "base and two chain levels");
+    let levels = gltf_input::load(&path).expect("read").levels;
+    let soups: Vec<_> = levels
+        .iter()
+        .map(|l| mesh_soup(&TriMesh::weld(&l.1).0))
+        .collect();
+    for (k, chain) in model.chain.iter().enumerate() {
+        let level = &soups[k + 1];
+        let measured = reference_distance(&soups[0], level, 1500, 31 + k as u64)
+            .max(reference_distance(level, &soups[0], 1500, 77 + k as u64));
+        let bound = f64::from(chain.error);
+        assert!(
+            bound >= measured * (1.0 - 1e-5) && bound < 1.0,
+            "chain level {}: bound {bound:.4e}, measured {measured:.4e}",
+            k + 1
         );
     }
 }

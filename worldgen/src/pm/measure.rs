@@ -2,6 +2,7 @@
 //! (spacing a fraction of the diagonal), each measured exactly against the other side. This is a
 //! *measurement* (a lower estimate of the true distance that converges as the spacing shrinks),
 //! used to compare simplifiers at equal triangle counts; the PM's stored error is a bound.
+//! [`hausdorff_bound`] adds the samples' covering radius, which makes it an upper bound.
 
 use super::bvh::TriangleBvh;
 use super::geom::{grid_samples, v3};
@@ -55,4 +56,27 @@ pub fn hausdorff(a: &Soup, b: &Soup, spacing: f64) -> f64 {
     let ta = TriangleBvh::new(a.clone());
     let tb = TriangleBvh::new(b.clone());
     one_sided(a, &tb, spacing).max(one_sided(b, &ta, spacing))
+}
+
+/// An upper bound of the two-sided Hausdorff distance between `a` and `b`: on each side, the
+/// largest exact distance from a grid sample to the other side plus the samples' covering radius
+/// (every point lies within that radius of a sample, and the distance to a set is 1-Lipschitz).
+pub fn hausdorff_bound(a: &Soup, b: &Soup, spacing: f64) -> f64 {
+    if a.is_empty() || b.is_empty() {
+        return if a.is_empty() && b.is_empty() {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+    }
+    let side = |from: &Soup, to: &Soup| {
+        let bvh = TriangleBvh::new(to.clone());
+        let mut points = Vec::new();
+        let mut cover = 0.0f64;
+        for [p, q, r] in from {
+            cover = cover.max(grid_samples(*p, *q, *r, spacing, |x| points.push(x)));
+        }
+        bvh.max_distance(points) + cover
+    };
+    side(a, b).max(side(b, a))
 }

@@ -129,8 +129,10 @@ pub(crate) struct Cli {
     pub(crate) warm_start: bool,
     /// Place this model as progressive-mesh objects in the world (repeatable): a `.pm` file
     /// (`worldgen pm`), or an `.obj` / `.gltf` / `.glb` built at start-up with the quadric
-    /// cost. Copies stand in a row ahead of the first camera, on the ground; each instance
-    /// draws the coarsest level whose measured error stays within tau on screen.
+    /// cost (a glTF `MSFT_lod` chain's levels too, each with its bounded distance to the base).
+    /// Copies stand in a row ahead of the first camera, on the ground; each instance draws the
+    /// level (of the base or of a chain level) with the fewest triangles whose error stays
+    /// within tau on screen.
     #[arg(long)]
     pub(crate) object: Vec<PathBuf>,
     /// Copies of each --object.

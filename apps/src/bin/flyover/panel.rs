@@ -132,8 +132,9 @@ pub(crate) fn panel(
     ));
     if s.object_draw_calls > 0 {
         ui.label(format!(
-            "objects: {} drawn, {} triangles ({:.1} % of {} at full detail)",
+            "objects: {} drawn ({} from MSFT_lod chain levels), {} triangles ({:.1} % of {} at full detail)",
             s.object_draw_calls,
+            s.object_chain_draws,
             s.object_triangles,
             100.0 * s.object_triangles as f64 / s.object_full_triangles.max(1) as f64,
             s.object_full_triangles
