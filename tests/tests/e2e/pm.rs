@@ -222,15 +222,9 @@ fn disconnected_parts_end_in_isolated_collapses() {
     }
 }
 
-/// Independent reference: points drawn uniformly by area on one mesh (a seeded generator, not the
-/// builder's lattice), each measured by brute force against every triangle of the other.
-pub(crate) fn reference_distance(
-    from: &[[DVec3; 3]],
-    to: &[[DVec3; 3]],
-    points: usize,
-    seed: u64,
-) -> f64 {
-    let areas: Vec<f64> = from
+/// Points drawn uniformly by area on `tris` (a seeded generator, not the builder's lattice).
+fn random_points(tris: &[[DVec3; 3]], points: usize, seed: u64) -> Vec<DVec3> {
+    let areas: Vec<f64> = tris
         .iter()
         .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).length() / 2.0)
         .collect();
@@ -248,24 +242,163 @@ pub(crate) fn reference_distance(
         x ^= x << 17;
         (x >> 11) as f64 / (1u64 << 53) as f64
     };
-    let mut worst = 0.0f64;
-    for _ in 0..points {
-        let r = rand() * total;
-        let k = cumulative.partition_point(|&c| c < r).min(from.len() - 1);
-        let (mut u, mut v) = (rand(), rand());
-        if u + v > 1.0 {
-            u = 1.0 - u;
-            v = 1.0 - v;
-        }
-        let [a, b, c] = from[k];
-        let p = a + (b - a) * u + (c - a) * v;
-        let d = to
+    (0..points)
+        .map(|_| {
+            let r = rand() * total;
+            let k = cumulative.partition_point(|&c| c < r).min(tris.len() - 1);
+            let (mut u, mut v) = (rand(), rand());
+            if u + v > 1.0 {
+                u = 1.0 - u;
+                v = 1.0 - v;
+            }
+            let [a, b, c] = tris[k];
+            a + (b - a) * u + (c - a) * v
+        })
+        .collect()
+}
+
+/// Independent reference: points drawn uniformly by area on one mesh, each measured by brute
+/// force against every triangle of the other.
+pub(crate) fn reference_distance(
+    from: &[[DVec3; 3]],
+    to: &[[DVec3; 3]],
+    points: usize,
+    seed: u64,
+) -> f64 {
+    random_points(from, points, seed)
+        .into_iter()
+        .map(|p| {
+            to.iter()
+                .map(|t| segment_free_distance(p, t))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Triangles bucketed by the grid cells their boxes overlap (written for this test, apart from
+/// worldgen's hierarchy), to decide "is some triangle within r of p" quickly.
+struct Buckets<'a> {
+    tris: &'a [[DVec3; 3]],
+    lo: DVec3,
+    cell: f64,
+    dims: [usize; 3],
+    /// Cell `c` holds `ids[start[c]..start[c + 1]]`.
+    start: Vec<u32>,
+    ids: Vec<u32>,
+}
+
+impl<'a> Buckets<'a> {
+    /// Buckets over the box `lo..hi` (holding every triangle and query point).
+    fn new(tris: &'a [[DVec3; 3]], lo: DVec3, hi: DVec3, cell: f64) -> Self {
+        let dims = [0, 1, 2].map(|k| ((hi[k] - lo[k]) / cell).floor() as usize + 1);
+        let mut b = Buckets {
+            tris,
+            lo,
+            cell,
+            dims,
+            start: vec![0; dims[0] * dims[1] * dims[2] + 1],
+            ids: Vec::new(),
+        };
+        let ranges: Vec<_> = tris
             .iter()
-            .map(|t| segment_free_distance(p, t))
-            .fold(f64::INFINITY, f64::min);
-        worst = worst.max(d);
+            .map(|t| b.range(t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
+            .collect();
+        for r in &ranges {
+            cells(dims, *r, |c| b.start[c + 1] += 1);
+        }
+        for c in 1..b.start.len() {
+            b.start[c] += b.start[c - 1];
+        }
+        let mut fill = b.start.clone();
+        b.ids = vec![0; *b.start.last().unwrap_or(&0) as usize];
+        for (t, r) in ranges.iter().enumerate() {
+            cells(dims, *r, |c| {
+                b.ids[fill[c] as usize] = t as u32;
+                fill[c] += 1;
+            });
+        }
+        b
     }
-    worst
+
+    fn range(&self, lo: DVec3, hi: DVec3) -> ([usize; 3], [usize; 3]) {
+        let at = |x: f64, k: usize| {
+            (((x - self.lo[k]) / self.cell).floor().max(0.0) as usize).min(self.dims[k] - 1)
+        };
+        (
+            [0, 1, 2].map(|k| at(lo[k], k)),
+            [0, 1, 2].map(|k| at(hi[k], k)),
+        )
+    }
+
+    /// Whether some triangle lies within `r` of `p`.
+    fn within(&self, p: DVec3, r: f64) -> bool {
+        let range = self.range(p - DVec3::splat(r), p + DVec3::splat(r));
+        let mut found = false;
+        cells(self.dims, range, |c| {
+            found = found
+                || self.ids[self.start[c] as usize..self.start[c + 1] as usize]
+                    .iter()
+                    .any(|&t| segment_free_distance(p, &self.tris[t as usize]) <= r);
+        });
+        found
+    }
+}
+
+/// Calls `f` with the index of every cell of the box of cells `(a, b)` (inclusive).
+fn cells(dims: [usize; 3], (a, b): ([usize; 3], [usize; 3]), mut f: impl FnMut(usize)) {
+    for z in a[2]..=b[2] {
+        for y in a[1]..=b[1] {
+            for x in a[0]..=b[0] {
+                f((z * dims[1] + y) * dims[0] + x);
+            }
+        }
+    }
+}
+
+/// Every prefix of `pm`: seeded random points on the full mesh each have a triangle of the
+/// level within the level's stored error, and random points on the level a triangle of the full
+/// mesh (the two sides of the Hausdorff distance, decided with this test's own distance).
+/// Returns the number of levels checked.
+fn check_every_prefix(name: &str, pm: &PmMesh, points: usize) -> usize {
+    let full = level_soup(pm, pm.level_count());
+    let lo = full
+        .iter()
+        .flatten()
+        .fold(DVec3::splat(f64::INFINITY), |a, p| a.min(*p));
+    let hi = full
+        .iter()
+        .flatten()
+        .fold(DVec3::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+    let base_cell = (hi - lo).length() / 16.0;
+    let on_full = random_points(&full, points, 4242);
+    let mut full_grid: Option<(f64, Buckets<'_>)> = None;
+    let mut checked = 0;
+    for p in 1..pm.level_count() {
+        let level = level_soup(pm, p);
+        if level.is_empty() {
+            continue;
+        }
+        let stored = f64::from(pm.levels[p - 1].error);
+        let r = stored * (1.0 + 1e-5) + 1e-12;
+        // Cells of base_cell x 2^k, at least r, so a query visits at most 3 x 3 x 3 cells.
+        let cell = base_cell * (r / base_cell).max(1.0).log2().ceil().exp2();
+        let level_grid = Buckets::new(&level, lo, hi, cell);
+        if let Some(q) = on_full.iter().find(|&&q| !level_grid.within(q, r)) {
+            panic!("{name} level {p}: full-mesh point {q} farther than the stored {stored:.4e}");
+        }
+        if full_grid.as_ref().is_none_or(|(c, _)| *c != cell) {
+            full_grid = Some((cell, Buckets::new(&full, lo, hi, cell)));
+        }
+        let grid = &full_grid.as_ref().expect("made above").1;
+        if let Some(q) = random_points(&level, points, 77 + p as u64)
+            .into_iter()
+            .find(|&q| !grid.within(q, r))
+        {
+            panic!("{name} level {p}: level point {q} farther than the stored {stored:.4e}");
+        }
+        checked += 1;
+    }
+    checked
 }
 
 /// Distance from a point to a triangle by barycentric clamping on the three edges and the
@@ -331,8 +464,14 @@ fn check_bound(path: &Path, cost: CostKind, levels: usize, points: usize) {
         );
         closest = closest.min(stored / measured.max(1e-12));
     }
+    // Every prefix as well, with fewer points, where the mesh has a few thousand levels.
+    let every = if n <= 4000 {
+        check_every_prefix(&format!("{} ({})", path.display(), cost.name()), &pm, 300)
+    } else {
+        0
+    };
     println!(
-        "{} ({}): {} levels checked, tightest stored / measured = {closest:.2}",
+        "{} ({}): {} levels checked against brute force, tightest stored / measured = {closest:.2}; {every} levels (every prefix) within the stored error at 2 x 300 points",
         path.display(),
         cost.name(),
         chosen.len()
