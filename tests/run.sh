@@ -80,6 +80,14 @@ if [ -f ../shared/data/meshes/spot.obj ]; then
   test -s "$smoke/lod_error.png"
 fi
 
+step "smoke: worldgen building (a procedural house as a progressive mesh)"
+./target/debug/worldgen building --roof hip --out "$smoke/house.obj" --quiet
+./target/debug/worldgen pm "$smoke/house.obj" --out "$smoke/house.pm" --quiet >/dev/null
+test -s "$smoke/house.pm"
+if ./target/debug/worldgen building --roof dome --out "$smoke/bad.obj" 2>/dev/null; then
+  echo "worldgen building accepted an unknown roof" >&2; exit 1
+fi
+
 step "smoke: nodebench --quick on the tiny map"
 ./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" --pm-plot "$smoke/pm_error.png" > "$smoke/nodebench.md"
 grep -q '"section": "selection"' "$smoke/nodebench.json"

@@ -15,6 +15,7 @@
 //! pure function of (seed, size): randomness comes from a stateless hash of (seed, position), and
 //! parallel steps split work by rows, so the bytes do not depend on the thread count.
 
+pub mod building_mesh;
 pub mod classify;
 pub mod dem;
 pub mod erosion;

@@ -1,6 +1,7 @@
 //! The end-to-end tests (worldgen -> map folder -> engine -> pixels), one module per area, in
 //! one test binary (one link of the engine and wgpu instead of seven).
 
+mod buildings;
 mod camera_path;
 mod dem_import;
 mod ground;

@@ -112,7 +112,7 @@ fn normal(pm: &PmMesh, t: [u32; 3]) -> DVec3 {
 
 /// Every level of `pm`: indices in range and drawing no degenerate triangle; between
 /// neighbouring levels, a collapse not flagged as flipping turns no surviving triangle over.
-fn check_levels(name: &str, pm: &PmMesh) {
+pub(crate) fn check_levels(name: &str, pm: &PmMesh) {
     pm.validate()
         .unwrap_or_else(|(f, m)| panic!("{name}: invalid PM: {f}: {m}"));
     assert_eq!(pm.triangles_at(1), 0, "{name}: level 1 draws nothing");

@@ -1,7 +1,8 @@
 //! Wavefront OBJ reader for progressive-mesh input: `v`, `vt`, `vn` and `f` lines (polygons are
 //! fan-triangulated, negative indices count from the end); groups, smoothing groups, materials,
 //! lines and points are ignored. Written by hand rather than with `tobj` so that every error
-//! names the file and the line, and so that nothing but geometry is read.
+//! names the file and the line, and so that nothing but geometry is read. [`to_text`] writes
+//! triangles back (positions and texture coordinates), e.g. for generated building meshes.
 
 use super::mesh::{Corner, TriMesh, WeldReport};
 use std::path::{Path, PathBuf};
@@ -181,4 +182,44 @@ pub fn load(path: &Path) -> Result<(TriMesh, WeldReport), ObjError> {
         });
     }
     Ok((mesh, report))
+}
+
+/// OBJ text of `triangles`: `v`, `vt` and `vn` lines per corner (attributes where every corner
+/// of the triangle has them) and an `f` line per triangle. Floats are written in their shortest
+/// exact form, so reading the text back gives the same bits (and the same welding).
+pub fn to_text(triangles: &[[Corner; 3]]) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let (mut uvs, mut normals) = (0usize, 0usize);
+    for (t, tri) in triangles.iter().enumerate() {
+        let with_uv = tri.iter().all(|c| c.uv.is_some());
+        let with_normal = tri.iter().all(|c| c.normal.is_some());
+        let mut refs = Vec::with_capacity(3);
+        for (k, c) in tri.iter().enumerate() {
+            let [x, y, z] = c.position;
+            let _ = writeln!(out, "v {x:?} {y:?} {z:?}");
+            let mut r = format!("{}", 3 * t + k + 1);
+            match (c.uv.filter(|_| with_uv), c.normal.filter(|_| with_normal)) {
+                (Some([u, v]), n) => {
+                    let _ = writeln!(out, "vt {u:?} {v:?}");
+                    uvs += 1;
+                    let _ = write!(r, "/{uvs}");
+                    if let Some([a, b, cc]) = n {
+                        let _ = writeln!(out, "vn {a:?} {b:?} {cc:?}");
+                        normals += 1;
+                        let _ = write!(r, "/{normals}");
+                    }
+                }
+                (None, Some([a, b, cc])) => {
+                    let _ = writeln!(out, "vn {a:?} {b:?} {cc:?}");
+                    normals += 1;
+                    let _ = write!(r, "//{normals}");
+                }
+                (None, None) => {}
+            }
+            refs.push(r);
+        }
+        let _ = writeln!(out, "f {}", refs.join(" "));
+    }
+    out
 }
