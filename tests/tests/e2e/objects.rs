@@ -168,18 +168,24 @@ fn objects_viewer(
     Viewer::with_kinds(g, COLOR_FORMAT, world.clone(), settings, &kinds)
 }
 
+/// A 320 x 180 camera 12 m above the tiny map at (150, 200), looking east along the rows of
+/// objects the tests place from x = 170-180 m.
+fn view_along_row(world: &World) -> Camera {
+    let eye = DVec3::new(150.0, 200.0, world.height_m(150.0, 200.0) + 12.0);
+    Camera::look_at(
+        eye,
+        eye + DVec3::new(1.0, 0.0, -0.15),
+        60f64.to_radians(),
+        [320, 180],
+    )
+}
+
 #[test]
 fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
     let Some(g) = device() else { return };
     let world = tiny_world();
     let ground = |x: f64, y: f64| world.height_m(x, y);
-    let eye = DVec3::new(150.0, 200.0, ground(150.0, 200.0) + 12.0);
-    let cam = Camera::look_at(
-        eye,
-        eye + DVec3::new(1.0, 0.0, -0.15),
-        60f64.to_radians(),
-        [320, 180],
-    );
+    let cam = view_along_row(&world);
     let model = PmModel::from_pm("box".into(), bumpy_box());
     let full = model.pm.triangles.len();
     let set = ObjectSet::place_row(
@@ -435,13 +441,7 @@ fn instances_draw_an_msft_lod_chain_level_where_it_needs_fewer_triangles() {
     let Some(g) = device() else { return };
     let world = tiny_world();
     let ground = |x: f64, y: f64| world.height_m(x, y);
-    let eye = DVec3::new(150.0, 200.0, ground(150.0, 200.0) + 12.0);
-    let cam = Camera::look_at(
-        eye,
-        eye + DVec3::new(1.0, 0.0, -0.15),
-        60f64.to_radians(),
-        [320, 180],
-    );
+    let cam = view_along_row(&world);
     let (model, _) = poor_base_with_chain();
     let set = Arc::new(ObjectSet::place_row(
         vec![model],

@@ -43,15 +43,20 @@ pub fn one_sided(from: &Soup, to: &TriangleBvh, spacing: f64) -> f64 {
     to.max_distance(points)
 }
 
+/// The distance when a side is empty: 0 between two empty sets, infinite to an empty one.
+fn distance_if_empty(a: &Soup, b: &Soup) -> Option<f64> {
+    match (a.is_empty(), b.is_empty()) {
+        (true, true) => Some(0.0),
+        (false, false) => None,
+        _ => Some(f64::INFINITY),
+    }
+}
+
 /// Two-sided measured Hausdorff distance between `a` and `b` (`INFINITY` if one is empty and the
 /// other is not).
 pub fn hausdorff(a: &Soup, b: &Soup, spacing: f64) -> f64 {
-    if a.is_empty() || b.is_empty() {
-        return if a.is_empty() && b.is_empty() {
-            0.0
-        } else {
-            f64::INFINITY
-        };
+    if let Some(d) = distance_if_empty(a, b) {
+        return d;
     }
     let ta = TriangleBvh::new(a.clone());
     let tb = TriangleBvh::new(b.clone());
@@ -62,12 +67,8 @@ pub fn hausdorff(a: &Soup, b: &Soup, spacing: f64) -> f64 {
 /// largest exact distance from a grid sample to the other side plus the samples' covering radius
 /// (every point lies within that radius of a sample, and the distance to a set is 1-Lipschitz).
 pub fn hausdorff_bound(a: &Soup, b: &Soup, spacing: f64) -> f64 {
-    if a.is_empty() || b.is_empty() {
-        return if a.is_empty() && b.is_empty() {
-            0.0
-        } else {
-            f64::INFINITY
-        };
+    if let Some(d) = distance_if_empty(a, b) {
+        return d;
     }
     let side = |from: &Soup, to: &Soup| {
         let bvh = TriangleBvh::new(to.clone());
