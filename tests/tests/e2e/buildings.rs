@@ -127,11 +127,14 @@ fn a_building_is_a_progressive_mesh_down_to_one_vertex() {
     let (pm, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.005, &mut |_, _, _| {});
     crate::pm::check_levels("building", &pm);
     // A quarter of the triangles keeps the house within about its window depth (0.15 m of a
-    // 16 m diagonal); coarser levels lose the chimney first (see the README).
-    let p = pm.finest_with_at_most(mesh.triangles.len() / 4);
-    let error = f64::from(pm.levels[p - 1].error) / f64::from(mesh.diagonal());
-    assert!(
-        error < 0.02,
-        "25 % of the triangles: stored error {error:.4} of the diagonal"
-    );
+    // 16 m diagonal), a tenth within 5 % (the creased facade seams do not hold back cheap
+    // collapses: with them as strict seams the chimney and a gable went first, 17 %).
+    for (share, limit) in [(4, 0.02), (10, 0.05)] {
+        let p = pm.finest_with_at_most(mesh.triangles.len() / share);
+        let error = f64::from(pm.levels[p - 1].error) / f64::from(mesh.diagonal());
+        assert!(
+            error < limit,
+            "1/{share} of the triangles: stored error {error:.4} of the diagonal"
+        );
+    }
 }

@@ -152,6 +152,10 @@ impl Key {
     }
 }
 
+/// Seams whose faces meet at this angle or more are creases, not texture seams on a smooth
+/// surface (quadric cost).
+const CREASE_DEGREES: f64 = 30.0;
+
 /// Tier of a collapse that moves a border or seam vertex off its feature (quadric).
 const TIER_FEATURE: u8 = 1;
 /// Tier of a collapse that flips a moving triangle.
@@ -299,6 +303,8 @@ struct State<'a> {
     pos_wedges: Vec<Vec<u32>>,
     pos_alive: Vec<bool>,
     quadric: Vec<Quadric>,
+    /// Quadric cost: positions on a smooth (not creased) seam, see [`initial_quadrics`].
+    smooth_seam: Vec<bool>,
 }
 
 impl State<'_> {
@@ -504,7 +510,9 @@ impl State<'_> {
                 0.0
             },
             on_border: border_u,
-            on_seam: self.pos_wedges[u as usize].len() > 1,
+            // The quadric's seam rule holds only on smooth seams.
+            on_seam: self.pos_wedges[u as usize].len() > 1
+                && (self.kind != CostKind::Quadric || self.smooth_seam[u as usize]),
         };
         let mut best: Option<(Key, u32)> = None;
         for &v in &neighbours {
@@ -645,10 +653,18 @@ type EdgeSide = (u32, u32, DVec3);
 /// linear scale). Seams weigh little: they matter for textures, not for the geometric error, and
 /// the move-along-the-seam rule in [`State::evaluate`] already keeps them. The two weights were
 /// chosen on the shared meshes (bunny: borders; spot: seams) and are reported in nodebench.
-fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> Vec<Quadric> {
+///
+/// Also returns, per position, whether it lies on a *smooth* seam: a seam edge whose two faces
+/// meet at less than [`CREASE_DEGREES`]. Only those keep the move-along-the-seam rule: a seam
+/// on a sharp crease (a building's corners, eaves and window insets, where facade textures
+/// meet) is held by the face planes on both sides, and the rule would only rank its cheap
+/// collapses after costly ones elsewhere.
+fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> (Vec<Quadric>, Vec<bool>) {
     const BORDER_WEIGHT: f64 = 10.0;
     const SEAM_WEIGHT: f64 = 0.1;
+    let crease_cos = CREASE_DEGREES.to_radians().cos();
     let mut q = vec![Quadric::default(); pos.len()];
+    let mut smooth_seam = vec![false; pos.len()];
     // (edge, the wedges and normal of one side) for every triangle side; sorted by edge below
     // (stably, so each edge's sides keep triangle order) to find borders and seams.
     let mut edges: Vec<((u32, u32), EdgeSide)> = Vec::with_capacity(3 * mesh.triangles.len());
@@ -682,6 +698,11 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> Vec<Quadric> {
         if !border && !seam {
             continue;
         }
+        let sharp = group.len() == 2 && group[0].1.2.dot(group[1].1.2) < crease_cos;
+        if seam && !sharp {
+            smooth_seam[key.0 as usize] = true;
+            smooth_seam[key.1 as usize] = true;
+        }
         let (a, b) = (pos[key.0 as usize], pos[key.1 as usize]);
         let e = b - a;
         for (_, s) in group {
@@ -695,7 +716,7 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> Vec<Quadric> {
             q[key.1 as usize].add(&plane);
         }
     }
-    q
+    (q, smooth_seam)
 }
 
 /// Computes the full collapse order of `mesh` with cost `kind`. `progress` is called with the
@@ -717,10 +738,10 @@ pub fn collapse_order(
     for (w, &p) in mesh.wedge_position.iter().enumerate() {
         pos_wedges[p as usize].push(w as u32);
     }
-    let quadric = if kind == CostKind::Quadric {
+    let (quadric, smooth_seam) = if kind == CostKind::Quadric {
         initial_quadrics(mesh, &pos)
     } else {
-        Vec::new()
+        (Vec::new(), Vec::new())
     };
     let mut s = State {
         mesh,
@@ -733,6 +754,7 @@ pub fn collapse_order(
         pos_wedges,
         pos_alive: vec![true; np],
         quadric,
+        smooth_seam,
     };
     let mut wedge_target = vec![u32::MAX; mesh.wedge_position.len()];
     let mut triangle_step = vec![0u32; mesh.triangles.len()];
