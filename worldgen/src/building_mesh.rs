@@ -57,17 +57,17 @@ pub struct BuildingSpec {
 impl BuildingSpec {
     /// Why this spec cannot be built, if it cannot (names the field).
     pub fn check(&self) -> Result<(), String> {
-        let positive = |v: f64, name: &str, lo: f64, hi: f64| {
+        let in_range = |v: f64, name: &str, lo: f64, hi: f64| {
             if v.is_finite() && v >= lo && v <= hi {
                 Ok(())
             } else {
                 Err(format!("{name} = {v}: must lie in [{lo}, {hi}]"))
             }
         };
-        positive(self.width_m, "width_m", 3.0, 200.0)?;
-        positive(self.depth_m, "depth_m", 3.0, 200.0)?;
-        positive(self.storey_m, "storey_m", 2.4, 6.0)?;
-        positive(self.roof_pitch_deg, "roof_pitch_deg", 5.0, 60.0)?;
+        in_range(self.width_m, "width_m", 3.0, 200.0)?;
+        in_range(self.depth_m, "depth_m", 3.0, 200.0)?;
+        in_range(self.storey_m, "storey_m", 2.4, 6.0)?;
+        in_range(self.roof_pitch_deg, "roof_pitch_deg", 5.0, 60.0)?;
         if !(1..=40).contains(&self.storeys) {
             return Err(format!("storeys = {}: must lie in [1, 40]", self.storeys));
         }

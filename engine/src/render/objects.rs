@@ -161,8 +161,6 @@ pub struct ObjectStats {
     pub full_triangles: u64,
     /// Index lists rewritten this frame (level changes).
     pub level_changes: u32,
-    /// Instances drawn from an `MSFT_lod` chain level rather than the base mesh.
-    pub chain_drawn: u32,
 }
 
 pub struct ObjectsRenderer {
@@ -493,7 +491,6 @@ impl NodeRenderer for ObjectsRenderer {
                         .extend(0.0)
                         .to_array(),
                 });
-                self.stats.chain_drawn += u32::from(choice.option > 0);
                 self.items.push(DrawItem {
                     instance: id,
                     model: inst.model,

@@ -60,23 +60,18 @@ fn bumpy_box() -> PmMesh {
     PmMesh::build(&mesh, CostKind::Quadric, 0.01, &mut |_, _, _| {}).0
 }
 
-/// A bumpy unit square of `n` x `n` quads (z = 0.2 sin 6x cos 5y).
+/// The glTF tests' bumpy unit square of `n` x `n` quads, welded.
 fn bumpy_square(n: usize) -> TriMesh {
-    let c = |i: usize, j: usize| {
-        let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
-        Corner {
-            position: [x, y, 0.2 * (x * 6.0).sin() * (y * 5.0).cos()],
-            uv: None,
-            normal: None,
-        }
+    let (pos, idx) = crate::pm::bumpy_square(n);
+    let corner = |i: u16| Corner {
+        position: pos[i as usize],
+        uv: None,
+        normal: None,
     };
-    let mut tris = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            tris.push([c(i, j), c(i + 1, j), c(i + 1, j + 1)]);
-            tris.push([c(i, j), c(i + 1, j + 1), c(i, j + 1)]);
-        }
-    }
+    let tris: Vec<[Corner; 3]> = idx
+        .chunks_exact(3)
+        .map(|t| [corner(t[0]), corner(t[1]), corner(t[2])])
+        .collect();
     TriMesh::weld(&tris).0
 }
 

@@ -617,7 +617,7 @@ fn base64(bytes: &[u8]) -> String {
 }
 
 /// A bumpy square of `n` x `n` quads as (positions, u16 indices).
-fn bumpy_square(n: usize) -> (Vec<[f32; 3]>, Vec<u16>) {
+pub(crate) fn bumpy_square(n: usize) -> (Vec<[f32; 3]>, Vec<u16>) {
     let mut pos = Vec::new();
     for j in 0..=n {
         for i in 0..=n {
@@ -637,14 +637,18 @@ fn bumpy_square(n: usize) -> (Vec<[f32; 3]>, Vec<u16>) {
     (pos, idx)
 }
 
-/// A glTF whose node 0 (translated by +10 m in x) has an MSFT_lod chain of nodes 1 and 2.
-fn gltf_with_chain(mode: u32, missing_lod: bool) -> String {
+/// A glTF whose node 0 (translated by +10 m in x) has an MSFT_lod chain of nodes 1 and 2 (the
+/// last one collapsed to a point with `flat_last`).
+fn gltf_with_chain(mode: u32, missing_lod: bool, flat_last: bool) -> String {
     let mut bin = Vec::new();
     let mut views = Vec::new();
     let mut accessors = Vec::new();
     let mut meshes = Vec::new();
     for (m, n) in [16usize, 4, 1].into_iter().enumerate() {
-        let (pos, idx) = bumpy_square(n);
+        let (mut pos, idx) = bumpy_square(n);
+        if flat_last && m == 2 {
+            pos.fill([0.0; 3]);
+        }
         let (p0, i0) = (bin.len(), {
             for p in &pos {
                 for x in p {
@@ -703,7 +707,7 @@ fn gltf_models_and_their_msft_lod_chains_are_read_and_measured() {
     use worldgen::pm::measure::{hausdorff, mesh_soup};
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("chain.gltf");
-    std::fs::write(&path, gltf_with_chain(4, false)).expect("write");
+    std::fs::write(&path, gltf_with_chain(4, false, false)).expect("write");
     let model = gltf_input::load(&path).expect("valid glTF loads");
     let counts: Vec<usize> = model.levels.iter().map(|l| l.1.len()).collect();
     assert_eq!(counts, vec![512, 32, 2], "base and two MSFT_lod levels");
@@ -735,8 +739,8 @@ fn gltf_models_and_their_msft_lod_chains_are_read_and_measured() {
 
     // Broken files name the file and what is wrong.
     for (text, needle) in [
-        (gltf_with_chain(1, false), "only TRIANGLES"),
-        (gltf_with_chain(4, true), "MSFT_lod names node 9"),
+        (gltf_with_chain(1, false, false), "only TRIANGLES"),
+        (gltf_with_chain(4, true, false), "MSFT_lod names node 9"),
         ("{ not json".to_string(), "not a valid glTF"),
     ] {
         std::fs::write(&path, text).expect("write");
@@ -755,7 +759,7 @@ fn a_gltf_chain_loads_as_an_object_whose_chain_levels_carry_bounds() {
     use worldgen::pm::measure::mesh_soup;
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("chain.gltf");
-    std::fs::write(&path, gltf_with_chain(4, false)).expect("write");
+    std::fs::write(&path, gltf_with_chain(4, false, false)).expect("write");
     let model = PmModel::load(&path).expect("a glTF chain loads as an object");
     let tris: Vec<usize> = std::iter::once(&model)
         .chain(model.chain.iter().map(|c| &c.model))
@@ -778,6 +782,15 @@ fn a_gltf_chain_loads_as_an_object_whose_chain_levels_carry_bounds() {
             k + 1
         );
     }
+    // A chain level without triangles is refused, naming the file and the level.
+    std::fs::write(&path, gltf_with_chain(4, false, true)).expect("write");
+    let err = PmModel::load(&path)
+        .expect_err("a chain level without triangles")
+        .to_string();
+    assert!(
+        err.contains("chain.gltf") && err.contains("MSFT_lod level 2"),
+        "{err}"
+    );
 }
 
 mod silhouette {

@@ -34,13 +34,22 @@ pub fn mesh_soup(mesh: &super::TriMesh) -> Soup {
     soup(&mesh.positions, &mesh.position_triangles().concat())
 }
 
-/// One direction: the largest distance from a sample of `from` to `to`.
-pub fn one_sided(from: &Soup, to: &TriangleBvh, spacing: f64) -> f64 {
+/// One direction: the largest distance from a grid sample of `from` to `to`, and the samples'
+/// covering radius (every point of `from` lies within it of a sample).
+fn sampled_side(from: &Soup, to: &TriangleBvh, spacing: f64) -> (f64, f64) {
     let mut points = Vec::new();
+    let mut cover = 0.0f64;
     for [a, b, c] in from {
-        grid_samples(*a, *b, *c, spacing, |p| points.push(p));
+        cover = cover.max(grid_samples(*a, *b, *c, spacing, |p| points.push(p)));
     }
-    to.max_distance(points)
+    (to.max_distance(points), cover)
+}
+
+/// [`sampled_side`] from `a` to `b` and from `b` to `a` (both non-empty).
+fn both_sides(a: &Soup, b: &Soup, spacing: f64) -> [(f64, f64); 2] {
+    let ta = TriangleBvh::new(a.clone());
+    let tb = TriangleBvh::new(b.clone());
+    [sampled_side(a, &tb, spacing), sampled_side(b, &ta, spacing)]
 }
 
 /// The distance when a side is empty: 0 between two empty sets, infinite to an empty one.
@@ -55,29 +64,18 @@ fn distance_if_empty(a: &Soup, b: &Soup) -> Option<f64> {
 /// Two-sided measured Hausdorff distance between `a` and `b` (`INFINITY` if one is empty and the
 /// other is not).
 pub fn hausdorff(a: &Soup, b: &Soup, spacing: f64) -> f64 {
-    if let Some(d) = distance_if_empty(a, b) {
-        return d;
-    }
-    let ta = TriangleBvh::new(a.clone());
-    let tb = TriangleBvh::new(b.clone());
-    one_sided(a, &tb, spacing).max(one_sided(b, &ta, spacing))
+    distance_if_empty(a, b).unwrap_or_else(|| {
+        let [ab, ba] = both_sides(a, b, spacing);
+        ab.0.max(ba.0)
+    })
 }
 
 /// An upper bound of the two-sided Hausdorff distance between `a` and `b`: on each side, the
 /// largest exact distance from a grid sample to the other side plus the samples' covering radius
 /// (every point lies within that radius of a sample, and the distance to a set is 1-Lipschitz).
 pub fn hausdorff_bound(a: &Soup, b: &Soup, spacing: f64) -> f64 {
-    if let Some(d) = distance_if_empty(a, b) {
-        return d;
-    }
-    let side = |from: &Soup, to: &Soup| {
-        let bvh = TriangleBvh::new(to.clone());
-        let mut points = Vec::new();
-        let mut cover = 0.0f64;
-        for [p, q, r] in from {
-            cover = cover.max(grid_samples(*p, *q, *r, spacing, |x| points.push(x)));
-        }
-        bvh.max_distance(points) + cover
-    };
-    side(a, b).max(side(b, a))
+    distance_if_empty(a, b).unwrap_or_else(|| {
+        let [ab, ba] = both_sides(a, b, spacing);
+        (ab.0 + ab.1).max(ba.0 + ba.1)
+    })
 }
