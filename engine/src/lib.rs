@@ -39,5 +39,6 @@ pub mod render;
 pub mod stream;
 pub mod surface;
 pub mod terrain;
+pub mod texcache;
 pub mod vegetation;
 pub mod viewer;

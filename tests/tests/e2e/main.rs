@@ -12,5 +12,6 @@ mod pm;
 mod render;
 mod streaming;
 mod terrain;
+mod texcache;
 mod vegetation;
 mod viewer_xvfb;

@@ -1,0 +1,128 @@
+//! The mip level a texture needs on an object this frame.
+//!
+//! Seed 000 keeps one **MipMapFactor per texture per object**: the longest edge, in metres, of
+//! one full-resolution texel anywhere on the object ([`texel_m`], from the mesh's positions and
+//! UVs; an instance scales it). A texel of level `k` is `2^k` times longer. The GPU's isotropic
+//! mip selection never draws a texel smaller than a pixel along its shortest on-screen axis, so
+//! holding the coarsest level whose *longest* on-screen texel edge is at most one pixel is
+//! pessimistic: the GPU never wants a finer level than the one resident.
+//!
+//! **On-screen length.** A point at camera-space depth `z` and lateral offset `s` projects with
+//! the Jacobian of `K (x/z, y/z)` (`K` = [`Camera::k_px`], square pixels), whose largest singular
+//! value is `K sqrt(z^2 + s^2) / z^2`: a segment of length `l` there is at most
+//! `l K sqrt(1 + (s/z)^2) / z` pixels long. Over the object's bounding ball (centre depth `c_z`,
+//! lateral `c_s`, radius `r`) every visible point has `z >= z_lo = max(c_z - r, near)` and
+//! `s / z <= m = min((c_s + r) / z_lo, tan of the half-diagonal field of view)`, so no texel of
+//! the object is longer on screen than `texel_m 2^k K sqrt(1 + m^2) / z_lo` ([`px_per_m`] is that
+//! bound per metre). The level is the largest `k` keeping it at most one pixel
+//! ([`needed_level`]); tests compare it with a brute-force projection of texels over the ball.
+//!
+//! [`Camera::k_px`]: crate::camera::Camera::k_px
+
+use crate::camera::Camera;
+use glam::DVec3;
+
+/// Upper bound of the on-screen length in pixels of a one-metre segment anywhere in the ball
+/// (`centre_m`, `radius_m`) that is in front of the near plane; `None` when the whole ball is
+/// behind it.
+pub fn px_per_m(camera: &Camera, centre_m: DVec3, radius_m: f64) -> Option<f64> {
+    let rel = centre_m - camera.position_m;
+    let depth_m = rel.dot(camera.forward);
+    if depth_m + radius_m < camera.near_m {
+        return None;
+    }
+    let lateral_m = (rel - camera.forward * depth_m).length();
+    let z_lo = (depth_m - radius_m).max(camera.near_m);
+    let half_y = (camera.fovy_rad * 0.5).tan();
+    let half_diagonal = half_y * (1.0 + camera.aspect() * camera.aspect()).sqrt();
+    let slope = ((lateral_m + radius_m) / z_lo).min(half_diagonal);
+    Some(camera.k_px() * (1.0 + slope * slope).sqrt() / z_lo)
+}
+
+/// The coarsest level `k <= coarsest` with `texel_m 2^k px_per_m <= 1` (level 0 when even full
+/// resolution has texels over a pixel).
+pub fn level_for(texel_m: f64, px_per_m: f64, coarsest: u32) -> u32 {
+    let mut level = 0;
+    let mut texel_px = texel_m * px_per_m;
+    while level < coarsest && texel_px * 2.0 <= 1.0 {
+        texel_px *= 2.0;
+        level += 1;
+    }
+    level
+}
+
+/// The level a texture with MipMapFactor `texel_m` (metres, instance scale applied) needs on an
+/// object bounded by the ball; `None` when the ball is behind the camera.
+pub fn needed_level(
+    camera: &Camera,
+    centre_m: DVec3,
+    radius_m: f64,
+    texel_m: f64,
+    coarsest: u32,
+) -> Option<u32> {
+    px_per_m(camera, centre_m, radius_m).map(|p| level_for(texel_m, p, coarsest))
+}
+
+/// The MipMapFactor of a textured mesh: the longest edge, in the positions' units, of one texel
+/// of a `size_texels` texture, over all triangles (the largest singular value of each
+/// triangle's map from texel coordinates to positions). Triangles with degenerate UVs are
+/// skipped; `None` when none is left.
+pub fn texel_m(
+    positions: &[[f32; 3]],
+    uvs: &[[f32; 2]],
+    triangles: &[[u32; 3]],
+    size_texels: u32,
+) -> Option<f64> {
+    let size = f64::from(size_texels);
+    let mut longest: Option<f64> = None;
+    for t in triangles {
+        let p = t.map(|i| DVec3::from(positions[i as usize].map(f64::from)));
+        let q = t.map(|i| uvs[i as usize].map(|c| f64::from(c) * size));
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let (du1, dv1) = (q[1][0] - q[0][0], q[1][1] - q[0][1]);
+        let (du2, dv2) = (q[2][0] - q[0][0], q[2][1] - q[0][1]);
+        let det = du1 * dv2 - du2 * dv1;
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        // Columns of the map texel -> position: dP/du and dP/dv.
+        let a = (e1 * dv2 - e2 * dv1) / det;
+        let b = (e2 * du1 - e1 * du2) / det;
+        // Largest singular value of [a b]: from the 2x2 Gram matrix.
+        let (aa, bb, ab) = (a.dot(a), b.dot(b), a.dot(b));
+        let half_trace = 0.5 * (aa + bb);
+        let root = (0.25 * (aa - bb) * (aa - bb) + ab * ab).sqrt();
+        let sigma = (half_trace + root).sqrt();
+        longest = Some(longest.map_or(sigma, |l| l.max(sigma)));
+    }
+    longest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_square_mapped_once_has_texels_of_side_over_size() {
+        let positions = [
+            [0.0, 0.0, 0.0],
+            [4.0, 0.0, 0.0],
+            [4.0, 0.0, 2.0],
+            [0.0, 0.0, 2.0],
+        ];
+        let uvs = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        let tris = [[0, 1, 2], [0, 2, 3]];
+        // 4 m over 256 texels across, 2 m down: the longest texel edge is 4/256 m.
+        let t = texel_m(&positions, &uvs, &tris, 256).unwrap();
+        assert!((t - 4.0 / 256.0).abs() < 1e-12, "{t}");
+    }
+
+    #[test]
+    fn levels_double_with_distance() {
+        assert_eq!(level_for(0.01, 100.0, 10), 0);
+        assert_eq!(level_for(0.01, 50.0, 10), 1);
+        assert_eq!(level_for(0.01, 49.0, 10), 1);
+        assert_eq!(level_for(0.01, 25.0, 10), 2);
+        assert_eq!(level_for(0.01, 0.001, 3), 3);
+    }
+}
