@@ -9,10 +9,10 @@
 //! gives exactly 1. The grid takes [`HORIZON_AZIMUTHS`] azimuths for the horizon and
 //! [`CANOPY_AZIMUTHS`] x [`SKY_BANDS`] (equal bands of `s`) rays through the canopy.
 //!
-//! **Horizons** are marched on the finest surface near the grid (a lattice of `F` at
-//! [`NEAR_SPACING_M`] over the node widened by [`NEAR_MARGIN_M`], bilinear between its points)
-//! and on the map heights beyond (bilinear), out to [`HORIZON_REACH_M`], with steps that grow
-//! with the distance. **Canopy transmittance** is `exp(-optical depth)` of
+//! **Horizons** are marched on the finest surface near the column (a lattice of `F` at
+//! [`NEAR_SPACING_M`] over the node widened by [`NEAR_MARGIN_M`], bilinear between its points,
+//! read up to one spacing less than the margin from the column) and on the map heights beyond
+//! (bilinear), out to [`HORIZON_REACH_M`], with steps that grow with the distance. **Canopy transmittance** is `exp(-optical depth)` of
 //! [`Canopy::extinction_per_m`] summed at midpoints along the ray until it leaves the canopy.
 //! **Sun visibility**: 1 when the sun is above the horizon along its own azimuth, else 0, times
 //! the canopy transmittance toward it.
@@ -131,11 +131,13 @@ pub struct LightGrid {
     pub layers_m: [f64; LAYERS],
 }
 
-/// The terrain heights a grid's horizons are marched on: the finest-surface lattice near the
-/// node, the map heights beyond. The lattice's points lie on one global lattice (multiples of
-/// [`NEAR_SPACING_M`] from the tree's origin), and positions are turned into lattice
-/// coordinates from that origin, so neighbouring grids read the same numbers for the same
-/// position.
+/// The terrain heights a grid's horizons are marched on: the finest-surface lattice within
+/// `near_reach_m` of the column a ray starts from, the map heights beyond. The lattice's points
+/// lie on one global lattice (multiples of [`NEAR_SPACING_M`] from the tree's origin), and
+/// positions are turned into lattice coordinates from that origin, so neighbouring grids read
+/// the same numbers for the same position; which of the two surfaces a ray point reads depends
+/// only on its distance from the column (never on the node's window), so a column two grids
+/// share gets the same bytes in both.
 struct HorizonHeights<'a> {
     world: &'a World,
     /// Spacing of `near` (m).
@@ -147,10 +149,17 @@ struct HorizonHeights<'a> {
     first: [i64; 2],
     tree_origin_m: [f64; 2],
     map_at: GridPlacement,
+    /// Ray points up to this far (horizontally) from their column read the lattice: inside the
+    /// window of every node the column belongs to (its margin less one spacing).
+    near_reach_m: f64,
 }
 
 impl HorizonHeights<'_> {
-    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+    /// The height at a ray point `r_m` (horizontally) from its column.
+    fn height_m(&self, x_m: f64, y_m: f64, r_m: f64) -> f64 {
+        if r_m > self.near_reach_m {
+            return bilinear(&self.world.map.heights, self.map_at, x_m, y_m);
+        }
         let gx = (x_m - self.tree_origin_m[0]) / self.spacing_m;
         let gy = (y_m - self.tree_origin_m[1]) / self.spacing_m;
         let (fx, fy) = (gx.floor(), gy.floor());
@@ -253,6 +262,7 @@ impl LightGrid {
                 origin_m: world.origin_m(),
                 spacing_m: world.map.manifest.heights.spacing_m,
             },
+            near_reach_m: (margin - 1) as f64 * near_spacing_m,
         };
         // No canopy anywhere a canopy ray can reach: every transmittance is 1 (open ground,
         // water, rock; most of many maps). A ray climbs out of the canopy within
@@ -316,7 +326,7 @@ impl LightGrid {
                 for (best, dir) in tan_max.iter_mut().zip(&dirs) {
                     *best = [f64::NEG_INFINITY; LAYERS];
                     for (&r, &inv_r) in distances.iter().zip(&inverse) {
-                        let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r) - ground;
+                        let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r, r) - ground;
                         for (b, lh) in best.iter_mut().zip(&layers_m) {
                             *b = b.max((dh - lh) * inv_r);
                         }
@@ -441,7 +451,8 @@ fn canopy_transmittance(
     let mut depth = 0.0;
     for k in 0..steps {
         let p = p0 + w * ((k as f64 + 0.5) * dl);
-        let above = p.z - heights.height_m(p.x, p.y);
+        let r = (p.x - p0.x).hypot(p.y - p0.y);
+        let above = p.z - heights.height_m(p.x, p.y, r);
         depth += canopy.extinction_per_m(p.x, p.y, above) * dl;
         if depth > OPAQUE_DEPTH {
             return 0.0;
