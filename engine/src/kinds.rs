@@ -10,6 +10,8 @@
 use crate::ground::content::GroundContent;
 use crate::lighting::content::LightingContent;
 use crate::lighting::grid::Sun;
+use crate::objects::content::ObjectsContent;
+use crate::objects::set::ObjectSet;
 use crate::render::Gpu;
 use crate::render::frame::FrameResources;
 use crate::render::scene::NodeRenderer;
@@ -46,7 +48,7 @@ fn entry(kind: impl ContentKind, renderer: Option<RendererFactory>) -> Registrat
 pub fn registered(world: &World) -> Vec<Registration> {
     let vegetation = VegetationContent::new(world);
     let canopy = Arc::clone(&vegetation.canopy);
-    vec![
+    let mut kinds = vec![
         // First, so the other renderers' upload hooks find the node's grid lease (their
         // `prepare` reads it); it draws nothing.
         entry(
@@ -64,7 +66,20 @@ pub fn registered(world: &World) -> Vec<Registration> {
             vegetation,
             Some(crate::render::vegetation::VegetationRenderer::create),
         ),
-    ]
+    ];
+    // The map's houses (issue 19), when it has any.
+    if !world.map.buildings.is_empty() {
+        kinds.push(entry(
+            ObjectsContent {
+                set: Arc::new(ObjectSet::from_buildings(
+                    &world.map.buildings,
+                    &world.map.building_models,
+                )),
+            },
+            Some(crate::render::objects::ObjectsRenderer::create),
+        ));
+    }
+    kinds
 }
 
 /// The CPU side of every registered kind (for a streamer without a renderer).

@@ -99,22 +99,37 @@ pub fn generated(p: &worldgen::generate::GenerateParams) -> worldgen::Map {
     worldgen::generate::generate(p, &worldgen::progress::Silent, &mut Vec::new()).expect("generate")
 }
 
-/// Copies every file of folder `from` into a new folder `to`.
+/// Copies every file under folder `from` (subfolders included) into a new folder `to`.
 pub fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("create copy folder");
-    for e in std::fs::read_dir(from).expect("read map folder") {
-        let e = e.expect("dir entry");
-        std::fs::copy(e.path(), to.join(e.file_name())).expect("copy file");
+    for rel in files_under(from) {
+        let dst = to.join(&rel);
+        if let Some(parent) = dst.parent() {
+            std::fs::create_dir_all(parent).expect("create copy folder");
+        }
+        std::fs::copy(from.join(&rel), dst).expect("copy file");
     }
 }
 
-/// FNV-1a over the names and bytes of every file in a folder, in name order.
+/// Every file under `dir` (paths relative to it, sorted), subfolders included.
+pub fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).expect("read dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if let Ok(rel) = p.strip_prefix(dir) {
+                out.push(rel.to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// FNV-1a over the relative paths and bytes of every file under a folder, in path order.
 pub fn hash_dir(dir: &Path) -> u64 {
-    let mut names: Vec<PathBuf> = std::fs::read_dir(dir)
-        .expect("read dir")
-        .map(|e| e.expect("entry").path())
-        .collect();
-    names.sort();
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut feed = |bytes: &[u8]| {
         for &b in bytes {
@@ -122,13 +137,9 @@ pub fn hash_dir(dir: &Path) -> u64 {
             h = h.wrapping_mul(0x0100_0000_01b3);
         }
     };
-    for n in names {
-        feed(
-            n.file_name()
-                .map(std::ffi::OsStr::as_encoded_bytes)
-                .unwrap_or_default(),
-        );
-        feed(&std::fs::read(&n).expect("read file"));
+    for n in files_under(dir) {
+        feed(n.as_os_str().as_encoded_bytes());
+        feed(&std::fs::read(dir.join(&n)).expect("read file"));
     }
     h
 }

@@ -468,6 +468,8 @@ pub fn import(
         slope,
         moisture,
         decals: Vec::new(),
+        buildings: Vec::new(),
+        building_models: Vec::new(),
         times,
     })?;
     let report = ImportReport {

@@ -14,6 +14,7 @@ use crate::patches::{self, PatchInputs};
 use crate::progress::{Progress, StepTime, timed};
 use crate::roads::{self, RoadInputs};
 use crate::sample::GridPlacement;
+use crate::towns::{self, TownInputs};
 
 /// What to generate.
 #[derive(Debug, Clone)]
@@ -57,6 +58,8 @@ pub enum GenerateError {
         "the map would have {samples} samples per side, more than the limit {max}; use a larger --spacing"
     )]
     TooManySamples { samples: u64, max: u32 },
+    #[error("a house mesh cannot be built (a bug in worldgen): {0}")]
+    Building(String),
     #[error("generated map is invalid (a bug in worldgen): {0}")]
     Invalid(#[from] crate::MapError),
 }
@@ -164,9 +167,27 @@ pub fn generate(
             water_level_m: WATER_LEVEL_M,
         })
     });
+    let towns = timed(times, "towns (houses along the roads)", || {
+        towns::place(&TownInputs {
+            seed,
+            heights: &heights,
+            placement,
+            origin_m,
+            size_m: [p.size_m; 2],
+            water_level_m: WATER_LEVEL_M,
+            towns_m: &network.towns_m,
+            decals: &network.decals,
+        })
+    });
+    let building_models = timed(times, "house meshes (progressive)", || {
+        towns::house_models(&towns.buildings, threads)
+    })
+    .map_err(GenerateError::Building)?;
+    let mut decals = network.decals;
+    decals.extend(towns.pads);
     let patches = timed(times, "ground patches (fields, dirt, rock)", || {
         let (w, h) = (heights.width(), heights.height());
-        let near_road = roads::decal_mask(&network.decals, placement, w, h, 6.0);
+        let near_road = roads::decal_mask(&decals, placement, w, h, 6.0);
         patches::place(&PatchInputs {
             seed,
             heights: &heights,
@@ -177,7 +198,6 @@ pub fn generate(
             near_road: &near_road,
         })
     });
-    let mut decals = network.decals;
     decals.extend(patches);
     assemble(AssembleInputs {
         name: p.name.clone(),
@@ -192,6 +212,8 @@ pub fn generate(
         slope,
         moisture,
         decals,
+        buildings: towns.buildings,
+        building_models,
         times,
     })
 }
@@ -210,6 +232,10 @@ pub struct AssembleInputs<'a> {
     pub slope: Grid<f32>,
     pub moisture: Grid<f32>,
     pub decals: Vec<crate::map::Decal>,
+    /// Houses (their pads are among the decals); large trees keep clear of them.
+    pub buildings: Vec<crate::map::Building>,
+    /// One mesh per house type of `buildings`.
+    pub building_models: Vec<crate::map::building_models::BuildingModel>,
     pub times: &'a mut Vec<StepTime>,
 }
 
@@ -248,7 +274,7 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
     };
     let trees = timed(a.times, "large trees", || {
         let tree_block = roads::decal_mask(&a.decals, dplacement, dw, dh, 4.0);
-        classify::large_trees(
+        let mut trees = classify::large_trees(
             a.seed,
             a.origin_m,
             a.size_m,
@@ -257,7 +283,9 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
             &tree_block,
             a.snow_line_m,
             &|x, y| crate::sample::bilinear(&a.heights, placement, x, y),
-        )
+        );
+        towns::clear_trees(&mut trees, &a.buildings);
+        trees
     });
     let poisson = timed(a.times, "Poisson-disc tile", || {
         crate::poisson::PoissonTile::generate(
@@ -316,7 +344,8 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
         densities,
         trees,
         decals: a.decals,
-        buildings: Vec::new(),
+        buildings: a.buildings,
+        building_models: a.building_models,
         poisson,
         materials,
     })

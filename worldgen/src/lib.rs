@@ -21,6 +21,7 @@ pub mod dem;
 pub mod erosion;
 pub mod generate;
 pub mod grid;
+
 pub mod map;
 pub mod noise;
 pub mod par;
@@ -30,6 +31,7 @@ pub mod poisson;
 pub mod progress;
 pub mod roads;
 pub mod sample;
+pub mod towns;
 
 pub use grid::Grid;
 pub use map::{Map, MapError};

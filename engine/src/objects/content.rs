@@ -25,9 +25,13 @@ impl Payload for NodeObjects {
     }
 }
 
+impl ObjectsContent {
+    pub const NAME: &'static str = "objects";
+}
+
 impl ContentKind for ObjectsContent {
     fn name(&self) -> &'static str {
-        "objects"
+        Self::NAME
     }
 
     fn phases(self: Arc<Self>) -> Vec<Phase> {

@@ -11,7 +11,10 @@
 //! pixel metric.
 
 use glam::DVec3;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use worldgen::map::Building;
+use worldgen::map::building_models::BuildingModel;
 use worldgen::pm::measure::{hausdorff_bound, mesh_soup};
 use worldgen::pm::{CostKind, ErrorIndex, PmEdits, PmMesh, TriMesh, file, gltf_input, load_mesh};
 
@@ -214,6 +217,47 @@ pub struct ObjectSet {
 }
 
 impl ObjectSet {
+    /// The map's houses: one model per house type (its progressive mesh from the map's
+    /// `buildings/<type>.pm`), one instance per row, standing on its pad with its longer side
+    /// along its yaw.
+    pub fn from_buildings(buildings: &[Building], models: &[BuildingModel]) -> Self {
+        let mut set = ObjectSet {
+            models: models
+                .iter()
+                .map(|m| PmModel::from_pm(m.type_name.clone(), m.pm.clone()))
+                .collect(),
+            instances: Vec::with_capacity(buildings.len()),
+        };
+        let index: HashMap<&str, u32> = models
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (m.type_name.as_str(), i as u32))
+            .collect();
+        // `Map::load` checked that every type has its mesh.
+        for b in buildings {
+            if let Some(&model) = index.get(b.type_name.as_str()) {
+                set.instances.push(ObjectInstance {
+                    model,
+                    position_m: DVec3::new(b.x_m, b.y_m, b.z_m),
+                    yaw_rad: b.yaw_deg.to_radians(),
+                    scale: 1.0,
+                });
+            }
+        }
+        set
+    }
+
+    /// Appends another set's models and instances.
+    pub fn append(&mut self, other: ObjectSet) {
+        let offset = self.models.len() as u32;
+        self.models.extend(other.models);
+        self.instances
+            .extend(other.instances.into_iter().map(|i| ObjectInstance {
+                model: i.model + offset,
+                ..i
+            }));
+    }
+
     /// The centre and radius (m) of an instance's bounding sphere.
     pub fn sphere(&self, inst: &ObjectInstance) -> (DVec3, f64) {
         let m = &self.models[inst.model as usize];

@@ -109,7 +109,8 @@ struct GpuArea {
 /// The area kind numbers of `ground.wgsl` (segments use 0 road, 1 path).
 fn area_kind(kind: DecalKind) -> u32 {
     match kind {
-        DecalKind::Dirt => 4,
+        // A building pad shows as bare, trodden earth around the house.
+        DecalKind::Dirt | DecalKind::Pad => 4,
         DecalKind::RockPatch => 2,
         DecalKind::Field => 3,
         // `pieces::node_decals` lists only area kinds as areas.

@@ -1,12 +1,13 @@
 //! Decal height shaping: roads and paths flatten the ground to their centre line's height (plus
-//! their offset), rock patches raise it.
+//! their offset), building pads to their polygon's height, rock patches raise it.
 //!
 //! The shaping is a displacement field `E` added to the finest surface. `E` is the C1
 //! Catmull-Rom interpolation of offsets stored at a 0.5 m sample lattice (zero where no decal
 //! reaches), so its slope and curvature are bounded per cell from sample differences exactly like
 //! the map's own bicubic heights ([`crate::surface::world`]). A sample's offset is `w * (target - G)` for
-//! roads and paths (`G` the bicubic map height at the sample, `target` the centre line's
-//! interpolated z plus the decal's offset) and `w * offset` for rock patches, where the weight
+//! roads, paths and pads (`G` the bicubic map height at the sample, `target` the centre line's
+//! interpolated z, or a pad's z, plus the decal's offset) and `w * offset` for the other areas;
+//! the "road weight" that clears vegetation and procedural detail counts pads too. The weight
 //! `w` is 1 within half the width (plus [`FLAT_MARGIN_M`] for roads and paths, so the visible
 //! width is exactly flat) and falls to 0 over `falloff_m` (smoothstep). Where decals
 //! overlap, the one with the larger weight wins (the first in the file on ties). Sampling at
@@ -141,7 +142,7 @@ fn flat_half_width_m(d: &Decal) -> f64 {
     let half = f64::from(d.width_m) * 0.5;
     match d.kind {
         DecalKind::Road | DecalKind::Path => half + FLAT_MARGIN_M,
-        DecalKind::RockPatch | DecalKind::Field | DecalKind::Dirt => half,
+        DecalKind::RockPatch | DecalKind::Field | DecalKind::Dirt | DecalKind::Pad => half,
     }
 }
 
@@ -203,7 +204,8 @@ fn decal_footprint(d: &Decal, origin_m: [f64; 2]) -> FxHashMap<(i64, i64), (f64,
             for ix in x0..=x1 {
                 let p = [origin_m[0] + ix as f64 * s, origin_m[1] + iy as f64 * s];
                 if inside_polygon(p, &d.points) {
-                    out.insert((ix, iy), (0.0, 0.0));
+                    // A pad's z is its points' (one z); other areas do not use it.
+                    out.insert((ix, iy), (0.0, d.points[0][2]));
                 }
             }
         }
@@ -229,7 +231,7 @@ impl DecalField {
                     continue;
                 }
                 let offset = match d.kind {
-                    DecalKind::Road | DecalKind::Path => {
+                    DecalKind::Road | DecalKind::Path | DecalKind::Pad => {
                         let p = [
                             origin_m[0] + ix as f64 * DECAL_SPACING_M,
                             origin_m[1] + iy as f64 * DECAL_SPACING_M,

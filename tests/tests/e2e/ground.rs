@@ -557,9 +557,9 @@ fn in_a_rendered_view_a_road_centre_is_road_and_ten_metres_off_is_not() {
     assert!(checked >= 2, "only {checked} road points checked");
 }
 
-/// Closed areas (fields, dirt, rock patches) where the map puts them: around an area's centre
-/// the texture has the kind's colour (nearer to it than to the legend colour of the ground type
-/// there), and 4 m beyond the area's soft edge it has the ground's colour, not the kind's.
+/// Closed areas (fields, dirt, rock patches, house pads) where the map puts them: around an
+/// area's centre the texture has the kind's colour (nearer to it than to the legend colour of
+/// the ground type there), and 4 m beyond the area's soft edge it has the ground's colour, not the kind's.
 /// Colours are means over 5 x 5 texels (27 cm each) against the material and pattern noise.
 #[test]
 fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
@@ -577,7 +577,8 @@ fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
     let kind_color = |k: DecalKind| {
         let lin = match k {
             DecalKind::RockPatch => [0.21, 0.2, 0.19],
-            DecalKind::Dirt => [0.2, 0.13, 0.075],
+            // A house pad is drawn as bare earth.
+            DecalKind::Dirt | DecalKind::Pad => [0.2, 0.13, 0.075],
             _ => [0.28, 0.215, 0.07],
         };
         lin.map(srgb)
@@ -701,7 +702,7 @@ fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
         }
     }
     assert!(checked >= 10, "only {checked} areas checked");
-    assert_eq!(kinds.len(), 3, "only kinds {kinds:?} met");
+    assert_eq!(kinds.len(), 4, "only kinds {kinds:?} met");
 }
 
 /// Close up the ground shows its material's own texels below the finest node texel. Every

@@ -13,5 +13,6 @@ mod render;
 mod streaming;
 mod terrain;
 mod texcache;
+mod towns;
 mod vegetation;
 mod viewer_xvfb;

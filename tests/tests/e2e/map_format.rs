@@ -21,11 +21,7 @@ fn regenerating_the_committed_tiny_map_gives_identical_files() {
     let out = tmp.path().join("tiny");
     generate_into(&tiny_map_params(), &out);
     let committed = tiny_map_dir();
-    let mut names: Vec<_> = std::fs::read_dir(&committed)
-        .unwrap()
-        .map(|e| e.unwrap().file_name())
-        .collect();
-    names.sort();
+    let names = tests::files_under(&committed);
     assert!(
         names.len() >= 8,
         "committed tiny map looks incomplete: {names:?}"
@@ -39,10 +35,9 @@ fn regenerating_the_committed_tiny_map_gives_identical_files() {
             "{n:?} differs from the committed file; regenerate with the command in maps/README.md"
         );
     }
-    let regenerated = std::fs::read_dir(&out).unwrap().count();
     assert_eq!(
-        regenerated,
-        names.len(),
+        tests::files_under(&out),
+        names,
         "regeneration wrote a different set of files"
     );
 }
@@ -608,12 +603,25 @@ fn malformed_material_images() {
 
 /// Worldgen's closed areas on a 2 km map: all three kinds appear; each keeps off roads and
 /// paths (no outline point or centre within the road's half width + 2 m of a centre line) and
-/// off water (every outline point above the water level); two areas of a kind never overlap
+/// off water (every outline point above the water level) and off house pads; two areas of a
+/// kind never overlap
 /// (disjoint boxes); and the vegetation density is zero at a field's centre.
 #[test]
 fn ground_patches_keep_off_roads_water_and_each_other() {
     let map = tests::generated(&tests::patches_map_params());
-    let areas: Vec<_> = map.decals.iter().filter(|d| d.closed).collect();
+    // House pads are checked against their footprints in tests/e2e/towns.rs; patches keep off
+    // them too.
+    let areas: Vec<_> = map
+        .decals
+        .iter()
+        .filter(|d| d.closed && d.kind != DecalKind::Pad)
+        .collect();
+    let pads: Vec<_> = map
+        .decals
+        .iter()
+        .filter(|d| d.kind == DecalKind::Pad)
+        .collect();
+    assert!(!pads.is_empty(), "no houses on a 2 km map");
     let roads: Vec<_> = map.decals.iter().filter(|d| !d.closed).collect();
     assert!(!roads.is_empty(), "no roads to keep off");
     for kind in [DecalKind::Field, DecalKind::Dirt, DecalKind::RockPatch] {
@@ -654,6 +662,13 @@ fn ground_patches_keep_off_roads_water_and_each_other() {
                     );
                 }
             }
+            for pad in &pads {
+                assert!(
+                    !worldgen::roads::inside_polygon(q, &pad.points),
+                    "{:?} point {q:?} is on a house pad",
+                    d.kind
+                );
+            }
             let h = map.height_bilinear_m(q[0], q[1]);
             assert!(
                 h > map.manifest.water_level_m,
@@ -685,7 +700,7 @@ fn ground_patches_keep_off_roads_water_and_each_other() {
             }
         }
     }
-    // A map written and read back keeps its areas (decals version 2).
+    // A map written and read back keeps its areas (decals version 3).
     let tmp = tempfile::tempdir().unwrap();
     map.write(&tmp.path().join("m")).expect("write");
     let again = Map::load(&tmp.path().join("m")).expect("load");
@@ -693,20 +708,29 @@ fn ground_patches_keep_off_roads_water_and_each_other() {
 }
 
 /// A decals file of version 1 still loads (roads, paths, rock patches); a version-1 file with a
-/// field, or an area kind not marked closed, is refused naming the decal and field.
+/// field, a version-2 file with a pad, or an area kind not marked closed, is refused naming the
+/// decal and field.
 #[test]
 fn decal_versions_and_area_kinds_are_checked() {
     let (_t, dir) = broken_copy();
     let p = dir.join("decals.toml");
     let text = std::fs::read_to_string(&p).unwrap();
     assert!(
-        text.contains("version = 2"),
-        "the tiny map writes decals version 2"
+        text.contains("version = 3"),
+        "the tiny map writes decals version 3"
     );
+    assert!(text.contains("\"pad\""), "the tiny map has house pads");
+    // Pads need version 3.
+    std::fs::write(&p, text.replace("version = 3", "version = 2")).unwrap();
+    expect_error(&dir, "decals.toml", &["kind", "\"pad\"", "version 3"]);
     let v1: String = text
-        .replace("version = 2", "version = 1")
+        .replace("version = 3", "version = 1")
         .split("[[decal]]")
-        .filter(|block| !block.contains("\"field\"") && !block.contains("\"dirt\""))
+        .filter(|block| {
+            !block.contains("\"field\"")
+                && !block.contains("\"dirt\"")
+                && !block.contains("\"pad\"")
+        })
         .collect::<Vec<_>>()
         .join("[[decal]]");
     std::fs::write(&p, &v1).unwrap();

@@ -139,7 +139,8 @@ fn chain_levels_meet_the_pixel_metric_and_are_drawn_where_they_need_fewer_triang
 }
 
 /// A viewer of `world` with every registered kind (less the light grids without `lighting`)
-/// plus the objects of `set`, one worker, threshold `tau_px` for terrain and objects.
+/// with the objects of `set` instead of the map's houses, one worker, threshold `tau_px` for
+/// terrain and objects.
 fn objects_viewer(
     g: &Gpu,
     world: &World,
@@ -148,6 +149,7 @@ fn objects_viewer(
     tau_px: f64,
 ) -> Viewer {
     let mut kinds = registered(world);
+    kinds.retain(|k| k.kind.name() != ObjectsContent::NAME);
     if !lighting {
         kinds.retain(|k| k.kind.name() != LightingContent::NAME);
     }

@@ -3,17 +3,24 @@
 //! Numbers are written with Rust's shortest round-trip formatting, so a write/read cycle is exact.
 
 use super::{Manifest, MapError, limits};
+use crate::building_mesh::{BuildingSpec, Roof};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
 
 pub const TREES_MAGIC: &str = "tvs-trees 1";
 pub const TREES_COLUMNS: &str = "species,x_m,y_m,height_m,crown_radius_m";
-pub const BUILDINGS_MAGIC: &str = "tvs-buildings 1";
-pub const BUILDINGS_COLUMNS: &str = "mesh,x_m,y_m,z_m,yaw_deg,scale";
+pub const BUILDINGS_MAGIC: &str = "tvs-buildings 2";
+pub const BUILDINGS_COLUMNS: &str =
+    "type,x_m,y_m,z_m,yaw_deg,width_m,depth_m,storeys,storey_m,roof,roof_pitch_deg,seed";
+/// Version 1 (mesh,x_m,y_m,z_m,yaw_deg,scale rows naming external meshes) was only ever written
+/// empty; an empty version 1 file is read as no buildings, one with rows is refused.
+const BUILDINGS_MAGIC_V1: &str = "tvs-buildings 1";
+const BUILDINGS_COLUMNS_V1: &str = "mesh,x_m,y_m,z_m,yaw_deg,scale";
 pub const DECALS_FORMAT: &str = "tvs-decals";
-/// Version written; version 1 files (roads, paths and rock patches only) are read as well.
-pub const DECALS_VERSION: u32 = 2;
+/// Version written; version 1 files (roads, paths and rock patches only) and version 2 files
+/// (no pads) are read as well.
+pub const DECALS_VERSION: u32 = 3;
 
 /// A large tree placed explicitly by the map.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,15 +33,36 @@ pub struct Tree {
     pub crown_radius_m: f32,
 }
 
-/// A building placement (a progressive mesh by name).
+/// A building (buildings version 2): a procedural house ([`crate::building_mesh`]) of a named
+/// type standing on a flattened pad. Every row of one type has the same dimensions: a type's
+/// mesh is built once and its instances share it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Building {
-    pub mesh: String,
+    pub type_name: String,
+    /// Centre of the footprint.
     pub x_m: f64,
     pub y_m: f64,
+    /// Floor height: the pad the ground is flattened to.
     pub z_m: f64,
-    pub yaw_deg: f32,
-    pub scale: f32,
+    /// Direction of the width (the longer side) from +x, counter-clockwise.
+    pub yaw_deg: f64,
+    /// The mesh; `width_m >= depth_m`.
+    pub spec: BuildingSpec,
+}
+
+impl Building {
+    /// The footprint's corners, counter-clockwise seen from above.
+    pub fn footprint_m(&self) -> [[f64; 2]; 4] {
+        let (s, c) = self.yaw_deg.to_radians().sin_cos();
+        let (hw, hd) = (self.spec.width_m * 0.5, self.spec.depth_m * 0.5);
+        [(-hw, -hd), (hw, -hd), (hw, hd), (-hw, hd)]
+            .map(|(u, v)| [self.x_m + c * u - s * v, self.y_m + s * u + c * v])
+    }
+
+    /// Height of the walls (storeys x storey height), metres.
+    pub fn wall_height_m(&self) -> f64 {
+        f64::from(self.spec.storeys) * self.spec.storey_m
+    }
 }
 
 /// What a decal is; decides its ground texture and how it shapes the ground.
@@ -53,6 +81,9 @@ pub enum DecalKind {
     /// Bare earth (closed area, since decals version 2): a dirt patch in meadow or forest; the
     /// ground is moved by the offset inside (usually 0 or slightly negative).
     Dirt,
+    /// Building pad (closed area, since decals version 3): the ground is flattened to the
+    /// polygon's z (every point has the same z) plus the offset inside, and nothing grows there.
+    Pad,
 }
 
 impl DecalKind {
@@ -63,12 +94,13 @@ impl DecalKind {
             Self::RockPatch => "rock_patch",
             Self::Field => "field",
             Self::Dirt => "dirt",
+            Self::Pad => "pad",
         }
     }
 
     /// Whether this kind is a closed area (a polygon) rather than a polyline.
     pub fn is_area(self) -> bool {
-        matches!(self, Self::RockPatch | Self::Field | Self::Dirt)
+        matches!(self, Self::RockPatch | Self::Field | Self::Dirt | Self::Pad)
     }
 }
 
@@ -263,19 +295,76 @@ pub fn write_trees(path: &Path, trees: &[Tree], _m: &Manifest) -> Result<(), Map
 
 pub fn read_buildings(path: &Path, m: &Manifest) -> Result<Vec<Building>, MapError> {
     let text = read_text(path)?;
+    if text.lines().next().map(|l| l.trim_end_matches('\r')) == Some(BUILDINGS_MAGIC_V1) {
+        let rows = data_rows(path, &text, BUILDINGS_MAGIC_V1, BUILDINGS_COLUMNS_V1)?;
+        return match rows.first() {
+            None => Ok(Vec::new()),
+            Some(&(n, _)) => Err(line_err(
+                path,
+                n,
+                format!(
+                    "version 1 building rows (external meshes) are no longer read; expected the header {BUILDINGS_MAGIC:?}"
+                ),
+            )),
+        };
+    }
     let rows = data_rows(path, &text, BUILDINGS_MAGIC, BUILDINGS_COLUMNS)?;
-    let mut out = Vec::with_capacity(rows.len());
+    let mut out: Vec<Building> = Vec::with_capacity(rows.len());
+    // Per type: the first row's line and spec.
+    let mut types: std::collections::HashMap<String, (usize, BuildingSpec)> =
+        std::collections::HashMap::new();
     for (n, row) in rows {
         let mut cols = row.split(',');
-        let mesh: String = parse_field(path, n, "mesh", cols.next())?;
-        let b = Building {
-            mesh,
-            x_m: parse_field(path, n, "x_m", cols.next())?,
-            y_m: parse_field(path, n, "y_m", cols.next())?,
-            z_m: parse_field(path, n, "z_m", cols.next())?,
-            yaw_deg: parse_field(path, n, "yaw_deg", cols.next())?,
-            scale: parse_field(path, n, "scale", cols.next())?,
+        let mut field = |name: &str| {
+            cols.next()
+                .map(str::trim)
+                .ok_or_else(|| line_err(path, n, format!("missing column `{name}`")))
         };
+        let type_name = field("type")?.to_string();
+        let number = |name: &str, v: &str| -> Result<f64, MapError> {
+            v.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    line_err(
+                        path,
+                        n,
+                        format!("column `{name}`: cannot parse {v:?} as a finite number"),
+                    )
+                })
+        };
+        let x_m = number("x_m", field("x_m")?)?;
+        let y_m = number("y_m", field("y_m")?)?;
+        let z_m = number("z_m", field("z_m")?)?;
+        let yaw_deg = number("yaw_deg", field("yaw_deg")?)?;
+        let width_m = number("width_m", field("width_m")?)?;
+        let depth_m = number("depth_m", field("depth_m")?)?;
+        let storeys_text = field("storeys")?;
+        let storeys: u32 = storeys_text.parse().map_err(|_| {
+            line_err(
+                path,
+                n,
+                format!("column `storeys`: cannot parse {storeys_text:?} as a whole number"),
+            )
+        })?;
+        let storey_m = number("storey_m", field("storey_m")?)?;
+        let roof_text = field("roof")?;
+        let roof = Roof::from_name(roof_text).ok_or_else(|| {
+            line_err(
+                path,
+                n,
+                format!("column `roof`: {roof_text:?} is not gable or hip"),
+            )
+        })?;
+        let roof_pitch_deg = number("roof_pitch_deg", field("roof_pitch_deg")?)?;
+        let seed_text = field("seed")?;
+        let seed = u64::from_str_radix(seed_text, 16).map_err(|_| {
+            line_err(
+                path,
+                n,
+                format!("column `seed`: cannot parse {seed_text:?} as hexadecimal"),
+            )
+        })?;
         if cols.next().is_some() {
             return Err(line_err(
                 path,
@@ -283,32 +372,117 @@ pub fn read_buildings(path: &Path, m: &Manifest) -> Result<Vec<Building>, MapErr
                 format!("too many columns; expected {BUILDINGS_COLUMNS}"),
             ));
         }
-        if b.mesh.is_empty() || !in_world(m, b.x_m, b.y_m) || !b.z_m.is_finite() {
-            return Err(line_err(
-                path,
-                n,
-                "empty mesh name or position outside the world",
-            ));
-        }
-        if !(b.yaw_deg.is_finite() && b.scale.is_finite() && b.scale > 0.0 && b.scale <= 1000.0) {
-            return Err(line_err(
-                path,
-                n,
-                format!("yaw {} / scale {} out of range", b.yaw_deg, b.scale),
-            ));
+        let b = Building {
+            type_name,
+            x_m,
+            y_m,
+            z_m,
+            yaw_deg,
+            spec: BuildingSpec {
+                width_m,
+                depth_m,
+                storeys,
+                storey_m,
+                roof,
+                roof_pitch_deg,
+                seed,
+            },
+        };
+        check_building(path, n, m, &b)?;
+        match types.get(&b.type_name) {
+            Some(&(first, spec)) if spec != b.spec => {
+                return Err(line_err(
+                    path,
+                    n,
+                    format!(
+                        "type {:?} has other dimensions, roof or seed than on line {first}; a type is one mesh",
+                        b.type_name
+                    ),
+                ));
+            }
+            Some(_) => {}
+            None => {
+                types.insert(b.type_name.clone(), (n, b.spec));
+            }
         }
         out.push(b);
     }
     Ok(out)
 }
 
+/// A building row's values: a type name, a footprint inside the world, a buildable spec.
+fn check_building(path: &Path, n: usize, m: &Manifest, b: &Building) -> Result<(), MapError> {
+    let name_ok = !b.type_name.is_empty()
+        && b.type_name.len() <= 64
+        && b.type_name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if !name_ok {
+        return Err(line_err(
+            path,
+            n,
+            format!(
+                "column `type`: {:?} must be 1 to 64 letters, digits, '_' or '-'",
+                b.type_name
+            ),
+        ));
+    }
+    b.spec
+        .check()
+        .map_err(|e| line_err(path, n, format!("column {e}")))?;
+    if b.spec.width_m < b.spec.depth_m {
+        return Err(line_err(
+            path,
+            n,
+            format!(
+                "column `width_m` = {} is less than `depth_m` = {}: the width is the longer side",
+                b.spec.width_m, b.spec.depth_m
+            ),
+        ));
+    }
+    if !(-360.0..=360.0).contains(&b.yaw_deg) {
+        return Err(line_err(
+            path,
+            n,
+            format!("column `yaw_deg` = {} outside [-360, 360]", b.yaw_deg),
+        ));
+    }
+    if let Some(&[x, y]) = b.footprint_m().iter().find(|&&[x, y]| !in_world(m, x, y)) {
+        return Err(line_err(
+            path,
+            n,
+            format!("the footprint reaches ({x:.1}, {y:.1}) m, outside the world"),
+        ));
+    }
+    if b.z_m.abs() > 20_000.0 {
+        return Err(line_err(
+            path,
+            n,
+            format!("column `z_m` = {} is not a plausible height", b.z_m),
+        ));
+    }
+    Ok(())
+}
+
 pub fn write_buildings(path: &Path, buildings: &[Building]) -> Result<(), MapError> {
     let mut s = format!("{BUILDINGS_MAGIC}\n{BUILDINGS_COLUMNS}\n");
     for b in buildings {
+        let p = &b.spec;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{}",
-            b.mesh, b.x_m, b.y_m, b.z_m, b.yaw_deg, b.scale
+            "{},{},{},{},{},{},{},{},{},{},{},{:016x}",
+            b.type_name,
+            b.x_m,
+            b.y_m,
+            b.z_m,
+            b.yaw_deg,
+            p.width_m,
+            p.depth_m,
+            p.storeys,
+            p.storey_m,
+            p.roof.name(),
+            p.roof_pitch_deg,
+            p.seed
         );
     }
     std::fs::write(path, s).map_err(|e| MapError::io(path, "write", e))
@@ -336,6 +510,7 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
         ));
     }
     let v1 = version == Some(1);
+    let before_v3 = version.is_some_and(|v| v < 3);
     let file: DecalFile = toml::from_str(&text).map_err(|e| MapError::ManifestSyntax {
         path: path.to_path_buf(),
         message: e.to_string(),
@@ -352,6 +527,28 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
                 format!(
                     "{:?} needs decals version 2, the file says version 1",
                     d.kind.name()
+                ),
+            ));
+        }
+        if before_v3 && d.kind == DecalKind::Pad {
+            return Err(MapError::field(
+                path,
+                f("kind"),
+                format!(
+                    "\"pad\" needs decals version 3, the file says version {}",
+                    version.unwrap_or(0)
+                ),
+            ));
+        }
+        if d.kind == DecalKind::Pad
+            && let Some(p) = d.points.iter().find(|p| p[2] != d.points[0][2])
+        {
+            return Err(MapError::field(
+                path,
+                f("points"),
+                format!(
+                    "a pad is flat: point {p:?} has another z than the first, {}",
+                    d.points[0][2]
                 ),
             ));
         }

@@ -6,8 +6,11 @@
 //! ground.png        8-bit indexed PNG; the palette index is a ground type from the legend
 //! density_*.png     one 8-bit grayscale PNG per vegetation species; 0..255 = 0..max density
 //! trees.csv         "tvs-trees 1" then species,x_m,y_m,height_m,crown_radius_m rows
-//! decals.toml       format = "tvs-decals", version = 1, [[decal]] polylines and areas
-//! buildings.csv     "tvs-buildings 1" then mesh,x_m,y_m,z_m,yaw_deg,scale rows (may be empty)
+//! decals.toml       format = "tvs-decals", version = 3, [[decal]] polylines and areas
+//!                   (version 2 added fields and dirt, version 3 house pads; older ones are read)
+//! buildings.csv     "tvs-buildings 2" then type,x_m,y_m,z_m,yaw_deg,width_m,depth_m,storeys,
+//!                   storey_m,roof,roof_pitch_deg,seed rows (may be empty; an empty version 1 is read)
+//! buildings/*.pm    one progressive mesh per house type named in buildings.csv (`.pm` format)
 //! poisson.csv       "tvs-poisson 1" then x,y rows: the ranked periodic Poisson-disc tile (v2)
 //! ```
 //!
@@ -16,6 +19,7 @@
 //! every field and every sample before it returns; nothing is allocated from a size that has not
 //! been checked against [`limits`].
 
+pub mod building_models;
 mod layers;
 mod lists;
 mod manifest;
@@ -85,6 +89,9 @@ pub enum MapError {
         found: i64,
         supported: u32,
     },
+    /// A house type's mesh (`buildings/<type>.pm`).
+    #[error(transparent)]
+    BuildingModel(#[from] crate::pm::file::PmError),
     #[error("{path}: field `{field}`: {problem}")]
     InvalidField {
         path: PathBuf,
@@ -185,6 +192,8 @@ pub struct Map {
     pub trees: Vec<Tree>,
     pub decals: Vec<Decal>,
     pub buildings: Vec<Building>,
+    /// One progressive mesh per house type in `buildings`, in order of first appearance.
+    pub building_models: Vec<building_models::BuildingModel>,
     /// The ranked Poisson-disc tile (points in rank order on the unit torus).
     pub poisson: crate::poisson::PoissonTile,
     /// Per legend entry, the material image it names (`ground.legend[i].material`), if any.
@@ -224,6 +233,7 @@ impl Map {
         let trees = lists::read_trees(&dir.join(&manifest.trees.file), &manifest)?;
         let decals = lists::read_decals(&dir.join(&manifest.decals.file), &manifest)?;
         let buildings = lists::read_buildings(&dir.join(&manifest.buildings.file), &manifest)?;
+        let building_models = building_models::read(dir, &buildings)?;
         let poisson = lists::read_poisson(
             &dir.join(&manifest.poisson.file),
             manifest.poisson.min_distance,
@@ -246,6 +256,7 @@ impl Map {
             trees,
             decals,
             buildings,
+            building_models,
             poisson,
             materials,
         })
@@ -290,6 +301,7 @@ impl Map {
             &staging.join(&self.manifest.buildings.file),
             &self.buildings,
         )?;
+        building_models::write(&staging, &self.building_models)?;
         lists::write_poisson(&staging.join(&self.manifest.poisson.file), &self.poisson)?;
         for (i, (t, image)) in self
             .manifest
@@ -381,6 +393,23 @@ impl Map {
                     "names a file without an image in memory, or the image has a bad size",
                 ));
             }
+        }
+        let types = building_models::types(&self.buildings);
+        let names: Vec<&str> = self
+            .building_models
+            .iter()
+            .map(|m| m.type_name.as_str())
+            .collect();
+        let want: Vec<&str> = types.iter().map(|b| b.type_name.as_str()).collect();
+        if names != want {
+            return Err(MapError::field(
+                &path,
+                "buildings",
+                format!("house types {want:?} but meshes for {names:?}"),
+            ));
+        }
+        for (b, m) in types.iter().zip(&self.building_models) {
+            building_models::check_fit(&building_models::path(dir, &b.type_name), b, &m.pm)?;
         }
         Ok(())
     }

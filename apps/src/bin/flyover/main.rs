@@ -120,6 +120,9 @@ pub(crate) struct Cli {
     /// occlusion (as before issue 17), for comparing cost and looks.
     #[arg(long)]
     pub(crate) no_lighting: bool,
+    /// Leave out the map's houses (its towns), for comparing cost and looks.
+    #[arg(long)]
+    pub(crate) no_buildings: bool,
     /// Debug view: everything grey, lit by the light grids alone.
     #[arg(long)]
     pub(crate) lighting_only: bool,
@@ -216,7 +219,8 @@ impl From<GroundViewArg> for GroundView {
 }
 
 /// The viewer for `cli`: every registered content kind (less ground textures with
-/// `--no-ground-textures`, less light grids with `--no-lighting`, plus the `--object` models),
+/// `--no-ground-textures`, less light grids with `--no-lighting`, less the map's houses with
+/// `--no-buildings`, plus the `--object` models),
 /// the ground view of `--ground-view`, the sun of `--sun-*`. `start` is the first camera (the
 /// objects stand ahead of it).
 pub(crate) fn make_viewer(
@@ -232,6 +236,9 @@ pub(crate) fn make_viewer(
     }
     if cli.no_lighting {
         kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+    }
+    if cli.no_buildings || !cli.object.is_empty() {
+        kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
     }
     if !cli.object.is_empty() {
         kinds.push(objects_registration(cli, &world, start)?);
@@ -251,7 +258,8 @@ pub(crate) fn make_viewer(
     Ok(viewer)
 }
 
-/// The objects kind for `--object`: the models, copies in a row ahead of `start`.
+/// The objects kind for `--object`: the models, copies in a row ahead of `start`, with the
+/// map's houses unless `--no-buildings`.
 fn objects_registration(
     cli: &Cli,
     world: &World,
@@ -276,7 +284,7 @@ fn objects_registration(
         start.position_m.x + dir[0] / len * ahead_m,
         start.position_m.y + dir[1] / len * ahead_m,
     ];
-    let set = ObjectSet::place_row(
+    let row = ObjectSet::place_row(
         models,
         from,
         dir,
@@ -285,6 +293,12 @@ fn objects_registration(
         cli.object_size_m,
         |x, y| world.height_m(x, y),
     );
+    let mut set = if cli.no_buildings {
+        ObjectSet::default()
+    } else {
+        ObjectSet::from_buildings(&world.map.buildings, &world.map.building_models)
+    };
+    set.append(row);
     Ok(engine::kinds::Registration {
         kind: std::sync::Arc::new(ObjectsContent {
             set: std::sync::Arc::new(set),
