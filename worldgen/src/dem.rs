@@ -470,6 +470,7 @@ pub fn import(
         decals: Vec::new(),
         buildings: Vec::new(),
         building_models: Vec::new(),
+        building_textures: Vec::new(),
         times,
     })?;
     let report = ImportReport {

@@ -183,6 +183,9 @@ pub fn generate(
         towns::house_models(&towns.buildings, threads)
     })
     .map_err(GenerateError::Building)?;
+    let building_textures = timed(times, "house textures (mip chains)", || {
+        towns::house_textures(seed, &towns.buildings)
+    });
     let mut decals = network.decals;
     decals.extend(towns.pads);
     let patches = timed(times, "ground patches (fields, dirt, rock)", || {
@@ -214,6 +217,7 @@ pub fn generate(
         decals,
         buildings: towns.buildings,
         building_models,
+        building_textures,
         times,
     })
 }
@@ -236,6 +240,8 @@ pub struct AssembleInputs<'a> {
     pub buildings: Vec<crate::map::Building>,
     /// One mesh per house type of `buildings`.
     pub building_models: Vec<crate::map::building_models::BuildingModel>,
+    /// The textures `buildings` name.
+    pub building_textures: Vec<crate::map::building_models::BuildingTexture>,
     pub times: &'a mut Vec<StepTime>,
 }
 
@@ -346,6 +352,7 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
         decals: a.decals,
         buildings: a.buildings,
         building_models: a.building_models,
+        building_textures: a.building_textures,
         poisson,
         materials,
     })

@@ -21,7 +21,7 @@ pub mod dem;
 pub mod erosion;
 pub mod generate;
 pub mod grid;
-
+pub mod house_textures;
 pub mod map;
 pub mod noise;
 pub mod par;

@@ -21,7 +21,8 @@
 
 use crate::Grid;
 use crate::building_mesh::{BuildingSpec, Roof, building_mesh};
-use crate::map::building_models::{self, BuildingModel};
+use crate::house_textures;
+use crate::map::building_models::{self, BuildingModel, BuildingTexture};
 use crate::map::{Building, Decal, DecalKind, Tree};
 use crate::noise;
 use crate::pm::{CostKind, PmMesh, TriMesh};
@@ -45,6 +46,10 @@ pub const MAX_RELIEF_M: f64 = 2.5;
 pub const DRY_MARGIN_M: f64 = 1.0;
 /// House types per map.
 pub const TYPE_COUNT: usize = 6;
+/// Facade textures per map (`facade_<k>.png`).
+pub const FACADES: u64 = 4;
+/// Roof textures per map (`roof_<k>.png`).
+pub const ROOFS: u64 = 2;
 
 /// Ground samples per side of the lattice over a pad.
 const PAD_SAMPLES: usize = 9;
@@ -223,7 +228,8 @@ pub fn place(inp: &TownInputs<'_>) -> Towns {
                         if noise::unit(h) >= 0.9 * (1.0 - r * r) {
                             continue;
                         }
-                        let (name, spec) = &types[(h >> 40) as usize % types.len()];
+                        let type_index = (h >> 40) as usize % types.len();
+                        let (name, spec) = &types[type_index];
                         let offset =
                             f64::from(d.width_m) * 0.5 + ROAD_SETBACK_M + spec.depth_m * 0.5;
                         // Normal to the left of the road direction.
@@ -235,6 +241,9 @@ pub fn place(inp: &TownInputs<'_>) -> Towns {
                             z_m: 0.0,
                             yaw_deg,
                             spec: *spec,
+                            // Facades vary per house, roofs per type.
+                            facade_texture: format!("facade_{}.png", (h >> 20) % FACADES),
+                            roof_texture: format!("roof_{}.png", type_index as u64 % ROOFS),
                         };
                         if let Some(z) = lot_fits(inp, &b, &near, &towns.buildings) {
                             b.z_m = cm(z);
@@ -354,6 +363,29 @@ pub fn house_models(buildings: &[Building], threads: usize) -> Result<Vec<Buildi
                 type_name: b.type_name.clone(),
                 pm,
             })
+        })
+        .collect()
+}
+
+/// The textures `buildings` name (the map's generated facades and roofs), made from the seed.
+pub fn house_textures(seed: u64, buildings: &[Building]) -> Vec<BuildingTexture> {
+    building_models::texture_names(buildings)
+        .into_iter()
+        .map(|name| {
+            let index = |prefix: &str| {
+                name.strip_prefix(prefix)
+                    .and_then(|r| r.strip_suffix(".png"))
+                    .and_then(|k| k.parse::<i64>().ok())
+            };
+            let chain = match (index("facade_"), index("roof_")) {
+                (Some(k), _) => house_textures::facade(noise::hash3(seed ^ SALT, k, 20)),
+                (_, Some(k)) => house_textures::roof(noise::hash3(seed ^ SALT, k, 21)),
+                _ => house_textures::facade(seed),
+            };
+            BuildingTexture {
+                name: name.to_string(),
+                chain,
+            }
         })
         .collect()
 }

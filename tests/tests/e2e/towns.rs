@@ -1,6 +1,6 @@
 //! Towns (issue 19): houses stand clear of roads, water and each other, on ground flattened
 //! under their footprint, with nothing growing inside; their meshes fill their footprints; bad
-//! building rows and meshes are refused naming the file, line and field.
+//! building rows, meshes and textures are refused naming the file, line and field.
 //!
 //! The geometry checks here sample footprints on a 0.25 m lattice and measure with plain
 //! point-segment distances, not with worldgen's polygon distances that placed the houses.
@@ -287,7 +287,32 @@ fn malformed_building_rows_and_meshes_are_refused() {
             let short = lines[2].rsplit_once(',').expect("columns").0.to_string();
             std::fs::write(&path, format!("{}\n{}\n{short}\n", lines[0], lines[1])).expect("write");
         },
-        &["buildings.csv", "line 3", "missing column `seed`"],
+        &["buildings.csv", "line 3", "missing column `roof_texture`"],
+    );
+    refused(
+        |d| edit_row(d, 12, "../map.toml"),
+        &["buildings.csv", "line 3", "facade_texture"],
+    );
+    refused(
+        |d| edit_row(d, 13, "roof.jpg"),
+        &["buildings.csv", "line 3", "roof_texture"],
+    );
+    // A texture file missing, or not a power-of-two square or mip atlas.
+    refused(
+        |d| std::fs::remove_file(d.join("buildings/roof_1.png")).expect("remove"),
+        &["buildings/roof_1.png", "cannot open"],
+    );
+    refused(
+        |d| {
+            let f = std::fs::File::create(d.join("buildings/roof_1.png")).expect("create");
+            let mut enc = png::Encoder::new(f, 300, 200);
+            enc.set_color(png::ColorType::Rgba);
+            enc.set_depth(png::BitDepth::Eight);
+            let mut w = enc.write_header().expect("header");
+            w.write_image_data(&vec![128u8; 300 * 200 * 4])
+                .expect("pixels");
+        },
+        &["buildings/roof_1.png", "300x200", "power-of-two"],
     );
     // A version 1 list with rows.
     refused(

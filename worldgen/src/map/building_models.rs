@@ -1,9 +1,12 @@
-//! The house types' progressive meshes: `buildings/<type>.pm` in the map folder, one per type
-//! named in `buildings.csv` (issue 19: each type is built once, offline, and its instances share
-//! it). Read with the checksummed, validated `.pm` reader; a file that does not match its type's
-//! footprint (a stale mesh after `buildings.csv` was edited) is refused.
+//! The house types' progressive meshes and the houses' textures, in the map's `buildings/`
+//! folder: `<type>.pm`, one per type named in `buildings.csv` (issue 19: each type is built
+//! once, offline, and its instances share it), and the PNG textures the rows name. Meshes are
+//! read with the checksummed, validated `.pm` reader; a mesh that does not match its type's
+//! footprint (a stale mesh after `buildings.csv` was edited) is refused; a texture must be a mip
+//! atlas or a square power-of-two image ([`crate::house_textures`]).
 
 use super::{Building, MapError};
+use crate::house_textures::MipChain;
 use crate::pm::PmMesh;
 use crate::pm::file;
 use std::path::{Path, PathBuf};
@@ -19,6 +22,63 @@ const FIT_TOLERANCE_M: f64 = 0.02;
 pub struct BuildingModel {
     pub type_name: String,
     pub pm: PmMesh,
+}
+
+/// A texture the houses name, with its mip chain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuildingTexture {
+    /// File name in the `buildings/` folder.
+    pub name: String,
+    pub chain: MipChain,
+}
+
+/// The texture names `buildings` use, in order of first appearance (facade before roof).
+pub fn texture_names(buildings: &[Building]) -> Vec<&str> {
+    let mut seen: Vec<&str> = Vec::new();
+    for b in buildings {
+        for name in [b.facade_texture.as_str(), b.roof_texture.as_str()] {
+            if !seen.contains(&name) {
+                seen.push(name);
+            }
+        }
+    }
+    seen
+}
+
+/// Reads every texture `buildings` name.
+pub fn read_textures(dir: &Path, buildings: &[Building]) -> Result<Vec<BuildingTexture>, MapError> {
+    texture_names(buildings)
+        .into_iter()
+        .map(|name| {
+            let p = dir.join(FOLDER).join(name);
+            let chain = MipChain::from_png(&p).map_err(|problem| MapError::InvalidField {
+                path: p.clone(),
+                field: "texture".into(),
+                problem,
+            })?;
+            Ok(BuildingTexture {
+                name: name.to_string(),
+                chain,
+            })
+        })
+        .collect()
+}
+
+/// Writes every texture as a mip atlas into `dir`'s building folder.
+pub fn write_textures(dir: &Path, textures: &[BuildingTexture]) -> Result<(), MapError> {
+    let folder = dir.join(FOLDER);
+    for t in textures {
+        std::fs::create_dir_all(&folder).map_err(|e| MapError::io(&folder, "create folder", e))?;
+        let p = folder.join(&t.name);
+        t.chain
+            .write_png(&p)
+            .map_err(|problem| MapError::InvalidField {
+                path: p.clone(),
+                field: "texture".into(),
+                problem,
+            })?;
+    }
+    Ok(())
 }
 
 /// Where a type's mesh lives.

@@ -11,8 +11,7 @@ use std::path::Path;
 pub const TREES_MAGIC: &str = "tvs-trees 1";
 pub const TREES_COLUMNS: &str = "species,x_m,y_m,height_m,crown_radius_m";
 pub const BUILDINGS_MAGIC: &str = "tvs-buildings 2";
-pub const BUILDINGS_COLUMNS: &str =
-    "type,x_m,y_m,z_m,yaw_deg,width_m,depth_m,storeys,storey_m,roof,roof_pitch_deg,seed";
+pub const BUILDINGS_COLUMNS: &str = "type,x_m,y_m,z_m,yaw_deg,width_m,depth_m,storeys,storey_m,roof,roof_pitch_deg,seed,facade_texture,roof_texture";
 /// Version 1 (mesh,x_m,y_m,z_m,yaw_deg,scale rows naming external meshes) was only ever written
 /// empty; an empty version 1 file is read as no buildings, one with rows is refused.
 const BUILDINGS_MAGIC_V1: &str = "tvs-buildings 1";
@@ -48,6 +47,10 @@ pub struct Building {
     pub yaw_deg: f64,
     /// The mesh; `width_m >= depth_m`.
     pub spec: BuildingSpec,
+    /// PNG files in the map's `buildings/` folder for the walls and the roof (a mip atlas or a
+    /// plain square image, see [`crate::house_textures`]); instances of a type may differ.
+    pub facade_texture: String,
+    pub roof_texture: String,
 }
 
 impl Building {
@@ -358,6 +361,8 @@ pub fn read_buildings(path: &Path, m: &Manifest) -> Result<Vec<Building>, MapErr
         })?;
         let roof_pitch_deg = number("roof_pitch_deg", field("roof_pitch_deg")?)?;
         let seed_text = field("seed")?;
+        let facade_texture = field("facade_texture")?.to_string();
+        let roof_texture = field("roof_texture")?.to_string();
         let seed = u64::from_str_radix(seed_text, 16).map_err(|_| {
             line_err(
                 path,
@@ -387,6 +392,8 @@ pub fn read_buildings(path: &Path, m: &Manifest) -> Result<Vec<Building>, MapErr
                 roof_pitch_deg,
                 seed,
             },
+            facade_texture,
+            roof_texture,
         };
         check_building(path, n, m, &b)?;
         match types.get(&b.type_name) {
@@ -410,6 +417,19 @@ pub fn read_buildings(path: &Path, m: &Manifest) -> Result<Vec<Building>, MapErr
     Ok(out)
 }
 
+/// A texture file name in `buildings/`: no folders, ends in `.png`.
+fn texture_name_ok(name: &str) -> bool {
+    name.len() <= 64
+        && name.len() > 4
+        && Path::new(name)
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+}
+
 /// A building row's values: a type name, a footprint inside the world, a buildable spec.
 fn check_building(path: &Path, n: usize, m: &Manifest, b: &Building) -> Result<(), MapError> {
     let name_ok = !b.type_name.is_empty()
@@ -426,6 +446,20 @@ fn check_building(path: &Path, n: usize, m: &Manifest, b: &Building) -> Result<(
                 b.type_name
             ),
         ));
+    }
+    for (column, name) in [
+        ("facade_texture", &b.facade_texture),
+        ("roof_texture", &b.roof_texture),
+    ] {
+        if !texture_name_ok(name) {
+            return Err(line_err(
+                path,
+                n,
+                format!(
+                    "column `{column}`: {name:?} must be a .png file name of letters, digits, '_', '-' and '.' (in the buildings/ folder)"
+                ),
+            ));
+        }
     }
     b.spec
         .check()
@@ -470,7 +504,7 @@ pub fn write_buildings(path: &Path, buildings: &[Building]) -> Result<(), MapErr
         let p = &b.spec;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{:016x}",
+            "{},{},{},{},{},{},{},{},{},{},{},{:016x},{},{}",
             b.type_name,
             b.x_m,
             b.y_m,
@@ -482,7 +516,9 @@ pub fn write_buildings(path: &Path, buildings: &[Building]) -> Result<(), MapErr
             p.storey_m,
             p.roof.name(),
             p.roof_pitch_deg,
-            p.seed
+            p.seed,
+            b.facade_texture,
+            b.roof_texture
         );
     }
     std::fs::write(path, s).map_err(|e| MapError::io(path, "write", e))

@@ -9,8 +9,10 @@
 //! decals.toml       format = "tvs-decals", version = 3, [[decal]] polylines and areas
 //!                   (version 2 added fields and dirt, version 3 house pads; older ones are read)
 //! buildings.csv     "tvs-buildings 2" then type,x_m,y_m,z_m,yaw_deg,width_m,depth_m,storeys,
-//!                   storey_m,roof,roof_pitch_deg,seed rows (may be empty; an empty version 1 is read)
+//!                   storey_m,roof,roof_pitch_deg,seed,facade_texture,roof_texture rows (may be
+//!                   empty; an empty version 1 is read)
 //! buildings/*.pm    one progressive mesh per house type named in buildings.csv (`.pm` format)
+//! buildings/*.png   the houses' facade and roof textures (mip atlases or square images)
 //! poisson.csv       "tvs-poisson 1" then x,y rows: the ranked periodic Poisson-disc tile (v2)
 //! ```
 //!
@@ -194,6 +196,8 @@ pub struct Map {
     pub buildings: Vec<Building>,
     /// One progressive mesh per house type in `buildings`, in order of first appearance.
     pub building_models: Vec<building_models::BuildingModel>,
+    /// Every texture `buildings` name, in order of first appearance.
+    pub building_textures: Vec<building_models::BuildingTexture>,
     /// The ranked Poisson-disc tile (points in rank order on the unit torus).
     pub poisson: crate::poisson::PoissonTile,
     /// Per legend entry, the material image it names (`ground.legend[i].material`), if any.
@@ -234,6 +238,7 @@ impl Map {
         let decals = lists::read_decals(&dir.join(&manifest.decals.file), &manifest)?;
         let buildings = lists::read_buildings(&dir.join(&manifest.buildings.file), &manifest)?;
         let building_models = building_models::read(dir, &buildings)?;
+        let building_textures = building_models::read_textures(dir, &buildings)?;
         let poisson = lists::read_poisson(
             &dir.join(&manifest.poisson.file),
             manifest.poisson.min_distance,
@@ -257,6 +262,7 @@ impl Map {
             decals,
             buildings,
             building_models,
+            building_textures,
             poisson,
             materials,
         })
@@ -302,6 +308,7 @@ impl Map {
             &self.buildings,
         )?;
         building_models::write(&staging, &self.building_models)?;
+        building_models::write_textures(&staging, &self.building_textures)?;
         lists::write_poisson(&staging.join(&self.manifest.poisson.file), &self.poisson)?;
         for (i, (t, image)) in self
             .manifest
@@ -406,6 +413,21 @@ impl Map {
                 &path,
                 "buildings",
                 format!("house types {want:?} but meshes for {names:?}"),
+            ));
+        }
+        let textures: Vec<&str> = self
+            .building_textures
+            .iter()
+            .map(|t| t.name.as_str())
+            .collect();
+        if textures != building_models::texture_names(&self.buildings) {
+            return Err(MapError::field(
+                &path,
+                "buildings",
+                format!(
+                    "the houses name textures {:?} but the map holds {textures:?}",
+                    building_models::texture_names(&self.buildings)
+                ),
             ));
         }
         for (b, m) in types.iter().zip(&self.building_models) {

@@ -1,0 +1,325 @@
+//! Facade and roof textures of the house types (issue 19): square sRGB RGBA8 images generated
+//! from a type's seed, with full mip chains (each level the mean of four texels of the level
+//! above, in linear light), tiling with a period of [`TILE_M`] metres of the house's facade and
+//! roof texture coordinates (which are in metres).
+//!
+//! On disk a chain is one PNG in the classic mip-atlas layout ([`MipChain::to_atlas`]): level 0
+//! on the left, levels 1, 2, ... stacked top-down in a column to its right, so the file is
+//! 1.5 x as wide as it is high. A plain square power-of-two PNG is read as level 0 and its chain
+//! computed ([`MipChain::from_png`]), so a map can carry its own pictures.
+
+use crate::noise;
+use std::path::Path;
+
+/// Edge of a generated texture, as a power of two (512 texels: 7.8 mm over [`TILE_M`]).
+pub const EDGE_LOG2: u32 = 9;
+/// Metres of facade or roof one texture spans before it repeats.
+pub const TILE_M: f64 = 4.0;
+/// Largest edge read from a file, as a power of two.
+pub const MAX_EDGE_LOG2: u32 = 12;
+/// Smallest edge read from a file, as a power of two.
+pub const MIN_EDGE_LOG2: u32 = 2;
+
+/// A square RGBA8 (sRGB) texture with every mip level down to 1 x 1: level `k` is
+/// `2^(edge_log2 - k)` texels across, rows from the top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MipChain {
+    pub edge_log2: u32,
+    pub levels: Vec<Vec<u8>>,
+}
+
+fn to_linear(c: u8) -> f64 {
+    let v = f64::from(c) / 255.0;
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn to_srgb(v: f64) -> u8 {
+    let v = v.clamp(0.0, 1.0);
+    let s = if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
+impl MipChain {
+    /// The chain of a level-0 image (`2^edge_log2` squared RGBA8 texels).
+    pub fn from_level0(edge_log2: u32, level0: Vec<u8>) -> Self {
+        let mut levels = vec![level0];
+        for k in 1..=edge_log2 {
+            let above = &levels[k as usize - 1];
+            let (n, m) = (1usize << (edge_log2 - k + 1), 1usize << (edge_log2 - k));
+            let mut next = vec![0u8; m * m * 4];
+            for y in 0..m {
+                for x in 0..m {
+                    for c in 0..4 {
+                        let at =
+                            |dx: usize, dy: usize| above[((2 * y + dy) * n + 2 * x + dx) * 4 + c];
+                        let texels = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
+                        next[(y * m + x) * 4 + c] = if c == 3 {
+                            let sum: u32 = texels.iter().map(|&t| u32::from(t)).sum();
+                            ((sum + 2) / 4) as u8
+                        } else {
+                            to_srgb(texels.iter().map(|&t| to_linear(t)).sum::<f64>() / 4.0)
+                        };
+                    }
+                }
+            }
+            levels.push(next);
+        }
+        MipChain { edge_log2, levels }
+    }
+
+    /// Texels across level `level`.
+    pub fn edge(&self, level: u32) -> u32 {
+        1 << (self.edge_log2 - level)
+    }
+
+    /// The mip atlas: (width, height, RGBA8 rows from the top); see the module docs.
+    pub fn to_atlas(&self) -> (u32, u32, Vec<u8>) {
+        let e = self.edge(0) as usize;
+        let w = e + e / 2;
+        let mut out = vec![0u8; w * e * 4];
+        for (k, level) in self.levels.iter().enumerate() {
+            let (x0, y0) = atlas_origin(e, k);
+            let n = e >> k;
+            for y in 0..n {
+                let dst = ((y0 + y) * w + x0) * 4;
+                out[dst..dst + n * 4].copy_from_slice(&level[y * n * 4..(y + 1) * n * 4]);
+            }
+        }
+        (w as u32, e as u32, out)
+    }
+
+    /// A chain from a mip atlas or from a plain square image (its chain computed).
+    pub fn from_image(width: u32, height: u32, rgba: &[u8]) -> Result<Self, String> {
+        if rgba.len() as u64 != u64::from(width) * u64::from(height) * 4 {
+            return Err(format!("{width}x{height} texels but {} bytes", rgba.len()));
+        }
+        let square = width == height;
+        let atlas = u64::from(width) * 2 == u64::from(height) * 3;
+        if !(square || atlas) || !height.is_power_of_two() {
+            return Err(format!(
+                "{width}x{height} texels: expected a square power-of-two image or a mip atlas 1.5 times as wide as its power-of-two height"
+            ));
+        }
+        let edge_log2 = height.trailing_zeros();
+        if !(MIN_EDGE_LOG2..=MAX_EDGE_LOG2).contains(&edge_log2) {
+            return Err(format!(
+                "{height} texels high: expected {} to {}",
+                1u32 << MIN_EDGE_LOG2,
+                1u32 << MAX_EDGE_LOG2
+            ));
+        }
+        let e = height as usize;
+        let w = width as usize;
+        let level = |k: usize| {
+            let (x0, y0) = if square { (0, 0) } else { atlas_origin(e, k) };
+            let n = e >> k;
+            let mut out = Vec::with_capacity(n * n * 4);
+            for y in 0..n {
+                let src = ((y0 + y) * w + x0) * 4;
+                out.extend_from_slice(&rgba[src..src + n * 4]);
+            }
+            out
+        };
+        if square {
+            return Ok(Self::from_level0(edge_log2, level(0)));
+        }
+        Ok(MipChain {
+            edge_log2,
+            levels: (0..=edge_log2 as usize).map(level).collect(),
+        })
+    }
+
+    /// Reads a PNG (8-bit RGBA or RGB): a mip atlas or a plain square image.
+    pub fn from_png(path: &Path) -> Result<Self, String> {
+        let file = std::fs::File::open(path).map_err(|e| format!("cannot open: {e}"))?;
+        let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
+        decoder.set_transformations(png::Transformations::EXPAND);
+        let mut reader = decoder.read_info().map_err(|e| format!("not a PNG: {e}"))?;
+        let (w, h) = (reader.info().width, reader.info().height);
+        if w > 3 << (MAX_EDGE_LOG2 - 1) || h > 1 << MAX_EDGE_LOG2 {
+            return Err(format!("{w}x{h} texels: larger than a texture may be"));
+        }
+        let mut buf = vec![0u8; reader.output_buffer_size().ok_or("image too large")?];
+        let info = reader
+            .next_frame(&mut buf)
+            .map_err(|e| format!("cannot decode: {e}"))?;
+        let rgba = match (info.color_type, info.bit_depth) {
+            (png::ColorType::Rgba, png::BitDepth::Eight) => buf[..info.buffer_size()].to_vec(),
+            (png::ColorType::Rgb, png::BitDepth::Eight) => buf[..info.buffer_size()]
+                .chunks_exact(3)
+                .flat_map(|p| [p[0], p[1], p[2], 255])
+                .collect(),
+            (c, d) => return Err(format!("{c:?} at {d:?}: expected 8-bit RGB or RGBA")),
+        };
+        Self::from_image(w, h, &rgba)
+    }
+
+    /// Writes the mip atlas as a PNG.
+    pub fn write_png(&self, path: &Path) -> Result<(), String> {
+        let (w, h, rgba) = self.to_atlas();
+        let file = std::fs::File::create(path).map_err(|e| format!("cannot create: {e}"))?;
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut writer = enc.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(&rgba).map_err(|e| e.to_string())
+    }
+}
+
+/// Where level `k` of a chain of edge `e` sits in the atlas (x, y of its top-left texel).
+fn atlas_origin(e: usize, k: usize) -> (usize, usize) {
+    if k == 0 {
+        return (0, 0);
+    }
+    // Levels 1, 2, ... stacked downwards: level k starts below e/2 + e/4 + ... + e/2^(k-1).
+    let y: usize = (1..k).map(|j| e >> j).sum();
+    (e, y)
+}
+
+/// Periodic value noise in [0, 1) at texel (`x`, `y`) of an `n`-texel texture, lattice cells of
+/// `cell` texels (dividing `n`), smoothly interpolated.
+fn value_noise(seed: u64, x: usize, y: usize, n: usize, cell: usize) -> f64 {
+    let period = (n / cell) as i64;
+    let (gx, gy) = (x as f64 / cell as f64, y as f64 / cell as f64);
+    let (ix, iy) = (gx.floor() as i64, gy.floor() as i64);
+    let (fx, fy) = (gx - ix as f64, gy - iy as f64);
+    let smooth = |t: f64| t * t * (3.0 - 2.0 * t);
+    let at = |i: i64, j: i64| noise::unit3(seed, i.rem_euclid(period), j.rem_euclid(period));
+    let (sx, sy) = (smooth(fx), smooth(fy));
+    let top = at(ix, iy) + (at(ix + 1, iy) - at(ix, iy)) * sx;
+    let bottom = at(ix, iy + 1) + (at(ix + 1, iy + 1) - at(ix, iy + 1)) * sx;
+    top + (bottom - top) * sy
+}
+
+/// Facade colours (linear RGB): plaster tones and brick.
+const PLASTER: [[f64; 3]; 4] = [
+    [0.72, 0.66, 0.52],
+    [0.78, 0.74, 0.68],
+    [0.70, 0.52, 0.36],
+    [0.62, 0.64, 0.62],
+];
+const BRICK: [f64; 3] = [0.42, 0.16, 0.09];
+const MORTAR: [f64; 3] = [0.55, 0.52, 0.47];
+
+/// A house type's facade: plaster of one of four tones, or brick courses, from the seed.
+pub fn facade(seed: u64) -> MipChain {
+    let n = 1usize << EDGE_LOG2;
+    let pick = noise::hash3(seed, 11, 0);
+    let brick = pick.is_multiple_of(3);
+    let tone = PLASTER[(pick >> 8) as usize % PLASTER.len()];
+    let mut rgba = vec![0u8; n * n * 4];
+    // 128 texels a metre: bricks 0.25 x 0.0625 m (32 x 8 texels), 1-texel joints.
+    for y in 0..n {
+        for x in 0..n {
+            let grain =
+                0.5 * value_noise(seed, x, y, n, 4) + 0.5 * value_noise(seed ^ 1, x, y, n, 32);
+            let c = if brick {
+                let course = y / 8;
+                let offset = if course % 2 == 0 { 0 } else { 16 };
+                let (bx, by) = ((x + offset) % 32, y % 8);
+                if bx == 0 || by == 0 {
+                    MORTAR.map(|v| v * (0.9 + 0.2 * grain))
+                } else {
+                    let shade = noise::unit3(seed ^ 2, ((x + offset) / 32) as i64, course as i64);
+                    BRICK.map(|v| v * (0.75 + 0.4 * shade) * (0.92 + 0.16 * grain))
+                }
+            } else {
+                let streak = value_noise(seed ^ 3, x, 0, n, 16);
+                tone.map(|v| v * (0.88 + 0.16 * grain) * (0.96 + 0.06 * streak))
+            };
+            let i = (y * n + x) * 4;
+            for k in 0..3 {
+                rgba[i + k] = to_srgb(c[k]);
+            }
+            rgba[i + 3] = 255;
+        }
+    }
+    MipChain::from_level0(EDGE_LOG2, rgba)
+}
+
+/// A house type's roof: rows of tiles (terracotta or slate from the seed), 0.25 m courses of
+/// staggered 0.25 m tiles, each a shade of its own and darker toward the course above it.
+pub fn roof(seed: u64) -> MipChain {
+    let n = 1usize << EDGE_LOG2;
+    let slate = noise::hash3(seed, 12, 0).is_multiple_of(2);
+    let base = if slate {
+        [0.16, 0.17, 0.19]
+    } else {
+        [0.45, 0.17, 0.08]
+    };
+    let mut rgba = vec![0u8; n * n * 4];
+    for y in 0..n {
+        for x in 0..n {
+            // Texture v (image rows) runs up the slope.
+            let course = y / 32;
+            let offset = if course % 2 == 0 { 0 } else { 16 };
+            let (tx, ty) = ((x + offset) % 32, y % 32);
+            let tile = noise::unit3(seed ^ 4, ((x + offset) / 32) as i64, course as i64);
+            let grain = value_noise(seed ^ 5, x, y, n, 4);
+            // Darker toward the course above (which overlaps and shades it).
+            let overlap = 0.7 + 0.3 * (1.0 - ty as f64 / 31.0);
+            let gap = if tx == 0 { 0.5 } else { 1.0 };
+            let c = base.map(|v| v * (0.8 + 0.35 * tile) * overlap * gap * (0.94 + 0.12 * grain));
+            let i = (y * n + x) * 4;
+            for k in 0..3 {
+                rgba[i + k] = to_srgb(c[k]);
+            }
+            rgba[i + 3] = 255;
+        }
+    }
+    MipChain::from_level0(EDGE_LOG2, rgba)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn atlas_round_trips_and_levels_halve() {
+        let chain = facade(3);
+        assert_eq!(chain.levels.len(), EDGE_LOG2 as usize + 1);
+        for (k, l) in chain.levels.iter().enumerate() {
+            let e = chain.edge(k as u32) as usize;
+            assert_eq!(l.len(), e * e * 4);
+        }
+        let (w, h, rgba) = chain.to_atlas();
+        assert_eq!((w, h), (768, 512));
+        assert_eq!(MipChain::from_image(w, h, &rgba).unwrap(), chain);
+        // A plain square image gets the same chain computed.
+        let plain = MipChain::from_image(512, 512, &chain.levels[0]).unwrap();
+        assert_eq!(plain, chain);
+        assert!(MipChain::from_image(500, 500, &vec![0; 500 * 500 * 4]).is_err());
+        assert!(MipChain::from_image(768, 500, &vec![0; 768 * 500 * 4]).is_err());
+    }
+
+    #[test]
+    fn a_mip_texel_is_the_linear_mean_of_four() {
+        // Black and white checks: every level-1 texel is mid grey in linear light (sRGB 188).
+        let n = 4usize;
+        let level0: Vec<u8> = (0..n * n)
+            .flat_map(|i| {
+                let v = if (i % n + i / n).is_multiple_of(2) {
+                    0
+                } else {
+                    255
+                };
+                [v, v, v, 255]
+            })
+            .collect();
+        let chain = MipChain::from_level0(2, level0);
+        assert!(
+            chain.levels[1]
+                .chunks(4)
+                .all(|p| p[0] == 188 && p[3] == 255)
+        );
+        assert_eq!(chain.levels[2], vec![188, 188, 188, 255]);
+    }
+}
