@@ -21,9 +21,20 @@ struct Draw {
     base_local: vec4<f32>,
     // xyz: the instance's base relative to the camera (m).
     base_rel: vec4<f32>,
+    // Texture cache (issue 19): x, y the mip level resident for the facade and the roof
+    // texture (-1: none, the mean colours in `albedo` and `roof_albedo` stand in); z 1 to tint
+    // by that level (debug view).
+    tex: vec4<f32>,
+    // rgb: the roof's albedo where no roof texture level is resident.
+    roof_albedo: vec4<f32>,
 };
 
 @group(2) @binding(0) var<uniform> draw: Draw;
+// The instance's facade and roof textures as the texture cache holds them (their resident
+// level is their level 0 here; a white 1 x 1 texture when none is resident).
+@group(2) @binding(1) var facade_tex: texture_2d<f32>;
+@group(2) @binding(2) var roof_tex: texture_2d<f32>;
+@group(2) @binding(3) var tex_sampler: sampler;
 // Per instance: for each morphing vertex, the position and normal of the vertex it collapses
 // onto (two entries per vertex).
 @group(3) @binding(0) var<storage, read> morph_to: array<vec4<f32>>;
@@ -31,11 +42,24 @@ struct Draw {
 struct ObjectIn {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
+    // Texture coordinates in metres (0 for models without).
+    @location(2) uv: vec2<f32>,
+};
+
+// The prelude's `VertexOut` plus the texture coordinates.
+struct ObjectOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) albedo: vec3<f32>,
+    @location(3) @interpolate(flat) fade: vec3<f32>,
+    @location(4) light: vec2<f32>,
+    @location(5) uv: vec2<f32>,
 };
 
 @vertex
-fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> VertexOut {
-    var out: VertexOut;
+fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> ObjectOut {
+    var out: ObjectOut;
     var p = v.position;
     var n = v.normal;
     if (f32(vi) >= draw.morph.x && f32(vi) < draw.morph.y) {
@@ -55,10 +79,42 @@ fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> VertexOut {
     node.light = draw.light;
     let local = draw.base_local.xy + (rel.xy - draw.base_rel.xy);
     out.light = light_at(light_coords(node, local, max(rel.z - draw.base_rel.z, 0.0)));
+    out.uv = v.uv;
     return out;
 }
 
+// Debug colour of a resident mip level: red (full resolution), orange, yellow, green, cyan,
+// blue, violet (level 6 and coarser); grey where nothing is resident.
+fn mip_color(level: f32) -> vec3<f32> {
+    if (level < 0.0) {
+        return vec3<f32>(0.3);
+    }
+    let colors = array<vec3<f32>, 7>(
+        vec3<f32>(0.9, 0.05, 0.05),
+        vec3<f32>(0.9, 0.4, 0.05),
+        vec3<f32>(0.85, 0.8, 0.05),
+        vec3<f32>(0.1, 0.75, 0.1),
+        vec3<f32>(0.05, 0.7, 0.8),
+        vec3<f32>(0.1, 0.2, 0.9),
+        vec3<f32>(0.5, 0.1, 0.8),
+    );
+    return colors[min(u32(level), 6u)];
+}
+
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    return lit_pixel(in);
+fn fs_main(in: ObjectOut) -> @location(0) vec4<f32> {
+    // Both sampled in uniform control flow; the face's normal picks one.
+    let uv = in.uv / TEXTURE_TILE_M;
+    let facade = textureSample(facade_tex, tex_sampler, uv).rgb;
+    let roof = textureSample(roof_tex, tex_sampler, uv).rgb;
+    let up = normalize(in.normal).z > ROOF_NORMAL_UP;
+    let level = select(draw.tex.x, draw.tex.y, up);
+    var albedo = select(in.albedo, draw.roof_albedo.rgb, up);
+    if (level >= 0.0) {
+        albedo = select(facade, roof, up);
+    }
+    if (draw.tex.z > 0.5) {
+        albedo = mip_color(level);
+    }
+    return lit_pixel(VertexOut(in.clip, in.rel, in.normal, albedo, in.fade, in.light));
 }

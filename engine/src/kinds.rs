@@ -74,6 +74,7 @@ pub fn registered(world: &World) -> Vec<Registration> {
                 set: Arc::new(ObjectSet::from_buildings(
                     &world.map.buildings,
                     &world.map.building_models,
+                    &world.map.building_textures,
                 )),
             },
             Some(crate::render::objects::ObjectsRenderer::create),

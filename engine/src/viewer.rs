@@ -63,6 +63,13 @@ pub struct FrameStats {
     pub object_full_triangles: u64,
     /// Objects drawn from an artist (`MSFT_lod`) chain level instead of the base mesh.
     pub object_chain_draws: u32,
+    /// The texture cache: resident bytes, bytes at full resolution of the drawn textures,
+    /// misses (drawn textures with nothing resident), uploads and their bytes this frame.
+    pub texture_resident_bytes: u64,
+    pub texture_full_bytes: u64,
+    pub texture_misses: u32,
+    pub texture_uploads: u32,
+    pub texture_upload_bytes: u64,
     /// Of the vegetation instances: group-billboard quads (one per cluster of items).
     pub group_billboards: u64,
     pub drawn_nodes: usize,
@@ -293,6 +300,11 @@ impl Viewer {
             object_triangles: stats.object_triangles,
             object_full_triangles: stats.object_full_triangles,
             object_chain_draws: stats.object_chain_draws,
+            texture_resident_bytes: stats.texture_resident_bytes,
+            texture_full_bytes: stats.texture_full_bytes,
+            texture_misses: stats.texture_misses,
+            texture_uploads: stats.texture_uploads,
+            texture_upload_bytes: stats.texture_upload_bytes,
             group_billboards: stats.group_billboards,
             drawn_nodes: drawn.len(),
             nodes_per_level: per_level,

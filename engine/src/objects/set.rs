@@ -13,8 +13,9 @@
 use glam::DVec3;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use worldgen::house_textures::MipChain;
 use worldgen::map::Building;
-use worldgen::map::building_models::BuildingModel;
+use worldgen::map::building_models::{BuildingModel, BuildingTexture};
 use worldgen::pm::measure::{hausdorff_bound, mesh_soup};
 use worldgen::pm::{CostKind, ErrorIndex, PmEdits, PmMesh, TriMesh, file, gltf_input, load_mesh};
 
@@ -207,26 +208,46 @@ pub struct ObjectInstance {
     pub yaw_rad: f64,
     /// Metres per model unit.
     pub scale: f64,
+    /// Indices into [`ObjectSet::textures`] of the facade and roof textures (faces whose normal
+    /// points up more than [`ROOF_NORMAL_UP`] take the roof's), if the instance is textured.
+    pub textures: Option<[u32; 2]>,
 }
 
-/// Models and instances of a run.
+/// A face whose unit normal's up component exceeds this takes an instance's roof texture.
+pub const ROOF_NORMAL_UP: f32 = 0.3;
+
+/// Models, textures and instances of a run.
 #[derive(Debug, Default)]
 pub struct ObjectSet {
     pub models: Vec<PmModel>,
+    /// Textures with their mip chains (texture coordinates in metres over
+    /// [`worldgen::house_textures::TILE_M`]); streamed by the texture cache.
+    pub textures: Vec<MipChain>,
     pub instances: Vec<ObjectInstance>,
 }
 
 impl ObjectSet {
     /// The map's houses: one model per house type (its progressive mesh from the map's
     /// `buildings/<type>.pm`), one instance per row, standing on its pad with its longer side
-    /// along its yaw.
-    pub fn from_buildings(buildings: &[Building], models: &[BuildingModel]) -> Self {
+    /// along its yaw, with the facade and roof textures its row names.
+    pub fn from_buildings(
+        buildings: &[Building],
+        models: &[BuildingModel],
+        textures: &[BuildingTexture],
+    ) -> Self {
         let mut set = ObjectSet {
             models: models
                 .iter()
                 .map(|m| PmModel::from_pm(m.type_name.clone(), m.pm.clone()))
                 .collect(),
+            textures: textures.iter().map(|t| t.chain.clone()).collect(),
             instances: Vec::with_capacity(buildings.len()),
+        };
+        let texture = |name: &str| {
+            textures
+                .iter()
+                .position(|t| t.name == name)
+                .map(|i| i as u32)
         };
         let index: HashMap<&str, u32> = models
             .iter()
@@ -241,19 +262,25 @@ impl ObjectSet {
                     position_m: DVec3::new(b.x_m, b.y_m, b.z_m),
                     yaw_rad: b.yaw_deg.to_radians(),
                     scale: 1.0,
+                    textures: texture(&b.facade_texture)
+                        .zip(texture(&b.roof_texture))
+                        .map(|(f, r)| [f, r]),
                 });
             }
         }
         set
     }
 
-    /// Appends another set's models and instances.
+    /// Appends another set's models, textures and instances.
     pub fn append(&mut self, other: ObjectSet) {
         let offset = self.models.len() as u32;
+        let tex_offset = self.textures.len() as u32;
         self.models.extend(other.models);
+        self.textures.extend(other.textures);
         self.instances
             .extend(other.instances.into_iter().map(|i| ObjectInstance {
                 model: i.model + offset,
+                textures: i.textures.map(|t| t.map(|k| k + tex_offset)),
                 ..i
             }));
     }
@@ -293,10 +320,15 @@ impl ObjectSet {
                     position_m: DVec3::new(x, y, ground_m(x, y)),
                     yaw_rad: (i as f64 * 0.9 + m as f64 * 2.1) % std::f64::consts::TAU,
                     scale: size_m / extent,
+                    textures: None,
                 });
                 k += 1;
             }
         }
-        ObjectSet { models, instances }
+        ObjectSet {
+            models,
+            textures: Vec::new(),
+            instances,
+        }
     }
 }

@@ -47,6 +47,9 @@ pub struct ViewOptions {
     pub pm_lod: crate::objects::lod::PmLodSettings,
     /// Debug view: objects coloured by the share of their positions drawn (MLMODE).
     pub pm_color_by_lod: bool,
+    /// Debug view: textured objects tinted by the mip level resident in the texture cache
+    /// (red full resolution, then orange, yellow, green, cyan, blue, violet coarser).
+    pub texture_mip_view: bool,
 }
 
 /// Debug views of the ground.
@@ -107,6 +110,7 @@ impl Default for ViewOptions {
             lighting_only: false,
             pm_lod: crate::objects::lod::PmLodSettings::default(),
             pm_color_by_lod: false,
+            texture_mip_view: false,
         }
     }
 }
@@ -135,6 +139,14 @@ pub struct DrawStats {
     pub object_full_triangles: u64,
     /// Objects drawn from an `MSFT_lod` chain level.
     pub object_chain_draws: u32,
+    /// The texture cache (issue 19): bytes of the slots holding textures, bytes the drawn
+    /// textures would take at full resolution, drawn textures with no level resident (drawn in
+    /// their mean colour), uploads and bytes uploaded this frame.
+    pub texture_resident_bytes: u64,
+    pub texture_full_bytes: u64,
+    pub texture_misses: u32,
+    pub texture_uploads: u32,
+    pub texture_upload_bytes: u64,
 }
 
 /// The frame uniforms and bind group and the node-table layout, shared by all renderers.

@@ -39,6 +39,7 @@ pub mod sky;
 pub mod suballoc;
 mod target;
 pub mod terrain;
+pub mod texture_pool;
 mod timer;
 pub mod vegetation;
 

@@ -7,14 +7,18 @@
 
 use super::Gpu;
 use super::frame::{
-    DrawStats, FrameResources, PipelineSpec, pipeline, storage_entry, uniform_entry,
+    DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, storage_entry, texture_entry,
+    uniform_entry,
 };
 use super::lighting::light_entry;
 use super::scene::{FrameDraws, NodeRenderer};
+use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::lod::{Choice, choose};
-use crate::objects::set::{ObjectSet, PmModel, model_to_world};
+use crate::objects::set::{ObjectSet, PmModel, ROOF_NORMAL_UP, model_to_world};
 use crate::stream::Shared;
+use crate::texcache::mip::{level_for, px_per_m, texel_m};
+use crate::texcache::pool::{PoolSettings, SlotId, TexturePool};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -37,6 +41,8 @@ struct DrawUniform {
     light: [f32; 4],
     base_local: [f32; 4],
     base_rel: [f32; 4],
+    tex: [f32; 4],
+    roof_albedo: [f32; 4],
 }
 
 /// A geomorph in progress: wedges `lo..hi` move between their own position and that of the
@@ -150,6 +156,8 @@ struct DrawItem {
     option: usize,
     index_count: u32,
     full_triangles: u32,
+    /// The slots of its facade and roof textures (None: the white fallback).
+    slots: [Option<SlotId>; 2],
 }
 
 /// Per-frame statistics of the objects.
@@ -173,8 +181,17 @@ pub struct ObjectsRenderer {
     /// Bound for instances that are not morphing (the shader reads nothing from it).
     no_morph: wgpu::BindGroup,
     draw_buffer: wgpu::Buffer,
-    draw_group: wgpu::BindGroup,
+    /// Draw groups by the slots of their two textures (remade when slots or the draw buffer
+    /// change).
+    groups: HashMap<[Option<SlotId>; 2], wgpu::BindGroup>,
     draw_capacity: u64,
+    /// The texture cache: its bookkeeping (texture ids are indices into the set's textures),
+    /// its slots on the GPU, and per model the MipMapFactor before scale and texture size.
+    tex_pool: TexturePool,
+    gpu_tex: GpuTexturePool,
+    units_per_texture: Vec<[f64; 2]>,
+    /// Per texture its mean linear colour (its 1 x 1 level), drawn while none is resident.
+    tex_means: Vec<[f32; 3]>,
     instances: HashMap<u32, InstanceGpu>,
     items: Vec<DrawItem>,
     frame_no: u64,
@@ -183,26 +200,79 @@ pub struct ObjectsRenderer {
 
 /// The WGSL of this renderer.
 pub fn shader_source() -> String {
-    super::shader::assemble("objects", "")
+    super::shader::assemble(
+        "objects",
+        &format!(
+            "const TEXTURE_TILE_M: f32 = {:?};\nconst ROOF_NORMAL_UP: f32 = {:?};\n",
+            worldgen::house_textures::TILE_M as f32,
+            ROOF_NORMAL_UP
+        ),
+    )
 }
 
+/// The draw uniforms with a facade and a roof texture view.
 fn draw_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     buffer: &wgpu::Buffer,
+    views: [&wgpu::TextureView; 2],
+    sampler: &wgpu::Sampler,
 ) -> wgpu::BindGroup {
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("object draws"),
         layout,
-        entries: &[wgpu::BindGroupEntry {
-            binding: 0,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer,
-                offset: 0,
-                size: wgpu::BufferSize::new(std::mem::size_of::<DrawUniform>() as u64),
-            }),
-        }],
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<DrawUniform>() as u64),
+                }),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(views[0]),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(views[1]),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
     })
+}
+
+/// Per model, the longest edge (model units) of one unit of texture coordinate, over the
+/// faces that take the facade texture and over those that take the roof's (0 without UVs):
+/// a texture's MipMapFactor is this times the instance's scale over its edge in texels.
+fn units_per_texture(model: &PmModel) -> [f64; 2] {
+    let pm = &model.pm;
+    if pm.uvs.is_empty() {
+        return [0.0; 2];
+    }
+    let positions: Vec<[f32; 3]> = pm
+        .wedge_position
+        .iter()
+        .map(|&p| pm.positions[p as usize])
+        .collect();
+    let tile = worldgen::house_textures::TILE_M as f32;
+    let uvs: Vec<[f32; 2]> = pm.uvs.iter().map(|uv| uv.map(|c| c / tile)).collect();
+    let (mut facade, mut roof) = (Vec::new(), Vec::new());
+    for t in &pm.triangles {
+        let p = t.map(|w| glam::Vec3::from(positions[w as usize]));
+        // Model space is Y-up.
+        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        if n.y > ROOF_NORMAL_UP {
+            roof.push(*t);
+        } else {
+            facade.push(*t);
+        }
+    }
+    [facade, roof].map(|tris| texel_m(&positions, &uvs, &tris, 1).unwrap_or(0.0))
 }
 
 fn morph_group(
@@ -243,7 +313,16 @@ impl ObjectsRenderer {
         let module = super::shader::module(device, "objects", &shader_source());
         let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("object draw layout"),
-            entries: &[uniform_entry(0, true, wgpu::ShaderStages::VERTEX)],
+            entries: &[
+                uniform_entry(
+                    0,
+                    true,
+                    wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT,
+                ),
+                texture_entry(1, wgpu::TextureViewDimension::D2),
+                texture_entry(2, wgpu::TextureViewDimension::D2),
+                sampler_entry(3),
+            ],
         });
         let morph_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("object morph layout"),
@@ -265,9 +344,9 @@ impl ObjectsRenderer {
             false,
             &[Some(&draw_layout), Some(&morph_layout)],
         );
-        let attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
+        let attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];
         let buffers = [Some(wgpu::VertexBufferLayout {
-            array_stride: 24,
+            array_stride: 32,
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &attrs,
         })];
@@ -286,10 +365,11 @@ impl ObjectsRenderer {
                 (0..=model.chain.len())
                     .map(|option| {
                         let m = model.option(option);
-                        let mut data: Vec<f32> = Vec::with_capacity(m.pm.wedge_position.len() * 6);
+                        let mut data: Vec<f32> = Vec::with_capacity(m.pm.wedge_position.len() * 8);
                         for (w, &p) in m.pm.wedge_position.iter().enumerate() {
                             data.extend_from_slice(&m.pm.positions[p as usize]);
                             data.extend_from_slice(&m.normals[w]);
+                            data.extend_from_slice(&m.pm.uvs.get(w).copied().unwrap_or([0.0; 2]));
                         }
                         device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                             label: Some("object vertices"),
@@ -302,7 +382,18 @@ impl ObjectsRenderer {
             .collect();
         let draw_capacity = 64;
         let draw_buffer = draw_buffer(device, draw_capacity);
-        let draw_group = draw_group(device, &draw_layout, &draw_buffer);
+        let mut tex_pool = TexturePool::new(PoolSettings::default());
+        let tex_means = set
+            .textures
+            .iter()
+            .map(|chain| {
+                // Edges outside the pool's sizes are refused when the map loads.
+                let _ = tex_pool.add_texture(chain.edge_log2);
+                let last = chain.levels.last().map_or(&[128u8; 4][..], |l| &l[..]);
+                [0, 1, 2].map(|c| crate::color::srgb_to_linear(last[c]) as f32)
+            })
+            .collect();
+        let units_per_texture = set.models.iter().map(units_per_texture).collect();
         ObjectsRenderer {
             set,
             pipeline,
@@ -311,8 +402,12 @@ impl ObjectsRenderer {
             morph_layout,
             no_morph,
             draw_buffer,
-            draw_group,
+            groups: HashMap::new(),
             draw_capacity,
+            tex_pool,
+            gpu_tex: GpuTexturePool::new(gpu),
+            units_per_texture,
+            tex_means,
             instances: HashMap::new(),
             items: Vec::new(),
             frame_no: 0,
@@ -384,6 +479,9 @@ impl NodeRenderer for ObjectsRenderer {
         let k_px = camera.k_px();
         let settings = draws.view.pm_lod;
         let mut uniforms: Vec<DrawUniform> = Vec::new();
+        // The instances and models (a second handle, so the texture cache can be asked while
+        // they are borrowed).
+        let set = Arc::clone(&self.set);
         for node in draws.drawn {
             let Some(objects) = node.work.get::<NodeObjects>() else {
                 continue;
@@ -392,9 +490,9 @@ impl NodeRenderer for ObjectsRenderer {
             let light = light_entry(draws.tree, node.work);
             let corner = draws.tree.rect(node.key).min;
             for &id in &objects.instances {
-                let inst = &self.set.instances[id as usize];
-                let model = &self.set.models[inst.model as usize];
-                let (c, r) = self.set.sphere(inst);
+                let inst = &set.instances[id as usize];
+                let model = &set.models[inst.model as usize];
+                let (c, r) = set.sphere(inst);
                 if !draws
                     .frustum
                     .intersects_aabb(c - DVec3::splat(r), c + DVec3::splat(r))
@@ -402,6 +500,7 @@ impl NodeRenderer for ObjectsRenderer {
                     continue;
                 }
                 let distance_m = (c - camera.position_m).length() - r;
+                self.request_textures(camera, id, c, r);
                 let choice = choose(model, &settings, draws.tau_px, distance_m, k_px, inst.scale);
                 let full = model.pm.triangles.len();
                 let drawn_model = model.option(choice.option);
@@ -490,6 +589,9 @@ impl NodeRenderer for ObjectsRenderer {
                         .as_vec3()
                         .extend(0.0)
                         .to_array(),
+                    // Filled in once this frame's texture plan is applied.
+                    tex: [-1.0, -1.0, 0.0, 0.0],
+                    roof_albedo: [albedo[0], albedo[1], albedo[2], 1.0],
                 });
                 self.items.push(DrawItem {
                     instance: id,
@@ -497,6 +599,7 @@ impl NodeRenderer for ObjectsRenderer {
                     option: choice.option,
                     index_count: indices.len() as u32,
                     full_triangles: full as u32,
+                    slots: [None; 2],
                 });
                 self.stats.instances_drawn += 1;
                 self.stats.triangles += indices.len() as u64 / 3;
@@ -506,21 +609,15 @@ impl NodeRenderer for ObjectsRenderer {
         let frame_no = self.frame_no;
         self.instances
             .retain(|_, i| frame_no.saturating_sub(i.last_frame) < KEEP_FRAMES);
-        if uniforms.is_empty() {
-            return;
+        let plan = self.tex_pool.end_frame();
+        if self.gpu_tex.apply(gpu, &plan, &self.set.textures) {
+            self.groups.clear();
         }
-        if uniforms.len() as u64 > self.draw_capacity {
-            self.draw_capacity = (uniforms.len() as u64).next_power_of_two();
-            self.draw_buffer = draw_buffer(&gpu.device, self.draw_capacity);
-            self.draw_group = draw_group(&gpu.device, &self.draw_layout, &self.draw_buffer);
-        }
-        let mut bytes = vec![0u8; uniforms.len() * DRAW_STRIDE as usize];
-        for (k, u) in uniforms.iter().enumerate() {
-            let at = k * DRAW_STRIDE as usize;
-            bytes[at..at + std::mem::size_of::<DrawUniform>()]
-                .copy_from_slice(bytemuck::bytes_of(u));
-        }
-        gpu.queue.write_buffer(&self.draw_buffer, 0, &bytes);
+        self.texture_levels(
+            &mut uniforms,
+            draws.view.texture_mip_view && !draws.view.pm_color_by_lod,
+        );
+        self.write_uniforms(gpu, &uniforms);
     }
 
     fn draw(
@@ -538,7 +635,10 @@ impl NodeRenderer for ObjectsRenderer {
             let Some(inst) = self.instances.get(&item.instance) else {
                 continue;
             };
-            pass.set_bind_group(2, &self.draw_group, &[(k as u64 * DRAW_STRIDE) as u32]);
+            let Some(group) = self.groups.get(&item.slots) else {
+                continue;
+            };
+            pass.set_bind_group(2, group, &[(k as u64 * DRAW_STRIDE) as u32]);
             let morph = inst
                 .morph_to
                 .as_ref()
@@ -556,6 +656,102 @@ impl NodeRenderer for ObjectsRenderer {
             stats.object_full_triangles += u64::from(item.full_triangles);
             stats.object_chain_draws += u32::from(item.option > 0);
         }
+        let t = self.tex_pool.stats();
+        stats.texture_resident_bytes += t.resident_bytes;
+        stats.texture_full_bytes += t.full_resolution_bytes;
+        stats.texture_misses += t.misses as u32;
+        stats.texture_uploads += t.uploads as u32;
+        stats.texture_upload_bytes += t.upload_bytes;
+    }
+}
+
+impl ObjectsRenderer {
+    /// Asks the texture cache for each texture of instance `id` (bounded by the ball `c`, `r`)
+    /// at the level it needs there; its importance is the instance's on-screen area.
+    fn request_textures(&mut self, camera: &crate::camera::Camera, id: u32, c: DVec3, r: f64) {
+        let inst = &self.set.instances[id as usize];
+        let (Some(textures), Some(ppm)) = (inst.textures, px_per_m(camera, c, r)) else {
+            return;
+        };
+        let screen_px = f64::from(camera.viewport_px[0]) * f64::from(camera.viewport_px[1]);
+        let area_px = (r * ppm).powi(2).min(screen_px);
+        let units = self.units_per_texture[inst.model as usize];
+        for (k, &t) in textures.iter().enumerate() {
+            let edge = f64::from(self.set.textures[t as usize].edge(0));
+            let texel = units[k] * inst.scale / edge;
+            let coarsest = self.tex_pool.coarsest_level(t);
+            self.tex_pool
+                .request(t, level_for(texel, ppm, coarsest), area_px);
+        }
+    }
+
+    /// Writes the draw uniforms (growing the buffer when needed) and makes the draw groups.
+    fn write_uniforms(&mut self, gpu: &Gpu, uniforms: &[DrawUniform]) {
+        if uniforms.is_empty() {
+            return;
+        }
+        if uniforms.len() as u64 > self.draw_capacity {
+            self.draw_capacity = (uniforms.len() as u64).next_power_of_two();
+            self.draw_buffer = draw_buffer(&gpu.device, self.draw_capacity);
+            self.groups.clear();
+        }
+        self.make_groups(gpu);
+        let mut bytes = vec![0u8; uniforms.len() * DRAW_STRIDE as usize];
+        for (k, u) in uniforms.iter().enumerate() {
+            let at = k * DRAW_STRIDE as usize;
+            bytes[at..at + std::mem::size_of::<DrawUniform>()]
+                .copy_from_slice(bytemuck::bytes_of(u));
+        }
+        gpu.queue.write_buffer(&self.draw_buffer, 0, &bytes);
+    }
+
+    /// Makes the draw groups this frame's items need (their slots' views, or the fallback).
+    fn make_groups(&mut self, gpu: &Gpu) {
+        for item in &self.items {
+            if self.groups.contains_key(&item.slots) {
+                continue;
+            }
+            let views = item.slots.map(|s| {
+                s.and_then(|s| self.gpu_tex.view(s))
+                    .unwrap_or(&self.gpu_tex.fallback)
+            });
+            let group = draw_group(
+                &gpu.device,
+                &self.draw_layout,
+                &self.draw_buffer,
+                views,
+                &self.gpu_tex.sampler,
+            );
+            self.groups.insert(item.slots, group);
+        }
+    }
+
+    /// After the frame's texture plan: each textured draw's resident levels (or -1 and the
+    /// textures' mean colours), the debug tint flag, and its slots.
+    fn texture_levels(&mut self, uniforms: &mut [DrawUniform], mip_view: bool) {
+        for (item, u) in self.items.iter_mut().zip(uniforms.iter_mut()) {
+            let inst = &self.set.instances[item.instance as usize];
+            let Some(textures) = inst.textures else {
+                continue;
+            };
+            let resident = textures.map(|t| self.tex_pool.resident(t));
+            item.slots = resident.map(|r| r.map(|(slot, _)| slot));
+            let level = |k: usize| resident[k].map_or(-1.0, |(_, l)| l as f32);
+            u.tex = [level(0), level(1), f32::from(u8::from(mip_view)), 0.0];
+            if u.fade[3] < 0.5 {
+                let [f, r] = textures.map(|t| self.tex_means[t as usize]);
+                u.albedo = [f[0], f[1], f[2], 1.0];
+                u.roof_albedo = [r[0], r[1], r[2], 1.0];
+            } else {
+                // Coloured by LOD: no textures.
+                u.tex = [-1.0, -1.0, 0.0, 0.0];
+            }
+        }
+    }
+
+    /// The texture cache's statistics of the last frame.
+    pub fn texture_stats(&self) -> crate::texcache::pool::PoolStats {
+        *self.tex_pool.stats()
     }
 }
 

@@ -373,9 +373,11 @@ fn an_object_in_a_cliff_shadow_is_darker_than_one_in_the_sun() {
             position_m: DVec3::new(x, y, 0.0),
             yaw_rad: 0.0,
             scale,
+            textures: None,
         };
         let set = Arc::new(ObjectSet {
             models: vec![model],
+            textures: Vec::new(),
             instances: vec![at(cliff_x - 150.0), at(cliff_x - 50.0)],
         });
         let mut v = objects_viewer(&g, &world, set, with_lighting, 2.0);

@@ -171,7 +171,11 @@ fn ground_is_flat_and_bare_under_houses() {
 #[test]
 fn house_meshes_fill_their_footprints() {
     let world = tiny_world();
-    let set = ObjectSet::from_buildings(&world.map.buildings, &world.map.building_models);
+    let set = ObjectSet::from_buildings(
+        &world.map.buildings,
+        &world.map.building_models,
+        &world.map.building_textures,
+    );
     assert_eq!(set.instances.len(), world.map.buildings.len());
     for (inst, b) in set.instances.iter().zip(&world.map.buildings) {
         let model = &set.models[inst.model as usize];
@@ -350,4 +354,59 @@ fn malformed_building_rows_and_meshes_are_refused() {
         },
         &["buildings/house_5.pm", "house type house_5", "width_m"],
     );
+}
+
+/// The tiny map's town through the viewer (320 x 180): houses are drawn with their textures
+/// from the texture cache (every drawn texture resident after settling, at least 4x fewer
+/// bytes than at full resolution from 70 m), and the "colour by mip level" view turns the
+/// houses' pixels into strong tints.
+#[test]
+fn houses_draw_their_textures_from_the_cache() {
+    use engine::render::{COLOR_FORMAT, Target};
+    use tests::gpu::{device, settle, tiny_viewer};
+    let Some(g) = device() else { return };
+    let eye = DVec3::new(190.0, 215.0, 100.0);
+    let cam = engine::camera::Camera::look_at(
+        eye,
+        DVec3::new(243.0, 262.0, 71.0),
+        60f64.to_radians(),
+        [320, 180],
+    );
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let mut v = tiny_viewer(&g, 1.0);
+    let st = settle(&g, &mut v, &target, &cam);
+    let shaded = target.read_rgba(&g).expect("pixels");
+    assert!(st.object_draw_calls >= 5, "{st:?}");
+    assert!(st.texture_full_bytes > 0, "no textured house drawn");
+    assert_eq!(
+        st.texture_misses, 0,
+        "a drawn texture is not resident after settling"
+    );
+    let saving = st.texture_full_bytes as f64 / st.texture_resident_bytes as f64;
+    println!(
+        "town from 70 m: {} houses, {} KiB resident of {} KiB at full resolution ({saving:.1}x)",
+        st.object_draw_calls,
+        st.texture_resident_bytes >> 10,
+        st.texture_full_bytes >> 10
+    );
+    assert!(saving >= 4.0, "only {saving:.1}x saved");
+    v.view.texture_mip_view = true;
+    let st2 = settle(&g, &mut v, &target, &cam);
+    assert_eq!(st2.object_draw_calls, st.object_draw_calls);
+    let tinted = target.read_rgba(&g).expect("pixels");
+    let mut house_pixels = 0;
+    let mut saturated = 0;
+    for (a, b) in shaded.chunks(4).zip(tinted.chunks(4)) {
+        if a[..3] != b[..3] {
+            house_pixels += 1;
+            let (hi, lo) = (b[..3].iter().max().unwrap(), b[..3].iter().min().unwrap());
+            saturated += usize::from(hi - lo > 60);
+        }
+    }
+    println!("{house_pixels} pixels tinted, {saturated} of them strongly coloured");
+    assert!(
+        house_pixels > 300,
+        "only {house_pixels} pixels changed in the mip view"
+    );
+    assert!(saturated * 2 > house_pixels, "the mip tint is not visible");
 }

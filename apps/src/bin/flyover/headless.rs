@@ -127,7 +127,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 20] = [
+    let rows: [(&str, Vec<f64>); 23] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -185,6 +185,18 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "object triangles, % of full detail",
             col(|s| 100.0 * s.object_triangles as f64 / s.object_full_triangles.max(1) as f64),
+        ),
+        (
+            "texture cache resident MiB",
+            col(|s| s.texture_resident_bytes as f64 / f64::from(1 << 20)),
+        ),
+        (
+            "texture MiB if every drawn texture were full resolution",
+            col(|s| s.texture_full_bytes as f64 / f64::from(1 << 20)),
+        ),
+        (
+            "texture cache misses (drawn in the mean colour)",
+            col(|s| f64::from(s.texture_misses)),
         ),
         (
             "drawn nodes still without their light grid (drawn fully lit)",

@@ -164,6 +164,10 @@ pub(crate) struct Cli {
     /// Debug: colour objects by the share of their vertices drawn (blue coarse .. red full).
     #[arg(long)]
     pub(crate) pm_color_by_lod: bool,
+    /// Debug: tint textured objects (houses) by the mip level the texture cache holds for them
+    /// (red full resolution, orange, yellow, green, cyan, blue, violet coarser; grey none).
+    #[arg(long)]
+    pub(crate) texture_mip_view: bool,
 }
 
 fn fraction(s: &str) -> Result<f64, String> {
@@ -254,6 +258,7 @@ pub(crate) fn make_viewer(
         morph_s: cli.pm_morph_s.max(0.0),
     };
     viewer.view.pm_color_by_lod = cli.pm_color_by_lod;
+    viewer.view.texture_mip_view = cli.texture_mip_view;
     viewer.set_sun(cli.sun(), glam::DVec3::ZERO);
     Ok(viewer)
 }
@@ -296,7 +301,11 @@ fn objects_registration(
     let mut set = if cli.no_buildings {
         ObjectSet::default()
     } else {
-        ObjectSet::from_buildings(&world.map.buildings, &world.map.building_models)
+        ObjectSet::from_buildings(
+            &world.map.buildings,
+            &world.map.building_models,
+            &world.map.building_textures,
+        )
     };
     set.append(row);
     Ok(engine::kinds::Registration {

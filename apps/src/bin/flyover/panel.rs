@@ -82,6 +82,10 @@ pub(crate) fn panel(
         &mut view.pm_color_by_lod,
         "colour objects by LOD (blue coarse .. red full)",
     );
+    ui.checkbox(
+        &mut view.texture_mip_view,
+        "colour textured objects by mip level (red full .. violet coarse)",
+    );
     let mut pm_fixed = view.pm_lod.fixed_fraction.is_some();
     ui.checkbox(&mut pm_fixed, "fixed object LOD");
     if pm_fixed {
@@ -138,6 +142,17 @@ pub(crate) fn panel(
             s.object_triangles,
             100.0 * s.object_triangles as f64 / s.object_full_triangles.max(1) as f64,
             s.object_full_triangles
+        ));
+    }
+    if s.texture_full_bytes > 0 {
+        ui.label(format!(
+            "texture cache: {:.1} MiB resident, {:.1} MiB if every drawn texture were full resolution ({:.1}x saved), {} misses, {} uploads ({:.2} MiB) this frame",
+            s.texture_resident_bytes as f64 / f64::from(1 << 20),
+            s.texture_full_bytes as f64 / f64::from(1 << 20),
+            s.texture_full_bytes as f64 / s.texture_resident_bytes.max(1) as f64,
+            s.texture_misses,
+            s.texture_uploads,
+            s.texture_upload_bytes as f64 / f64::from(1 << 20),
         ));
     }
     ui.label(format!("nodes per level {:?}", s.nodes_per_level));
