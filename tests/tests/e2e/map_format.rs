@@ -235,19 +235,21 @@ fn malformed_layer_file_size_disagrees_with_manifest() {
 fn malformed_unknown_version() {
     let (_t, dir) = broken_copy();
     edit_manifest(&dir, |t| {
-        t.insert("version".into(), 3.into());
+        t.insert("version".into(), 4.into());
     });
-    let e = expect_error(&dir, "map.toml", &["version", "3"]);
+    let e = expect_error(&dir, "map.toml", &["version", "4"]);
     assert!(
-        matches!(e, MapError::UnknownVersion { found: 3, .. }),
+        matches!(e, MapError::UnknownVersion { found: 4, .. }),
         "{e:?}"
     );
-    // A version-1 map (before the Poisson tile) says so and how to fix it.
-    let (_t, dir) = broken_copy();
-    edit_manifest(&dir, |t| {
-        t.insert("version".into(), 1.into());
-    });
-    expect_error(&dir, "map.toml", &["version", "1", "regenerate"]);
+    // Older maps (version 1 before the Poisson tile, 2 before towns) say so and how to fix it.
+    for old in [1, 2] {
+        let (_t, dir) = broken_copy();
+        edit_manifest(&dir, |t| {
+            t.insert("version".into(), old.into());
+        });
+        expect_error(&dir, "map.toml", &["version", &old.to_string(), "regenerate"]);
+    }
 }
 
 #[test]

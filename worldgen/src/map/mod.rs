@@ -1,7 +1,7 @@
-//! Map format v2: a folder with a `map.toml` manifest and layer files.
+//! Map format v3: a folder with a `map.toml` manifest and layer files.
 //!
 //! ```text
-//! map.toml          manifest: format = "tvs-map", version = 2, world size, origin, seed, layers
+//! map.toml          manifest: format = "tvs-map", version = 3, world size, origin, seed, layers
 //! heights.exr       OpenEXR, one f32 channel "Y", metres above sea level
 //! ground.png        8-bit indexed PNG; the palette index is a ground type from the legend
 //! density_*.png     one 8-bit grayscale PNG per vegetation species; 0..255 = 0..max density
@@ -81,7 +81,7 @@ pub enum MapError {
     #[error(
         "{path}: field `version` is {found}, this build reads version {supported}; {}",
         if *found < i64::from(*supported) {
-            "regenerate the map with `worldgen generate` (version 2 added poisson.csv, the vegetation tile)"
+            "regenerate the map with `worldgen generate` (version 2 added poisson.csv, the vegetation tile; version 3 towns: house rows, meshes and textures, house pads)"
         } else {
             "upgrade the engine or regenerate the map"
         }
