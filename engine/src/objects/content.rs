@@ -44,13 +44,7 @@ impl ContentKind for ObjectsContent {
                     .instances
                     .iter()
                     .enumerate()
-                    .filter(|(_, i)| {
-                        let p = i.position_m;
-                        p.x >= rect.min[0]
-                            && p.x < rect.max[0]
-                            && p.y >= rect.min[1]
-                            && p.y < rect.max[1]
-                    })
+                    .filter(|(_, i)| rect.contains(i.position_m.x, i.position_m.y))
                     .map(|(k, _)| k as u32)
                     .collect();
                 if !instances.is_empty() {

@@ -5,6 +5,7 @@
 //! - [`set`]: models (`.pm`, or built from `.obj` / glTF at start-up) and placed instances.
 //! - [`content`]: the `objects` kind (a node's payload: the instances inside it).
 //! - [`lod`]: the level per instance (proven against rendered silhouettes in tests/e2e/pm.rs).
+//! - [`texturing`]: what the texture cache is asked for each drawn textured instance.
 //!
 //! The renderer (`render::objects`) keeps one index list per drawn instance, edited level by
 //! level (seed 000's per-instance triangle lists), and geomorphs level changes over
@@ -13,3 +14,4 @@
 pub mod content;
 pub mod lod;
 pub mod set;
+pub mod texturing;

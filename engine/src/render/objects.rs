@@ -16,8 +16,8 @@ use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::lod::{Choice, choose};
 use crate::objects::set::{ObjectSet, PmModel, ROOF_NORMAL_UP, model_to_world};
+use crate::objects::texturing;
 use crate::stream::Shared;
-use crate::texcache::mip::{level_for, px_per_m, texel_m};
 use crate::texcache::pool::{PoolSettings, SlotId, TexturePool};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
@@ -246,35 +246,6 @@ fn draw_group(
     })
 }
 
-/// Per model, the longest edge (model units) of one unit of texture coordinate, over the
-/// faces that take the facade texture and over those that take the roof's (0 without UVs):
-/// a texture's MipMapFactor is this times the instance's scale over its edge in texels.
-fn units_per_texture(model: &PmModel) -> [f64; 2] {
-    let pm = &model.pm;
-    if pm.uvs.is_empty() {
-        return [0.0; 2];
-    }
-    let positions: Vec<[f32; 3]> = pm
-        .wedge_position
-        .iter()
-        .map(|&p| pm.positions[p as usize])
-        .collect();
-    let tile = worldgen::house_textures::TILE_M as f32;
-    let uvs: Vec<[f32; 2]> = pm.uvs.iter().map(|uv| uv.map(|c| c / tile)).collect();
-    let (mut facade, mut roof) = (Vec::new(), Vec::new());
-    for t in &pm.triangles {
-        let p = t.map(|w| glam::Vec3::from(positions[w as usize]));
-        // Model space is Y-up.
-        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-        if n.y > ROOF_NORMAL_UP {
-            roof.push(*t);
-        } else {
-            facade.push(*t);
-        }
-    }
-    [facade, roof].map(|tris| texel_m(&positions, &uvs, &tris, 1).unwrap_or(0.0))
-}
-
 fn morph_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
@@ -383,17 +354,12 @@ impl ObjectsRenderer {
         let draw_capacity = 64;
         let draw_buffer = draw_buffer(device, draw_capacity);
         let mut tex_pool = TexturePool::new(PoolSettings::default());
-        let tex_means = set
-            .textures
+        let tex_means = texturing::register(&mut tex_pool, &set);
+        let units_per_texture = set
+            .models
             .iter()
-            .map(|chain| {
-                // Edges outside the pool's sizes are refused when the map loads.
-                let _ = tex_pool.add_texture(chain.edge_log2);
-                let last = chain.levels.last().map_or(&[128u8; 4][..], |l| &l[..]);
-                [0, 1, 2].map(|c| crate::color::srgb_to_linear(last[c]) as f32)
-            })
+            .map(texturing::units_per_texture)
             .collect();
-        let units_per_texture = set.models.iter().map(units_per_texture).collect();
         ObjectsRenderer {
             set,
             pipeline,
@@ -500,7 +466,14 @@ impl NodeRenderer for ObjectsRenderer {
                     continue;
                 }
                 let distance_m = (c - camera.position_m).length() - r;
-                self.request_textures(camera, id, c, r);
+                texturing::request_instance(
+                    &mut self.tex_pool,
+                    &set,
+                    &self.units_per_texture,
+                    camera,
+                    id,
+                    (c, r),
+                );
                 let choice = choose(model, &settings, draws.tau_px, distance_m, k_px, inst.scale);
                 let full = model.pm.triangles.len();
                 let drawn_model = model.option(choice.option);
@@ -666,25 +639,6 @@ impl NodeRenderer for ObjectsRenderer {
 }
 
 impl ObjectsRenderer {
-    /// Asks the texture cache for each texture of instance `id` (bounded by the ball `c`, `r`)
-    /// at the level it needs there; its importance is the instance's on-screen area.
-    fn request_textures(&mut self, camera: &crate::camera::Camera, id: u32, c: DVec3, r: f64) {
-        let inst = &self.set.instances[id as usize];
-        let (Some(textures), Some(ppm)) = (inst.textures, px_per_m(camera, c, r)) else {
-            return;
-        };
-        let screen_px = f64::from(camera.viewport_px[0]) * f64::from(camera.viewport_px[1]);
-        let area_px = (r * ppm).powi(2).min(screen_px);
-        let units = self.units_per_texture[inst.model as usize];
-        for (k, &t) in textures.iter().enumerate() {
-            let edge = f64::from(self.set.textures[t as usize].edge(0));
-            let texel = units[k] * inst.scale / edge;
-            let coarsest = self.tex_pool.coarsest_level(t);
-            self.tex_pool
-                .request(t, level_for(texel, ppm, coarsest), area_px);
-        }
-    }
-
     /// Writes the draw uniforms (growing the buffer when needed) and makes the draw groups.
     fn write_uniforms(&mut self, gpu: &Gpu, uniforms: &[DrawUniform]) {
         if uniforms.is_empty() {

@@ -94,6 +94,14 @@ pub struct Rect {
     pub max: [f64; 2],
 }
 
+impl Rect {
+    /// Whether (`x_m`, `y_m`) lies in the half-open rectangle (min included, max excluded), so
+    /// a point belongs to one node of a level.
+    pub fn contains(&self, x_m: f64, y_m: f64) -> bool {
+        x_m >= self.min[0] && x_m < self.max[0] && y_m >= self.min[1] && y_m < self.max[1]
+    }
+}
+
 impl World {
     /// Opens `map`, computing the map-error grids ([`super::map_error`]) on all cores (seconds
     /// on an 8 km map; [`World::with_error_cache`] keeps them in a file).

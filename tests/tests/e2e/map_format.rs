@@ -248,7 +248,11 @@ fn malformed_unknown_version() {
         edit_manifest(&dir, |t| {
             t.insert("version".into(), old.into());
         });
-        expect_error(&dir, "map.toml", &["version", &old.to_string(), "regenerate"]);
+        expect_error(
+            &dir,
+            "map.toml",
+            &["version", &old.to_string(), "regenerate"],
+        );
     }
 }
 

@@ -1,6 +1,7 @@
 //! `nodebench`: the headless node-generation benchmark. Prints Markdown tables, optionally writes
 //! JSON rows and a speed-against-error plot. See `--help`. One file per section.
 
+mod buildings;
 mod error;
 mod gpu;
 mod lighting;
@@ -23,7 +24,7 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 10] = [
+const SECTIONS: [&str; 11] = [
     "tiles",
     "terrain",
     "selection",
@@ -31,6 +32,7 @@ const SECTIONS: [&str; 10] = [
     "vegetation",
     "lighting",
     "pm",
+    "buildings",
     "streaming",
     "gpu",
     "textures",
@@ -47,7 +49,10 @@ const SECTIONS: [&str; 10] = [
 /// `lighting` (light grids: sky and sun visibility against a ray-marched reference, computation
 /// time and bytes per grid, relighting the flight's grids after a sun change), `pm` (progressive
 /// meshes on the shared meshes: build throughput of each cost and of meshoptimizer, measured
-/// error at 50/10/1/0.1 % of the triangles, index rebuild rates, bytes per triangle), `streaming`
+/// error at 50/10/1/0.1 % of the triangles, index rebuild rates, bytes per triangle), `buildings`
+/// (towns: generation time, houses per node, house triangles at tau 2 against full detail, the
+/// texture cache's resident bytes against full resolution and its misses, on the benchmark
+/// flight and an orbit of the largest town), `streaming`
 /// (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
 /// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
@@ -63,7 +68,7 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// lighting, pm, streaming, gpu, textures.
+    /// lighting, pm, buildings, streaming, gpu, textures.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -162,6 +167,9 @@ fn run(cli: &Cli) -> Result<()> {
             Ok(()) => {}
             Err(e) => eprintln!("warning: pm plot not written: {e:#}"),
         }
+    }
+    if want("buildings") {
+        buildings::section_buildings(&world, &tree, &cams, &mut report, cli.quick);
     }
     // One adapter for the sections that use it (streaming renders ground textures with it).
     let adapter = if want("streaming") || want("gpu") || want("textures") {

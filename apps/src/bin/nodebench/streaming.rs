@@ -127,6 +127,10 @@ impl<'g> Flight<'g> {
     }
 }
 
+/// One streaming run: flight (speed m/s, height m), workers, ground textures, light grids,
+/// houses.
+type Run = ((f64, f64), usize, bool, bool, bool);
+
 pub(crate) fn section_streaming(
     world_path: &std::path::Path,
     r: &mut Report,
@@ -148,18 +152,21 @@ pub(crate) fn section_streaming(
     for busy in [0].into_iter().chain(worker_counts.iter().copied()) {
         scheduling_noise(r, frames, dt, busy);
     }
-    // Every flight with 1 and N workers, ground textures and light grids on; and with 1
-    // worker, ground textures off with light grids on and off.
-    let runs: Vec<((f64, f64), usize, bool, bool)> = FLIGHTS
+    // Every flight with 1 and N workers, ground textures, light grids and the map's houses on;
+    // with 1 worker, ground textures off with light grids on and off, and (on a map with
+    // towns) the houses off.
+    let houses = open_world(world_path)?.map.buildings.len();
+    let runs: Vec<Run> = FLIGHTS
         .iter()
         .flat_map(|&f| {
             worker_counts
                 .iter()
-                .map(move |&w| (f, w, true, true))
-                .chain([(f, 1, false, true), (f, 1, false, false)])
+                .map(move |&w| (f, w, true, true, true))
+                .chain([(f, 1, false, true, true), (f, 1, false, false, true)])
+                .chain((houses > 0).then_some((f, 1, true, true, false)))
         })
         .collect();
-    for (flight, workers, textures, lighting) in runs {
+    for (flight, workers, textures, lighting, towns) in runs {
         let (speed, above) = flight;
         let world = open_world(world_path)?;
         let cams: Vec<Camera> = (0..frames)
@@ -190,6 +197,9 @@ pub(crate) fn section_streaming(
         }
         if !lighting {
             kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+        }
+        if !towns {
+            kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
         }
         let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
         // Warm start at the first camera, as after loading.
@@ -237,9 +247,16 @@ pub(crate) fn section_streaming(
         let cancelled =
             s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
         let params = format!(
-            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), light \
-             grids {}, ground textures {}",
+            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), houses \
+             {}, light grids {}, ground textures {}",
             s.settings.workers,
+            if !towns {
+                "off".to_string()
+            } else if houses == 0 {
+                "none on this map".to_string()
+            } else {
+                format!("on ({houses})")
+            },
             if lighting { "on" } else { "off" },
             match (textures, gpu) {
                 (false, _) => "off".to_string(),
