@@ -23,7 +23,7 @@ struct Draw {
     base_rel: vec4<f32>,
     // Texture cache (issue 19): x, y the mip level resident for the facade and the roof
     // texture (-1: none, the mean colours in `albedo` and `roof_albedo` stand in); z 1 to tint
-    // by that level (debug view).
+    // by that level (debug view); w 1 for a merged far mesh (the vertices carry the colour).
     tex: vec4<f32>,
     // rgb: the roof's albedo where no roof texture level is resident.
     roof_albedo: vec4<f32>,
@@ -101,6 +101,30 @@ fn mip_color(level: f32) -> vec3<f32> {
     return colors[min(u32(level), 6u)];
 }
 
+// A node's merged far mesh (HLOD): node-relative positions, flat normals, vertex colours.
+struct HlodIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec3<f32>,
+};
+
+@vertex
+fn vs_hlod(v: HlodIn) -> ObjectOut {
+    var out: ObjectOut;
+    let rel = (draw.rel_from_model * vec4<f32>(v.position, 1.0)).xyz;
+    out.rel = rel;
+    out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.normal = v.normal;
+    out.albedo = v.color;
+    out.fade = draw.fade.xyz;
+    var node: Node;
+    node.light = draw.light;
+    let local = draw.base_local.xy + (rel.xy - draw.base_rel.xy);
+    out.light = light_at(light_coords(node, local, max(rel.z - draw.base_rel.z, 0.0)));
+    out.uv = vec2<f32>(0.0);
+    return out;
+}
+
 @fragment
 fn fs_main(in: ObjectOut) -> @location(0) vec4<f32> {
     // Both sampled in uniform control flow; the face's normal picks one.
@@ -112,6 +136,9 @@ fn fs_main(in: ObjectOut) -> @location(0) vec4<f32> {
     var albedo = select(in.albedo, draw.roof_albedo.rgb, up);
     if (level >= 0.0) {
         albedo = select(facade, roof, up);
+    }
+    if (draw.tex.w > 0.5) {
+        albedo = in.albedo;
     }
     if (draw.tex.z > 0.5) {
         albedo = mip_color(level);

@@ -63,6 +63,8 @@ pub struct FrameStats {
     pub object_full_triangles: u64,
     /// Objects drawn from an artist (`MSFT_lod`) chain level instead of the base mesh.
     pub object_chain_draws: u32,
+    /// Of the object draws: merged far meshes of a node's houses (HLOD).
+    pub object_hlod_draws: u32,
     /// The texture cache: resident bytes, bytes at full resolution of the drawn textures,
     /// misses (drawn textures with nothing resident), uploads and their bytes this frame.
     pub texture_resident_bytes: u64,
@@ -300,6 +302,7 @@ impl Viewer {
             object_triangles: stats.object_triangles,
             object_full_triangles: stats.object_full_triangles,
             object_chain_draws: stats.object_chain_draws,
+            object_hlod_draws: stats.object_hlod_draws,
             texture_resident_bytes: stats.texture_resident_bytes,
             texture_full_bytes: stats.texture_full_bytes,
             texture_misses: stats.texture_misses,

@@ -42,13 +42,20 @@ pub fn units_per_texture(model: &PmModel) -> [f64; 2] {
 }
 
 /// Registers every texture of `set` with `pool` (texture ids are indices into
-/// `set.textures`) and returns each texture's mean linear colour (its 1 x 1 level).
+/// `set.textures`) and returns each texture's mean linear colour ([`mean_colors`]).
 pub fn register(pool: &mut TexturePool, set: &ObjectSet) -> Vec<[f32; 3]> {
+    for chain in &set.textures {
+        // Edges outside the pool's sizes are refused when the map loads.
+        let _ = pool.add_texture(chain.edge_log2);
+    }
+    mean_colors(set)
+}
+
+/// Each texture's mean linear colour: its 1 x 1 mip level.
+pub fn mean_colors(set: &ObjectSet) -> Vec<[f32; 3]> {
     set.textures
         .iter()
         .map(|chain| {
-            // Edges outside the pool's sizes are refused when the map loads.
-            let _ = pool.add_texture(chain.edge_log2);
             let last = chain.levels.last().map_or(&[128u8; 4][..], |l| &l[..]);
             [0, 1, 2].map(|c| crate::color::srgb_to_linear(last[c]) as f32)
         })

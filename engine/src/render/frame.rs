@@ -50,6 +50,9 @@ pub struct ViewOptions {
     /// Debug view: textured objects tinted by the mip level resident in the texture cache
     /// (red full resolution, then orange, yellow, green, cyan, blue, violet coarser).
     pub texture_mip_view: bool,
+    /// Draw a node's merged far mesh of its houses where the pixel metric accepts it (HLOD);
+    /// off: every house on its own.
+    pub hlod: bool,
 }
 
 /// Debug views of the ground.
@@ -111,6 +114,7 @@ impl Default for ViewOptions {
             pm_lod: crate::objects::lod::PmLodSettings::default(),
             pm_color_by_lod: false,
             texture_mip_view: false,
+            hlod: true,
         }
     }
 }
@@ -139,6 +143,8 @@ pub struct DrawStats {
     pub object_full_triangles: u64,
     /// Objects drawn from an `MSFT_lod` chain level.
     pub object_chain_draws: u32,
+    /// Of the object draws: merged far meshes of a node's houses (HLOD).
+    pub object_hlod_draws: u32,
     /// The texture cache (issue 19): bytes of the slots holding textures, bytes the drawn
     /// textures would take at full resolution, drawn textures with no level resident (drawn in
     /// their mean colour), uploads and bytes uploaded this frame.

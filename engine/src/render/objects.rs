@@ -14,6 +14,7 @@ use super::lighting::light_entry;
 use super::scene::{FrameDraws, NodeRenderer};
 use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
+use crate::objects::hlod;
 use crate::objects::lod::{Choice, choose};
 use crate::objects::set::{ObjectSet, PmModel, ROOF_NORMAL_UP, model_to_world};
 use crate::objects::texturing;
@@ -158,6 +159,15 @@ struct DrawItem {
     full_triangles: u32,
     /// The slots of its facade and roof textures (None: the white fallback).
     slots: [Option<SlotId>; 2],
+    /// A merged far mesh: the index of its node in the frame's drawn nodes.
+    hlod: Option<usize>,
+}
+
+/// A node's merged far mesh on the GPU.
+struct HlodGpu {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
 }
 
 /// Per-frame statistics of the objects.
@@ -169,11 +179,16 @@ pub struct ObjectStats {
     pub full_triangles: u64,
     /// Index lists rewritten this frame (level changes).
     pub level_changes: u32,
+    /// Merged far meshes drawn and the houses they stood for.
+    pub hlod_draws: u32,
+    pub hlod_instances: u32,
 }
 
 pub struct ObjectsRenderer {
     set: Arc<ObjectSet>,
     pipeline: wgpu::RenderPipeline,
+    /// Merged far meshes: per-vertex colour, no morph.
+    pipeline_hlod: wgpu::RenderPipeline,
     /// Per model, per chain option (0 the base).
     vertex_buffers: Vec<Vec<wgpu::Buffer>>,
     draw_layout: wgpu::BindGroupLayout,
@@ -328,7 +343,21 @@ impl ObjectsRenderer {
             &buffers,
             frame.color_format,
         );
-        let pipeline = pipeline(device, &module, &layout, &spec);
+        let pipeline_objects = pipeline(device, &module, &layout, &spec);
+        let hlod_attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
+        let hlod_buffers = [Some(wgpu::VertexBufferLayout {
+            array_stride: 36,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &hlod_attrs,
+        })];
+        let hlod_spec = PipelineSpec::triangles(
+            "objects hlod",
+            "vs_hlod",
+            "fs_main",
+            &hlod_buffers,
+            frame.color_format,
+        );
+        let pipeline_hlod = pipeline(device, &module, &layout, &hlod_spec);
         let vertex_buffers = set
             .models
             .iter()
@@ -362,7 +391,8 @@ impl ObjectsRenderer {
             .collect();
         ObjectsRenderer {
             set,
-            pipeline,
+            pipeline: pipeline_objects,
+            pipeline_hlod,
             vertex_buffers,
             draw_layout,
             morph_layout,
@@ -385,6 +415,7 @@ impl ObjectsRenderer {
     pub fn morphs(&self) -> Vec<(u32, f32)> {
         self.items
             .iter()
+            .filter(|i| i.hlod.is_none())
             .filter_map(|i| Some((i.instance, self.instances[&i.instance].morph?.t)))
             .collect()
     }
@@ -394,6 +425,7 @@ impl ObjectsRenderer {
         let mut v: Vec<(u32, usize)> = self
             .items
             .iter()
+            .filter(|i| i.hlod.is_none())
             .map(|i| (i.instance, self.instances[&i.instance].lod.level()))
             .collect();
         v.sort_unstable();
@@ -405,6 +437,7 @@ impl ObjectsRenderer {
         let mut v: Vec<(u32, Choice)> = self
             .items
             .iter()
+            .filter(|i| i.hlod.is_none())
             .map(|i| {
                 let inst = &self.instances[&i.instance];
                 (
@@ -437,6 +470,41 @@ impl NodeRenderer for ObjectsRenderer {
         "objects"
     }
 
+    /// A node's merged far mesh, when it has one, goes to the GPU with the node.
+    fn upload(
+        &mut self,
+        gpu: &Gpu,
+        _frame: &FrameResources,
+        _tree: &crate::terrain::quadtree::QuadTree,
+        work: &mut crate::stream::NodeWork,
+    ) -> usize {
+        let Some(h) = work.get::<NodeObjects>().and_then(|o| o.hlod.as_ref()) else {
+            return 0;
+        };
+        let vertices = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("object hlod vertices"),
+                contents: bytemuck::cast_slice(&h.vertices),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+        let indices = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("object hlod indices"),
+                contents: bytemuck::cast_slice(&h.indices),
+                usage: wgpu::BufferUsages::INDEX,
+            });
+        let bytes = h.vertices.len() * 36 + h.indices.len() * 4;
+        let index_count = h.indices.len() as u32;
+        work.gpu.put(HlodGpu {
+            vertices,
+            indices,
+            index_count,
+        });
+        bytes
+    }
+
     fn prepare(&mut self, gpu: &Gpu, _frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.frame_no += 1;
         self.items.clear();
@@ -448,12 +516,15 @@ impl NodeRenderer for ObjectsRenderer {
         // The instances and models (a second handle, so the texture cache can be asked while
         // they are borrowed).
         let set = Arc::clone(&self.set);
-        for node in draws.drawn {
+        for (node_index, node) in draws.drawn.iter().enumerate() {
             let Some(objects) = node.work.get::<NodeObjects>() else {
                 continue;
             };
             // Objects are lit by the drawing node's light grid (sky and sun visibility).
             let light = light_entry(draws.tree, node.work);
+            if self.hlod_item(draws, node_index, objects, light, &mut uniforms) {
+                continue;
+            }
             let corner = draws.tree.rect(node.key).min;
             for &id in &objects.instances {
                 let inst = &set.instances[id as usize];
@@ -573,6 +644,7 @@ impl NodeRenderer for ObjectsRenderer {
                     index_count: indices.len() as u32,
                     full_triangles: full as u32,
                     slots: [None; 2],
+                    hlod: None,
                 });
                 self.stats.instances_drawn += 1;
                 self.stats.triangles += indices.len() as u64 / 3;
@@ -597,17 +669,36 @@ impl NodeRenderer for ObjectsRenderer {
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         _frame: &FrameResources,
-        _draws: &FrameDraws<'_>,
+        draws: &FrameDraws<'_>,
         stats: &mut DrawStats,
     ) {
         if self.items.is_empty() {
             return;
         }
-        pass.set_pipeline(&self.pipeline);
         for (k, item) in self.items.iter().enumerate() {
+            if let Some(node_index) = item.hlod {
+                let (Some(mesh), Some(group)) = (
+                    draws.drawn[node_index].work.gpu.get::<HlodGpu>(),
+                    self.groups.get(&item.slots),
+                ) else {
+                    continue;
+                };
+                pass.set_pipeline(&self.pipeline_hlod);
+                pass.set_bind_group(2, group, &[(k as u64 * DRAW_STRIDE) as u32]);
+                pass.set_bind_group(3, &self.no_morph, &[]);
+                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+                stats.object_draw_calls += 1;
+                stats.object_hlod_draws += 1;
+                stats.object_triangles += u64::from(mesh.index_count / 3);
+                stats.object_full_triangles += u64::from(item.full_triangles);
+                continue;
+            }
             let Some(inst) = self.instances.get(&item.instance) else {
                 continue;
             };
+            pass.set_pipeline(&self.pipeline);
             let Some(group) = self.groups.get(&item.slots) else {
                 continue;
             };
@@ -639,6 +730,70 @@ impl NodeRenderer for ObjectsRenderer {
 }
 
 impl ObjectsRenderer {
+    /// Draws node `node_index`'s merged far mesh instead of its houses when it has one on the
+    /// GPU, the view allows it and the pixel metric accepts its error ([`hlod::accepts`]).
+    fn hlod_item(
+        &mut self,
+        draws: &FrameDraws<'_>,
+        node_index: usize,
+        objects: &NodeObjects,
+        light: [f32; 4],
+        uniforms: &mut Vec<DrawUniform>,
+    ) -> bool {
+        let node = &draws.drawn[node_index];
+        let camera = draws.camera;
+        let (Some(h), Some(gpu_mesh)) = (&objects.hlod, node.work.gpu.get::<HlodGpu>()) else {
+            return false;
+        };
+        if !draws.view.hlod
+            || !hlod::accepts(
+                h,
+                &draws.view.pm_lod,
+                draws.tau_px,
+                camera.position_m,
+                camera.k_px(),
+            )
+        {
+            return false;
+        }
+        if !draws.frustum.intersects_aabb(h.lo_m, h.hi_m) {
+            return true;
+        }
+        let rel = (h.origin_m - camera.position_m).as_vec3();
+        uniforms.push(DrawUniform {
+            rel_from_model: glam::Mat4::from_translation(rel).to_cols_array_2d(),
+            normal_from_model: glam::Mat4::IDENTITY.to_cols_array_2d(),
+            fade: [
+                node.dither[0],
+                node.dither[1],
+                f32::from(node.key.level),
+                0.0,
+            ],
+            albedo: [1.0; 4],
+            morph: [0.0; 4],
+            light,
+            base_local: [0.0; 4],
+            base_rel: rel.extend(0.0).to_array(),
+            // Vertex colours (w = 1), no texture level.
+            tex: [-1.0, -1.0, 0.0, 1.0],
+            roof_albedo: [1.0; 4],
+        });
+        self.items.push(DrawItem {
+            instance: 0,
+            model: 0,
+            option: 0,
+            index_count: gpu_mesh.index_count,
+            full_triangles: h.full_triangles as u32,
+            slots: [None; 2],
+            hlod: Some(node_index),
+        });
+        self.stats.hlod_draws += 1;
+        self.stats.hlod_instances += h.instances as u32;
+        self.stats.triangles += u64::from(gpu_mesh.index_count / 3);
+        self.stats.full_triangles += h.full_triangles as u64;
+        true
+    }
+
     /// Writes the draw uniforms (growing the buffer when needed) and makes the draw groups.
     fn write_uniforms(&mut self, gpu: &Gpu, uniforms: &[DrawUniform]) {
         if uniforms.is_empty() {
@@ -684,6 +839,9 @@ impl ObjectsRenderer {
     /// textures' mean colours), the debug tint flag, and its slots.
     fn texture_levels(&mut self, uniforms: &mut [DrawUniform], mip_view: bool) {
         for (item, u) in self.items.iter_mut().zip(uniforms.iter_mut()) {
+            if item.hlod.is_some() {
+                continue;
+            }
             let inst = &self.set.instances[item.instance as usize];
             let Some(textures) = inst.textures else {
                 continue;

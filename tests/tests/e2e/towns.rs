@@ -410,3 +410,107 @@ fn houses_draw_their_textures_from_the_cache() {
     );
     assert!(saturated * 2 > house_pixels, "the mip tint is not visible");
 }
+
+/// A wide node's merged far mesh (HLOD) of the tiny map's houses stays within its error budget
+/// of the houses at full detail (two-sided Hausdorff bound measured by worldgen's sampling,
+/// not by the levels' stored errors) with far fewer triangles.
+#[test]
+fn merged_far_meshes_stay_within_their_budget() {
+    use engine::objects::hlod;
+    use worldgen::pm::measure::hausdorff_bound;
+    let world = tiny_world();
+    let set = ObjectSet::from_buildings(
+        &world.map.buildings,
+        &world.map.building_models,
+        &world.map.building_textures,
+    );
+    let means = engine::objects::texturing::mean_colors(&set);
+    for side_m in [128.0, 256.0, 512.0] {
+        let budget = hlod::error_budget_m(side_m);
+        // The town of the first house.
+        let first = set.instances[0].position_m;
+        let ids: Vec<u32> = (0..set.instances.len() as u32)
+            .filter(|&i| (set.instances[i as usize].position_m - first).length() < 80.0)
+            .collect();
+        let h = hlod::build(&set, &ids, [0.0, 0.0], budget, &means).expect("houses");
+        let merged: Vec<[glam::DVec3; 3]> = h
+            .indices
+            .chunks_exact(3)
+            .map(|t| {
+                [t[0], t[1], t[2]].map(|i| {
+                    h.origin_m + glam::Vec3::from_slice(&h.vertices[i as usize][..3]).as_dvec3()
+                })
+            })
+            .collect();
+        let full: Vec<[glam::DVec3; 3]> = ids
+            .iter()
+            .map(|&i| &set.instances[i as usize])
+            .flat_map(|inst| {
+                let model = &set.models[inst.model as usize];
+                let pm = &model.pm;
+                pm.triangles
+                    .iter()
+                    .map(move |t| {
+                        t.map(|w| {
+                            let q = pm.positions[pm.wedge_position[w as usize] as usize];
+                            model_to_world(DVec3::from(q.map(f64::from)), inst, model)
+                        })
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let spacing = 0.1;
+        let d = hausdorff_bound(&full, &merged, spacing);
+        println!(
+            "{side_m} m node: {} of {} triangles, Hausdorff bound {d:.3} m, budget {budget} m",
+            merged.len(),
+            h.full_triangles
+        );
+        // The bound adds the samples' covering radius (under the spacing) to the true distance.
+        assert!(d <= budget + spacing, "{d} m over the budget {budget} m");
+        assert!(
+            merged.len() * 4 < h.full_triangles,
+            "{} triangles",
+            merged.len()
+        );
+    }
+}
+
+/// From far away the tiny map's houses are drawn as their nodes' merged far meshes (HLOD):
+/// fewer draws than with every house on its own, and the same picture up to the metric's
+/// threshold along the houses' outlines (the frames' mean channel difference is small; the
+/// merged meshes take the textures' mean colours).
+#[test]
+fn far_houses_draw_as_merged_meshes() {
+    use engine::render::{COLOR_FORMAT, Target};
+    use tests::gpu::{device, settle};
+    let Some(g) = device() else { return };
+    let town = DVec3::new(240.0, 260.0, 72.0);
+    let eye = town + DVec3::new(-520.0, -380.0, 220.0);
+    let cam = engine::camera::Camera::look_at(eye, town, 40f64.to_radians(), [480, 270]);
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let mut v = tests::gpu::viewer(&g, tiny_world(), 2.0);
+    let merged = settle(&g, &mut v, &target, &cam);
+    let a = target.read_rgba(&g).expect("pixels");
+    v.view.hlod = false;
+    let single = settle(&g, &mut v, &target, &cam);
+    let b = target.read_rgba(&g).expect("pixels");
+    let diff: u64 = a
+        .chunks(4)
+        .zip(b.chunks(4))
+        .map(|(p, q)| (0..3).map(|c| u64::from(p[c].abs_diff(q[c]))).sum::<u64>())
+        .sum();
+    let mean = diff as f64 / (a.len() / 4 * 3) as f64;
+    println!(
+        "far town: merged {} draws ({} HLOD), {} triangles; single {} draws, {} triangles; mean difference {mean:.3} / 255",
+        merged.object_draw_calls,
+        merged.object_hlod_draws,
+        merged.object_triangles,
+        single.object_draw_calls,
+        single.object_triangles
+    );
+    assert!(merged.object_hlod_draws > 0, "{merged:?}");
+    assert_eq!(single.object_hlod_draws, 0);
+    assert!(merged.object_draw_calls < single.object_draw_calls);
+    assert!(mean < 1.0, "mean channel difference {mean} / 255");
+}

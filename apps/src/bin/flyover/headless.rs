@@ -127,7 +127,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 23] = [
+    let rows: [(&str, Vec<f64>); 24] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -181,6 +181,10 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "objects drawn (progressive meshes)",
             col(|s| f64::from(s.object_draw_calls)),
+        ),
+        (
+            "of those: merged far meshes of a node's houses (HLOD)",
+            col(|s| f64::from(s.object_hlod_draws)),
         ),
         (
             "object triangles, % of full detail",

@@ -168,6 +168,9 @@ pub(crate) struct Cli {
     /// (red full resolution, orange, yellow, green, cyan, blue, violet coarser; grey none).
     #[arg(long)]
     pub(crate) texture_mip_view: bool,
+    /// Draw every house on its own, also where a node's merged far mesh (HLOD) would do.
+    #[arg(long)]
+    pub(crate) no_hlod: bool,
 }
 
 fn fraction(s: &str) -> Result<f64, String> {
@@ -259,6 +262,7 @@ pub(crate) fn make_viewer(
     };
     viewer.view.pm_color_by_lod = cli.pm_color_by_lod;
     viewer.view.texture_mip_view = cli.texture_mip_view;
+    viewer.view.hlod = !cli.no_hlod;
     viewer.set_sun(cli.sun(), glam::DVec3::ZERO);
     Ok(viewer)
 }

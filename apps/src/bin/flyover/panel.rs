@@ -77,32 +77,7 @@ pub(crate) fn panel(
         "merged draws (off: one draw per item)",
     );
     ui.checkbox(&mut st_ui.occlusion, "split less behind dense vegetation");
-    ui.label("progressive-mesh objects:");
-    ui.checkbox(
-        &mut view.pm_color_by_lod,
-        "colour objects by LOD (blue coarse .. red full)",
-    );
-    ui.checkbox(
-        &mut view.texture_mip_view,
-        "colour textured objects by mip level (red full .. violet coarse)",
-    );
-    let mut pm_fixed = view.pm_lod.fixed_fraction.is_some();
-    ui.checkbox(&mut pm_fixed, "fixed object LOD");
-    if pm_fixed {
-        let mut f = view.pm_lod.fixed_fraction.unwrap_or(0.5);
-        ui.add(egui::Slider::new(&mut f, 0.0..=1.0).text("share of vertices"));
-        view.pm_lod.fixed_fraction = Some(f);
-    } else {
-        view.pm_lod.fixed_fraction = None;
-    }
-    ui.add(
-        egui::Slider::new(&mut view.pm_lod.strength, 0.1..=10.0)
-            .logarithmic(true)
-            .text("object LOD strength"),
-    );
-    ui.add(egui::Slider::new(&mut view.pm_lod.min_vertices, 1..=500).text("object min vertices"));
-    ui.add(egui::Slider::new(&mut view.pm_lod.z_disp_m, 0.0..=500.0).text("object ZDISP (m)"));
-    ui.add(egui::Slider::new(&mut view.pm_lod.morph_s, 0.0..=2.0).text("object geomorph (s)"));
+    object_controls(ui, view);
     ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
     ui.checkbox(&mut fixed, "fixed level");
     if fixed {
@@ -136,9 +111,10 @@ pub(crate) fn panel(
     ));
     if s.object_draw_calls > 0 {
         ui.label(format!(
-            "objects: {} drawn ({} from MSFT_lod chain levels), {} triangles ({:.1} % of {} at full detail)",
+            "objects: {} drawn ({} from MSFT_lod chain levels, {} merged far meshes), {} triangles ({:.1} % of {} at full detail)",
             s.object_draw_calls,
             s.object_chain_draws,
+            s.object_hlod_draws,
             s.object_triangles,
             100.0 * s.object_triangles as f64 / s.object_full_triangles.max(1) as f64,
             s.object_full_triangles
@@ -175,4 +151,38 @@ pub(crate) fn panel(
         s.unlit_nodes
     ));
     ui.label(extra);
+}
+
+/// The progressive-mesh objects' controls (level of detail, debug views, HLOD).
+fn object_controls(ui: &mut egui::Ui, view: &mut ViewOptions) {
+    ui.label("progressive-mesh objects:");
+    ui.checkbox(
+        &mut view.pm_color_by_lod,
+        "colour objects by LOD (blue coarse .. red full)",
+    );
+    ui.checkbox(
+        &mut view.hlod,
+        "merge far houses into one mesh per node (HLOD)",
+    );
+    ui.checkbox(
+        &mut view.texture_mip_view,
+        "colour textured objects by mip level (red full .. violet coarse)",
+    );
+    let mut pm_fixed = view.pm_lod.fixed_fraction.is_some();
+    ui.checkbox(&mut pm_fixed, "fixed object LOD");
+    if pm_fixed {
+        let mut f = view.pm_lod.fixed_fraction.unwrap_or(0.5);
+        ui.add(egui::Slider::new(&mut f, 0.0..=1.0).text("share of vertices"));
+        view.pm_lod.fixed_fraction = Some(f);
+    } else {
+        view.pm_lod.fixed_fraction = None;
+    }
+    ui.add(
+        egui::Slider::new(&mut view.pm_lod.strength, 0.1..=10.0)
+            .logarithmic(true)
+            .text("object LOD strength"),
+    );
+    ui.add(egui::Slider::new(&mut view.pm_lod.min_vertices, 1..=500).text("object min vertices"));
+    ui.add(egui::Slider::new(&mut view.pm_lod.z_disp_m, 0.0..=500.0).text("object ZDISP (m)"));
+    ui.add(egui::Slider::new(&mut view.pm_lod.morph_s, 0.0..=2.0).text("object geomorph (s)"));
 }
