@@ -70,6 +70,8 @@ pub struct FrameStats {
     pub texture_resident_bytes: u64,
     pub texture_full_bytes: u64,
     pub texture_misses: u32,
+    /// Drawn textures resident coarser than they need (a texel may be over a pixel).
+    pub texture_coarser: u32,
     pub texture_uploads: u32,
     pub texture_upload_bytes: u64,
     /// Of the vegetation instances: group-billboard quads (one per cluster of items).
@@ -306,6 +308,7 @@ impl Viewer {
             texture_resident_bytes: stats.texture_resident_bytes,
             texture_full_bytes: stats.texture_full_bytes,
             texture_misses: stats.texture_misses,
+            texture_coarser: stats.texture_coarser,
             texture_uploads: stats.texture_uploads,
             texture_upload_bytes: stats.texture_upload_bytes,
             group_billboards: stats.group_billboards,

@@ -151,6 +151,8 @@ pub struct DrawStats {
     pub texture_resident_bytes: u64,
     pub texture_full_bytes: u64,
     pub texture_misses: u32,
+    /// Drawn textures resident coarser than the level they need (budget or uploads short).
+    pub texture_coarser: u32,
     pub texture_uploads: u32,
     pub texture_upload_bytes: u64,
 }

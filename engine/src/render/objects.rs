@@ -724,6 +724,7 @@ impl NodeRenderer for ObjectsRenderer {
         stats.texture_resident_bytes += t.resident_bytes;
         stats.texture_full_bytes += t.full_resolution_bytes;
         stats.texture_misses += t.misses as u32;
+        stats.texture_coarser += t.coarser_than_needed as u32;
         stats.texture_uploads += t.uploads as u32;
         stats.texture_upload_bytes += t.upload_bytes;
     }

@@ -127,7 +127,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 24] = [
+    let rows: [(&str, Vec<f64>); 25] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -201,6 +201,10 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "texture cache misses (drawn in the mean colour)",
             col(|s| f64::from(s.texture_misses)),
+        ),
+        (
+            "textures resident coarser than needed",
+            col(|s| f64::from(s.texture_coarser)),
         ),
         (
             "drawn nodes still without their light grid (drawn fully lit)",

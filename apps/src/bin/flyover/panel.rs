@@ -122,11 +122,12 @@ pub(crate) fn panel(
     }
     if s.texture_full_bytes > 0 {
         ui.label(format!(
-            "texture cache: {:.1} MiB resident, {:.1} MiB if every drawn texture were full resolution ({:.1}x saved), {} misses, {} uploads ({:.2} MiB) this frame",
+            "texture cache: {:.1} MiB resident, {:.1} MiB if every drawn texture were full resolution ({:.1}x saved), {} misses, {} coarser than needed, {} uploads ({:.2} MiB) this frame",
             s.texture_resident_bytes as f64 / f64::from(1 << 20),
             s.texture_full_bytes as f64 / f64::from(1 << 20),
             s.texture_full_bytes as f64 / s.texture_resident_bytes.max(1) as f64,
             s.texture_misses,
+            s.texture_coarser,
             s.texture_uploads,
             s.texture_upload_bytes as f64 / f64::from(1 << 20),
         ));
