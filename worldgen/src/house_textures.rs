@@ -8,6 +8,7 @@
 //! 1.5 x as wide as it is high. A plain square power-of-two PNG is read as level 0 and its chain
 //! computed ([`MipChain::from_png`]), so a map can carry its own pictures.
 
+use crate::color::{linear_to_srgb, srgb_to_linear};
 use crate::noise;
 use std::path::Path;
 
@@ -28,25 +29,6 @@ pub struct MipChain {
     pub levels: Vec<Vec<u8>>,
 }
 
-fn to_linear(c: u8) -> f64 {
-    let v = f64::from(c) / 255.0;
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-fn to_srgb(v: f64) -> u8 {
-    let v = v.clamp(0.0, 1.0);
-    let s = if v <= 0.003_130_8 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
-}
-
 impl MipChain {
     /// The chain of a level-0 image (`2^edge_log2` squared RGBA8 texels).
     pub fn from_level0(edge_log2: u32, level0: Vec<u8>) -> Self {
@@ -65,7 +47,9 @@ impl MipChain {
                             let sum: u32 = texels.iter().map(|&t| u32::from(t)).sum();
                             ((sum + 2) / 4) as u8
                         } else {
-                            to_srgb(texels.iter().map(|&t| to_linear(t)).sum::<f64>() / 4.0)
+                            linear_to_srgb(
+                                texels.iter().map(|&t| srgb_to_linear(t)).sum::<f64>() / 4.0,
+                            )
                         };
                     }
                 }
@@ -237,7 +221,7 @@ pub fn facade(seed: u64) -> MipChain {
             };
             let i = (y * n + x) * 4;
             for k in 0..3 {
-                rgba[i + k] = to_srgb(c[k]);
+                rgba[i + k] = linear_to_srgb(c[k]);
             }
             rgba[i + 3] = 255;
         }
@@ -270,7 +254,7 @@ pub fn roof(seed: u64) -> MipChain {
             let c = base.map(|v| v * (0.8 + 0.35 * tile) * overlap * gap * (0.94 + 0.12 * grain));
             let i = (y * n + x) * 4;
             for k in 0..3 {
-                rgba[i + k] = to_srgb(c[k]);
+                rgba[i + k] = linear_to_srgb(c[k]);
             }
             rgba[i + 3] = 255;
         }

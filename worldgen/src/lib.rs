@@ -17,6 +17,7 @@
 
 pub mod building_mesh;
 pub mod classify;
+pub mod color;
 pub mod dem;
 pub mod erosion;
 pub mod generate;

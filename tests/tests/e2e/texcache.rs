@@ -317,24 +317,26 @@ fn scene(pool: &mut TexturePool, rng: &mut Stream) -> Scene {
 }
 
 /// Requests every visible object's textures for `camera`.
-fn request_view(pool: &mut TexturePool, scene: &Scene, camera: &Camera) {
+/// The objects whose bounding boxes meet the camera's frustum, with their on-screen stretch
+/// bound (pixels per metre).
+fn visible<'a>(scene: &'a Scene, camera: &Camera) -> Vec<(&'a Object, f64)> {
     let frustum = camera.frustum();
-    for Object {
-        centre,
-        radius,
-        textures,
-    } in &scene.objects
-    {
-        let r = DVec3::splat(*radius);
-        if !frustum.intersects_aabb(*centre - r, *centre + r) {
-            continue;
-        }
-        let Some(ppm) = px_per_m(camera, *centre, *radius) else {
-            continue;
-        };
-        let area_px = (radius * ppm).powi(2);
-        for &(t, texel_m) in textures {
-            let level = needed_level(camera, *centre, *radius, texel_m, pool.coarsest_level(t))
+    scene
+        .objects
+        .iter()
+        .filter(|o| {
+            let r = DVec3::splat(o.radius);
+            frustum.intersects_aabb(o.centre - r, o.centre + r)
+        })
+        .filter_map(|o| Some((o, px_per_m(camera, o.centre, o.radius)?)))
+        .collect()
+}
+
+fn request_view(pool: &mut TexturePool, scene: &Scene, camera: &Camera) {
+    for (o, ppm) in visible(scene, camera) {
+        let area_px = (o.radius * ppm).powi(2);
+        for &(t, texel_m) in &o.textures {
+            let level = needed_level(camera, o.centre, o.radius, texel_m, pool.coarsest_level(t))
                 .unwrap_or(0);
             pool.request(t, level, area_px);
         }
@@ -422,19 +424,8 @@ fn never_coarser_than_needed_while_the_budget_allows() {
         // Per texture the finest level any visible object needs (the per-object level is tied
         // to the brute-force projection by the first test; this checks the pool's part).
         let mut need: HashMap<TextureId, u32> = HashMap::new();
-        let frustum = camera.frustum();
-        for Object {
-            centre,
-            radius,
-            textures,
-        } in &scene.objects
-        {
-            let r = DVec3::splat(*radius);
-            if !frustum.intersects_aabb(*centre - r, *centre + r) {
-                continue;
-            }
-            let ppm = px_per_m(&camera, *centre, *radius).unwrap_or(0.0);
-            for &(t, texel_m) in textures {
+        for (o, ppm) in visible(&scene, &camera) {
+            for &(t, texel_m) in &o.textures {
                 let level = brute_level(texel_m, ppm, pool.coarsest_level(t));
                 let e = need.entry(t).or_insert(level);
                 *e = (*e).min(level);
