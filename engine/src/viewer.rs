@@ -210,7 +210,7 @@ impl Viewer {
         let select_cam = self.frozen.unwrap_or(*cam);
         self.streamer.update(&select_cam, dt_s);
         let t1 = Instant::now();
-        self.upload(gpu, budget_s);
+        let uploaded = self.upload(gpu, budget_s);
         let t2 = Instant::now();
         let drawn: Vec<DrawnNode<'_>> = self
             .streamer
@@ -254,6 +254,11 @@ impl Viewer {
             ancestors: &ancestors,
             dt_s,
             tau_px: self.streamer.settings.tau_px,
+            upload_bytes_left: self
+                .streamer
+                .settings
+                .gpu_budget_bytes
+                .saturating_sub(uploaded),
         };
         let stats: DrawStats = self.scene.render(gpu, encoder, color, depth, &draws);
         if timed && let Some(t) = &self.timer {
@@ -371,12 +376,16 @@ impl Viewer {
     }
 
     /// The streamer's GPU phases under `budget_s`: every renderer's upload hook.
-    fn upload(&mut self, gpu: &Gpu, budget_s: f64) {
+    /// Runs the nodes' GPU phases within `budget_s`; returns the bytes they uploaded.
+    fn upload(&mut self, gpu: &Gpu, budget_s: f64) -> usize {
         let scene = &mut self.scene;
+        let mut bytes = 0;
         self.streamer
             .run_gpu_phases_within(budget_s, &mut |shared, work| {
                 work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
+                bytes += work.uploaded_bytes;
             });
+        bytes
     }
 
     /// Wanted nodes not drawn yet (a coarser ancestor stands in for them): the pop debt count.

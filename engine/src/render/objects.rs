@@ -654,14 +654,7 @@ impl NodeRenderer for ObjectsRenderer {
         let frame_no = self.frame_no;
         self.instances
             .retain(|_, i| frame_no.saturating_sub(i.last_frame) < KEEP_FRAMES);
-        let plan = self.tex_pool.end_frame();
-        if self.gpu_tex.apply(gpu, &plan, &self.set.textures) {
-            self.groups.clear();
-        }
-        self.texture_levels(
-            &mut uniforms,
-            draws.view.texture_mip_view && !draws.view.pm_color_by_lod,
-        );
+        self.texture_plan(gpu, draws, &mut uniforms);
         self.write_uniforms(gpu, &uniforms);
     }
 
@@ -793,6 +786,24 @@ impl ObjectsRenderer {
         self.stats.triangles += u64::from(gpu_mesh.index_count / 3);
         self.stats.full_triangles += h.full_triangles as u64;
         true
+    }
+
+    /// Ends the texture cache's frame (its uploads within what is left of the streamer's
+    /// per-frame upload budget), applies the plan on the GPU and fills the draws' texture
+    /// levels.
+    fn texture_plan(&mut self, gpu: &Gpu, draws: &FrameDraws<'_>, uniforms: &mut [DrawUniform]) {
+        // Texture uploads share the streamer's per-frame upload budget with the nodes'.
+        let left = u64::try_from(draws.upload_bytes_left).unwrap_or(u64::MAX);
+        self.tex_pool
+            .set_upload_budget(left.min(PoolSettings::default().upload_bytes_per_frame));
+        let plan = self.tex_pool.end_frame();
+        if self.gpu_tex.apply(gpu, &plan, &self.set.textures) {
+            self.groups.clear();
+        }
+        self.texture_levels(
+            uniforms,
+            draws.view.texture_mip_view && !draws.view.pm_color_by_lod,
+        );
     }
 
     /// Writes the draw uniforms (growing the buffer when needed) and makes the draw groups.

@@ -32,6 +32,9 @@ pub struct FrameDraws<'a> {
     pub dt_s: f64,
     /// The pixel-error threshold the streamer selects with (objects choose their levels by it).
     pub tau_px: f64,
+    /// What is left this frame of the streamer's GPU upload budget in bytes after the nodes'
+    /// uploads (the texture cache uploads within it, at least one texture a frame).
+    pub upload_bytes_left: usize,
 }
 
 /// The GPU side of one kind of thing drawn.

@@ -236,6 +236,11 @@ impl TexturePool {
         slot_bytes(edge_log2, self.settings.bytes_per_texel)
     }
 
+    /// Changes the per-frame upload budget (bytes; one upload a frame is always allowed).
+    pub fn set_upload_budget(&mut self, bytes: u64) {
+        self.settings.upload_bytes_per_frame = bytes;
+    }
+
     /// Changes the budget; the next [`Self::end_frame`] gets under it.
     pub fn set_budget(&mut self, budget_bytes: u64) {
         self.settings.budget_bytes = budget_bytes;

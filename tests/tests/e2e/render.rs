@@ -247,6 +247,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
             ancestors: &[],
             dt_s: 0.0,
             tau_px: 2.0,
+            upload_bytes_left: usize::MAX,
         };
         let mut enc = g
             .device
