@@ -24,6 +24,7 @@ pub mod generate;
 pub mod grid;
 pub mod house_textures;
 pub mod map;
+pub mod mip_chain;
 pub mod noise;
 pub mod par;
 pub mod patches;

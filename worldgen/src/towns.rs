@@ -154,17 +154,6 @@ pub fn polygon_distance(p: &[[f64; 2]], q: &[[f64; 2]]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// The corners of a footprint grown by `margin_m` on every side, counter-clockwise.
-pub fn grown_footprint_m(b: &Building, margin_m: f64) -> [[f64; 2]; 4] {
-    let (s, c) = b.yaw_deg.to_radians().sin_cos();
-    let (hw, hd) = (
-        b.spec.width_m * 0.5 + margin_m,
-        b.spec.depth_m * 0.5 + margin_m,
-    );
-    [(-hw, -hd), (hw, -hd), (hw, hd), (-hw, hd)]
-        .map(|(u, v)| [b.x_m + c * u - s * v, b.y_m + s * u + c * v])
-}
-
 /// A road or path segment with its half width.
 struct RoadSegment {
     a: [f64; 2],
@@ -266,7 +255,8 @@ pub fn pad(b: &Building) -> Decal {
         width_m: 0.5,
         falloff_m: PAD_FALLOFF_M,
         height_offset_m: 0.0,
-        points: grown_footprint_m(b, PAD_MARGIN_M)
+        points: b
+            .grown_footprint_m(PAD_MARGIN_M)
             .iter()
             .map(|c| [c[0], c[1], b.z_m])
             .collect(),
@@ -281,7 +271,7 @@ fn lot_fits(
     placed: &[Building],
 ) -> Option<f64> {
     let foot = b.footprint_m();
-    let padded = grown_footprint_m(b, PAD_MARGIN_M + f64::from(PAD_FALLOFF_M));
+    let padded = b.grown_footprint_m(PAD_MARGIN_M + f64::from(PAD_FALLOFF_M));
     let (o, s) = (inp.origin_m, inp.size_m);
     let in_world =
         |c: &[f64; 2]| c[0] >= o[0] && c[1] >= o[1] && c[0] <= o[0] + s[0] && c[1] <= o[1] + s[1];
@@ -301,7 +291,7 @@ fn lot_fits(
         return None;
     }
     // Ground samples over the pad on a lattice.
-    let pad = grown_footprint_m(b, PAD_MARGIN_M);
+    let pad = b.grown_footprint_m(PAD_MARGIN_M);
     let (mut lo, mut hi, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
     let n = PAD_SAMPLES;
     for i in 0..n {

@@ -33,7 +33,7 @@ impl Payload for NodeObjects {
             + self
                 .hlod
                 .as_ref()
-                .map_or(0, |h| h.vertices.len() * 36 + h.indices.len() * 4)
+                .map_or(0, |h| std::mem::size_of_val(h.vertices.as_slice()))
     }
 }
 

@@ -13,36 +13,31 @@
 //! colour of the house's facade or roof texture (its 1 x 1 mip level), by the face's normal.
 
 use super::lod::PmLodSettings;
-use super::set::{ObjectSet, ROOF_NORMAL_UP, model_to_world};
+use super::set::{ObjectSet, PLAIN_ALBEDO, ROOF_NORMAL_UP, model_to_world};
+use crate::terrain::quadtree::NODE_QUADS;
 use glam::DVec3;
 use worldgen::pm::ErrorIndex;
-
-/// Mesh cells along a node's side (the terrain's: 32 x 32 quads a node).
-const NODE_CELLS: f64 = 32.0;
-/// Colour of untextured objects (the renderer's default albedo).
-const PLAIN_ALBEDO: [f32; 3] = [0.62, 0.58, 0.52];
 
 /// A node's merged mesh of its houses, node-relative (origin: the node's south-west corner at
 /// the lowest house base).
 #[derive(Debug, Clone)]
 pub struct NodeHlod {
     pub origin_m: DVec3,
-    /// Per vertex: position relative to `origin_m`, unit normal, linear albedo.
+    /// Per vertex: position relative to `origin_m`, unit normal, linear albedo; three vertices
+    /// a triangle (flat shaded, drawn without an index list).
     pub vertices: Vec<[f32; 9]>,
-    pub indices: Vec<u32>,
     /// The error budget every house's level meets, metres.
     pub error_m: f64,
     /// Bounds of the merged mesh, world metres.
     pub lo_m: DVec3,
     pub hi_m: DVec3,
-    /// Houses merged and the triangles they have at full detail.
-    pub instances: usize,
+    /// Triangles of the merged houses at full detail.
     pub full_triangles: usize,
 }
 
 /// A node's error budget: one mesh cell of the node, metres.
 pub fn error_budget_m(node_side_m: f64) -> f64 {
-    node_side_m / NODE_CELLS
+    node_side_m / f64::from(NODE_QUADS)
 }
 
 /// Whether the objects' pixel metric accepts `hlod` seen from `eye_m` (module docs).
@@ -58,21 +53,12 @@ pub fn accepts(
 }
 
 /// The coarsest level of a model whose stored error times `scale` is within `budget_m`, at
-/// least `min_vertices` positions and at least one triangle (a coarser level draws nothing: its
-/// stored error is the distance to its points, but a house must not vanish from the merged
-/// mesh that stands for it).
-fn level_within(
-    pm: &worldgen::pm::PmMesh,
-    index: &ErrorIndex,
-    budget_m: f64,
-    scale: f64,
-    min_vertices: usize,
-) -> usize {
+/// least the default MINVERTS positions and at least one triangle (a coarser level draws
+/// nothing: its stored error is the distance to its points, but a house must not vanish from
+/// the merged mesh that stands for it).
+fn level_within(pm: &worldgen::pm::PmMesh, index: &ErrorIndex, budget_m: f64, scale: f64) -> usize {
     // The metric with K = 1 / budget at 1 m: error x scale / budget <= 1.
-    let settings = PmLodSettings {
-        min_vertices,
-        ..PmLodSettings::default()
-    };
+    let settings = PmLodSettings::default();
     let level = super::lod::choose_level(pm, index, &settings, 1.0, 1.0, 1.0 / budget_m, scale);
     let first_drawn = pm
         .levels
@@ -99,7 +85,7 @@ pub fn build(
         .map(|&i| set.instances[i as usize].position_m.z)
         .fold(f64::INFINITY, f64::min);
     let origin_m = DVec3::new(node_min_m[0], node_min_m[1], base_z);
-    let (mut vertices, mut indices) = (Vec::new(), Vec::new());
+    let mut vertices = Vec::new();
     let (mut lo_m, mut hi_m) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
     let mut full_triangles = 0;
     let mut list = Vec::new();
@@ -108,7 +94,7 @@ pub fn build(
         let model = &set.models[inst.model as usize];
         let pm = &model.pm;
         full_triangles += pm.triangles.len();
-        let level = level_within(pm, &model.index, budget_m, inst.scale, 4);
+        let level = level_within(pm, &model.index, budget_m, inst.scale);
         pm.indices_at(level, &mut list);
         let colors = inst
             .textures
@@ -129,7 +115,6 @@ pub fn build(
                 lo_m = lo_m.min(v);
                 hi_m = hi_m.max(v);
                 let r = (v - origin_m).as_vec3();
-                indices.push(vertices.len() as u32);
                 vertices.push([
                     r.x, r.y, r.z, n.x as f32, n.y as f32, n.z as f32, albedo[0], albedo[1],
                     albedo[2],
@@ -140,11 +125,9 @@ pub fn build(
     Some(NodeHlod {
         origin_m,
         vertices,
-        indices,
         error_m: budget_m,
         lo_m,
         hi_m,
-        instances: ids.len(),
         full_triangles,
     })
 }

@@ -215,6 +215,8 @@ pub struct ObjectInstance {
 
 /// A face whose unit normal's up component exceeds this takes an instance's roof texture.
 pub const ROOF_NORMAL_UP: f32 = 0.3;
+/// Linear albedo of untextured objects.
+pub const PLAIN_ALBEDO: [f32; 3] = [0.62, 0.58, 0.52];
 
 /// Models, textures and instances of a run.
 #[derive(Debug, Default)]

@@ -21,6 +21,7 @@ use crate::ground::pieces::NodeDecals;
 use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use wgpu::util::DeviceExt;
+use worldgen::house_textures::MipChain;
 use worldgen::map::DecalKind;
 
 /// Format of node ground textures (shaded in linear light, stored sRGB).
@@ -192,44 +193,6 @@ impl std::fmt::Debug for GroundTexturer {
     }
 }
 
-/// The mip chain of a periodic `n x n` sRGB texture (2 x 2 box filter in linear light).
-fn mips(level0: &[[u8; 4]], n: u32) -> Vec<Vec<[u8; 4]>> {
-    let mut out = vec![level0.to_vec()];
-    let mut side = n as usize;
-    while side > 1 {
-        let prev = out.last().expect("level 0 is there");
-        let half = side / 2;
-        let mut next = Vec::with_capacity(half * half);
-        for y in 0..half {
-            for x in 0..half {
-                let mut c = [0u8; 4];
-                for (k, v) in c.iter_mut().enumerate() {
-                    let sum: f64 = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                        .iter()
-                        .map(|&(dx, dy)| {
-                            let p = prev[(2 * y + dy) * side + 2 * x + dx][k];
-                            if k < 3 {
-                                crate::color::srgb_to_linear(p)
-                            } else {
-                                f64::from(p) / 255.0
-                            }
-                        })
-                        .sum();
-                    *v = if k < 3 {
-                        crate::color::linear_to_srgb(sum / 4.0)
-                    } else {
-                        (sum / 4.0 * 255.0).round() as u8
-                    };
-                }
-                next.push(c);
-            }
-        }
-        out.push(next);
-        side = half;
-    }
-    out
-}
-
 /// The map's ground layer as an `R8Uint` texture (row 0 = south).
 fn ground_types_view(gpu: &Gpu, ground: &worldgen::Grid<u8>) -> wgpu::TextureView {
     gpu.device
@@ -270,10 +233,17 @@ fn materials_view(gpu: &Gpu, map: &worldgen::Map) -> (wgpu::TextureView, u32) {
         ]);
     }
     let types = mats.len() as u32;
+    // Each layer's mip chain (2 x 2 box filter in linear light), levels in order.
     let bytes: Vec<u8> = mats
         .iter()
-        .flat_map(|m| mips(m, MATERIAL_TEXELS))
-        .flat_map(|level| level.into_iter().flatten())
+        .flat_map(|m| {
+            MipChain::from_level0(
+                MATERIAL_TEXELS.ilog2(),
+                m.iter().flatten().copied().collect(),
+            )
+            .levels
+        })
+        .flatten()
         .collect();
     let view = gpu
         .device

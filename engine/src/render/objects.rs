@@ -16,7 +16,7 @@ use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::hlod;
 use crate::objects::lod::{Choice, choose};
-use crate::objects::set::{ObjectSet, PmModel, ROOF_NORMAL_UP, model_to_world};
+use crate::objects::set::{ObjectSet, PLAIN_ALBEDO, PmModel, ROOF_NORMAL_UP, model_to_world};
 use crate::objects::texturing;
 use crate::stream::Shared;
 use crate::texcache::pool::{PoolSettings, SlotId, TexturePool};
@@ -155,6 +155,7 @@ struct DrawItem {
     instance: u32,
     model: u32,
     option: usize,
+    /// Indices drawn (vertices, for a merged far mesh).
     index_count: u32,
     full_triangles: u32,
     /// The slots of its facade and roof textures (None: the white fallback).
@@ -163,11 +164,10 @@ struct DrawItem {
     hlod: Option<usize>,
 }
 
-/// A node's merged far mesh on the GPU.
+/// A node's merged far mesh on the GPU (three vertices a triangle, no index list).
 struct HlodGpu {
     vertices: wgpu::Buffer,
-    indices: wgpu::Buffer,
-    index_count: u32,
+    vertex_count: u32,
 }
 
 /// Per-frame statistics of the objects.
@@ -179,9 +179,6 @@ pub struct ObjectStats {
     pub full_triangles: u64,
     /// Index lists rewritten this frame (level changes).
     pub level_changes: u32,
-    /// Merged far meshes drawn and the houses they stood for.
-    pub hlod_draws: u32,
-    pub hlod_instances: u32,
 }
 
 pub struct ObjectsRenderer {
@@ -488,19 +485,11 @@ impl NodeRenderer for ObjectsRenderer {
                 contents: bytemuck::cast_slice(&h.vertices),
                 usage: wgpu::BufferUsages::VERTEX,
             });
-        let indices = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("object hlod indices"),
-                contents: bytemuck::cast_slice(&h.indices),
-                usage: wgpu::BufferUsages::INDEX,
-            });
-        let bytes = h.vertices.len() * 36 + h.indices.len() * 4;
-        let index_count = h.indices.len() as u32;
+        let vertex_count = h.vertices.len() as u32;
+        let bytes = std::mem::size_of_val(h.vertices.as_slice());
         work.gpu.put(HlodGpu {
             vertices,
-            indices,
-            index_count,
+            vertex_count,
         });
         bytes
     }
@@ -609,7 +598,7 @@ impl NodeRenderer for ObjectsRenderer {
                 let albedo = if by_lod {
                     lod_color(share)
                 } else {
-                    [0.62, 0.58, 0.52]
+                    PLAIN_ALBEDO
                 };
                 uniforms.push(DrawUniform {
                     rel_from_model: rel.as_mat4().to_cols_array_2d(),
@@ -680,11 +669,10 @@ impl NodeRenderer for ObjectsRenderer {
                 pass.set_bind_group(2, group, &[(k as u64 * DRAW_STRIDE) as u32]);
                 pass.set_bind_group(3, &self.no_morph, &[]);
                 pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+                pass.draw(0..mesh.vertex_count, 0..1);
                 stats.object_draw_calls += 1;
                 stats.object_hlod_draws += 1;
-                stats.object_triangles += u64::from(mesh.index_count / 3);
+                stats.object_triangles += u64::from(mesh.vertex_count / 3);
                 stats.object_full_triangles += u64::from(item.full_triangles);
                 continue;
             }
@@ -776,14 +764,12 @@ impl ObjectsRenderer {
             instance: 0,
             model: 0,
             option: 0,
-            index_count: gpu_mesh.index_count,
+            index_count: gpu_mesh.vertex_count,
             full_triangles: h.full_triangles as u32,
             slots: [None; 2],
             hlod: Some(node_index),
         });
-        self.stats.hlod_draws += 1;
-        self.stats.hlod_instances += h.instances as u32;
-        self.stats.triangles += u64::from(gpu_mesh.index_count / 3);
+        self.stats.triangles += u64::from(gpu_mesh.vertex_count / 3);
         self.stats.full_triangles += h.full_triangles as u64;
         true
     }
@@ -871,11 +857,6 @@ impl ObjectsRenderer {
                 u.tex = [-1.0, -1.0, 0.0, 0.0];
             }
         }
-    }
-
-    /// The texture cache's statistics of the last frame.
-    pub fn texture_stats(&self) -> crate::texcache::pool::PoolStats {
-        *self.tex_pool.stats()
     }
 }
 

@@ -120,7 +120,8 @@ pub struct PoolStats {
     pub coarser_than_needed: usize,
     pub uploads: usize,
     pub upload_bytes: u64,
-    /// Textures not drawn this frame that lost their slot to make room.
+    /// Textures that lost their slot to make room (least recently used first, drawn ones only
+    /// after a budget cut).
     pub evictions: usize,
 }
 
@@ -491,13 +492,12 @@ impl TexturePool {
                 continue;
             }
             stats.evictions += 1;
-            let slot = self.release(victim);
-            if slot.is_some_and(|s| s.edge_log2 == edge) {
+            // A victim of the wanted size hands its slot over (taken back off the free list).
+            if let Some(slot) = self.release(victim)
+                && slot.edge_log2 == edge
+            {
                 self.classes[edge as usize].free.pop();
-                return slot.unwrap_or(SlotId {
-                    edge_log2: edge,
-                    index: 0,
-                });
+                return slot;
             }
         }
         let class = &mut self.classes[edge as usize];

@@ -434,13 +434,9 @@ fn merged_far_meshes_stay_within_their_budget() {
             .collect();
         let h = hlod::build(&set, &ids, [0.0, 0.0], budget, &means).expect("houses");
         let merged: Vec<[glam::DVec3; 3]> = h
-            .indices
+            .vertices
             .chunks_exact(3)
-            .map(|t| {
-                [t[0], t[1], t[2]].map(|i| {
-                    h.origin_m + glam::Vec3::from_slice(&h.vertices[i as usize][..3]).as_dvec3()
-                })
-            })
+            .map(|t| [0, 1, 2].map(|k| h.origin_m + glam::Vec3::from_slice(&t[k][..3]).as_dvec3()))
             .collect();
         let full: Vec<[glam::DVec3; 3]> = ids
             .iter()

@@ -67,8 +67,10 @@ pub fn read_textures(dir: &Path, buildings: &[Building]) -> Result<Vec<BuildingT
 /// Writes every texture as a mip atlas into `dir`'s building folder.
 pub fn write_textures(dir: &Path, textures: &[BuildingTexture]) -> Result<(), MapError> {
     let folder = dir.join(FOLDER);
-    for t in textures {
+    if !textures.is_empty() {
         std::fs::create_dir_all(&folder).map_err(|e| MapError::io(&folder, "create folder", e))?;
+    }
+    for t in textures {
         let p = folder.join(&t.name);
         t.chain
             .write_png(&p)

@@ -56,15 +56,18 @@ pub struct Building {
 impl Building {
     /// The footprint's corners, counter-clockwise seen from above.
     pub fn footprint_m(&self) -> [[f64; 2]; 4] {
-        let (s, c) = self.yaw_deg.to_radians().sin_cos();
-        let (hw, hd) = (self.spec.width_m * 0.5, self.spec.depth_m * 0.5);
-        [(-hw, -hd), (hw, -hd), (hw, hd), (-hw, hd)]
-            .map(|(u, v)| [self.x_m + c * u - s * v, self.y_m + s * u + c * v])
+        self.grown_footprint_m(0.0)
     }
 
-    /// Height of the walls (storeys x storey height), metres.
-    pub fn wall_height_m(&self) -> f64 {
-        f64::from(self.spec.storeys) * self.spec.storey_m
+    /// The footprint grown by `margin_m` on every side, corners counter-clockwise.
+    pub fn grown_footprint_m(&self, margin_m: f64) -> [[f64; 2]; 4] {
+        let (s, c) = self.yaw_deg.to_radians().sin_cos();
+        let (hw, hd) = (
+            self.spec.width_m * 0.5 + margin_m,
+            self.spec.depth_m * 0.5 + margin_m,
+        );
+        [(-hw, -hd), (hw, -hd), (hw, hd), (-hw, hd)]
+            .map(|(u, v)| [self.x_m + c * u - s * v, self.y_m + s * u + c * v])
     }
 }
 
