@@ -14,18 +14,9 @@ pub const EDGE_LOG2: u32 = 9;
 /// Metres of facade or roof one texture spans before it repeats.
 pub const TILE_M: f64 = 4.0;
 /// Periodic value noise in [0, 1) at texel (`x`, `y`) of an `n`-texel texture, lattice cells of
-/// `cell` texels (dividing `n`), smoothly interpolated.
+/// `cell` texels (dividing `n`).
 fn value_noise(seed: u64, x: usize, y: usize, n: usize, cell: usize) -> f64 {
-    let period = (n / cell) as i64;
-    let (gx, gy) = (x as f64 / cell as f64, y as f64 / cell as f64);
-    let (ix, iy) = (gx.floor() as i64, gy.floor() as i64);
-    let (fx, fy) = (gx - ix as f64, gy - iy as f64);
-    let smooth = |t: f64| t * t * (3.0 - 2.0 * t);
-    let at = |i: i64, j: i64| noise::unit3(seed, i.rem_euclid(period), j.rem_euclid(period));
-    let (sx, sy) = (smooth(fx), smooth(fy));
-    let top = at(ix, iy) + (at(ix + 1, iy) - at(ix, iy)) * sx;
-    let bottom = at(ix, iy + 1) + (at(ix + 1, iy + 1) - at(ix, iy + 1)) * sx;
-    top + (bottom - top) * sy
+    noise::periodic_value(seed, n as u32, (n / cell) as u32, x as u32, y as u32)
 }
 
 /// Facade colours (linear RGB): plaster tones and brick.

@@ -74,6 +74,23 @@ pub fn fade(t: f64) -> f64 {
     t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 }
 
+/// Periodic value noise in [0, 1) on a tile of `texels` x `texels`: `cells` lattice cells
+/// across it, sampled at the centre of texel (`i`, `j`), corner values hashed from their indices
+/// modulo `cells` (so the tile repeats without a seam).
+pub fn periodic_value(seed: u64, texels: u32, cells: u32, i: u32, j: u32) -> f64 {
+    let per = f64::from(texels) / f64::from(cells);
+    let (x, y) = ((f64::from(i) + 0.5) / per, (f64::from(j) + 0.5) / per);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (fade(x - x0), fade(y - y0));
+    let corner = |a: f64, b: f64| {
+        let wrap = |v: f64| i64::from((v as u32) % cells);
+        unit3(seed, wrap(a), wrap(b))
+    };
+    let bottom = corner(x0, y0) + fx * (corner(x0 + 1.0, y0) - corner(x0, y0));
+    let top = corner(x0, y0 + 1.0) + fx * (corner(x0 + 1.0, y0 + 1.0) - corner(x0, y0 + 1.0));
+    bottom + fy * (top - bottom)
+}
+
 /// Gradient noise in about [-1, 1] with unit lattice spacing; C2 (quintic fade).
 pub fn gradient(seed: u64, x: f64, y: f64) -> f64 {
     let x0 = crate::sample::floor_small(x);

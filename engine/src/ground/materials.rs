@@ -16,7 +16,7 @@
 
 use crate::color::{linear_to_srgb, srgb_to_linear};
 use worldgen::map::{GroundType, MaterialImage};
-use worldgen::noise::{fade, unit3};
+use worldgen::noise::periodic_value;
 
 /// Texels per material side (a power of two: mips tile too): 7.8 mm texels, four times finer
 /// than the finest node texture's (3.3 cm), so that close up the terrain shader can show the
@@ -72,22 +72,6 @@ fn character(name: &str) -> Character {
     }
 }
 
-/// Periodic value noise in [0, 1): `cells` lattice cells across the tile, texel (`i`, `j`) of
-/// `MATERIAL_TEXELS`, corner values hashed from indices modulo `cells`.
-fn periodic_noise(seed: u64, cells: u32, i: u32, j: u32) -> f64 {
-    let per = f64::from(MATERIAL_TEXELS) / f64::from(cells);
-    let (x, y) = ((f64::from(i) + 0.5) / per, (f64::from(j) + 0.5) / per);
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (fade(x - x0), fade(y - y0));
-    let corner = |a: f64, b: f64| {
-        let wrap = |v: f64| i64::from((v as u32) % cells);
-        unit3(seed, wrap(a), wrap(b))
-    };
-    let bottom = corner(x0, y0) + fx * (corner(x0 + 1.0, y0) - corner(x0, y0));
-    let top = corner(x0, y0 + 1.0) + fx * (corner(x0 + 1.0, y0 + 1.0) - corner(x0, y0 + 1.0));
-    bottom + fy * (top - bottom)
-}
-
 /// The material of legend entry `index` (type `t`) for a map of `seed`.
 pub fn material(index: usize, t: &GroundType, seed: u64) -> Material {
     let ch = character(&t.name);
@@ -104,7 +88,7 @@ pub fn material(index: usize, t: &GroundType, seed: u64) -> Material {
                 .enumerate()
                 .map(|(k, &(cells, w))| {
                     let s = seed ^ (index as u64) << 8 ^ k as u64;
-                    w * periodic_noise(s, cells, i, j)
+                    w * periodic_value(s, MATERIAL_TEXELS, cells, i, j)
                 })
                 .sum::<f64>()
                 / total;

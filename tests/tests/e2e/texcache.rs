@@ -124,7 +124,7 @@ fn brute_level(texel_m: f64, px_per_m: f64, coarsest: u32) -> u32 {
 }
 
 #[test]
-fn picked_mip_matches_brute_force_projection() {
+fn picked_mip_is_never_coarser_and_mostly_equal_to_a_brute_force_projection() {
     let mut rng = Stream::new(19);
     let (mut cases, mut equal, mut finer) = (0, 0, 0);
     let mut worst_ratio: f64 = 0.0;
