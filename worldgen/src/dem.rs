@@ -1,6 +1,6 @@
-//! Importing real elevation data into a map: SRTM `.hgt` (1201² or 3601² big-endian i16, -32768 =
-//! void), 16-bit (or 8-bit) grayscale PNG with a vertical scale, and single-channel EXR (NaN =
-//! void). Voids are filled from valid neighbours, layer by layer inwards; the source is resampled
+//! Importing real elevation data into a map: GeoTIFF (see [`crate::geotiff`]), SRTM `.hgt` (1201²
+//! or 3601² big-endian i16, -32768 = void), 16-bit (or 8-bit) grayscale PNG with a vertical scale,
+//! and single-channel EXR (NaN = void). Voids are filled from valid neighbours, layer by layer inwards; the source is resampled
 //! (bicubic) onto a square grid and ground types, densities and trees are derived as for
 //! generated maps.
 
@@ -56,6 +56,11 @@ pub struct ImportReport {
     pub source_spacing_m: [f64; 2],
     pub voids_filled: usize,
     pub spacing_m: f64,
+    /// The map's origin: the south-west sample in projected metres (0 when the source has no
+    /// projected position).
+    pub origin_m: [f64; 2],
+    /// How the source was placed, in words (empty for formats without georeferencing).
+    pub georeference: String,
 }
 
 /// Why an import failed; every variant names the file.
@@ -67,7 +72,8 @@ pub enum DemError {
         source: std::io::Error,
     },
     #[error(
-        "{path}: unknown elevation format; expected .hgt (SRTM), .png (16-bit grayscale) or .exr"
+        "{path}: unknown elevation format; expected .tif/.tiff (GeoTIFF), .hgt (SRTM), .png \
+         (16-bit grayscale) or .exr"
     )]
     UnknownFormat { path: PathBuf },
     #[error(
@@ -94,6 +100,12 @@ pub enum DemError {
         height: u64,
         max: u32,
     },
+    #[error("{path}: {tag}: {message}")]
+    Unsupported {
+        path: PathBuf,
+        tag: &'static str,
+        message: String,
+    },
     #[error("{path}: every sample is void; nothing to import")]
     AllVoid { path: PathBuf },
     #[error("{path}: invalid parameter: {message}")]
@@ -102,13 +114,16 @@ pub enum DemError {
     Generate(#[from] GenerateError),
 }
 
-/// A source grid (row 0 = south) with NaN marking voids, and its anisotropic spacing.
-struct Source {
-    grid: Grid<f32>,
-    spacing_m: [f64; 2],
+/// A source grid (row 0 = south) with NaN marking voids, its anisotropic spacing, the position of
+/// its south-west sample and how that was found.
+pub(crate) struct Source {
+    pub grid: Grid<f32>,
+    pub spacing_m: [f64; 2],
+    pub origin_m: [f64; 2],
+    pub note: String,
 }
 
-fn check_size(path: &Path, w: u64, h: u64) -> Result<(), DemError> {
+pub(crate) fn check_size(path: &Path, w: u64, h: u64) -> Result<(), DemError> {
     let max = limits::MAX_GRID_SIDE;
     if w > u64::from(max) || h > u64::from(max) || w < 2 || h < 2 {
         return Err(DemError::TooLarge {
@@ -189,6 +204,8 @@ fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
     Ok(Source {
         grid,
         spacing_m: [dx, dy],
+        origin_m: [0.0, 0.0],
+        note: format!("SRTM tile, south edge at {lat} N"),
     })
 }
 
@@ -254,6 +271,8 @@ fn read_png(p: &ImportParams) -> Result<Source, DemError> {
     Ok(Source {
         grid,
         spacing_m: [spacing, spacing],
+        origin_m: [0.0, 0.0],
+        note: String::new(),
     })
 }
 
@@ -300,6 +319,8 @@ fn read_exr(p: &ImportParams) -> Result<Source, DemError> {
     Ok(Source {
         grid,
         spacing_m: [spacing, spacing],
+        origin_m: [0.0, 0.0],
+        note: String::new(),
     })
 }
 
@@ -385,6 +406,7 @@ pub fn import(
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     let mut src = timed(times, "read elevation file", || match ext.as_deref() {
+        Some("tif" | "tiff") => crate::geotiff::read(path, p.spacing_m, p.vertical_scale_m),
         Some("hgt") => read_hgt(p),
         Some("png") => read_png(p),
         Some("exr") => read_exr(p),
@@ -459,7 +481,7 @@ pub fn import(
         name: p.name.clone(),
         seed: 0,
         size_m,
-        origin_m: [0.0, 0.0],
+        origin_m: src.origin_m,
         water_level_m: p.water_level_m,
         snow_line_m: p.snow_line_m,
         heights,
@@ -478,6 +500,8 @@ pub fn import(
         source_spacing_m: src.spacing_m,
         voids_filled: voids,
         spacing_m: spacing,
+        origin_m: src.origin_m,
+        georeference: src.note,
     };
     Ok((map, report))
 }

@@ -21,6 +21,7 @@ pub mod color;
 pub mod dem;
 pub mod erosion;
 pub mod generate;
+pub mod geotiff;
 pub mod grid;
 pub mod house_textures;
 pub mod map;

@@ -4,6 +4,7 @@
 mod buildings;
 mod camera_path;
 mod dem_import;
+mod geotiff;
 mod ground;
 mod lighting;
 mod map_format;

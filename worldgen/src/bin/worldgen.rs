@@ -52,20 +52,26 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         threads: usize,
     },
-    /// Import real elevation data: SRTM .hgt (1201² or 3601², void = -32768), 8/16-bit
-    /// grayscale PNG (with --spacing-m and --vertical-scale-m) or single-channel EXR (with
-    /// --spacing-m; NaN = void). Voids are filled from neighbours and counted; ground types,
-    /// densities and trees are derived from slope and height.
+    /// Import real elevation data: GeoTIFF (.tif/.tiff: one band of 8/16/32-bit integers or
+    /// 32/64-bit floats, strips or tiles, uncompressed/LZW/Deflate/PackBits; pixel size and
+    /// position from ModelPixelScale + ModelTiepoint or ModelTransformation, projected metres or
+    /// feet, or geographic degrees converted at the centre latitude; GDAL nodata = void), SRTM
+    /// .hgt (1201² or 3601², void = -32768), 8/16-bit grayscale PNG (with --spacing-m and
+    /// --vertical-scale-m) or single-channel EXR (with --spacing-m; NaN = void). Voids are
+    /// filled from neighbours and counted; ground types, densities and trees are derived from
+    /// slope and height. A projected GeoTIFF keeps its position as the map's origin.
     ImportDem {
         /// The elevation file.
         file: PathBuf,
         /// Output map folder.
         #[arg(long)]
         out: PathBuf,
-        /// Distance between source samples in metres (PNG and EXR; derived for .hgt).
+        /// Distance between source samples in metres (PNG, EXR and GeoTIFF without
+        /// georeferencing; derived for .hgt and georeferenced GeoTIFF).
         #[arg(long)]
         spacing_m: Option<f64>,
-        /// Metres per PNG unit (e.g. 0.1 for the Puget Sound height field).
+        /// Metres per PNG or GeoTIFF unit (e.g. 0.1 for the Puget Sound height field); a
+        /// GeoTIFF's VerticalUnitsGeoKey (feet) is applied on top.
         #[arg(long, default_value_t = 1.0)]
         vertical_scale_m: f64,
         /// Latitude of the south edge of a .hgt tile whose name does not carry it.
@@ -373,6 +379,9 @@ fn run(cli: Cli) -> Result<()> {
                 report.voids_filled,
                 report.spacing_m
             );
+            if !report.georeference.is_empty() {
+                say!("placed: {}", report.georeference);
+            }
             print_times(&times, t0.elapsed().as_secs_f64());
             say!("{}", map.summary());
         }
