@@ -77,6 +77,19 @@ pub struct CameraPath {
 
 impl CameraPath {
     pub fn load(path: &Path) -> Result<Self, PathError> {
+        // A day of keys at 60 per second is about 300 MB: refuse more before reading it.
+        const MAX_BYTES: u64 = 512 << 20;
+        if let Ok(meta) = std::fs::metadata(path)
+            && meta.len() > MAX_BYTES
+        {
+            return Err(PathError::File {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "{} bytes is beyond the limit of {MAX_BYTES} bytes",
+                    meta.len()
+                ),
+            });
+        }
         let text = std::fs::read_to_string(path).map_err(|e| PathError::File {
             path: path.to_path_buf(),
             reason: e.to_string(),

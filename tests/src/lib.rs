@@ -1,6 +1,9 @@
 //! End-to-end test crate: worldgen -> map folder -> engine. Shared helpers for the tests in
 //! `tests/tests/`.
 
+pub mod mutate;
+pub mod readers;
+
 use std::path::{Path, PathBuf};
 
 /// The workspace root (the folder holding `Cargo.toml`, `maps/`, `shaders/`).

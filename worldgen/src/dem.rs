@@ -116,7 +116,7 @@ pub enum DemError {
 
 /// A source grid (row 0 = south) with NaN marking voids, its anisotropic spacing, the position of
 /// its south-west sample and how that was found.
-pub(crate) struct Source {
+pub struct Source {
     pub grid: Grid<f32>,
     pub spacing_m: [f64; 2],
     pub origin_m: [f64; 2],

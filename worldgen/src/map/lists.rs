@@ -226,8 +226,7 @@ fn in_world(m: &Manifest, x: f64, y: f64) -> bool {
 }
 
 fn read_text(path: &Path) -> Result<String, MapError> {
-    std::fs::read_to_string(path)
-        .map_err(|e| MapError::io(path, "read list file (listed in map.toml)", e))
+    super::read_text_file(path, "read list file (listed in map.toml)")
 }
 
 pub fn read_trees(path: &Path, m: &Manifest) -> Result<Vec<Tree>, MapError> {

@@ -145,7 +145,7 @@ impl GridSpec {
 /// Reads and validates a manifest. The format name and version are checked before the rest is
 /// parsed, so a future version gets a version error rather than a confusing field error.
 pub fn read(path: &Path) -> Result<Manifest, MapError> {
-    let text = std::fs::read_to_string(path).map_err(|e| MapError::io(path, "read manifest", e))?;
+    let text = super::read_text_file(path, "read manifest")?;
     let table: toml::Table = toml::from_str(&text).map_err(|e| MapError::ManifestSyntax {
         path: path.to_path_buf(),
         message: e.to_string(),

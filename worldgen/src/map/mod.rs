@@ -22,9 +22,9 @@
 //! been checked against [`limits`].
 
 pub mod building_models;
-mod layers;
-mod lists;
-mod manifest;
+pub mod layers;
+pub mod lists;
+pub mod manifest;
 pub mod material_image;
 
 pub use lists::{Building, Decal, DecalKind, Tree};
@@ -57,6 +57,9 @@ pub mod limits {
     pub const MAX_SPECIES: usize = 64;
     /// Most rows in a tree, building or decal list.
     pub const MAX_LIST_ITEMS: usize = 10_000_000;
+    /// Largest text file (lists, decals, manifest) read, bytes: 10 million rows of about 50
+    /// bytes. Parsing holds a small multiple of the text, so memory stays bounded.
+    pub const MAX_TEXT_FILE_BYTES: u64 = 512 << 20;
     /// Largest magnitude of a height sample, metres.
     pub const MAX_ABS_HEIGHT_M: f32 = 100_000.0;
 }
@@ -154,6 +157,24 @@ pub enum MapError {
         line: usize,
         problem: String,
     },
+}
+
+/// Reads a UTF-8 text file of at most [`limits::MAX_TEXT_FILE_BYTES`]; `what` names it in errors.
+pub(crate) fn read_text_file(path: &Path, what: &'static str) -> Result<String, MapError> {
+    let len = std::fs::metadata(path)
+        .map_err(|e| MapError::io(path, what, e))?
+        .len();
+    if len > limits::MAX_TEXT_FILE_BYTES {
+        return Err(MapError::field(
+            path,
+            "(file size)",
+            format!(
+                "{len} bytes is beyond the limit of {} bytes",
+                limits::MAX_TEXT_FILE_BYTES
+            ),
+        ));
+    }
+    std::fs::read_to_string(path).map_err(|e| MapError::io(path, what, e))
 }
 
 impl MapError {

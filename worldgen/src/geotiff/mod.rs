@@ -7,10 +7,12 @@
 //! marks voids. Whatever cannot be read faithfully (several bands, rotation, other compressions,
 //! control-point rasters, geocentric models, unknown units) is refused with the tag that says so.
 
+mod ifd_sizes;
+
 use crate::Grid;
 use crate::dem::{DemError, Source, check_size};
 use crate::map::limits;
-use std::io::BufReader;
+use std::io::{BufReader, Seek};
 use std::path::Path;
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
@@ -149,6 +151,97 @@ fn check_layout(path: &Path, dec: &mut Dec) -> Result<(), DemError> {
     Ok(())
 }
 
+/// Checks, before the raster is allocated, that every strip or tile lies inside the file and
+/// that together they hold enough bytes for `samples` samples even at the compression's highest
+/// ratio (PackBits 64:1, Deflate 1032:1, LZW 4096:1): a damaged header cannot make the reader
+/// allocate a raster the file could never fill.
+fn check_data_size(
+    path: &Path,
+    dec: &mut Dec,
+    file_len: u64,
+    samples: u64,
+) -> Result<(), DemError> {
+    let tiled = dec
+        .find_tag(Tag::TileOffsets)
+        .map_err(|e| bad(path, format!("TileOffsets (324): cannot read: {e}")))?
+        .is_some();
+    let (offsets_tag, counts_tag, names) = if tiled {
+        (
+            Tag::TileOffsets,
+            Tag::TileByteCounts,
+            ("TileOffsets (324)", "TileByteCounts (325)"),
+        )
+    } else {
+        (
+            Tag::StripOffsets,
+            Tag::StripByteCounts,
+            ("StripOffsets (273)", "StripByteCounts (279)"),
+        )
+    };
+    let read = |dec: &mut Dec, tag, name| {
+        dec.find_tag(tag)
+            .and_then(|v| v.map(tiff::decoder::ifd::Value::into_u64_vec).transpose())
+            .map_err(|e| bad(path, format!("{name}: cannot read: {e}")))?
+            .ok_or_else(|| bad(path, format!("{name} is missing")))
+    };
+    let offsets = read(dec, offsets_tag, names.0)?;
+    let counts = read(dec, counts_tag, names.1)?;
+    if offsets.len() != counts.len() {
+        return Err(bad(
+            path,
+            format!(
+                "{} lists {} chunks but {} lists {}",
+                names.0,
+                offsets.len(),
+                names.1,
+                counts.len()
+            ),
+        ));
+    }
+    let mut total = 0u64;
+    for (i, (&o, &c)) in offsets.iter().zip(&counts).enumerate() {
+        if o.checked_add(c).is_none_or(|end| end > file_len) {
+            return Err(bad(
+                path,
+                format!(
+                    "{}: chunk {i} ({c} bytes at {o}) reaches past the end of the {file_len}-byte \
+                     file (truncated?)",
+                    names.1
+                ),
+            ));
+        }
+        total += c;
+    }
+    let compression = dec
+        .find_tag_unsigned::<u16>(Tag::Compression)
+        .ok()
+        .flatten()
+        .unwrap_or(1);
+    let ratio: u64 = match compression {
+        32773 => 64,
+        8 | 32946 => 1032,
+        5 => 4096,
+        _ => 1,
+    };
+    let bits = dec
+        .find_tag_unsigned::<u16>(Tag::BitsPerSample)
+        .ok()
+        .flatten()
+        .unwrap_or(8);
+    let needed = samples * u64::from(bits / 8).max(1);
+    if total.saturating_mul(ratio) < needed {
+        return Err(bad(
+            path,
+            format!(
+                "{}: the chunks hold {total} bytes, too few for {samples} samples of {bits} bits \
+                 ({needed} bytes) even at the compression's highest ratio {ratio}:1 (truncated?)",
+                names.1
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The pixel-to-model transform from ModelTransformation or ModelPixelScale + ModelTiepoint.
 fn read_affine(path: &Path, dec: &mut Dec) -> Result<Option<Affine>, DemError> {
     const TRANSFORM: &str = "ModelTransformationTag (34264)";
@@ -281,19 +374,31 @@ fn linear_unit_m(path: &Path, code: u16, tag: &'static str) -> Result<f64, DemEr
     }
 }
 
-/// Reads a GeoTIFF elevation raster. `spacing_m` is only for files without georeferencing.
-pub(crate) fn read(
-    path: &Path,
-    spacing_m: Option<f64>,
-    vertical_scale: f64,
-) -> Result<Source, DemError> {
-    let file = std::fs::File::open(path).map_err(|e| DemError::Io {
+/// Reads a GeoTIFF elevation raster (`vertical_scale` metres per unit, on top of its vertical
+/// unit). `spacing_m` is only for files without georeferencing.
+pub fn read(path: &Path, spacing_m: Option<f64>, vertical_scale: f64) -> Result<Source, DemError> {
+    let mut file = std::fs::File::open(path).map_err(|e| DemError::Io {
         path: path.to_path_buf(),
         source: e,
     })?;
+    let file_len = file
+        .metadata()
+        .map_err(|e| DemError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        })?
+        .len();
+    ifd_sizes::check(&mut file, file_len).map_err(|m| bad(path, m))?;
+    file.seek(std::io::SeekFrom::Start(0))
+        .map_err(|e| DemError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
     let mut dec_limits = Limits::default();
     dec_limits.decoding_buffer_size = (limits::MAX_GRID_SIDE as usize).pow(2) * 8;
-    dec_limits.ifd_value_size = 64 << 20;
+    // Tag values (strip and tile offsets of the largest raster fit) are decoded into lists of
+    // 32-byte values: keep their raw size small.
+    dec_limits.ifd_value_size = 1 << 20;
     let mut dec = Decoder::new(BufReader::new(file))
         .map_err(|e| bad(path, format!("not a readable TIFF: {e}")))?
         .with_limits(dec_limits);
@@ -302,6 +407,7 @@ pub(crate) fn read(
         .map_err(|e| bad(path, format!("ImageWidth/ImageLength: {e}")))?;
     check_size(path, w.into(), h.into())?;
     check_layout(path, &mut dec)?;
+    check_data_size(path, &mut dec, file_len, u64::from(w) * u64::from(h))?;
     let affine = read_affine(path, &mut dec)?;
     let keys = read_geokeys(path, &mut dec)?;
     let key = |id| keys.iter().find(|k| k.0 == id).map(|k| k.1);
