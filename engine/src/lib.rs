@@ -23,7 +23,7 @@
 //! Modules by concern: [`surface`] (the finest surface), [`terrain`] (quad tree, bounds,
 //! selection, tiles, meshes), [`vegetation`], [`stream`] (jobs, residency, fades), [`render`]
 //! (one renderer per kind of thing drawn), [`camera`], [`flight`] (automatic flyover, camera
-//! paths), [`viewer`] (the frame loop), and behind the `measure` feature `measure` (dense error
+//! paths), [`viewer`] (the frame loop), [`soak`] (long headless flights sampled for growth), and behind the `measure` feature `measure` (dense error
 //! measurement and reference selections for tests and benchmarks).
 
 pub mod camera;
@@ -36,6 +36,7 @@ pub mod lighting;
 pub mod measure;
 pub mod objects;
 pub mod render;
+pub mod soak;
 pub mod stream;
 pub mod surface;
 pub mod terrain;

@@ -207,6 +207,10 @@ impl Streamer {
 
     pub(super) fn finish(&mut self, key: NodeKey, work: Box<NodeWork>) {
         if let Some(req) = self.requests.remove(&key) {
+            // Nobody may read the log (the viewer does not): keep the newest ones only.
+            if self.stats.latencies.len() >= super::MAX_LATENCIES_KEPT {
+                self.stats.latencies.drain(..super::MAX_LATENCIES_KEPT / 2);
+            }
             self.stats.latencies.push(JobLatency {
                 request_to_ready_s: req.requested_at.elapsed().as_secs_f64(),
                 need_to_ready_s: req.needed_at.map(|t| t.elapsed().as_secs_f64()),

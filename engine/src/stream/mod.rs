@@ -186,11 +186,16 @@ pub struct StreamStats {
     pub pinned_bytes: usize,
     pub wanted: usize,
     pub drawn: usize,
-    /// Latencies of the jobs completed since the last `take_latencies`.
+    /// Latencies of the jobs completed since the last `take_latencies` (at most
+    /// [`MAX_LATENCIES_KEPT`]: the oldest half goes when it is full, so a viewer that never
+    /// reads them does not grow).
     pub latencies: Vec<JobLatency>,
     /// Time of the last update's two selections (display and prefetch sets).
     pub last_selection_s: f64,
 }
+
+/// Most job latencies [`StreamStats::latencies`] keeps unread (about 1.5 MiB).
+pub const MAX_LATENCIES_KEPT: usize = 65_536;
 
 /// How long a completed job took.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -11,6 +11,7 @@ mod map_format;
 mod objects;
 mod pm;
 mod render;
+mod soak;
 mod streaming;
 mod terrain;
 mod texcache;

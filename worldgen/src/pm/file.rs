@@ -305,10 +305,16 @@ impl PmMesh {
         let mut expect = 0u32;
         let mut first_of = vec![0u32; np + 1];
         for (w, &p) in self.wedge_position.iter().enumerate() {
+            if p as usize >= np {
+                return Err((
+                    "wedge_position",
+                    format!("wedge {w} has position {p}, beyond the {np} positions"),
+                ));
+            }
             if p == expect {
                 first_of[p as usize] = w as u32;
                 expect += 1;
-            } else if p + 1 != expect {
+            } else if expect == 0 || p != expect - 1 {
                 return Err((
                     "wedge_position",
                     format!(

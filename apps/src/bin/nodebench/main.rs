@@ -9,6 +9,7 @@ mod plot;
 mod pm;
 mod report;
 mod selection;
+mod soak;
 mod streaming;
 mod terrain;
 mod textures;
@@ -24,7 +25,7 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 11] = [
+const SECTIONS: [&str; 12] = [
     "tiles",
     "terrain",
     "selection",
@@ -36,6 +37,7 @@ const SECTIONS: [&str; 11] = [
     "streaming",
     "gpu",
     "textures",
+    "soak",
 ];
 
 /// Node-generation benchmark: speed of every CPU phase and speed against measured error.
@@ -59,7 +61,9 @@ const SECTIONS: [&str; 11] = [
 /// jobs, pop debt, bookkeeping per frame), `gpu` (when an adapter exists: the automatic flight
 /// rendered offscreen at 720p and 1440p, the frame pass timed with timestamp queries next to a
 /// same-run one-draw terrain reference, draw calls), `textures` (when an adapter exists: one
-/// ground texture per sampled node, CPU and GPU time, bytes). Per-item times are on one
+/// ground texture per sampled node, CPU and GPU time, bytes), `soak` (when an adapter exists:
+/// the automatic flight in laps for `--soak-minutes`, resident and GPU memory, caches, jobs and
+/// tiles sampled every second; their growth, and what is left over at the end). Per-item times are on one
 /// core (p50/p95/p99/max); throughput is given for 1 and N worker threads.
 #[derive(Parser)]
 #[command(name = "nodebench", version, about, long_about)]
@@ -68,7 +72,7 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// lighting, pm, buildings, streaming, gpu, textures.
+    /// lighting, pm, buildings, streaming, gpu, textures, soak.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -93,6 +97,9 @@ struct Cli {
     /// Worker threads for the throughput rows (default: all cores).
     #[arg(long)]
     workers: Option<usize>,
+    /// Length of the soak section in minutes (--quick: a quarter of a minute).
+    #[arg(long, default_value_t = 30.0)]
+    soak_minutes: f64,
     /// Viewport height in pixels for selection and error (width is 16:9).
     #[arg(long, default_value_t = 720)]
     viewport_height: u32,
@@ -172,7 +179,7 @@ fn run(cli: &Cli) -> Result<()> {
         buildings::section_buildings(&world, &tree, &cams, &mut report, cli.quick);
     }
     // One adapter for the sections that use it (streaming renders ground textures with it).
-    let adapter = if want("streaming") || want("gpu") || want("textures") {
+    let adapter = if want("streaming") || want("gpu") || want("textures") || want("soak") {
         gpu::adapter()
     } else {
         None
@@ -191,34 +198,10 @@ fn run(cli: &Cli) -> Result<()> {
         .as_ref()
         .filter(|_| want("streaming"))
         .map(|(_, name)| name.clone());
-    if want("gpu") || want("textures") {
-        match adapter {
-            Some((g, name)) => {
-                if want("gpu") {
-                    gpu::section_gpu(&g, &name, &cli.map, &mut report, cli.quick)?;
-                }
-                if want("textures") {
-                    textures::section_textures(
-                        &g,
-                        &name,
-                        &cli.map,
-                        &world,
-                        &tree,
-                        &cams,
-                        &mut report,
-                        cli.quick,
-                    )?;
-                }
-                adapter_name = Some(name);
-            }
-            None if cli.only.iter().any(|o| o == "gpu" || o == "textures") => {
-                bail!(
-                    "sections gpu and textures: no GPU adapter (install mesa-vulkan-drivers for \
-                     lavapipe)"
-                )
-            }
-            None => eprintln!("no GPU adapter: sections gpu and textures left out"),
-        }
+    if (want("gpu") || want("textures") || want("soak"))
+        && let Some(name) = adapter_sections(cli, adapter, &world, &tree, &cams, &mut report)?
+    {
+        adapter_name = Some(name);
     }
     let summary = format!(
         "nodebench on {} ({} x {} m, {} levels), {} worker(s), {:.1} s{}",
@@ -252,6 +235,51 @@ fn run(cli: &Cli) -> Result<()> {
         println!("json: {}", p.display());
     }
     Ok(())
+}
+
+/// Sections `gpu`, `textures` and `soak` (as `cli` wants them) on the adapter; its name, or
+/// None when there is none and no section insists on one.
+fn adapter_sections(
+    cli: &Cli,
+    adapter: Option<(engine::render::Gpu, String)>,
+    world: &World,
+    tree: &QuadTree,
+    cams: &[engine::camera::Camera],
+    report: &mut Report,
+) -> Result<Option<String>> {
+    let want = |s: &str| cli.only.is_empty() || cli.only.iter().any(|o| o == s);
+    match adapter {
+        Some((g, name)) => {
+            if want("gpu") {
+                gpu::section_gpu(&g, &name, &cli.map, report, cli.quick)?;
+            }
+            if want("textures") {
+                textures::section_textures(
+                    &g, &name, &cli.map, world, tree, cams, report, cli.quick,
+                )?;
+            }
+            if want("soak") {
+                let minutes = if cli.quick { 0.25 } else { cli.soak_minutes };
+                if !(minutes.is_finite() && minutes > 0.0) {
+                    bail!("--soak-minutes {minutes} must be a positive number");
+                }
+                soak::section_soak(&g, &name, &cli.map, report, minutes)?;
+            }
+            return Ok(Some(name));
+        }
+        None if cli
+            .only
+            .iter()
+            .any(|o| o == "gpu" || o == "textures" || o == "soak") =>
+        {
+            bail!(
+                "sections gpu, textures and soak: no GPU adapter (install \
+                 mesa-vulkan-drivers for lavapipe)"
+            )
+        }
+        None => eprintln!("no GPU adapter: sections gpu, textures and soak left out"),
+    }
+    Ok(None)
 }
 
 /// Writes `text` to `path`, creating its folder.
