@@ -97,8 +97,9 @@ fn runtime_dir(tmp: &std::path::Path) -> PathBuf {
     runtime
 }
 
-#[test]
-fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
+/// The flyover binary when Xvfb, xdotool and the binary are there; None (a recorded skip)
+/// otherwise, outside CI.
+fn tools() -> Option<PathBuf> {
     let missing: Vec<&str> = ["Xvfb", "xdotool"]
         .into_iter()
         .filter(|t| !have(t))
@@ -114,14 +115,15 @@ fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
             "viewer under Xvfb",
             &format!("{why} (tests/run.sh installs the tools and builds the binaries)"),
         );
-        return;
+        return None;
     }
-    let bin = bin.expect("checked above");
-    let tmp = tempfile::tempdir().expect("temp dir");
-    let runtime = runtime_dir(tmp.path());
-    let n = 90 + std::process::id() % 100;
+    bin
+}
+
+/// Starts Xvfb on display `:n` and waits for its socket.
+fn xvfb(n: u32) -> (Killed, String) {
     let display = format!(":{n}");
-    let _xvfb = Killed(
+    let xvfb = Killed(
         Command::new("Xvfb")
             .args([
                 display.as_str(),
@@ -145,6 +147,17 @@ fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
         );
         std::thread::sleep(Duration::from_millis(50));
     }
+    (xvfb, display)
+}
+
+#[test]
+fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
+    let Some(bin) = tools() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let runtime = runtime_dir(tmp.path());
+    let (_xvfb, display) = xvfb(90 + std::process::id() % 100);
     let stats = tmp.path().join("stats.json");
     let out = tmp.path().join("out");
     let log_path = tmp.path().join("viewer.log");
@@ -252,4 +265,146 @@ fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
         "screenshot is (nearly) uniform: {} colours",
         distinct.len()
     );
+}
+
+/// Starts the flyover on `display` with the tiny map and `extra` arguments; returns it, its
+/// stats file and its log file.
+fn spawn_viewer(
+    bin: &Path,
+    display: &str,
+    tmp: &Path,
+    extra: &[&str],
+) -> (Killed, PathBuf, PathBuf) {
+    let stats = tmp.join("stats.json");
+    let log_path = tmp.join("viewer.log");
+    let log = std::fs::File::create(&log_path).expect("log file");
+    let child = Command::new(bin)
+        .args(["--map"])
+        .arg(tests::tiny_map_dir())
+        .args(["--size", "640x360", "--exit-after-s", "300"])
+        .args(extra)
+        .arg("--stats-file")
+        .arg(&stats)
+        .arg("--out")
+        .arg(tmp.join("out"))
+        .env("DISPLAY", display)
+        .env("XDG_RUNTIME_DIR", runtime_dir(tmp))
+        .env_remove("WAYLAND_DISPLAY")
+        .stdout(log.try_clone().expect("dup log"))
+        .stderr(log)
+        .spawn()
+        .expect("flyover starts");
+    (Killed(child), stats, log_path)
+}
+
+fn window_id(display: &str) -> String {
+    let out = Command::new("xdotool")
+        .args(["search", "--sync", "--name", "flyover"])
+        .env("DISPLAY", display)
+        .output()
+        .expect("xdotool search");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .next()
+        .unwrap_or_default()
+        .to_string()
+}
+
+/// Resize storms (down to 1x1 and up past the screen) and hiding/showing the window while the
+/// automatic flight runs: the viewer keeps drawing, at the size it was left at. (Without a
+/// window manager Xvfb cannot minimise to 0x0; that case skips drawing until the window has an
+/// area again, see `flyover/window.rs`.)
+#[test]
+fn viewer_survives_resize_storms_and_hiding() {
+    let Some(bin) = tools() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let (_xvfb, display) = xvfb(200 + std::process::id() % 100);
+    let (mut viewer, stats, log) = spawn_viewer(&bin, &display, tmp.path(), &[]);
+    let timeout = Duration::from_mins(4);
+    let frame = |v: &serde_json::Value| v["stats"]["frame"].as_u64().unwrap_or(0);
+    let first = wait_for(&stats, &log, timeout, "first frames", |v| {
+        v["stats"]["triangles"].as_u64().unwrap_or(0) > 0
+    });
+    let win = window_id(&display);
+    assert!(!win.is_empty(), "no flyover window");
+    let sizes = [
+        (1, 1),
+        (2000, 1200),
+        (320, 200),
+        (17, 931),
+        (1, 600),
+        (800, 1),
+    ];
+    for round in 0..4 {
+        for (w, h) in sizes {
+            xdotool(
+                &display,
+                &["windowsize", &win, &w.to_string(), &h.to_string()],
+            );
+        }
+        xdotool(&display, &["windowunmap", &win]);
+        xdotool(&display, &["windowmap", &win]);
+        assert!(
+            viewer.0.try_wait().expect("viewer status").is_none(),
+            "the viewer exited during round {round}:\n{}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+    }
+    xdotool(&display, &["windowsize", &win, "500", "300"]);
+    let f0 = frame(&first);
+    let after = wait_for(&stats, &log, timeout, "frames at the final size", |v| {
+        frame(v) > f0 + 10 && v["surface_px"] == serde_json::json!([500, 300])
+    });
+    println!(
+        "resize storm: frames {f0} -> {}, surface {}",
+        frame(&after),
+        after["surface_px"]
+    );
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(!text.contains("panicked"), "viewer log:\n{text}");
+}
+
+/// A lost GPU device (a driver reset; here the device destroyed by a test hook): the viewer
+/// exits with an error that says so, not a panic. It does not recreate the device.
+#[test]
+fn viewer_exits_with_a_clear_message_when_the_device_is_lost() {
+    let Some(bin) = tools() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let (_xvfb, display) = xvfb(300 + std::process::id() % 100);
+    let (mut viewer, stats, log) = spawn_viewer(
+        &bin,
+        &display,
+        tmp.path(),
+        &["--debug-lose-device-after-s", "3"],
+    );
+    wait_for(&stats, &log, Duration::from_mins(4), "first frames", |v| {
+        v["stats"]["triangles"].as_u64().unwrap_or(0) > 0
+    });
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = viewer.0.try_wait().expect("viewer status") {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_mins(2),
+            "the viewer kept running after losing its device:\n{}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    println!(
+        "device lost: {status}; log tail: {}",
+        text.lines().last().unwrap_or("")
+    );
+    assert!(!status.success(), "exit status {status}");
+    assert!(
+        text.contains("GPU device was lost") && text.contains("does not recreate"),
+        "log:\n{text}"
+    );
+    assert!(!text.contains("panicked"), "log:\n{text}");
 }

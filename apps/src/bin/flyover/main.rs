@@ -89,6 +89,10 @@ pub(crate) struct Cli {
     /// Window: quit after this many seconds.
     #[arg(long)]
     pub(crate) exit_after_s: Option<f64>,
+    /// Window, for tests: destroy the GPU device after this many seconds (as a driver reset
+    /// would lose it); the viewer must then exit with a clear message.
+    #[arg(long, hide = true)]
+    pub(crate) debug_lose_device_after_s: Option<f64>,
     /// Headless: also time a same-run GPU reference each frame (the frame's terrain triangles as
     /// one indexed draw with a flat shader) and report pass / reference. Turns vegetation off
     /// for the run, so the pass and the reference draw the same triangles.

@@ -65,6 +65,66 @@ struct State {
     recording: Option<CameraPath>,
     screenshot: bool,
     screenshots: u32,
+    faults: Faults,
+}
+
+/// What keeps the viewer from drawing a frame.
+struct Faults {
+    /// The window has no area (minimised): no frame is drawn until it has one again.
+    minimised: bool,
+    /// Set by the device's lost callback and by its uncaptured-error handler: the viewer exits
+    /// with this message at the next frame (it does not recreate a lost device).
+    gpu_failure: Arc<std::sync::Mutex<Option<String>>>,
+    /// `--debug-lose-device-after-s` has destroyed the device.
+    device_destroyed: bool,
+}
+
+/// Whether to draw this frame: an error when the GPU failed, false while minimised or right
+/// after the test hook destroyed the device.
+fn may_draw(st: &mut State, cli: &Cli) -> Result<bool> {
+    let f = &mut st.faults;
+    if let Some(failure) = f
+        .gpu_failure
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .clone()
+    {
+        bail!(
+            "{failure}; the viewer does not recreate its GPU device, so it stops here (restart \
+             it; a driver update or a smaller --budget-mib may help)"
+        );
+    }
+    if let Some(after_s) = cli.debug_lose_device_after_s
+        && !f.device_destroyed
+        && st.started.elapsed().as_secs_f64() > after_s
+    {
+        // Test hook: lose the device the way a driver reset would, then let wgpu report it.
+        f.device_destroyed = true;
+        st.gpu.device.destroy();
+        let _ = st.gpu.device.poll(wgpu::PollType::Poll);
+        return Ok(false);
+    }
+    Ok(!f.minimised)
+}
+
+/// Whether a window of this size can be drawn into (a minimised window reports 0x0).
+fn drawable(size: winit::dpi::PhysicalSize<u32>) -> bool {
+    size.width > 0 && size.height > 0
+}
+
+/// Records device loss and uncaptured GPU errors (the default handler panics) into `failure`.
+fn watch_gpu(gpu: &Gpu, failure: &Arc<std::sync::Mutex<Option<String>>>) {
+    let f = Arc::clone(failure);
+    gpu.device.set_device_lost_callback(move |reason, message| {
+        let mut slot = f.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        slot.get_or_insert(format!("the GPU device was lost ({reason:?}: {message})"));
+    });
+    let f = Arc::clone(failure);
+    gpu.device
+        .on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            let mut slot = f.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            slot.get_or_insert(format!("GPU error: {e}"));
+        }));
 }
 
 struct App {
@@ -91,6 +151,8 @@ impl App {
             .create_surface(Arc::clone(&window))
             .context("creating the window surface")?;
         let gpu = Gpu::with_instance(instance, Some(&surface))?;
+        let gpu_failure = Arc::new(std::sync::Mutex::new(None));
+        watch_gpu(&gpu, &gpu_failure);
         let size = window.inner_size();
         let mut config = surface
             .get_default_config(&gpu.adapter, size.width.max(1), size.height.max(1))
@@ -167,6 +229,11 @@ impl App {
             recording: None,
             screenshot: false,
             screenshots: 0,
+            faults: Faults {
+                minimised: !drawable(size),
+                gpu_failure,
+                device_destroyed: false,
+            },
         })
     }
 }
@@ -193,8 +260,12 @@ impl ApplicationHandler for App {
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::Resized(size) => {
-                st.config.width = size.width.max(1);
-                st.config.height = size.height.max(1);
+                st.faults.minimised = !drawable(size);
+                if st.faults.minimised {
+                    return;
+                }
+                st.config.width = size.width;
+                st.config.height = size.height;
                 st.surface.configure(&st.gpu.device, &st.config);
                 st.depth = engine::render::depth_view(
                     &st.gpu.device,
@@ -285,7 +356,8 @@ impl ApplicationHandler for App {
     }
 
     fn about_to_wait(&mut self, _el: &ActiveEventLoop) {
-        if let Some(st) = &self.state {
+        // A minimised window waits for the event that gives it an area again.
+        if let Some(st) = self.state.as_ref().filter(|st| !st.faults.minimised) {
             st.window.request_redraw();
         }
     }
@@ -336,6 +408,9 @@ fn apply_panel(st: &mut State) {
 }
 
 fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
+    if !may_draw(st, cli)? {
+        return Ok(());
+    }
     let now = Instant::now();
     let elapsed_s = (now - st.last_frame).as_secs_f64();
     st.frame_ms = st.frame_ms * 0.9 + elapsed_s * 1e3 * 0.1;
@@ -472,6 +547,7 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
             "slider_rect_points": st.ui.slider_rect,
             "pixels_per_point": ppp,
             "screenshots": st.screenshots,
+            "surface_px": [st.config.width, st.config.height],
             "stats": stats,
         });
         let tmp = p.with_extension("tmp");
