@@ -39,3 +39,11 @@ pub fn timed<R>(times: &mut Vec<StepTime>, step: &str, f: impl FnOnce() -> R) ->
     log::info!("{step}: {:.3} s", t0.elapsed().as_secs_f64());
     r
 }
+
+/// The process's peak resident memory so far (Linux `VmHWM`), None where it is not reported.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}

@@ -198,6 +198,12 @@ fn print_times(times: &[StepTime], total_s: f64) {
         say!("| {} | {:.3} |", t.step, t.duration_s);
     }
     say!("| **total** | **{total_s:.3}** |");
+    if let Some(b) = worldgen::progress::peak_rss_bytes() {
+        say!(
+            "peak resident memory: {:.0} MiB",
+            b as f64 / f64::from(1 << 20)
+        );
+    }
 }
 
 fn write_map(map: &Map, out: &std::path::Path, times: &mut Vec<StepTime>) -> Result<()> {

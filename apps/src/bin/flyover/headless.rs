@@ -10,8 +10,10 @@ use engine::viewer::FrameStats;
 use std::time::Instant;
 
 pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
+    let load = Instant::now();
     let world = open_world(&cli.map, &worldgen::progress::Silent)
         .with_context(|| format!("opening map {}", cli.map.display()))?;
+    let map_load_s = load.elapsed().as_secs_f64();
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
     eprintln!(
@@ -104,11 +106,18 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         gpu.adapter_name()
     );
     let summary = print_table(&all, &gpu.adapter_name());
+    let peak_rss_mib = worldgen::progress::peak_rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    println!(
+        "\nmap opened in {map_load_s:.2} s (load, validation, error grids); peak resident memory {}",
+        peak_rss_mib.map_or_else(|| "not reported".to_string(), |m| format!("{m:.0} MiB"))
+    );
     let json = cli.out.join("stats.json");
     let doc = serde_json::json!({
         "adapter": gpu.adapter_name(),
         "size": cli.size,
         "tau_px": cli.tau,
+        "map_load_s": map_load_s,
+        "peak_rss_mib": peak_rss_mib,
         "summary": summary,
         "frames": all,
     });
