@@ -15,6 +15,7 @@ mod terrain;
 mod textures;
 mod tiles;
 mod vegetation;
+mod worlds;
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
@@ -25,7 +26,7 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 12] = [
+const SECTIONS: [&str; 13] = [
     "tiles",
     "terrain",
     "selection",
@@ -38,6 +39,7 @@ const SECTIONS: [&str; 12] = [
     "gpu",
     "textures",
     "soak",
+    "worlds",
 ];
 
 /// Node-generation benchmark: speed of every CPU phase and speed against measured error.
@@ -63,7 +65,10 @@ const SECTIONS: [&str; 12] = [
 /// same-run one-draw terrain reference, draw calls), `textures` (when an adapter exists: one
 /// ground texture per sampled node, CPU and GPU time, bytes), `soak` (when an adapter exists:
 /// the automatic flight in laps for `--soak-minutes`, resident and GPU memory, caches, jobs and
-/// tiles sampled every second; their growth, and what is left over at the end). Per-item times are on one
+/// tiles sampled every second; their growth, and what is left over at the end), `worlds` (only
+/// when named in --only: `worldgen generate` and `flyover --headless` at each of
+/// `--world-sizes`, as child processes: step times, peak memory, bytes on disk, load and
+/// selection time). Per-item times are on one
 /// core (p50/p95/p99/max); throughput is given for 1 and N worker threads.
 #[derive(Parser)]
 #[command(name = "nodebench", version, about, long_about)]
@@ -72,7 +77,8 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// lighting, pm, buildings, streaming, gpu, textures, soak.
+    /// lighting, pm, buildings, streaming, gpu, textures, soak, worlds (worlds runs only when
+    /// named here).
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -97,6 +103,12 @@ struct Cli {
     /// Worker threads for the throughput rows (default: all cores).
     #[arg(long)]
     workers: Option<usize>,
+    /// Section worlds: the map sides to generate and fly, metres (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [2048.0, 8192.0, 32768.0])]
+    world_sizes: Vec<f64>,
+    /// Section worlds: where its maps go (gigabytes for 32 km).
+    #[arg(long, default_value = "target/nodebench/worlds")]
+    worlds_scratch: PathBuf,
     /// Length of the soak section in minutes (--quick: a quarter of a minute).
     #[arg(long, default_value_t = 30.0)]
     soak_minutes: f64,
@@ -118,6 +130,13 @@ fn run(cli: &Cli) -> Result<()> {
         }
     }
     let want = |s: &str| cli.only.is_empty() || cli.only.iter().any(|o| o == s);
+    if cli.only.iter().any(|o| o == "worlds") {
+        for &s in &cli.world_sizes {
+            if !(s.is_finite() && (256.0..=65_536.0).contains(&s)) {
+                bail!("--world-sizes: {s} m is outside 256..=65536 m");
+            }
+        }
+    }
     let workers = cli
         .workers
         .unwrap_or_else(|| {
@@ -202,6 +221,9 @@ fn run(cli: &Cli) -> Result<()> {
         && let Some(name) = adapter_sections(cli, adapter, &world, &tree, &cams, &mut report)?
     {
         adapter_name = Some(name);
+    }
+    if cli.only.iter().any(|o| o == "worlds") {
+        worlds::section_worlds(&cli.world_sizes, &cli.worlds_scratch, &mut report)?;
     }
     let summary = format!(
         "nodebench on {} ({} x {} m, {} levels), {} worker(s), {:.1} s{}",

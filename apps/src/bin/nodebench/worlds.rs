@@ -1,0 +1,188 @@
+//! Section `worlds` (only with `--only worlds`: minutes to hours, gigabytes of scratch maps):
+//! how cost grows with the world. For each side in `--world-sizes` it runs the `worldgen` binary
+//! beside this one (`generate --size S`, 4 m spacing) and then `flyover --headless` on the map,
+//! each as its own process, and reads back what they print: time per generation step, peak
+//! resident memory, bytes on disk, the map's load time, and the per-frame selection time.
+
+use crate::report::Report;
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// A binary built beside this one (`cargo build --release -p worldgen -p apps`).
+fn sibling(name: &str) -> Result<PathBuf> {
+    let me = std::env::current_exe().context("locating nodebench")?;
+    let p = me.with_file_name(name);
+    if !p.exists() {
+        bail!(
+            "section worlds needs the {name} binary beside nodebench ({}); build it with \
+             `cargo build --release -p worldgen -p apps`",
+            p.display()
+        );
+    }
+    Ok(p)
+}
+
+fn run(cmd: &mut Command, what: &str) -> Result<String> {
+    let out = cmd.output().with_context(|| format!("starting {what}"))?;
+    if !out.status.success() {
+        bail!(
+            "{what} failed ({}):\n{}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The number after `prefix` on the line that starts with it.
+fn number_after(text: &str, prefix: &str) -> Option<f64> {
+    let line = text.lines().find(|l| l.trim_start().starts_with(prefix))?;
+    line.trim_start()[prefix.len()..]
+        .split_whitespace()
+        .next()?
+        .trim_end_matches(',')
+        .parse()
+        .ok()
+}
+
+fn dir_bytes(dir: &Path) -> u64 {
+    std::fs::read_dir(dir).map_or(0, |entries| {
+        entries
+            .filter_map(Result::ok)
+            .map(|e| {
+                let p = e.path();
+                if p.is_dir() {
+                    dir_bytes(&p)
+                } else {
+                    e.metadata().map_or(0, |m| m.len())
+                }
+            })
+            .sum()
+    })
+}
+
+pub(crate) fn section_worlds(sizes_m: &[f64], scratch: &Path, r: &mut Report) -> Result<()> {
+    let worldgen = sibling("worldgen")?;
+    let flyover = sibling("flyover")?;
+    std::fs::create_dir_all(scratch).with_context(|| format!("creating {}", scratch.display()))?;
+    for &size in sizes_m {
+        let km = size / 1000.0;
+        let map = scratch.join(format!("world_{size:.0}m"));
+        let p = format!("{km:.1} km square, 4 m spacing, seed 1, {}", map.display());
+        eprintln!("worlds: generating {km:.1} km");
+        let t0 = Instant::now();
+        let out = run(
+            Command::new(&worldgen)
+                .args(["generate", "--seed", "1", "--spacing", "4", "--size"])
+                .arg(format!("{size}"))
+                .arg("--out")
+                .arg(&map),
+            "worldgen generate",
+        )?;
+        let wall_s = t0.elapsed().as_secs_f64();
+        // The step table: `| step | seconds |`.
+        for line in out
+            .lines()
+            .filter(|l| l.starts_with("| ") && !l.contains("---"))
+        {
+            let cells: Vec<&str> = line.trim_matches('|').split('|').map(str::trim).collect();
+            if let [step, secs] = cells[..]
+                && let Ok(v) = secs.trim_matches('*').parse::<f64>()
+                && step != "step"
+            {
+                r.add(
+                    "worlds",
+                    &format!("generate {km:.0} km: {}", step.trim_matches('*')),
+                    v,
+                    "s",
+                    &p,
+                );
+            }
+        }
+        r.add(
+            "worlds",
+            &format!("generate {km:.0} km: wall time"),
+            wall_s,
+            "s",
+            &p,
+        );
+        if let Some(m) = number_after(&out, "peak resident memory:") {
+            r.add(
+                "worlds",
+                &format!("generate {km:.0} km: peak resident memory"),
+                m,
+                "MiB",
+                &p,
+            );
+        }
+        r.add(
+            "worlds",
+            &format!("{km:.0} km map on disk"),
+            dir_bytes(&map) as f64 / f64::from(1 << 20),
+            "MiB",
+            &p,
+        );
+        eprintln!("worlds: flying {km:.1} km");
+        let fly = scratch.join(format!("fly_{size:.0}m"));
+        run(
+            Command::new(&flyover)
+                .args([
+                    "--headless",
+                    "--frames",
+                    "40",
+                    "--every",
+                    "0",
+                    "--size",
+                    "640x360",
+                ])
+                .args(["--duration-s", "40", "--map"])
+                .arg(&map)
+                .arg("--out")
+                .arg(&fly),
+            "flyover --headless",
+        )?;
+        let stats: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(fly.join("stats.json")).context("reading stats.json")?,
+        )?;
+        let fp = format!("{p}; flyover --headless, 40 frames of the automatic flight, 640x360");
+        if let Some(v) = stats["map_load_s"].as_f64() {
+            r.add(
+                "worlds",
+                &format!("flyover {km:.0} km: map load"),
+                v,
+                "s",
+                &fp,
+            );
+        }
+        if let Some(v) = stats["peak_rss_mib"].as_f64() {
+            r.add(
+                "worlds",
+                &format!("flyover {km:.0} km: peak resident memory"),
+                v,
+                "MiB",
+                &fp,
+            );
+        }
+        let mut sel: Vec<f64> = stats["frames"]
+            .as_array()
+            .map(|f| {
+                f.iter()
+                    .filter_map(|s| s["selection_ms"].as_f64())
+                    .collect()
+            })
+            .unwrap_or_default();
+        sel.sort_by(f64::total_cmp);
+        if !sel.is_empty() {
+            r.add(
+                "worlds",
+                &format!("flyover {km:.0} km: selection per frame, median"),
+                apps::percentile(&sel, 0.5),
+                "ms",
+                &fp,
+            );
+        }
+    }
+    Ok(())
+}
