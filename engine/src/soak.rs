@@ -129,25 +129,8 @@ pub fn run(
         let cam = cam_at(&viewer, (t_s / p.lap_s).fract());
         let dt = (now - last).as_secs_f64().max(1e-3);
         last = now;
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("soak frame"),
-            });
-        let st = viewer.frame(
-            gpu,
-            &mut enc,
-            &target.color_view,
-            &target.depth_view,
-            &cam,
-            dt,
-        );
+        let st = viewer.render_offscreen(gpu, &target, &cam, dt)?;
         texture_bytes = st.texture_resident_bytes;
-        gpu.queue.submit([enc.finish()]);
-        viewer.after_submit();
-        gpu.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| format!("waiting for the GPU: {e}"))?;
         frames += 1;
     }
     let start = cam_at(&viewer, 0.0);

@@ -334,6 +334,36 @@ impl Viewer {
         }
     }
 
+    /// Draws one frame of `cam` into `target` (offscreen runs: benchmarks, soaks), submits it and
+    /// waits for the GPU.
+    pub fn render_offscreen(
+        &mut self,
+        gpu: &Gpu,
+        target: &crate::render::Target,
+        cam: &Camera,
+        dt_s: f64,
+    ) -> Result<FrameStats, String> {
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("offscreen frame"),
+            });
+        let st = self.frame(
+            gpu,
+            &mut enc,
+            &target.color_view,
+            &target.depth_view,
+            cam,
+            dt_s,
+        );
+        gpu.queue.submit([enc.finish()]);
+        self.after_submit();
+        gpu.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| format!("waiting for the GPU: {e}"))?;
+        Ok(st)
+    }
+
     /// Call after submitting the encoder given to [`Self::frame`] (starts the timestamp
     /// readback).
     pub fn after_submit(&self) {

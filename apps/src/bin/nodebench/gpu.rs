@@ -133,24 +133,9 @@ pub(crate) fn fly(
         // frame's statistics hold a settled frame's times.
         let mut last = None;
         for _ in 0..3 {
-            let mut enc = gpu
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("nodebench gpu frame"),
-                });
-            let st = viewer.frame(
-                gpu,
-                &mut enc,
-                &target.color_view,
-                &target.depth_view,
-                &cam,
-                dt,
-            );
-            gpu.queue.submit([enc.finish()]);
-            viewer.after_submit();
-            gpu.device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
+            let st = viewer
+                .render_offscreen(gpu, &target, &cam, dt)
+                .map_err(|e| anyhow::anyhow!(e))?;
             last = Some(st);
         }
         each(&viewer, &target)?;
