@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 pub struct SoakSample {
     pub t_s: f64,
     pub frames: u64,
-    /// Resident set of the process (Linux `/proc/self/statm`), None elsewhere.
+    /// Resident set of the process (Linux `VmRSS`), None elsewhere.
     pub rss_bytes: Option<u64>,
     /// GPU memory held by buffers and textures, and the buffers alive (wgpu's counters; its
     /// Vulkan backend counts destroyed textures but not created ones, so no texture count).
@@ -68,19 +68,13 @@ pub struct SoakParams {
     pub settings: StreamSettings,
 }
 
-fn rss_bytes() -> Option<u64> {
-    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
-    let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
-    Some(pages * 4096)
-}
-
 fn sample(viewer: &Viewer, gpu: &Gpu, t_s: f64, frames: u64, texture_bytes: u64) -> SoakSample {
     let counters = gpu.device.get_internal_counters();
     let st = &viewer.streamer.stats;
     SoakSample {
         t_s,
         frames,
-        rss_bytes: rss_bytes(),
+        rss_bytes: worldgen::progress::rss_bytes(),
         gpu_buffer_bytes: counters.hal.buffer_memory.read() as i64,
         gpu_texture_bytes: counters.hal.texture_memory.read() as i64,
         gpu_buffers: counters.hal.buffers.read() as i64,

@@ -214,6 +214,22 @@ fn decal_footprint(d: &Decal, origin_m: [f64; 2]) -> FxHashMap<(i64, i64), (f64,
 }
 
 impl DecalField {
+    /// Heap bytes, approximately: hash-map entries times their size (key, value, a control
+    /// byte), boxed blocks, the occupancy grids.
+    pub fn heap_bytes(&self) -> usize {
+        let block = (BLOCK * BLOCK) as usize * 4;
+        self.blocks.capacity() * (8 + 8 + 1)
+            + self.blocks.len() * block
+            + self
+                .bounds
+                .iter()
+                .map(|b| b.capacity() * (8 + 12 + 1))
+                .sum::<usize>()
+            + self.road_weight.capacity() * (16 + 4 + 1)
+            + self.road_cells.len()
+            + self.coarse.len()
+    }
+
     /// Rasterizes the decals. `ground_height_m` is the map's bicubic height (without detail).
     pub fn new(
         decals: &[Decal],

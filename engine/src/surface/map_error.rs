@@ -157,6 +157,11 @@ impl MapErrorPyramid {
         p
     }
 
+    /// Heap bytes of the blocks.
+    pub fn bytes(&self) -> usize {
+        self.levels.iter().map(|l| l.blocks.len() * 16).sum()
+    }
+
     /// The pyramid as bytes (little-endian; see [`super::map_error_cache`]).
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut out = Vec::new();

@@ -103,6 +103,39 @@ impl Rect {
 }
 
 impl World {
+    /// Heap bytes of what the world keeps, by part (approximate for hash maps: entries times
+    /// their size, without the tables' spare capacity).
+    pub fn memory_bytes(&self) -> Vec<(&'static str, usize)> {
+        let grid = |w: usize, h: usize, b: usize| w * h * b;
+        let m = &self.map;
+        let layers = grid(m.heights.width(), m.heights.height(), 4)
+            + grid(m.ground.width(), m.ground.height(), 1)
+            + m.densities
+                .iter()
+                .map(|d| grid(d.density.width(), d.density.height(), 1))
+                .sum::<usize>();
+        let pyramids = [
+            &self.slope_g,
+            &self.slope_detail,
+            &self.curv_g,
+            &self.curv_detail,
+            &self.amp_max,
+        ]
+        .iter()
+        .map(|p| p.bytes())
+        .sum();
+        vec![
+            ("map layers (heights, ground, densities)", layers),
+            (
+                "ground amplitude grid",
+                grid(self.amplitude_m.width(), self.amplitude_m.height(), 4),
+            ),
+            ("slope, curvature and amplitude max-pyramids", pyramids),
+            ("decal field", self.decals.heap_bytes()),
+            ("surface error grids", self.map_error.bytes()),
+        ]
+    }
+
     /// Opens `map`, computing the map-error grids ([`super::map_error`]) on all cores (seconds
     /// on an 8 km map; [`World::with_error_cache`] keeps them in a file).
     pub fn new(map: Map) -> Self {
@@ -495,6 +528,10 @@ struct MaxPyramid {
 }
 
 impl MaxPyramid {
+    fn bytes(&self) -> usize {
+        self.levels.iter().map(|l| l.data().len() * 4).sum()
+    }
+
     fn new(base: worldgen::Grid<f32>) -> Self {
         let mut levels = vec![base];
         while let Some(prev) = levels.last() {

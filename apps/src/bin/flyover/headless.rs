@@ -14,6 +14,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let world = open_world(&cli.map, &worldgen::progress::Silent)
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let map_load_s = load.elapsed().as_secs_f64();
+    let world_memory: Vec<(&str, usize)> = world.memory_bytes();
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
     eprintln!(
@@ -107,17 +108,34 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     );
     let summary = print_table(&all, &gpu.adapter_name());
     let peak_rss_mib = worldgen::progress::peak_rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let rss_mib = worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let show =
+        |m: Option<f64>| m.map_or_else(|| "not reported".to_string(), |m| format!("{m:.0} MiB"));
     println!(
-        "\nmap opened in {map_load_s:.2} s (load, validation, error grids); peak resident memory {}",
-        peak_rss_mib.map_or_else(|| "not reported".to_string(), |m| format!("{m:.0} MiB"))
+        "\nmap opened in {map_load_s:.2} s (load, validation, error grids); resident memory {} at \
+         the end, {} at the peak",
+        show(rss_mib),
+        show(peak_rss_mib)
     );
+    let mib = |b: usize| b as f64 / f64::from(1 << 20);
+    let parts: Vec<String> = world_memory
+        .iter()
+        .map(|(what, b)| format!("{what} {:.0} MiB", mib(*b)))
+        .collect();
+    println!("world in memory: {}", parts.join(", "));
+    let world_memory_mib: serde_json::Map<String, serde_json::Value> = world_memory
+        .iter()
+        .map(|(what, b)| ((*what).to_string(), serde_json::json!(mib(*b))))
+        .collect();
     let json = cli.out.join("stats.json");
     let doc = serde_json::json!({
+        "world_memory_mib": world_memory_mib,
         "adapter": gpu.adapter_name(),
         "size": cli.size,
         "tau_px": cli.tau,
         "map_load_s": map_load_s,
         "peak_rss_mib": peak_rss_mib,
+        "end_rss_mib": rss_mib,
         "summary": summary,
         "frames": all,
     });
