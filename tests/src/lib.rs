@@ -1,6 +1,7 @@
 //! End-to-end test crate: worldgen -> map folder -> engine. Shared helpers for the tests in
 //! `tests/tests/`.
 
+pub mod gltf_fixture;
 pub mod mutate;
 pub mod readers;
 

@@ -1,7 +1,7 @@
 //! Every reader of untrusted input, each with a valid seed file of its format in a scratch
 //! folder: the committed tiny map's files (map.toml, EXR heights, PNG layers, CSV lists,
-//! decals, poisson.csv, house PMs and textures), a material PNG, a camera path, a GeoTIFF and an
-//! OBJ mesh. Shared by the bounded fuzz test (`tests/tests/readers_fuzz.rs`) and the cargo-fuzz
+//! decals, poisson.csv, house PMs and textures), a material PNG, a camera path, a GeoTIFF, an OBJ
+//! mesh and a glTF model. Shared by the bounded fuzz test (`tests/tests/readers_fuzz.rs`) and the cargo-fuzz
 //! targets (`tests/fuzz/`).
 
 use crate::mutate::Format;
@@ -44,6 +44,11 @@ impl Fixture {
         .expect("copy a camera path");
         write_geotiff(&root.join("dem.tif"));
         write_obj(&root.join("house.obj"));
+        std::fs::write(
+            root.join("chain.gltf"),
+            crate::gltf_fixture::gltf_with_chain(4, false, false),
+        )
+        .expect("write glTF");
         let m = &map.manifest;
         let house = building_models::path(Path::new(""), &map.buildings[0].type_name);
         let texture = format!(
@@ -114,6 +119,9 @@ impl Fixture {
             }),
             r("OBJ mesh", "house.obj", Format::Text, |_, p| {
                 worldgen::pm::load_mesh(p).map(drop).map_err(err)
+            }),
+            r("glTF model", "chain.gltf", Format::Text, |_, p| {
+                worldgen::pm::gltf_input::load(p).map(drop).map_err(err)
             }),
         ];
         Self {

@@ -165,9 +165,26 @@ fn every_reader_is_listed() {
     let names: Vec<&str> = fixture.readers().iter().map(|r| r.name).collect();
     assert_eq!(
         names.len(),
-        14,
+        15,
         "{names:?}: add a test below for each new reader"
     );
+    // Each reader has its cargo-fuzz target.
+    let targets = tests::workspace_root().join("tests/fuzz/fuzz_targets");
+    let mut fuzzed = Vec::new();
+    for entry in std::fs::read_dir(&targets).expect("fuzz targets folder") {
+        let text = std::fs::read_to_string(entry.expect("entry").path()).expect("target");
+        if let Some(at) = text.find("check(\"") {
+            let rest = &text[at + 7..];
+            fuzzed.push(rest[..rest.find('"').unwrap_or(0)].to_string());
+        }
+    }
+    for name in &names {
+        assert!(
+            fuzzed.iter().any(|f| f == name),
+            "no cargo-fuzz target in {} runs {name:?}",
+            targets.display()
+        );
+    }
 }
 
 #[test]
@@ -238,4 +255,9 @@ fn fuzz_geotiff() {
 #[test]
 fn fuzz_obj_mesh() {
     check("OBJ mesh", 14);
+}
+
+#[test]
+fn fuzz_gltf_model() {
+    check("glTF model", 15);
 }

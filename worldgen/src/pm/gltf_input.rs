@@ -141,6 +141,20 @@ fn lod_ids(node: &gltf::Node<'_>, ctx: &Ctx<'_>) -> Result<Option<Vec<usize>>, G
 
 /// Reads a glTF or GLB file.
 pub fn load(path: &Path) -> Result<GltfModel, GltfError> {
+    // The gltf crate (1.4) panics on some damaged files instead of returning an error (an
+    // accessor index past its array in validation, accessor readers on inconsistent views);
+    // found by fuzzing. Contained here as an error naming the file.
+    std::panic::catch_unwind(|| read_model(path)).unwrap_or_else(|_| {
+        Err(GltfError {
+            path: path.to_path_buf(),
+            message: "not a valid glTF: the glTF reader failed on it (an index or a view points \
+                      outside its data)"
+                .into(),
+        })
+    })
+}
+
+fn read_model(path: &Path) -> Result<GltfModel, GltfError> {
     let fail = |message: String| GltfError {
         path: path.to_path_buf(),
         message,
