@@ -46,7 +46,58 @@ impl Hydraulic {
     }
 }
 
-fn height_and_gradient(g: &Grid<f32>, x: f64, y: f64) -> (f64, f64, f64) {
+/// A grid stored in 32 x 32 blocks (4 KiB of f32, one page each) instead of rows. A droplet's
+/// path stays within a few blocks, where in rows every step north or south lands a whole row
+/// (a page or more) away: on large maps the row layout makes erosion miss the cache and the TLB
+/// on almost every step. Same values, same order of operations: the result is bit-identical.
+struct Blocked {
+    blocks_per_row: usize,
+    data: Vec<f32>,
+}
+
+const BLOCK_SHIFT: usize = 5;
+const BLOCK_MASK: usize = (1 << BLOCK_SHIFT) - 1;
+
+impl Blocked {
+    fn from_grid(g: &Grid<f32>) -> Self {
+        let blocks_per_row = g.width().div_ceil(1 << BLOCK_SHIFT);
+        let rows = g.height().div_ceil(1 << BLOCK_SHIFT);
+        let mut b = Self {
+            blocks_per_row,
+            data: vec![0.0; (blocks_per_row * rows) << (2 * BLOCK_SHIFT)],
+        };
+        for y in 0..g.height() {
+            for x in 0..g.width() {
+                b.set(x, y, g.get(x, y));
+            }
+        }
+        b
+    }
+
+    fn copy_to(&self, g: &mut Grid<f32>) {
+        for y in 0..g.height() {
+            for x in 0..g.width() {
+                g.set(x, y, self.get(x, y));
+            }
+        }
+    }
+
+    fn index(&self, x: usize, y: usize) -> usize {
+        let block = (y >> BLOCK_SHIFT) * self.blocks_per_row + (x >> BLOCK_SHIFT);
+        (block << (2 * BLOCK_SHIFT)) | ((y & BLOCK_MASK) << BLOCK_SHIFT) | (x & BLOCK_MASK)
+    }
+
+    fn get(&self, x: usize, y: usize) -> f32 {
+        self.data[self.index(x, y)]
+    }
+
+    fn set(&mut self, x: usize, y: usize, v: f32) {
+        let i = self.index(x, y);
+        self.data[i] = v;
+    }
+}
+
+fn height_and_gradient(g: &Blocked, x: f64, y: f64) -> (f64, f64, f64) {
     let (ix, iy) = (x.floor() as usize, y.floor() as usize);
     let (fx, fy) = (x - ix as f64, y - iy as f64);
     let h00 = f64::from(g.get(ix, iy));
@@ -62,7 +113,7 @@ fn height_and_gradient(g: &Grid<f32>, x: f64, y: f64) -> (f64, f64, f64) {
     (h, gx, gy)
 }
 
-fn add_bilinear(g: &mut Grid<f32>, x: f64, y: f64, amount: f64) {
+fn add_bilinear(g: &mut Blocked, x: f64, y: f64, amount: f64) {
     let (ix, iy) = (x.floor() as usize, y.floor() as usize);
     let (fx, fy) = (x - ix as f64, y - iy as f64);
     for (dx, dy, w) in [
@@ -85,10 +136,12 @@ pub fn hydraulic(
     progress: &dyn Progress,
 ) -> Grid<f32> {
     let (w, h) = (heights.width(), heights.height());
-    let mut flow = Grid::new(w, h, 0.0f32);
+    let mut flow_grid = Grid::new(w, h, 0.0f32);
     if w < 3 || h < 3 {
-        return flow;
+        return flow_grid;
     }
+    let mut flow = Blocked::from_grid(&flow_grid);
+    let mut cells = Blocked::from_grid(heights);
     let (max_x, max_y) = ((w - 1) as f64, (h - 1) as f64);
     progress.begin("hydraulic erosion", p.droplets as u64);
     for i in 0..p.droplets {
@@ -101,7 +154,7 @@ pub fn hydraulic(
         let (mut dx, mut dy) = (0.0f64, 0.0f64);
         let (mut speed, mut water, mut sediment) = (1.0f64, 1.0f64, 0.0f64);
         for _ in 0..p.max_steps {
-            let (h0, gx, gy) = height_and_gradient(heights, x, y);
+            let (h0, gx, gy) = height_and_gradient(&cells, x, y);
             flow.set(
                 x as usize,
                 y as usize,
@@ -119,7 +172,7 @@ pub fn hydraulic(
             if nx < 0.0 || ny < 0.0 || nx >= max_x || ny >= max_y {
                 break;
             }
-            let (h1, _, _) = height_and_gradient(heights, nx, ny);
+            let (h1, _, _) = height_and_gradient(&cells, nx, ny);
             let dh = h1 - h0;
             let capacity = (-dh).max(p.min_capacity) * speed * water * p.capacity;
             if sediment > capacity || dh > 0.0 {
@@ -131,13 +184,13 @@ pub fn hydraulic(
                 };
                 let amount = amount.min(p.max_change_m);
                 sediment -= amount;
-                add_bilinear(heights, x, y, amount);
+                add_bilinear(&mut cells, x, y, amount);
             } else {
                 let amount = ((capacity - sediment) * p.erode)
                     .min(-dh)
                     .min(p.max_change_m);
                 sediment += amount;
-                add_bilinear(heights, x, y, -amount);
+                add_bilinear(&mut cells, x, y, -amount);
             }
             speed = (speed * speed + dh.abs() * p.gravity).sqrt().min(20.0);
             water *= 1.0 - p.evaporate;
@@ -146,7 +199,9 @@ pub fn hydraulic(
         }
     }
     progress.end();
-    flow
+    cells.copy_to(heights);
+    flow.copy_to(&mut flow_grid);
+    flow_grid
 }
 
 /// Thermal erosion: `iterations` Jacobi sweeps moving material down slopes steeper than
