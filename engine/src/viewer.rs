@@ -334,8 +334,8 @@ impl Viewer {
         }
     }
 
-    /// Draws one frame of `cam` into `target` (offscreen runs: benchmarks, soaks), submits it and
-    /// waits for the GPU.
+    /// Draws one frame of `cam` into `target` (offscreen runs: headless flights, benchmarks,
+    /// soaks, tests), submits it and waits for the GPU (`gpu_wait_ms`).
     pub fn render_offscreen(
         &mut self,
         gpu: &Gpu,
@@ -348,7 +348,7 @@ impl Viewer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("offscreen frame"),
             });
-        let st = self.frame(
+        let mut st = self.frame(
             gpu,
             &mut enc,
             &target.color_view,
@@ -356,11 +356,13 @@ impl Viewer {
             cam,
             dt_s,
         );
+        let t0 = Instant::now();
         gpu.queue.submit([enc.finish()]);
         self.after_submit();
         gpu.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| format!("waiting for the GPU: {e}"))?;
+        st.gpu_wait_ms = t0.elapsed().as_secs_f64() * 1e3;
         Ok(st)
     }
 

@@ -373,24 +373,8 @@ pub mod gpu {
 
     /// Renders one frame into `target` and waits for the GPU.
     pub fn frame(g: &Gpu, v: &mut Viewer, target: &Target, cam: &Camera, dt_s: f64) -> FrameStats {
-        let mut enc = g
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("test frame"),
-            });
-        let st = v.frame(
-            g,
-            &mut enc,
-            &target.color_view,
-            &target.depth_view,
-            cam,
-            dt_s,
-        );
-        g.queue.submit([enc.finish()]);
-        g.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .expect("GPU finishes the frame");
-        st
+        v.render_offscreen(g, target, cam, dt_s)
+            .expect("GPU finishes the frame")
     }
 
     /// Renders frames until every wanted node is shown and no job is left, then a few more so

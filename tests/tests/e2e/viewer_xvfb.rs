@@ -186,16 +186,7 @@ fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
         v["stats"]["triangles"].as_u64().unwrap_or(0) > 0
     });
     let _ = first;
-    let win = Command::new("xdotool")
-        .args(["search", "--sync", "--name", "flyover"])
-        .env("DISPLAY", &display)
-        .output()
-        .expect("xdotool search");
-    let win = String::from_utf8_lossy(&win.stdout)
-        .lines()
-        .next()
-        .unwrap_or_default()
-        .to_string();
+    let win = window_id(&display);
     assert!(
         !win.is_empty(),
         "no flyover window found; log:\n{}",

@@ -100,9 +100,15 @@ fn compression_name(code: u16) -> &'static str {
     }
 }
 
+/// The layout the elevation reader accepted: its compression code and bits per sample.
+struct Layout {
+    compression: u16,
+    bits: u16,
+}
+
 /// Checks the layout tags the elevation reader depends on: one band, a supported compression
 /// and sample type.
-fn check_layout(path: &Path, dec: &mut Dec) -> Result<(), DemError> {
+fn check_layout(path: &Path, dec: &mut Dec) -> Result<Layout, DemError> {
     let bands = tag_u16(path, dec, Tag::SamplesPerPixel, "SamplesPerPixel (277)")?.unwrap_or(1);
     if bands != 1 {
         return Err(unsupported(
@@ -148,7 +154,7 @@ fn check_layout(path: &Path, dec: &mut Dec) -> Result<(), DemError> {
             ),
         ));
     }
-    Ok(())
+    Ok(Layout { compression, bits })
 }
 
 /// Checks, before the raster is allocated, that every strip or tile lies inside the file and
@@ -158,6 +164,7 @@ fn check_layout(path: &Path, dec: &mut Dec) -> Result<(), DemError> {
 fn check_data_size(
     path: &Path,
     dec: &mut Dec,
+    layout: &Layout,
     file_len: u64,
     samples: u64,
 ) -> Result<(), DemError> {
@@ -212,22 +219,13 @@ fn check_data_size(
         }
         total += c;
     }
-    let compression = dec
-        .find_tag_unsigned::<u16>(Tag::Compression)
-        .ok()
-        .flatten()
-        .unwrap_or(1);
-    let ratio: u64 = match compression {
+    let ratio: u64 = match layout.compression {
         32773 => 64,
         8 | 32946 => 1032,
         5 => 4096,
         _ => 1,
     };
-    let bits = dec
-        .find_tag_unsigned::<u16>(Tag::BitsPerSample)
-        .ok()
-        .flatten()
-        .unwrap_or(8);
+    let bits = layout.bits;
     let needed = samples * u64::from(bits / 8).max(1);
     if total.saturating_mul(ratio) < needed {
         return Err(bad(
@@ -406,8 +404,14 @@ pub fn read(path: &Path, spacing_m: Option<f64>, vertical_scale: f64) -> Result<
         .dimensions()
         .map_err(|e| bad(path, format!("ImageWidth/ImageLength: {e}")))?;
     check_size(path, w.into(), h.into())?;
-    check_layout(path, &mut dec)?;
-    check_data_size(path, &mut dec, file_len, u64::from(w) * u64::from(h))?;
+    let layout = check_layout(path, &mut dec)?;
+    check_data_size(
+        path,
+        &mut dec,
+        &layout,
+        file_len,
+        u64::from(w) * u64::from(h),
+    )?;
     let affine = read_affine(path, &mut dec)?;
     let keys = read_geokeys(path, &mut dec)?;
     let key = |id| keys.iter().find(|k| k.0 == id).map(|k| k.1);

@@ -69,26 +69,9 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
             t_s,
             cli.size,
         );
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("headless frame"),
-            });
-        let mut st = viewer.frame(
-            &gpu,
-            &mut enc,
-            &target.color_view,
-            &target.depth_view,
-            &cam,
-            dt,
-        );
-        let t0 = Instant::now();
-        gpu.queue.submit([enc.finish()]);
-        viewer.after_submit();
-        gpu.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| anyhow::anyhow!("waiting for the GPU: {e}"))?;
-        st.gpu_wait_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let mut st = viewer
+            .render_offscreen(&gpu, &target, &cam, dt)
+            .map_err(|e| anyhow::anyhow!(e))?;
         st.t_s = t_s;
         if cli.every > 0 && (f % cli.every == 0 || f + 1 == cli.frames) {
             let png = cli.out.join(format!("frame_{f:05}.png"));
