@@ -140,7 +140,7 @@ pub fn generate(
     });
     let flow = timed(times, "hydraulic erosion", || {
         let params = erosion::Hydraulic::for_cells(n * n);
-        erosion::hydraulic(&mut heights, seed, &params, progress)
+        erosion::hydraulic(&mut heights, seed, &params, threads, progress)
     });
     timed(times, "thermal erosion", || {
         erosion::thermal(&mut heights, spacing, 0.9, 8, threads, progress);
