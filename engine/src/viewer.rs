@@ -210,8 +210,9 @@ impl Viewer {
         let select_cam = self.frozen.unwrap_or(*cam);
         self.streamer.update(&select_cam, dt_s);
         let t1 = Instant::now();
-        let uploaded = self.upload(gpu, budget_s);
+        let (uploaded, expected_gpu_s) = self.upload(gpu, budget_s);
         let t2 = Instant::now();
+        let upload_time_left_s = budget_s - (t2 - t1).as_secs_f64() - expected_gpu_s;
         let drawn: Vec<DrawnNode<'_>> = self
             .streamer
             .draw_list()
@@ -259,6 +260,7 @@ impl Viewer {
                 .settings
                 .gpu_budget_bytes
                 .saturating_sub(uploaded),
+            upload_time_left_s,
         };
         let stats: DrawStats = self.scene.render(gpu, encoder, color, depth, &draws);
         if timed && let Some(t) = &self.timer {
@@ -407,17 +409,19 @@ impl Viewer {
         self.scene.finish_uploads(gpu);
     }
 
-    /// The streamer's GPU phases under `budget_s`: every renderer's upload hook.
-    /// Runs the nodes' GPU phases within `budget_s`; returns the bytes they uploaded.
-    fn upload(&mut self, gpu: &Gpu, budget_s: f64) -> usize {
+    /// The streamer's GPU phases under `budget_s`, with every renderer's upload hook; returns
+    /// the bytes they uploaded and the GPU time their recorded work is expected to take.
+    fn upload(&mut self, gpu: &Gpu, budget_s: f64) -> (usize, f64) {
         let scene = &mut self.scene;
-        let mut bytes = 0;
+        let (mut bytes, mut expected_gpu_s) = (0, 0.0);
         self.streamer
             .run_gpu_phases_within(budget_s, &mut |shared, work| {
+                let estimate_before_s = work.gpu_estimate_s;
                 work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
                 bytes += work.uploaded_bytes;
+                expected_gpu_s += work.gpu_estimate_s - estimate_before_s;
             });
-        bytes
+        (bytes, expected_gpu_s)
     }
 
     /// Wanted nodes not drawn yet (a coarser ancestor stands in for them): the pop debt count.

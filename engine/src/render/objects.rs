@@ -775,11 +775,18 @@ impl ObjectsRenderer {
     }
 
     /// Ends the texture cache's frame (its uploads within what is left of the streamer's
-    /// per-frame upload budget), applies the plan on the GPU and fills the draws' texture
+    /// per-frame upload budgets of bytes and time), applies the plan on the GPU and fills the draws' texture
     /// levels.
     fn texture_plan(&mut self, gpu: &Gpu, draws: &FrameDraws<'_>, uniforms: &mut [DrawUniform]) {
-        // Texture uploads share the streamer's per-frame upload budget with the nodes'.
-        let left = u64::try_from(draws.upload_bytes_left).unwrap_or(u64::MAX);
+        // Texture uploads share the streamer's per-frame upload budgets, bytes and time, with
+        // the nodes'.
+        let left = u64::try_from(draws.upload_bytes_left)
+            .unwrap_or(u64::MAX)
+            .min(
+                self.gpu_tex
+                    .upload_cost
+                    .bytes_within(draws.upload_time_left_s),
+            );
         self.tex_pool
             .set_upload_budget(left.min(PoolSettings::default().upload_bytes_per_frame));
         let plan = self.tex_pool.end_frame();

@@ -35,6 +35,10 @@ pub struct FrameDraws<'a> {
     /// What is left this frame of the streamer's GPU upload budget in bytes after the nodes'
     /// uploads (the texture cache uploads within it, at least one texture a frame).
     pub upload_bytes_left: usize,
+    /// What is left this frame of the streamer's GPU time budget after the nodes' GPU phases
+    /// (their frame-thread time and expected GPU time): the texture cache's uploads fit in it
+    /// at their measured cost per byte, at least one texture a frame.
+    pub upload_time_left_s: f64,
 }
 
 /// The GPU side of one kind of thing drawn.

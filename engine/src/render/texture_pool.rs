@@ -4,6 +4,7 @@
 
 use super::Gpu;
 use crate::texcache::pool::{Op, Plan, SlotId};
+use crate::texcache::upload_cost::UploadCost;
 use std::collections::HashMap;
 use worldgen::house_textures::MipChain;
 
@@ -12,6 +13,8 @@ pub struct GpuTexturePool {
     slots: HashMap<SlotId, (wgpu::Texture, wgpu::TextureView)>,
     pub fallback: wgpu::TextureView,
     pub sampler: wgpu::Sampler,
+    /// Frame-thread cost of an uploaded byte (the texture writes of recent plans).
+    pub upload_cost: UploadCost,
 }
 
 fn slot_texture(device: &wgpu::Device, edge: u32, levels: u32) -> wgpu::Texture {
@@ -61,6 +64,7 @@ impl GpuTexturePool {
             slots: HashMap::new(),
             fallback: white.create_view(&wgpu::TextureViewDescriptor::default()),
             sampler,
+            upload_cost: UploadCost::default(),
         }
     }
 
@@ -73,6 +77,7 @@ impl GpuTexturePool {
     /// was destroyed or made (bind groups naming slots must then be made again).
     pub fn apply(&mut self, gpu: &Gpu, plan: &Plan, chains: &[MipChain]) -> bool {
         let mut changed = false;
+        let (mut upload_s, mut upload_bytes) = (0.0f64, 0usize);
         for op in &plan.ops {
             match *op {
                 Op::Destroy(slot) => {
@@ -95,6 +100,7 @@ impl GpuTexturePool {
                         continue;
                     };
                     let chain = &chains[texture as usize];
+                    let t0 = std::time::Instant::now();
                     for (mip, data) in chain.levels[level as usize..].iter().enumerate() {
                         let edge = chain.edge(level + mip as u32);
                         gpu.queue.write_texture(
@@ -116,10 +122,13 @@ impl GpuTexturePool {
                                 depth_or_array_layers: 1,
                             },
                         );
+                        upload_bytes += data.len();
                     }
+                    upload_s += t0.elapsed().as_secs_f64();
                 }
             }
         }
+        self.upload_cost.record(upload_bytes, upload_s);
         changed
     }
 }

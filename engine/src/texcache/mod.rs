@@ -8,6 +8,9 @@
 //!   every drawn texture, the least visible losing resolution first when the budget is short,
 //!   least recently used textures evicted, uploads under a per-frame byte budget; the result is
 //!   a [`pool::Plan`] of slot creations, destructions and uploads for the GPU side.
+//! - [`upload_cost`]: the measured frame-thread cost of an uploaded byte, which turns the time
+//!   left of the streamer's per-frame GPU budget into bytes of texture uploads.
 
 pub mod mip;
 pub mod pool;
+pub mod upload_cost;

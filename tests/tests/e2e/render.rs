@@ -248,6 +248,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
             dt_s: 0.0,
             tau_px: 2.0,
             upload_bytes_left: usize::MAX,
+            upload_time_left_s: f64::INFINITY,
         };
         let mut enc = g
             .device
