@@ -17,8 +17,14 @@ use engine::terrain::tin;
 /// and the bounds' check lattice.
 const MAX_SAMPLES_PER_QUAD: u32 = 2;
 
+/// Cached entries (meshes and sample sets together) above which [`MeshCache`] starts over. The
+/// finest distance ratios the baseline tuning tries select hundreds of thousands of nodes, whose
+/// meshes and samples (about 100 KiB a node) would not fit in memory: a run on the 8 km map
+/// passed 21 GiB without this.
+const MAX_CACHED_ENTRIES: usize = 40_000;
+
 /// Node meshes (grid and TIN) and their dense error samples, built once and reused across
-/// thresholds and bisection steps.
+/// thresholds and bisection steps while they fit under [`MAX_CACHED_ENTRIES`].
 #[derive(Default)]
 struct MeshCache {
     grid: std::collections::HashMap<NodeKey, NodeMesh>,
@@ -28,6 +34,16 @@ struct MeshCache {
 }
 
 impl MeshCache {
+    /// Starts over when over [`MAX_CACHED_ENTRIES`] (everything here is a pure function of the
+    /// node: dropping it costs time, never a different figure).
+    fn trim(&mut self) {
+        if self.grid.len() + self.tin.len() + self.samples.len() > MAX_CACHED_ENTRIES {
+            self.grid.clear();
+            self.tin.clear();
+            self.samples.clear();
+        }
+    }
+
     fn grid(
         &mut self,
         world: &World,
@@ -72,6 +88,7 @@ fn measure_view(
     tin_target: Option<f64>,
 ) -> (usize, ViewError) {
     let (cache, tiles, meshes_cache) = ctx;
+    meshes_cache.trim();
     let mut meshes = Vec::with_capacity(sel.nodes.len());
     let mut tris = 0;
     for s in &sel.nodes {
