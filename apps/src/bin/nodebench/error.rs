@@ -281,7 +281,8 @@ pub(crate) fn section_error(
         } else if baseline.bracketed {
             "MISSES our max error on the scored cameras"
         } else {
-            "MISSES: no ratio up to 256 reaches our max error on the tuning cameras"
+            "MISSES: no ratio up to 256 with at most 12,000 nodes a view reaches our max error \
+             on the tuning cameras"
         };
         let bparams = format!(
             "{params}, ratio {hi:.2} tuned on {} other cameras, {verdict}",
@@ -335,6 +336,12 @@ pub(crate) fn section_error(
     curve
 }
 
+/// Nodes a view of the CDLOD-style baseline may select while tuning (each a 33 x 33 grid: 2,048
+/// triangles, so 12,000 nodes are 25 M triangles a frame); a wider ratio is not tried. Without
+/// a limit the widest ratios selected most of the 8 km map's million leaf nodes and ran out of
+/// 24 GiB of memory.
+const MAX_BASELINE_NODES: usize = 12_000;
+
 /// The tuned CDLOD-style baseline: its distance ratio, whether tuning found a ratio that meets
 /// the target, and (triangles, max px, mean px) on the scored cameras.
 struct Baseline {
@@ -355,34 +362,49 @@ fn tune_baseline(
     target_px: f64,
     quick: bool,
 ) -> Baseline {
-    let mut measure_ratio = |ratio: f64, cams: &[Camera]| {
+    // (triangles, max px, mean px) over `cams`; None when a view selects more than
+    // `node_limit` nodes (the tuning stops widening there: memory, and no useful baseline).
+    let mut measure_ratio = |ratio: f64, cams: &[Camera], node_limit: usize| {
         let nc = cams.len().max(1) as f64;
         let (mut tris, mut mx, mut mean) = (0usize, 0.0f64, 0.0f64);
         for cam in cams {
             let sel = measure::select_by_distance(world, tree, &mut ctx.0, cam, ratio);
+            if sel.nodes.len() > node_limit {
+                return None;
+            }
             let (t, e) = measure_view(world, tree, ctx, cam, &sel, per_side, None);
             tris += t;
             mx = mx.max(e.max_px);
             mean += e.mean_px / nc;
         }
-        (tris, mx, mean)
+        Some((tris, mx, mean))
     };
+    let meets = |m: Option<(usize, f64, f64)>| m.is_some_and(|m| m.1 <= target_px);
     let (mut lo, mut hi) = (0.25f64, 32.0f64);
     // The upper end must meet the target, the lower end must miss it.
-    let mut top_px = measure_ratio(hi, tune).1;
-    while top_px > target_px && hi < 256.0 {
-        hi *= 2.0;
-        top_px = measure_ratio(hi, tune).1;
+    let mut top = measure_ratio(hi, tune, MAX_BASELINE_NODES);
+    while top.is_none() && hi > 1.0 / 64.0 {
+        hi *= 0.5;
+        top = measure_ratio(hi, tune, MAX_BASELINE_NODES);
     }
-    let bracketed = top_px <= target_px;
-    while bracketed && measure_ratio(lo, tune).1 <= target_px && lo > 1.0 / 64.0 {
+    while top.is_some() && !meets(top) && hi < 256.0 {
+        let wider = measure_ratio(hi * 2.0, tune, MAX_BASELINE_NODES);
+        if wider.is_none() {
+            break;
+        }
+        hi *= 2.0;
+        top = wider;
+    }
+    let bracketed = meets(top);
+    lo = lo.min(hi * 0.5);
+    while bracketed && meets(measure_ratio(lo, tune, MAX_BASELINE_NODES)) && lo > 1.0 / 64.0 {
         hi = lo;
         lo *= 0.5;
     }
     if bracketed {
         for _ in 0..if quick { 5 } else { 8 } {
             let mid = (lo * hi).sqrt();
-            if measure_ratio(mid, tune).1 <= target_px {
+            if meets(measure_ratio(mid, tune, MAX_BASELINE_NODES)) {
                 hi = mid;
             } else {
                 lo = mid;
@@ -392,6 +414,8 @@ fn tune_baseline(
     Baseline {
         ratio: hi,
         bracketed,
-        scored: measure_ratio(hi, score),
+        // Scored at a ratio the tuning views held within the limit: the other cameras of the
+        // same flight select about as many nodes.
+        scored: measure_ratio(hi, score, usize::MAX).unwrap_or_default(),
     }
 }
