@@ -91,7 +91,7 @@ pub fn tiny_map_params() -> worldgen::generate::GenerateParams {
 pub fn patches_map_params() -> worldgen::generate::GenerateParams {
     worldgen::generate::GenerateParams {
         name: "patches".into(),
-        seed: 11,
+        seed: 16,
         size_m: 2048.0,
         spacing_m: 4.0,
         threads: 0,
@@ -190,7 +190,7 @@ pub mod terrain {
         World::new(Map::load(&super::tiny_map_dir()).expect("tiny map loads"))
     }
 
-    /// A generated 2 km map (seed 11, 4 m spacing), large enough to hold every kind of
+    /// A generated 2 km map (seed 16, 4 m spacing), large enough to hold every kind of
     /// worldgen's ground patches (fields, dirt, rock outcrops), as a world.
     pub fn patches_world() -> World {
         World::new(super::generated(&super::patches_map_params()))
