@@ -276,14 +276,7 @@ pub(crate) fn section_error(
         }
         // The baseline's rows claim "at most our measured max error" only where it holds on
         // the scored cameras; otherwise the params say that it misses.
-        let verdict = if baseline.bracketed && best.1 <= g_max {
-            "meets our max error"
-        } else if baseline.bracketed {
-            "MISSES our max error on the scored cameras"
-        } else {
-            "MISSES: no ratio up to 256 with at most 12,000 nodes a view reaches our max error \
-             on the tuning cameras"
-        };
+        let verdict = baseline.verdict(g_max);
         let bparams = format!(
             "{params}, ratio {hi:.2} tuned on {} other cameras, {verdict}",
             tune_cams.len()
@@ -348,6 +341,22 @@ struct Baseline {
     ratio: f64,
     bracketed: bool,
     scored: (usize, f64, f64),
+}
+
+impl Baseline {
+    /// Whether the baseline reaches our measured max error `ours_px`, in words for the params.
+    fn verdict(&self, ours_px: f64) -> String {
+        if self.bracketed && self.scored.1 <= ours_px {
+            "meets our max error".to_string()
+        } else if self.bracketed {
+            "MISSES our max error on the scored cameras".to_string()
+        } else {
+            format!(
+                "MISSES: no ratio up to 256 with at most {MAX_BASELINE_NODES} nodes a view \
+                 reaches our max error on the tuning cameras"
+            )
+        }
+    }
 }
 
 /// Finds the smallest distance ratio whose measured max error on the tuning cameras is at most
