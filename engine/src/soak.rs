@@ -1,5 +1,6 @@
 //! Soak: the viewer flying the automatic flyover path in a loop for a given time, headless,
-//! sampling once a second what could grow: resident memory of the process, GPU memory alive
+//! sampling once a second what could grow: resident memory of the process (and where it lives),
+//! GPU memory alive
 //! (wgpu's own counters of buffer and texture memory), job counts, the prepared-node cache, held
 //! tiles, the texture cache and the streamer's latency log. At the end it settles on one view
 //! and checks that no job, cancellation or tile is left over. Used by `nodebench --only soak`
@@ -19,6 +20,11 @@ pub struct SoakSample {
     pub frames: u64,
     /// Resident set of the process (Linux `VmRSS`), None elsewhere.
     pub rss_bytes: Option<u64>,
+    /// The same split by kind of mapping (`worldgen::progress::RssParts`): the main thread's
+    /// malloc heap, every other anonymous page, pages backed by files.
+    pub rss_main_heap_bytes: Option<u64>,
+    pub rss_other_anonymous_bytes: Option<u64>,
+    pub rss_file_bytes: Option<u64>,
     /// GPU memory held by buffers and textures, and the buffers alive (wgpu's counters; its
     /// Vulkan backend counts destroyed textures but not created ones, so no texture count).
     pub gpu_buffer_bytes: i64,
@@ -71,10 +77,14 @@ pub struct SoakParams {
 fn sample(viewer: &Viewer, gpu: &Gpu, t_s: f64, frames: u64, texture_bytes: u64) -> SoakSample {
     let counters = gpu.device.get_internal_counters();
     let st = &viewer.streamer.stats;
+    let parts = worldgen::progress::rss_parts();
     SoakSample {
         t_s,
         frames,
         rss_bytes: worldgen::progress::rss_bytes(),
+        rss_main_heap_bytes: parts.map(|p| p.main_heap_bytes),
+        rss_other_anonymous_bytes: parts.map(|p| p.other_anonymous_bytes),
+        rss_file_bytes: parts.map(|p| p.file_bytes),
         gpu_buffer_bytes: counters.hal.buffer_memory.read() as i64,
         gpu_texture_bytes: counters.hal.texture_memory.read() as i64,
         gpu_buffers: counters.hal.buffers.read() as i64,

@@ -39,7 +39,10 @@ fn a_short_soak_leaks_no_job_or_tile_and_stays_in_budget() {
         "{:?}",
         report.samples[0]
     );
-    assert!(report.samples.iter().all(|s| s.rss_bytes.is_some()));
+    assert!(report.samples.iter().all(|s| s.rss_bytes.is_some()
+        && s.rss_main_heap_bytes.is_some()
+        && s.rss_other_anonymous_bytes.is_some()
+        && s.rss_file_bytes.is_some()));
     assert!(
         report
             .samples

@@ -56,9 +56,21 @@ pub(crate) fn section_soak(
         "fps",
         &p,
     );
-    let metrics: [Metric; 9] = [
+    let metrics: [Metric; 12] = [
         ("resident memory (RSS)", MIB, "MiB", |s| {
             s.rss_bytes.unwrap_or(0) as f64
+        }),
+        ("RSS in the main thread's malloc heap", MIB, "MiB", |s| {
+            s.rss_main_heap_bytes.unwrap_or(0) as f64
+        }),
+        (
+            "RSS in other anonymous memory (other threads' heaps, large blocks, driver)",
+            MIB,
+            "MiB",
+            |s| s.rss_other_anonymous_bytes.unwrap_or(0) as f64,
+        ),
+        ("RSS in file-backed pages (code, mapped files)", MIB, "MiB", |s| {
+            s.rss_file_bytes.unwrap_or(0) as f64
         }),
         ("GPU memory alive (buffers + textures)", MIB, "MiB", |s| {
             (s.gpu_buffer_bytes + s.gpu_texture_bytes) as f64
