@@ -10,33 +10,60 @@
 //! **On-screen length.** A point at camera-space depth `z` and lateral offset `s` projects with
 //! the Jacobian of `K (x/z, y/z)` (`K` = [`Camera::k_px`], square pixels), whose largest singular
 //! value is `K sqrt(z^2 + s^2) / z^2`: a segment of length `l` there is at most
-//! `l K sqrt(1 + (s/z)^2) / z` pixels long. Over the object's bounding ball (centre depth `c_z`,
-//! lateral `c_s`, radius `r`) every visible point has `z >= z_lo = max(c_z - r, near)` and
-//! `s / z <= m = min((c_s + r) / z_lo, tan of the half-diagonal field of view)`, so no texel of
-//! the object is longer on screen than `texel_m 2^k K sqrt(1 + m^2) / z_lo` ([`px_per_m`] is that
-//! bound per metre). The level is the largest `k` keeping it at most one pixel
-//! ([`needed_level`]); tests compare it with a brute-force projection of texels over the ball.
+//! `l K sqrt(z^2 + s^2) / z^2` pixels long, more so nearer and further off the axis. Over the
+//! object's bounding ball (centre depth `c_z`, lateral `c_s`, radius `r`), the visible points
+//! have depths in `[max(c_z - r, near), c_z + r]`; [`px_per_m`] cuts that range into slices
+//! whose far depth is at most 1 % beyond their near depth `a`, and in a slice `[a, b]` bounds
+//! every visible point by `sqrt(b^2 + S^2) / a^2`, where `S` is the widest lateral offset of the
+//! ball at a depth of the slice (`c_s` plus the cross-section radius nearest `c_z`), and at most
+//! `b` times the tangent of the half-diagonal field of view (nothing wider is on screen). The
+//! largest slice bound is a proven upper bound of the stretch over the ball and exceeds the
+//! exact maximum by at most the slice ratio cubed (3 %). The level is the largest `k` keeping
+//! `texel_m 2^k` times it at most one pixel ([`needed_level`]); tests compare it with a
+//! brute-force projection of texels over the ball.
 //!
 //! [`Camera::k_px`]: crate::camera::Camera::k_px
 
 use crate::camera::Camera;
 use glam::DVec3;
 
+/// Far over near depth of one slice of [`px_per_m`]: the bound exceeds the exact maximum by at
+/// most this cubed.
+const SLICE_RATIO: f64 = 1.01;
+
 /// Upper bound of the on-screen length in pixels of a one-metre segment anywhere in the ball
-/// (`centre_m`, `radius_m`) that is in front of the near plane; `None` when the whole ball is
-/// behind it.
+/// (`centre_m`, `radius_m`) that is in front of the near plane and inside the view's
+/// half-diagonal cone (the module's slices); `None` when the whole ball is behind the near plane.
 pub fn px_per_m(camera: &Camera, centre_m: DVec3, radius_m: f64) -> Option<f64> {
     let rel = centre_m - camera.position_m;
     let depth_m = rel.dot(camera.forward);
-    if depth_m + radius_m < camera.near_m {
+    let radius_m = radius_m.max(0.0);
+    let far_m = depth_m + radius_m;
+    // Slices grow from the near plane: it must be positive, and the depths finite.
+    let near_plane_m = camera.near_m.max(1e-6);
+    if !far_m.is_finite() || far_m < near_plane_m {
         return None;
     }
     let lateral_m = (rel - camera.forward * depth_m).length();
-    let z_lo = (depth_m - radius_m).max(camera.near_m);
     let half_y = (camera.fovy_rad * 0.5).tan();
     let half_diagonal = half_y * (1.0 + camera.aspect() * camera.aspect()).sqrt();
-    let slope = ((lateral_m + radius_m) / z_lo).min(half_diagonal);
-    Some(camera.k_px() * (1.0 + slope * slope).sqrt() / z_lo)
+    // The ball's widest lateral offset at depths in [a, b].
+    let widest_m = |a: f64, b: f64| {
+        let dz = depth_m.clamp(a, b) - depth_m;
+        lateral_m + (radius_m * radius_m - dz * dz).max(0.0).sqrt()
+    };
+    let mut near = (depth_m - radius_m).max(near_plane_m);
+    let mut stretch: f64 = 0.0;
+    loop {
+        let far = (near * SLICE_RATIO).min(far_m).max(near);
+        let s = widest_m(near, far).min(half_diagonal * far);
+        stretch = stretch.max((far * far + s * s).sqrt() / (near * near));
+        if far >= far_m {
+            break;
+        }
+        near = far;
+    }
+    Some(camera.k_px() * stretch)
 }
 
 /// The coarsest level `k <= coarsest` with `texel_m 2^k px_per_m <= 1` (level 0 when even full
@@ -115,6 +142,69 @@ mod tests {
         // 4 m over 256 texels across, 2 m down: the longest texel edge is 4/256 m.
         let t = texel_m(&positions, &uvs, &tris, 256).unwrap();
         assert!((t - 4.0 / 256.0).abs() < 1e-12, "{t}");
+    }
+
+    /// The largest stretch over the visible part of a ball, by scanning its depths finely: at a
+    /// depth the widest visible lateral offset is the cross-section's far edge, cut at the
+    /// half-diagonal cone (the stretch grows with the offset).
+    fn scanned_max(camera: &Camera, centre: DVec3, radius: f64) -> f64 {
+        let rel = centre - camera.position_m;
+        let (cz, cs) = (
+            rel.dot(camera.forward),
+            (rel - camera.forward * rel.dot(camera.forward)).length(),
+        );
+        let half_y = (camera.fovy_rad * 0.5).tan();
+        let cone = half_y * (1.0 + camera.aspect() * camera.aspect()).sqrt();
+        let mut best: f64 = 0.0;
+        for i in 0..=20_000 {
+            let z = cz - radius + 2.0 * radius * f64::from(i) / 20_000.0;
+            if z < camera.near_m {
+                continue;
+            }
+            let rho = (radius * radius - (z - cz) * (z - cz)).max(0.0).sqrt();
+            let (lo, hi) = ((cs - rho).max(0.0), cs + rho);
+            let s = hi.min(cone * z);
+            if s >= lo {
+                best = best.max(camera.k_px() * (z * z + s * s).sqrt() / (z * z));
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn the_bound_is_above_the_scanned_maximum_and_within_three_percent_of_it() {
+        let camera = Camera::look_at(
+            DVec3::new(3.0, -2.0, 40.0),
+            DVec3::new(20.0, 30.0, 35.0),
+            0.9,
+            [1280, 720],
+        );
+        let (right, up, fwd) = (camera.right(), camera.up, camera.forward);
+        let mut worst: f64 = 0.0;
+        for (i, (along, side, high, share)) in [
+            (30.0, 0.0, 0.0, 0.05),
+            (30.0, 0.0, 0.0, 0.45),
+            (200.0, 60.0, -30.0, 0.2),
+            (12.0, -5.0, 4.0, 0.4),
+            (800.0, 500.0, 0.0, 0.1),
+            (5.0, 0.0, 0.0, 1.5),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let centre = camera.position_m + fwd * along + right * side + up * high;
+            let radius = share * along;
+            let bound = px_per_m(&camera, centre, radius).expect("in front");
+            let scanned = scanned_max(&camera, centre, radius);
+            assert!(bound >= scanned, "case {i}: bound {bound} below {scanned}");
+            worst = worst.max(bound / scanned);
+        }
+        assert!(
+            worst <= SLICE_RATIO.powi(3) * 1.001,
+            "bound / scanned max up to {worst}"
+        );
+        let behind = camera.position_m - fwd * 10.0;
+        assert_eq!(px_per_m(&camera, behind, 5.0), None);
     }
 
     #[test]
