@@ -97,7 +97,9 @@ struct ThreadState {
 /// What the light threads share with the kind.
 #[derive(Debug)]
 struct Inner {
-    world: World,
+    /// The streamer's world, attached by the first node job (or [`LightingContent::attach_world`]):
+    /// shared, never copied (a copy of a 32 km world is 2.8 GB).
+    world: std::sync::OnceLock<Arc<World>>,
     tree: QuadTree,
     canopy: Arc<Canopy>,
     sun: Mutex<Sun>,
@@ -144,6 +146,10 @@ impl Inner {
 
     fn run(&self) {
         crate::stream::lower_priority();
+        // Threads start only once a world is attached.
+        let Some(world) = self.world.get() else {
+            return;
+        };
         loop {
             let next = {
                 let mut state = self.state.lock().expect("state lock");
@@ -174,7 +180,7 @@ impl Inner {
             };
             let sun = self.sun();
             next.store(LightGrid::compute(
-                &self.world,
+                world,
                 &self.canopy,
                 &self.tree,
                 next.key,
@@ -223,7 +229,8 @@ impl LightingContent {
     /// The kind's registered name.
     pub const NAME: &'static str = "lighting";
 
-    /// The kind for `world` (kept by the light threads), lit through `canopy` (the vegetation
+    /// The kind for `world` (its quad tree; the light threads compute on the world attached by
+    /// the first node job, see [`Self::attach_world`]), lit through `canopy` (the vegetation
     /// kind's), with `sun`, and [`default_light_threads`] threads.
     pub fn new(world: &World, canopy: Arc<Canopy>, sun: Sun) -> Self {
         Self::with_threads(world, canopy, sun, default_light_threads())
@@ -233,7 +240,7 @@ impl LightingContent {
     pub fn with_threads(world: &World, canopy: Arc<Canopy>, sun: Sun, threads: usize) -> Self {
         Self {
             inner: Arc::new(Inner {
-                world: world.clone(),
+                world: std::sync::OnceLock::new(),
                 tree: QuadTree::new(world.origin_m(), world.size_m()),
                 canopy,
                 sun: Mutex::new(sun),
@@ -325,9 +332,18 @@ impl LightingContent {
         g
     }
 
+    /// Gives the light threads `world` (the first one given stays; a streamer's node jobs
+    /// attach its shared world). Grids are computed only once a world is attached.
+    pub fn attach_world(&self, world: &Arc<World>) {
+        if self.inner.world.set(Arc::clone(world)).is_ok() {
+            self.start_thread();
+            self.inner.poke();
+        }
+    }
+
     fn start_thread(&self) {
         let mut state = self.inner.state.lock().expect("state lock");
-        if state.started {
+        if state.started || self.inner.world.get().is_none() {
             return;
         }
         state.started = true;
@@ -359,6 +375,7 @@ impl ContentKind for LightingContent {
             move |s: &Shared, w: &mut NodeWork| {
                 let owner = LightGrid::owner(&s.tree, w.key);
                 debug_assert!(owner.level <= grid_level(&s.tree));
+                self.attach_world(&s.world);
                 let grid = self.grid_for(owner);
                 w.put(NodeLight {
                     grid,

@@ -64,7 +64,8 @@ pub const GUARD_BAND: f64 = 1.15;
 /// Everything phases may read, shared by all threads.
 #[derive(Debug)]
 pub struct Shared {
-    pub world: World,
+    /// The world, shared (not copied) with every kind that keeps it, such as the light threads.
+    pub world: Arc<World>,
     pub tree: QuadTree,
     pub bounds: BoundsStore,
     pub tiles: Mutex<TileCache>,
@@ -255,18 +256,23 @@ impl std::fmt::Debug for Streamer {
 impl Streamer {
     /// A streamer for `world` preparing the content of every kind in `kinds` (in that order;
     /// see [`node_phases`]).
-    pub fn new(world: World, settings: StreamSettings, kinds: Vec<Arc<dyn ContentKind>>) -> Self {
+    pub fn new(
+        world: impl Into<Arc<World>>,
+        settings: StreamSettings,
+        kinds: Vec<Arc<dyn ContentKind>>,
+    ) -> Self {
         let phases = node_phases(&kinds);
         Self::with_phases(world, settings, kinds, phases)
     }
 
     /// A streamer running `phases` (normally [`node_phases`] of `kinds`; tests insert their own).
     pub fn with_phases(
-        world: World,
+        world: impl Into<Arc<World>>,
         settings: StreamSettings,
         kinds: Vec<Arc<dyn ContentKind>>,
         phases: Vec<Phase>,
     ) -> Self {
+        let world: Arc<World> = world.into();
         let tree = QuadTree::new(world.origin_m(), world.size_m());
         let shared = Arc::new(Shared {
             world,

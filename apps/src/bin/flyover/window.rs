@@ -391,7 +391,7 @@ fn apply_panel(st: &mut State) {
     }
     if st.ui.workers != st.viewer.streamer.settings.workers {
         let s = st.viewer.streamer.settings.with_workers(st.ui.workers);
-        // Same world (cloned, not recomputed) and content kinds, new worker threads.
+        // Same world (shared, not copied) and content kinds, new worker threads.
         let shared = &st.viewer.streamer.shared;
         let world = shared.world.clone();
         let kinds = shared.kinds.clone();

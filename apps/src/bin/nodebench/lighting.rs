@@ -144,6 +144,8 @@ pub(crate) fn section_lighting(
         all.truncate(8);
     }
     let kind = LightingContent::with_threads(world, Arc::new(canopy), SUN, workers);
+    // No streamer here: the kind gets its own copy of the world.
+    kind.attach_world(&Arc::new(world.clone()));
     let t0 = Instant::now();
     let held: Vec<_> = all.iter().map(|&k| kind.grid_for(k)).collect();
     kind.wait_idle();
