@@ -108,6 +108,9 @@ step "smoke: flyover headless, and its fallback when there is no display"
   --duration-s 2 --out "$smoke/flyover" > "$smoke/flyover.md"
 test -s "$smoke/flyover/frame_00000.png" && test -s "$smoke/flyover/frame_00059.png"
 grep -q '"frames"' "$smoke/flyover/stats.json"
+# Where the resident memory is at the end (Linux): by mapping, and what is accounted for.
+grep -q '"not_accounted_for"' "$smoke/flyover/stats.json"
+grep -q "not accounted for" "$smoke/flyover.md"
 ./target/debug/flyover --headless --map maps/tiny --frames 40 --every 0 --size 320x180 \
   --duration-s 2 --gpu-reference --out "$smoke/flyover-reference" > "$smoke/flyover-reference.md"
 grep -q "GPU frame pass / one-draw reference" "$smoke/flyover-reference.md"

@@ -15,6 +15,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let map_load_s = load.elapsed().as_secs_f64();
     let world_memory: Vec<(&str, usize)> = world.memory_bytes();
+    let after_load_rss_mib = worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
     eprintln!(
@@ -40,7 +41,10 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
     let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size);
+    let after_gpu_rss_mib = worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
     let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
+    let after_viewer_rss_mib =
+        worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
     viewer.view.merged_draws = !cli.per_item_draws;
     if cli.gpu_reference {
         viewer.view.plants = false;
@@ -106,19 +110,32 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .map(|(what, b)| format!("{what} {:.0} MiB", mib(*b)))
         .collect();
     println!("world in memory: {}", parts.join(", "));
+    println!(
+        "resident memory after loading the map {}, after opening the GPU {}, after making the \
+         viewer and its renderers {}",
+        show(after_load_rss_mib),
+        show(after_gpu_rss_mib),
+        show(after_viewer_rss_mib)
+    );
     let world_memory_mib: serde_json::Map<String, serde_json::Value> = world_memory
         .iter()
         .map(|(what, b)| ((*what).to_string(), serde_json::json!(mib(*b))))
         .collect();
+    let world_bytes: usize = world_memory.iter().map(|(_, b)| b).sum();
+    let resident = resident_breakdown(&gpu, &viewer, world_bytes);
     let json = cli.out.join("stats.json");
     let doc = serde_json::json!({
         "world_memory_mib": world_memory_mib,
+        "end_resident_mib": resident,
         "adapter": gpu.adapter_name(),
         "size": cli.size,
         "tau_px": cli.tau,
         "map_load_s": map_load_s,
         "peak_rss_mib": peak_rss_mib,
         "end_rss_mib": rss_mib,
+        "after_load_rss_mib": after_load_rss_mib,
+        "after_gpu_rss_mib": after_gpu_rss_mib,
+        "after_viewer_rss_mib": after_viewer_rss_mib,
         "summary": summary,
         "frames": all,
     });
@@ -131,6 +148,64 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         json.display()
     );
     Ok(())
+}
+
+/// Where the resident memory is at the end (Linux): by kind of mapping, and how much of it the
+/// world, the GPU objects alive (on a CPU adapter, whose "GPU" memory is RAM), the
+/// prepared-node cache (the CPU copies of the nodes' GPU data) and file-backed pages account
+/// for. Printed; returned in MiB for `stats.json` (null where `/proc/self/smaps` is missing).
+fn resident_breakdown(
+    gpu: &Gpu,
+    viewer: &engine::viewer::Viewer,
+    world_bytes: usize,
+) -> serde_json::Value {
+    let Some(parts) = worldgen::progress::rss_parts() else {
+        return serde_json::Value::Null;
+    };
+    let mib = |b: u64| b as f64 / f64::from(1 << 20);
+    let counters = gpu.device.get_internal_counters();
+    let gpu_alive = counters.hal.buffer_memory.read() + counters.hal.texture_memory.read();
+    let cpu_adapter = gpu.adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+    let gpu_in_ram = if cpu_adapter {
+        u64::try_from(gpu_alive).unwrap_or(0)
+    } else {
+        0
+    };
+    let cache = viewer.streamer.stats.resident_bytes as u64;
+    let total = parts.main_heap_bytes + parts.other_anonymous_bytes + parts.file_bytes;
+    let known = world_bytes as u64 + gpu_in_ram + cache + parts.file_bytes;
+    let rest = total.saturating_sub(known);
+    println!(
+        "resident at the end by mapping: {:.0} MiB main-thread heap, {:.0} MiB other anonymous \
+         memory (other threads' heaps, large blocks, the driver's), {:.0} MiB file-backed",
+        mib(parts.main_heap_bytes),
+        mib(parts.other_anonymous_bytes),
+        mib(parts.file_bytes)
+    );
+    println!(
+        "of the {:.0} MiB: world {:.0}, GPU buffers and textures alive {:.0}{}, prepared-node \
+         cache {:.0}, file-backed {:.0}; not accounted for {:.0} MiB",
+        mib(total),
+        mib(world_bytes as u64),
+        mib(gpu_in_ram),
+        if cpu_adapter {
+            " (a CPU adapter: in RAM)"
+        } else {
+            " (on the GPU, not counted)"
+        },
+        mib(cache),
+        mib(parts.file_bytes),
+        mib(rest)
+    );
+    serde_json::json!({
+        "main_heap": mib(parts.main_heap_bytes),
+        "other_anonymous": mib(parts.other_anonymous_bytes),
+        "file_backed": mib(parts.file_bytes),
+        "world": mib(world_bytes as u64),
+        "gpu_alive_in_ram": mib(gpu_in_ram),
+        "prepared_node_cache": mib(cache),
+        "not_accounted_for": mib(rest),
+    })
 }
 
 /// Prints the per-frame table (median, p95, max of every row) and the GPU ratio; returns the

@@ -69,9 +69,12 @@ pub(crate) fn section_soak(
             "MiB",
             |s| s.rss_other_anonymous_bytes.unwrap_or(0) as f64,
         ),
-        ("RSS in file-backed pages (code, mapped files)", MIB, "MiB", |s| {
-            s.rss_file_bytes.unwrap_or(0) as f64
-        }),
+        (
+            "RSS in file-backed pages (code, mapped files)",
+            MIB,
+            "MiB",
+            |s| s.rss_file_bytes.unwrap_or(0) as f64,
+        ),
         ("GPU memory alive (buffers + textures)", MIB, "MiB", |s| {
             (s.gpu_buffer_bytes + s.gpu_texture_bytes) as f64
         }),
