@@ -175,10 +175,12 @@ fn picked_mip_is_never_coarser_and_mostly_equal_to_a_brute_force_projection() {
         "mip level vs brute force: {equal} equal, {finer} one finer ({:.1} % equal); bound / brute px per m at most {worst_ratio:.3}",
         share * 100.0
     );
-    // The bound is pessimistic only by the ball's extent and the off-axis stretch: balls up to
-    // 45 % of their distance here, so most picks are exact.
+    // The bound is within 3 % of the exact maximum over a ball wholly on screen (looser where
+    // the screen's edges cut it), and the brute force samples from below: 96.1 % of the picks
+    // are equal with this seed (90.2 % with the earlier bound that paired the nearest depth
+    // with the widest offset).
     assert!(
-        share >= 0.8,
+        share >= 0.93,
         "only {:.1} % of the levels equal the brute force",
         share * 100.0
     );
