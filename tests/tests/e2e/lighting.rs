@@ -338,6 +338,12 @@ fn streamed_nodes_share_grids_and_a_sun_change_relights_them_nearest_first() {
     assert!(s.settle(&cam, 300.0), "streaming settles");
     let lighting = s.shared.kind::<LightingContent>().expect("registered");
     lighting.wait_idle();
+    // The light threads compute on the streamer's world itself, not on a copy (a copy of a
+    // 32 km world is 2.8 GB): the streamer's shared state and the kind hold the same one.
+    assert!(
+        Arc::strong_count(&s.shared.world) >= 2,
+        "the lighting kind does not share the streamer's world"
+    );
 
     let level = grid::grid_level(&tree);
     let mut owners: HashMap<NodeKey, (Arc<SharedGrid>, usize)> = HashMap::new();
