@@ -335,7 +335,8 @@ impl LightingContent {
     /// Gives the light threads `world` (the first one given stays; a streamer's node jobs
     /// attach its shared world). Grids are computed only once a world is attached.
     pub fn attach_world(&self, world: &Arc<World>) {
-        if self.inner.world.set(Arc::clone(world)).is_ok() {
+        // Called by every node job: only the first one clones the Arc.
+        if self.inner.world.get().is_none() && self.inner.world.set(Arc::clone(world)).is_ok() {
             self.start_thread();
             self.inner.poke();
         }

@@ -15,7 +15,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let map_load_s = load.elapsed().as_secs_f64();
     let world_memory: Vec<(&str, usize)> = world.memory_bytes();
-    let after_load_rss_mib = worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let rss_mib_now = || worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let after_load_rss_mib = rss_mib_now();
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
     eprintln!(
@@ -41,10 +42,9 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
     let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size);
-    let after_gpu_rss_mib = worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let after_gpu_rss_mib = rss_mib_now();
     let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
-    let after_viewer_rss_mib =
-        worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let after_viewer_rss_mib = rss_mib_now();
     viewer.view.merged_draws = !cli.per_item_draws;
     if cli.gpu_reference {
         viewer.view.plants = false;
@@ -95,7 +95,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     );
     let summary = print_table(&all, &gpu.adapter_name());
     let peak_rss_mib = worldgen::progress::peak_rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
-    let rss_mib = worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
+    let rss_mib = rss_mib_now();
     let show =
         |m: Option<f64>| m.map_or_else(|| "not reported".to_string(), |m| format!("{m:.0} MiB"));
     println!(

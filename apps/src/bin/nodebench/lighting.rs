@@ -27,7 +27,7 @@ const SUN: Sun = Sun {
 };
 
 pub(crate) fn section_lighting(
-    world: &World,
+    world: &Arc<World>,
     tree: &QuadTree,
     cams: &[Camera],
     r: &mut Report,
@@ -144,8 +144,8 @@ pub(crate) fn section_lighting(
         all.truncate(8);
     }
     let kind = LightingContent::with_threads(world, Arc::new(canopy), SUN, workers);
-    // No streamer here: the kind gets its own copy of the world.
-    kind.attach_world(&Arc::new(world.clone()));
+    // No streamer here: the kind shares the benchmark's world.
+    kind.attach_world(world);
     let t0 = Instant::now();
     let held: Vec<_> = all.iter().map(|&k| kind.grid_for(k)).collect();
     kind.wait_idle();

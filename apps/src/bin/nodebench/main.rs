@@ -143,7 +143,8 @@ fn run(cli: &Cli) -> Result<()> {
             std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
         })
         .max(1);
-    let world = open_world(&cli.map)?;
+    // Shared with the light threads of section lighting (never copied).
+    let world = std::sync::Arc::new(open_world(&cli.map)?);
     let tree = QuadTree::new(world.origin_m(), world.size_m());
     let vh = cli.viewport_height.max(16);
     let cams = measure::default_flight(&world, if cli.quick { 8 } else { 64 }, [vh * 16 / 9, vh]);
