@@ -13,8 +13,17 @@
 //! available; such collapses are taken only when nothing else remains (flagged in the output).
 //! When no triangle is left, isolated positions (the last points of disconnected parts) collapse
 //! onto the surviving position, so every mesh reaches one vertex.
+//!
+//! Speed (the collapse loop waits on memory and branches more than it computes): positions and
+//! triangles are renumbered for locality ([`super::locality`]); after a collapse u -> v only v
+//! and u's neighbours are updated, and a neighbour whose key was its plain quadric cost gets the
+//! key of a full evaluation from one cost evaluation (see `Queue::update_neighbour`; a test
+//! checks every such update against the full evaluation). The order is the same as without
+//! these steps: ties go by input index, and the PM files of the shared meshes are byte-identical.
 
 use super::geom::{area_normal, v3};
+use super::heap::{Key, PosHeap};
+use super::locality;
 use super::mesh::TriMesh;
 use glam::DVec3;
 use std::cmp::Ordering;
@@ -135,23 +144,6 @@ impl Quadric {
     }
 }
 
-/// Priority key: tier (0 normal, 1 flips a normal), then cost, then the removed end's cornerness.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Key {
-    tier: u8,
-    cost: f64,
-    tie: f64,
-}
-
-impl Key {
-    fn cmp_key(&self, o: &Self) -> Ordering {
-        self.tier
-            .cmp(&o.tier)
-            .then(self.cost.total_cmp(&o.cost))
-            .then(self.tie.total_cmp(&o.tie))
-    }
-}
-
 /// Seams whose faces meet at this angle or more are creases, not texture seams on a smooth
 /// surface (quadric cost).
 const CREASE_DEGREES: f64 = 30.0;
@@ -161,125 +153,21 @@ const TIER_FEATURE: u8 = 1;
 /// Tier of a collapse that flips a moving triangle.
 const TIER_FLIP: u8 = 2;
 
-/// One heap entry: a position, its best collapse target and that collapse's key.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct HeapEntry {
-    key: Key,
-    pos: u32,
-    target: u32,
-}
-
-impl HeapEntry {
-    /// Heap order: key, then the lower position (deterministic).
-    fn less(&self, o: &Self) -> bool {
-        match self.key.cmp_key(&o.key) {
-            Ordering::Less => true,
-            Ordering::Greater => false,
-            Ordering::Equal => (self.pos, self.target) < (o.pos, o.target),
-        }
-    }
-}
-
-/// An indexed binary min-heap of positions by their best collapse: one entry per position,
-/// updated in place (no stale entries to skip). Entries hold their keys, so sifting reads the
-/// heap array only.
-struct PosHeap {
-    heap: Vec<HeapEntry>,
-    slot: Vec<u32>,
-}
-
-const NO_SLOT: u32 = u32::MAX;
-
-impl PosHeap {
-    fn new(n: usize) -> Self {
-        PosHeap {
-            heap: Vec::with_capacity(n),
-            slot: vec![NO_SLOT; n],
-        }
-    }
-
-    fn swap(&mut self, i: usize, j: usize) {
-        self.heap.swap(i, j);
-        self.slot[self.heap[i].pos as usize] = i as u32;
-        self.slot[self.heap[j].pos as usize] = j as u32;
-    }
-
-    fn up(&mut self, mut i: usize) {
-        while i > 0 {
-            let parent = (i - 1) / 2;
-            if !self.heap[i].less(&self.heap[parent]) {
-                break;
-            }
-            self.swap(i, parent);
-            i = parent;
-        }
-    }
-
-    fn down(&mut self, mut i: usize) {
-        loop {
-            let (l, r) = (2 * i + 1, 2 * i + 2);
-            let mut m = i;
-            if l < self.heap.len() && self.heap[l].less(&self.heap[m]) {
-                m = l;
-            }
-            if r < self.heap.len() && self.heap[r].less(&self.heap[m]) {
-                m = r;
-            }
-            if m == i {
-                break;
-            }
-            self.swap(i, m);
-            i = m;
-        }
-    }
-
-    /// Inserts or updates position `p`'s entry (nothing moves when it is unchanged).
-    fn set(&mut self, p: u32, key: Key, target: u32) {
-        let entry = HeapEntry {
-            key,
-            pos: p,
-            target,
-        };
-        let s = self.slot[p as usize];
-        if s == NO_SLOT {
-            self.heap.push(entry);
-            let i = self.heap.len() - 1;
-            self.slot[p as usize] = i as u32;
-            self.up(i);
-        } else if self.heap[s as usize] != entry {
-            self.heap[s as usize] = entry;
-            self.up(s as usize);
-            self.down(self.slot[p as usize] as usize);
-        }
-    }
-
-    fn remove(&mut self, p: u32) {
-        let s = self.slot[p as usize];
-        if s == NO_SLOT {
-            return;
-        }
-        let i = s as usize;
-        let last = self.heap.len() - 1;
-        self.swap(i, last);
-        self.heap.pop();
-        self.slot[p as usize] = NO_SLOT;
-        if i < self.heap.len() {
-            self.up(i);
-            self.down(self.slot[self.heap[i].pos as usize] as usize);
-        }
-    }
-
-    fn peek(&self) -> Option<(u32, Key, u32)> {
-        let e = self.heap.first()?;
-        Some((e.pos, e.key, e.target))
-    }
-}
-
 /// Per-position facts shared by the evaluation of all its candidate collapses.
 struct Context {
     corner: f64,
     on_border: bool,
     on_seam: bool,
+}
+
+/// A neighbour p of the removed position u of a collapse u -> v, and how many of the triangles
+/// (before the collapse) use the edge (p, u), the edge (p, v) and both.
+#[derive(Debug, Clone, Copy)]
+struct EdgeCounts {
+    p: u32,
+    with_u: u32,
+    with_v: u32,
+    with_both: u32,
 }
 
 /// Reused buffers (no allocation per evaluation).
@@ -289,12 +177,25 @@ struct Scratch {
     uses: Vec<u32>,
     vanish: Vec<DVec3>,
     moving: Vec<DVec3>,
+    /// A collapse's vanishing and moving triangles.
+    vanish_t: Vec<u32>,
+    moving_t: Vec<u32>,
+    /// The neighbours of the removed position, with their edge counts.
+    touched: Vec<EdgeCounts>,
 }
 
 struct State<'a> {
     mesh: &'a TriMesh,
     kind: CostKind,
-    pos: Vec<DVec3>,
+    /// The positions, renumbered for locality (see [`super::locality`]), in single precision
+    /// as read (half the bytes of a `DVec3`: the collapse loop waits on memory reads; widened
+    /// exactly on use).
+    pos: Vec<[f32; 3]>,
+    /// The input index of every (renumbered) position: ties are broken by it, so the order is
+    /// the same as without the renumbering.
+    orig: &'a [u32],
+    /// Every wedge's (renumbered) position.
+    wedge_pos: Vec<u32>,
     tri_w: Vec<[u32; 3]>,
     /// The positions of `tri_w` (kept in step: read far more often than written).
     tri_p: Vec<[u32; 3]>,
@@ -303,27 +204,48 @@ struct State<'a> {
     pos_wedges: Vec<Vec<u32>>,
     pos_alive: Vec<bool>,
     quadric: Vec<Quadric>,
-    /// Quadric cost: positions on a smooth (not creased) seam, see [`initial_quadrics`].
-    smooth_seam: Vec<bool>,
+    /// Positions held by the seam rule: several wedges and, under the quadric cost, a smooth
+    /// (not creased) seam, see [`initial_quadrics`]. Fixed for the whole build: a position's
+    /// wedges change only when it is removed.
+    seam_rule: Vec<bool>,
 }
 
 impl State<'_> {
+    fn at(&self, p: u32) -> DVec3 {
+        v3(self.pos[p as usize])
+    }
+
     fn tri_pos(&self, t: u32) -> [u32; 3] {
         self.tri_p[t as usize]
     }
 
-    fn neighbours(&self, u: u32) -> Vec<u32> {
-        let mut out = Vec::with_capacity(8);
-        self.neighbours_into(u, &mut out);
-        out
-    }
-
-    fn neighbours_into(&self, u: u32, out: &mut Vec<u32>) {
+    /// The neighbours of `u` with their [`EdgeCounts`] for the collapse u -> v, into `out`.
+    fn edge_counts(&self, u: u32, v: u32, out: &mut Vec<EdgeCounts>) {
         out.clear();
         for &t in &self.pos_tris[u as usize] {
+            let tp = self.tri_pos(t);
+            let both = u32::from(tp.contains(&v));
+            for p in tp {
+                if p == u {
+                    continue;
+                }
+                if let Some(e) = out.iter_mut().find(|e| e.p == p) {
+                    e.with_u += 1;
+                    e.with_both += both;
+                } else {
+                    out.push(EdgeCounts {
+                        p,
+                        with_u: 1,
+                        with_v: 0,
+                        with_both: both,
+                    });
+                }
+            }
+        }
+        for &t in &self.pos_tris[v as usize] {
             for p in self.tri_pos(t) {
-                if p != u && !out.contains(&p) {
-                    out.push(p);
+                if let Some(e) = out.iter_mut().find(|e| e.p == p) {
+                    e.with_v += 1;
                 }
             }
         }
@@ -357,7 +279,7 @@ impl State<'_> {
         let mut mean = DVec3::ZERO;
         let mut normals = Vec::with_capacity(tris.len());
         for &t in tris {
-            let [a, b, c] = self.tri_pos(t).map(|p| self.pos[p as usize]);
+            let [a, b, c] = self.tri_pos(t).map(|p| self.at(p));
             let n = area_normal(a, b, c);
             mean += n;
             normals.push(n.normalize_or_zero());
@@ -387,8 +309,8 @@ impl State<'_> {
         scratch: &mut Scratch,
         check_flips: bool,
     ) -> Key {
-        let pu = self.pos[u as usize];
-        let pv = self.pos[v as usize];
+        let pu = self.at(u);
+        let pv = self.at(v);
         let mut flips = false;
         let mut longest = 0.0f64;
         scratch.vanish.clear();
@@ -403,7 +325,7 @@ impl State<'_> {
         };
         for &t in tris {
             let tp = self.tri_pos(t);
-            let [a, b, c] = tp.map(|p| self.pos[p as usize]);
+            let [a, b, c] = tp.map(|p| self.at(p));
             let n0 = area_normal(a, b, c);
             if tp.contains(&v) {
                 vanish_count += 1;
@@ -418,7 +340,7 @@ impl State<'_> {
                 }
             } else {
                 if check_flips && !flips {
-                    let moved = tp.map(|p| if p == u { pv } else { self.pos[p as usize] });
+                    let moved = tp.map(|p| if p == u { pv } else { self.at(p) });
                     let n1 = area_normal(moved[0], moved[1], moved[2]);
                     let l0 = n0.length_squared();
                     if l0 > 0.0 {
@@ -476,11 +398,14 @@ impl State<'_> {
         }
         let mut wedge: Option<(u32, u32)> = None;
         for &t in &self.pos_tris[u as usize] {
+            let tp = self.tri_pos(t);
+            if !tp.contains(&v) {
+                continue;
+            }
             let tw = self.tri_w[t as usize];
             let mut wu = None;
             let mut wv = None;
-            for w in tw {
-                let p = self.mesh.wedge_position[w as usize];
+            for (w, p) in tw.into_iter().zip(tp) {
                 if p == u {
                     wu = Some(w);
                 } else if p == v {
@@ -499,8 +424,10 @@ impl State<'_> {
     }
 
     /// The cheapest collapse of `u`; flips are tested only with `check_flips` (otherwise when
-    /// the collapse is about to be made).
-    fn best(&self, u: u32, scratch: &mut Scratch, check_flips: bool) -> Option<(Key, u32)> {
+    /// the collapse is about to be made). Also whether the key is the quadric cost alone (tier
+    /// 0: quadric, no flip test, u on no border and under no seam rule), see
+    /// [`collapse_order`]'s update of u's neighbours.
+    fn best(&self, u: u32, scratch: &mut Scratch, check_flips: bool) -> (Option<(Key, u32)>, bool) {
         let mut neighbours = std::mem::take(&mut scratch.neighbours);
         let border_u = self.neighbours_and_border(u, &mut neighbours, &mut scratch.uses);
         let ctx = Context {
@@ -510,18 +437,50 @@ impl State<'_> {
                 0.0
             },
             on_border: border_u,
-            // The quadric's seam rule holds only on smooth seams.
-            on_seam: self.pos_wedges[u as usize].len() > 1
-                && (self.kind != CostKind::Quadric || self.smooth_seam[u as usize]),
+            on_seam: self.seam_rule[u as usize],
         };
         let mut best: Option<(Key, u32)> = None;
+        if self.kind == CostKind::Quadric && !check_flips {
+            // Without flip tests the quadric key needs no triangle scan per candidate: the
+            // cost, and for a border or seam position the feature rule, whose count of
+            // triangles on the edge the neighbour pass already made (`uses`). The same key
+            // `evaluate` gives.
+            let plain = !ctx.on_border && !ctx.on_seam;
+            let q = &self.quadric[u as usize];
+            for (i, &v) in neighbours.iter().enumerate() {
+                let cost = q.eval(self.at(v));
+                let tier = if plain || self.is_feature_edge(u, v, scratch.uses[i] as usize) {
+                    0
+                } else {
+                    TIER_FEATURE
+                };
+                let key = Key {
+                    tier,
+                    cost,
+                    tie: 0.0,
+                };
+                let better = match &best {
+                    None => true,
+                    Some((b, bv)) => match key.cmp_key(b) {
+                        Ordering::Less => true,
+                        Ordering::Equal => self.orig[v as usize] < self.orig[*bv as usize],
+                        Ordering::Greater => false,
+                    },
+                };
+                if better {
+                    best = Some((key, v));
+                }
+            }
+            scratch.neighbours = neighbours;
+            return (best, plain);
+        }
         for &v in &neighbours {
             let k = self.evaluate(u, v, &ctx, scratch, check_flips);
             let better = match &best {
                 None => true,
                 Some((b, bv)) => match k.cmp_key(b) {
                     Ordering::Less => true,
-                    Ordering::Equal => v < *bv,
+                    Ordering::Equal => self.orig[v as usize] < self.orig[*bv as usize],
                     Ordering::Greater => false,
                 },
             };
@@ -530,7 +489,7 @@ impl State<'_> {
             }
         }
         scratch.neighbours = neighbours;
-        best
+        (best, false)
     }
 
     /// Performs the half-edge collapse u -> v: maps u's wedges, removes the triangles on the
@@ -542,11 +501,16 @@ impl State<'_> {
         step: u32,
         wedge_target: &mut [u32],
         triangle_step: &mut [u32],
+        scratch: &mut Scratch,
     ) {
         // Split u's triangles into vanishing and moving.
         let tris_u = std::mem::take(&mut self.pos_tris[u as usize]);
-        let mut vanish = Vec::new();
-        let mut moving = Vec::new();
+        let (mut vanish, mut moving) = (
+            std::mem::take(&mut scratch.vanish_t),
+            std::mem::take(&mut scratch.moving_t),
+        );
+        vanish.clear();
+        moving.clear();
         for &t in &tris_u {
             if self.tri_pos(t).contains(&v) {
                 vanish.push(t);
@@ -565,7 +529,7 @@ impl State<'_> {
                     target = tw
                         .iter()
                         .copied()
-                        .find(|&x| self.mesh.wedge_position[x as usize] == v);
+                        .find(|&x| self.wedge_pos[x as usize] == v);
                     break;
                 }
             }
@@ -593,7 +557,7 @@ impl State<'_> {
         for &t in &moving {
             let tw = &mut self.tri_w[t as usize];
             for w in tw.iter_mut() {
-                if self.mesh.wedge_position[*w as usize] == u {
+                if self.wedge_pos[*w as usize] == u {
                     *w = wedge_target[*w as usize];
                 }
             }
@@ -609,19 +573,21 @@ impl State<'_> {
             self.quadric[v as usize].add(&qu);
         }
         self.pos_alive[u as usize] = false;
+        scratch.vanish_t = vanish;
+        scratch.moving_t = moving;
     }
 
     /// Whether collapsing u onto v turns a moving triangle by more than the flip angle.
     fn flips(&self, u: u32, v: u32) -> bool {
-        let pv = self.pos[v as usize];
+        let pv = self.at(v);
         self.pos_tris[u as usize].iter().any(|&t| {
             let tp = self.tri_pos(t);
             if tp.contains(&v) {
                 return false;
             }
-            let [a, b, c] = tp.map(|p| self.pos[p as usize]);
+            let [a, b, c] = tp.map(|p| self.at(p));
             let n0 = area_normal(a, b, c);
-            let moved = tp.map(|p| if p == u { pv } else { self.pos[p as usize] });
+            let moved = tp.map(|p| if p == u { pv } else { self.at(p) });
             let n1 = area_normal(moved[0], moved[1], moved[2]);
             let l0 = n0.length_squared();
             let d = n0.dot(n1);
@@ -689,8 +655,7 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> (Vec<Quadric>, Vec<bool>) 
             edges.push((key, (wi, wj, n)));
         }
     }
-    edges.sort_by_key(|e| e.0);
-    for group in edges.chunk_by(|x, y| x.0 == y.0) {
+    for group in sides_by_edge(&edges, pos.len()).chunk_by(|x, y| x.0 == y.0) {
         let key = group[0].0;
         let side0 = group[0].1;
         let border = group.len() == 1;
@@ -719,6 +684,104 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> (Vec<Quadric>, Vec<bool>) 
     (q, smooth_seam)
 }
 
+/// The triangle sides ordered by edge (lower position, then higher) and, within an edge, by
+/// triangle: a counting sort by the lower position (linear, stable), then each position's few
+/// sides by the higher one. The same order as a stable sort of the whole list, which cost a
+/// tenth of the collapse order's time.
+fn sides_by_edge(
+    edges: &[((u32, u32), EdgeSide)],
+    positions: usize,
+) -> Vec<((u32, u32), EdgeSide)> {
+    let mut start = vec![0usize; positions + 1];
+    for e in edges {
+        start[e.0.0 as usize + 1] += 1;
+    }
+    for i in 0..positions {
+        start[i + 1] += start[i];
+    }
+    let mut next = start.clone();
+    let mut out = vec![((0, 0), (0, 0, DVec3::ZERO)); edges.len()];
+    for e in edges {
+        let slot = &mut next[e.0.0 as usize];
+        out[*slot] = *e;
+        *slot += 1;
+    }
+    for p in 0..positions {
+        out[start[p]..start[p + 1]].sort_by_key(|e| e.0.1);
+    }
+    out
+}
+
+impl<'a> State<'a> {
+    /// The state before the first collapse, on the renumbering `r` of `mesh`.
+    fn new(mesh: &'a TriMesh, kind: CostKind, r: &'a locality::Renumbering) -> Self {
+        let np = mesh.positions.len();
+        let wedge_pos: Vec<u32> = mesh
+            .wedge_position
+            .iter()
+            .map(|&p| r.pos_new[p as usize])
+            .collect();
+        let tri_w: Vec<[u32; 3]> = r
+            .tri_old
+            .iter()
+            .map(|&t| mesh.triangles[t as usize])
+            .collect();
+        let tri_p: Vec<[u32; 3]> = tri_w
+            .iter()
+            .map(|t| t.map(|w| wedge_pos[w as usize]))
+            .collect();
+        // Lists sized once (a collapse adds to the kept position's list: room for a few more).
+        let mut degree = vec![0usize; np];
+        for tri in &tri_p {
+            for &p in tri {
+                degree[p as usize] += 1;
+            }
+        }
+        let mut pos_tris: Vec<Vec<u32>> =
+            degree.iter().map(|&d| Vec::with_capacity(d + 4)).collect();
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            for &w in tri {
+                pos_tris[wedge_pos[w as usize] as usize].push(r.tri_new[t]);
+            }
+        }
+        let mut pos_wedges = vec![Vec::with_capacity(1); np];
+        for (w, &p) in wedge_pos.iter().enumerate() {
+            pos_wedges[p as usize].push(w as u32);
+        }
+        let (quadric, smooth_seam) = if kind == CostKind::Quadric {
+            let pos: Vec<DVec3> = mesh.positions.iter().map(|&p| v3(p)).collect();
+            let (q, smooth) = initial_quadrics(mesh, &pos);
+            let q = r.pos_old.iter().map(|&p| q[p as usize]).collect();
+            (q, r.pos_old.iter().map(|&p| smooth[p as usize]).collect())
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        // The quadric's seam rule holds only on smooth seams.
+        let seam_rule = (0..np)
+            .map(|p| pos_wedges[p].len() > 1 && (kind != CostKind::Quadric || smooth_seam[p]))
+            .collect();
+        State {
+            mesh,
+            kind,
+            pos: r
+                .pos_old
+                .iter()
+                .map(|&p| mesh.positions[p as usize])
+                .collect(),
+            orig: &r.pos_old,
+            wedge_pos,
+            tri_w,
+            tri_p,
+            tri_alive: vec![true; mesh.triangles.len()],
+            pos_tris,
+            pos_wedges,
+            pos_alive: vec![true; np],
+            quadric,
+            seam_rule,
+        }
+    }
+}
+
 /// Computes the full collapse order of `mesh` with cost `kind`. `progress` is called with the
 /// number of collapses done so far (every 1024).
 pub fn collapse_order(
@@ -726,73 +789,62 @@ pub fn collapse_order(
     kind: CostKind,
     progress: &mut dyn FnMut(usize),
 ) -> CollapseOrder {
+    order(mesh, kind, progress, false)
+}
+
+/// [`collapse_order`]; with `verify`, every neighbour update that skips the full evaluation is
+/// checked against it (a panic names the position), for the tests.
+fn order(
+    mesh: &TriMesh,
+    kind: CostKind,
+    progress: &mut dyn FnMut(usize),
+    verify: bool,
+) -> CollapseOrder {
     let np = mesh.positions.len();
-    let pos: Vec<DVec3> = mesh.positions.iter().map(|&p| v3(p)).collect();
-    let mut pos_tris = vec![Vec::new(); np];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        for &w in tri {
-            pos_tris[mesh.wedge_position[w as usize] as usize].push(t as u32);
-        }
-    }
-    let mut pos_wedges = vec![Vec::new(); np];
-    for (w, &p) in mesh.wedge_position.iter().enumerate() {
-        pos_wedges[p as usize].push(w as u32);
-    }
-    let (quadric, smooth_seam) = if kind == CostKind::Quadric {
-        initial_quadrics(mesh, &pos)
-    } else {
-        (Vec::new(), Vec::new())
-    };
-    let mut s = State {
-        mesh,
-        kind,
-        pos,
-        tri_w: mesh.triangles.clone(),
-        tri_p: mesh.position_triangles(),
-        tri_alive: vec![true; mesh.triangles.len()],
-        pos_tris,
-        pos_wedges,
-        pos_alive: vec![true; np],
-        quadric,
-        smooth_seam,
-    };
+    // Everything below runs on renumbered positions and triangles (memory locality) and gives
+    // the same order as on the input numbering: every tie is broken by input index, every
+    // per-position triangle list keeps input order, and the quadrics are summed on the input.
+    let r = locality::renumbering(&mesh.positions, &mesh.position_triangles());
+    let mut s = State::new(mesh, kind, &r);
     let mut wedge_target = vec![u32::MAX; mesh.wedge_position.len()];
     let mut triangle_step = vec![0u32; mesh.triangles.len()];
     let mut collapses: Vec<Collapse> = Vec::with_capacity(np.saturating_sub(1));
-    let mut heap = PosHeap::new(np);
+    let mut queue = Queue {
+        heap: PosHeap::new(&r.pos_old),
+        checked: vec![false; np],
+        plain: vec![false; np],
+    };
     let mut scratch = Scratch::default();
-    // Whether a position's entry was evaluated with flip tests (else they run on pop).
-    let mut checked = vec![false; np];
-    let refresh =
-        |s: &State<'_>, heap: &mut PosHeap, scratch: &mut Scratch, p: u32, check: bool| match s
-            .best(p, scratch, check)
-        {
-            Some((key, v)) => heap.set(p, key, v),
-            None => heap.remove(p),
-        };
     for u in 0..np as u32 {
-        refresh(&s, &mut heap, &mut scratch, u, false);
+        queue.refresh(&s, &mut scratch, u, false);
     }
-
     let mut alive = np;
     while alive > 1 {
-        let Some((u, key, v)) = heap.peek() else {
+        let Some((u, key, v)) = queue.heap.peek() else {
             break;
         };
-        if !checked[u as usize] && s.flips(u, v) {
+        if !queue.checked[u as usize] && s.flips(u, v) {
             // The cheapest collapse of u flips a triangle: rank u by its best collapse with
             // flips tested (a flipping one only when every one of u's flips).
-            checked[u as usize] = true;
-            refresh(&s, &mut heap, &mut scratch, u, true);
+            queue.checked[u as usize] = true;
+            queue.refresh(&s, &mut scratch, u, true);
             continue;
         }
-        heap.remove(u);
+        queue.heap.remove(u);
         let step = collapses.len() as u32 + 1;
         // Only v and u's neighbours see their triangles change: every other position keeps its
         // triangles, its quadric and its neighbours' positions (v does not move), so its best
         // collapse stays what it was and is not evaluated again.
-        let touched = s.neighbours(u);
-        s.collapse(u, v, step, &mut wedge_target, &mut triangle_step);
+        let mut touched = std::mem::take(&mut scratch.touched);
+        s.edge_counts(u, v, &mut touched);
+        s.collapse(
+            u,
+            v,
+            step,
+            &mut wedge_target,
+            &mut triangle_step,
+            &mut scratch,
+        );
         alive -= 1;
         collapses.push(Collapse {
             removed: u,
@@ -804,39 +856,67 @@ pub fn collapse_order(
                 0
             },
         });
-        for p in touched {
-            checked[p as usize] = false;
-            refresh(&s, &mut heap, &mut scratch, p, false);
+        for &counts in &touched {
+            queue.update_neighbour(&s, &mut scratch, (u, v), counts, verify);
         }
+        scratch.touched = touched;
         if collapses.len().is_multiple_of(1024) {
             progress(collapses.len());
         }
     }
+    let survivor = isolated_leftovers(&s, &mut wedge_target, &mut collapses);
+    progress(collapses.len());
+    // Back to the input numbering (wedges were not renumbered).
+    for c in &mut collapses {
+        c.removed = r.pos_old[c.removed as usize];
+        c.kept = r.pos_old[c.kept as usize];
+    }
+    let mut input_triangle_step = vec![0u32; triangle_step.len()];
+    for (new, &old) in r.tri_old.iter().enumerate() {
+        input_triangle_step[old as usize] = triangle_step[new];
+    }
+    CollapseOrder {
+        kind,
+        collapses,
+        wedge_target,
+        triangle_step: input_triangle_step,
+        survivor,
+    }
+}
+
+/// Collapses the isolated positions left when no triangle is (the last points of disconnected
+/// parts) onto the survivor, the position nearest the bounding box's centre, farthest first.
+/// Returns the survivor's input index (0 for an empty mesh).
+fn isolated_leftovers(
+    s: &State<'_>,
+    wedge_target: &mut [u32],
+    collapses: &mut Vec<Collapse>,
+) -> u32 {
     // Isolated leftovers (last points of disconnected parts): onto the survivor, farthest first.
-    let mut left: Vec<u32> = (0..np as u32)
+    let mut left: Vec<u32> = (0..s.pos.len() as u32)
         .filter(|&p| s.pos_alive[p as usize])
         .collect();
-    let survivor = if left.is_empty() {
+    if left.is_empty() {
         0
     } else {
-        let (lo, hi) = mesh.bounds();
+        let (lo, hi) = s.mesh.bounds();
         let centre = (v3(lo) + v3(hi)) / 2.0;
         let keep = *left
             .iter()
             .min_by(|&&a, &&b| {
-                (s.pos[a as usize] - centre)
+                (s.at(a) - centre)
                     .length_squared()
-                    .total_cmp(&(s.pos[b as usize] - centre).length_squared())
-                    .then(a.cmp(&b))
+                    .total_cmp(&(s.at(b) - centre).length_squared())
+                    .then(s.orig[a as usize].cmp(&s.orig[b as usize]))
             })
             .expect("non-empty");
         left.retain(|&p| p != keep);
-        let pk = s.pos[keep as usize];
+        let pk = s.at(keep);
         left.sort_by(|&a, &b| {
-            (s.pos[b as usize] - pk)
+            (s.at(b) - pk)
                 .length_squared()
-                .total_cmp(&(s.pos[a as usize] - pk).length_squared())
-                .then(a.cmp(&b))
+                .total_cmp(&(s.at(a) - pk).length_squared())
+                .then(s.orig[a as usize].cmp(&s.orig[b as usize]))
         });
         let keep_wedge = s.pos_wedges[keep as usize][0];
         for u in left {
@@ -846,18 +926,148 @@ pub fn collapse_order(
             collapses.push(Collapse {
                 removed: u,
                 kept: keep,
-                cost: (s.pos[u as usize] - pk).length(),
+                cost: (s.at(u) - pk).length(),
                 flags: FLAG_ISOLATED,
             });
         }
-        keep
-    };
-    progress(collapses.len());
-    CollapseOrder {
-        kind,
-        collapses,
-        wedge_target,
-        triangle_step,
-        survivor,
+        s.orig[keep as usize]
+    }
+}
+
+/// The heap of best collapses and what is known of each position's entry.
+struct Queue<'a> {
+    heap: PosHeap<'a>,
+    /// Whether a position's entry was evaluated with flip tests (else they run on pop).
+    checked: Vec<bool>,
+    /// Whether a position's entry is its quadric cost alone (see [`State::best`]).
+    plain: Vec<bool>,
+}
+
+impl Queue<'_> {
+    /// Evaluates position p in full and updates its entry.
+    fn refresh(&mut self, s: &State<'_>, scratch: &mut Scratch, p: u32, check_flips: bool) {
+        let (best, is_plain) = s.best(p, scratch, check_flips);
+        self.plain[p as usize] = is_plain;
+        match best {
+            Some((key, v)) => self.heap.set(p, key, v),
+            None => self.heap.remove(p),
+        }
+    }
+
+    /// Updates the entry of u's neighbour `counts.p` after the collapse u -> v.
+    fn update_neighbour(
+        &mut self,
+        s: &State<'_>,
+        scratch: &mut Scratch,
+        (u, v): (u32, u32),
+        counts: EdgeCounts,
+        verify: bool,
+    ) {
+        let EdgeCounts {
+            p,
+            with_u,
+            with_v,
+            with_both,
+        } = counts;
+        let was_checked = std::mem::replace(&mut self.checked[p as usize], false);
+        // A neighbour p of u (not v) keeps its quadric; of its edges only (p, u) and (p, v)
+        // change: (p, u) goes, and (p, v) is then used by the triangles that had one of the
+        // two without the other. With that count >= 2, p is on a border after exactly when
+        // it was before, and its candidates lose u and keep or gain v. So when p's entry was
+        // its plain quadric cost and not the collapse onto u, the new best is the old one or
+        // the collapse onto v: the key a full evaluation gives, without the scan.
+        let pv_after = with_u + with_v - 2 * with_both;
+        if p != v && !was_checked && self.plain[p as usize] && pv_after >= 2 {
+            let old = self.heap.entry(p).expect("a neighbour of u has a collapse");
+            if old.target != u {
+                if with_v == 0 {
+                    let cost = s.quadric[p as usize].eval(s.at(v));
+                    let closer = cost
+                        .total_cmp(&old.key.cost)
+                        .then(s.orig[v as usize].cmp(&s.orig[old.target as usize]));
+                    if closer == Ordering::Less {
+                        let key = Key {
+                            tier: 0,
+                            cost,
+                            tie: 0.0,
+                        };
+                        self.heap.set(p, key, v);
+                    }
+                }
+                if verify {
+                    let (full, is_plain) = s.best(p, scratch, false);
+                    let entry = self.heap.entry(p).map(|e| (e.key, e.target));
+                    assert!(
+                        is_plain && full == entry,
+                        "collapse {u} -> {v}: position {p} updated to {entry:?}, a full evaluation gives {full:?}"
+                    );
+                }
+                return;
+            }
+        }
+        self.refresh(s, scratch, p, false);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pm::mesh::Corner;
+
+    /// A bumpy n x n grid with what makes the neighbour updates hard: a fold (a crease) with a
+    /// UV seam on it, a UV seam on a smooth part, holes (open borders), fins (three triangles on
+    /// one edge) and triangles repeated the other way round.
+    fn hard_grid(n: usize) -> TriMesh {
+        let height = |x: usize, y: usize| {
+            let h = (x as u32).wrapping_mul(2_654_435_761) ^ (y as u32).wrapping_mul(40_503);
+            (h % 1000) as f32 / 4000.0 + (x as f32 - n as f32 / 2.0).abs() * 0.7
+        };
+        let corner = |x: usize, y: usize, u_shift: f32| Corner {
+            position: [x as f32, y as f32, height(x, y)],
+            uv: Some([x as f32 * 0.1 + u_shift, y as f32 * 0.1]),
+            normal: None,
+        };
+        let mut tris = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                if (x * 7 + y * 3) % 23 == 0 {
+                    continue; // a hole
+                }
+                // Seams along the fold (x = n/2) and along y = n/3.
+                let s = if x < n / 2 { 0.0 } else { 0.5 } + if y < n / 3 { 0.0 } else { 0.25 };
+                let (a, b, c, d) = (
+                    corner(x, y, s),
+                    corner(x + 1, y, s),
+                    corner(x, y + 1, s),
+                    corner(x + 1, y + 1, s),
+                );
+                tris.push([a, b, d]);
+                tris.push([a, d, c]);
+                if (x + y * 5) % 17 == 0 {
+                    // A fin on the diagonal, and the quad's first triangle the other way round.
+                    let mut top = corner(x, y, s);
+                    top.position[2] += 1.0;
+                    tris.push([a, d, top]);
+                    tris.push([a, d, b]);
+                }
+            }
+        }
+        TriMesh::weld(&tris).0
+    }
+
+    #[test]
+    fn neighbour_updates_without_a_full_evaluation_give_its_key() {
+        for n in [6, 13, 40] {
+            let mesh = hard_grid(n);
+            assert!(
+                mesh.triangles.len() > n * n,
+                "{n}: {}",
+                mesh.triangles.len()
+            );
+            let checked = order(&mesh, CostKind::Quadric, &mut |_| {}, true);
+            let plain = collapse_order(&mesh, CostKind::Quadric, &mut |_| {});
+            assert_eq!(checked.collapses, plain.collapses);
+            assert_eq!(checked.collapses.len(), mesh.positions.len() - 1);
+        }
     }
 }

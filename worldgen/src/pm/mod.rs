@@ -17,6 +17,8 @@ pub mod data;
 pub mod file;
 pub mod geom;
 pub mod gltf_input;
+mod heap;
+pub mod locality;
 pub mod lod;
 pub mod measure;
 pub mod mesh;
