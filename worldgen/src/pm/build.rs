@@ -23,6 +23,7 @@
 
 use super::geom::{area_normal, v3};
 use super::heap::{Key, PosHeap};
+use super::lists::Lists;
 use super::locality;
 use super::mesh::TriMesh;
 use glam::DVec3;
@@ -177,7 +178,8 @@ struct Scratch {
     uses: Vec<u32>,
     vanish: Vec<DVec3>,
     moving: Vec<DVec3>,
-    /// A collapse's vanishing and moving triangles.
+    /// A collapse's removed position's triangles, and the vanishing and moving ones.
+    tris_u: Vec<u32>,
     vanish_t: Vec<u32>,
     moving_t: Vec<u32>,
     /// The neighbours of the removed position, with their edge counts.
@@ -200,7 +202,7 @@ struct State<'a> {
     /// The positions of `tri_w` (kept in step: read far more often than written).
     tri_p: Vec<[u32; 3]>,
     tri_alive: Vec<bool>,
-    pos_tris: Vec<Vec<u32>>,
+    pos_tris: Lists,
     pos_wedges: Vec<Vec<u32>>,
     pos_alive: Vec<bool>,
     quadric: Vec<Quadric>,
@@ -222,7 +224,7 @@ impl State<'_> {
     /// The neighbours of `u` with their [`EdgeCounts`] for the collapse u -> v, into `out`.
     fn edge_counts(&self, u: u32, v: u32, out: &mut Vec<EdgeCounts>) {
         out.clear();
-        for &t in &self.pos_tris[u as usize] {
+        for &t in self.pos_tris.get(u) {
             let tp = self.tri_pos(t);
             let both = u32::from(tp.contains(&v));
             for p in tp {
@@ -242,7 +244,7 @@ impl State<'_> {
                 }
             }
         }
-        for &t in &self.pos_tris[v as usize] {
+        for &t in self.pos_tris.get(v) {
             for p in self.tri_pos(t) {
                 if let Some(e) = out.iter_mut().find(|e| e.p == p) {
                     e.with_v += 1;
@@ -256,7 +258,7 @@ impl State<'_> {
     fn neighbours_and_border(&self, u: u32, out: &mut Vec<u32>, uses: &mut Vec<u32>) -> bool {
         out.clear();
         uses.clear();
-        for &t in &self.pos_tris[u as usize] {
+        for &t in self.pos_tris.get(u) {
             for p in self.tri_pos(t) {
                 if p == u {
                     continue;
@@ -275,7 +277,7 @@ impl State<'_> {
     /// How much of a corner `u` is: the largest deviation of a triangle normal from the mean
     /// normal (0 on a plane, up to 2), plus 1 on an open border, plus 1 on a seam.
     fn cornerness(&self, u: u32, on_border: bool) -> f64 {
-        let tris = &self.pos_tris[u as usize];
+        let tris = self.pos_tris.get(u);
         let mut mean = DVec3::ZERO;
         let mut normals = Vec::with_capacity(tris.len());
         for &t in tris {
@@ -318,11 +320,7 @@ impl State<'_> {
         let mut vanish_count = 0usize;
         // The quadric needs the triangles only for the flip test and the feature rule.
         let scan = check_flips || self.kind != CostKind::Quadric || ctx.on_border || ctx.on_seam;
-        let tris: &[u32] = if scan {
-            &self.pos_tris[u as usize]
-        } else {
-            &[]
-        };
+        let tris: &[u32] = if scan { self.pos_tris.get(u) } else { &[] };
         for &t in tris {
             let tp = self.tri_pos(t);
             let [a, b, c] = tp.map(|p| self.at(p));
@@ -397,7 +395,7 @@ impl State<'_> {
             return true;
         }
         let mut wedge: Option<(u32, u32)> = None;
-        for &t in &self.pos_tris[u as usize] {
+        for &t in self.pos_tris.get(u) {
             let tp = self.tri_pos(t);
             if !tp.contains(&v) {
                 continue;
@@ -504,7 +502,10 @@ impl State<'_> {
         scratch: &mut Scratch,
     ) {
         // Split u's triangles into vanishing and moving.
-        let tris_u = std::mem::take(&mut self.pos_tris[u as usize]);
+        let mut tris_u = std::mem::take(&mut scratch.tris_u);
+        tris_u.clear();
+        tris_u.extend_from_slice(self.pos_tris.get(u));
+        self.pos_tris.clear(u);
         let (mut vanish, mut moving) = (
             std::mem::take(&mut scratch.vanish_t),
             std::mem::take(&mut scratch.moving_t),
@@ -550,7 +551,7 @@ impl State<'_> {
             triangle_step[t as usize] = step;
             for p in self.tri_pos(t) {
                 if p != u {
-                    self.pos_tris[p as usize].retain(|&x| x != t);
+                    self.pos_tris.remove(p, t);
                 }
             }
         }
@@ -566,7 +567,7 @@ impl State<'_> {
                     *p = v;
                 }
             }
-            self.pos_tris[v as usize].push(t);
+            self.pos_tris.push(v, t);
         }
         if self.kind == CostKind::Quadric {
             let qu = self.quadric[u as usize];
@@ -574,13 +575,14 @@ impl State<'_> {
         }
         self.pos_alive[u as usize] = false;
         scratch.vanish_t = vanish;
+        scratch.tris_u = tris_u;
         scratch.moving_t = moving;
     }
 
     /// Whether collapsing u onto v turns a moving triangle by more than the flip angle.
     fn flips(&self, u: u32, v: u32) -> bool {
         let pv = self.at(v);
-        self.pos_tris[u as usize].iter().any(|&t| {
+        self.pos_tris.get(u).iter().any(|&t| {
             let tp = self.tri_pos(t);
             if tp.contains(&v) {
                 return false;
@@ -609,9 +611,6 @@ fn attribute_distance(mesh: &TriMesh, a: u32, b: u32) -> f64 {
     d
 }
 
-/// One triangle's side of an edge: its wedges at the lower and higher position, and its normal.
-type EdgeSide = (u32, u32, DVec3);
-
 /// Initial quadrics: face planes weighted by the square root of the triangle's area (so the
 /// weight grows linearly with size, as meshoptimizer does; plain area weights let fine regions
 /// and silhouettes go early), plus planes through open-border and attribute-seam edges,
@@ -631,9 +630,10 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> (Vec<Quadric>, Vec<bool>) 
     let crease_cos = CREASE_DEGREES.to_radians().cos();
     let mut q = vec![Quadric::default(); pos.len()];
     let mut smooth_seam = vec![false; pos.len()];
-    // (edge, the wedges and normal of one side) for every triangle side; sorted by edge below
-    // (stably, so each edge's sides keep triangle order) to find borders and seams.
-    let mut edges: Vec<((u32, u32), EdgeSide)> = Vec::with_capacity(3 * mesh.triangles.len());
+    let unit_normal = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|w| pos[mesh.wedge_position[w as usize] as usize]);
+        area_normal(a, b, c).normalize_or_zero()
+    };
     for t in &mesh.triangles {
         let p = t.map(|w| mesh.wedge_position[w as usize]);
         let [a, b, c] = p.map(|i| pos[i as usize]);
@@ -644,34 +644,25 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> (Vec<Quadric>, Vec<bool>) 
         for &i in &p {
             q[i as usize].add(&plane);
         }
-        for k in 0..3 {
-            let (i, j) = (p[k], p[(k + 1) % 3]);
-            let key = (i.min(j), i.max(j));
-            let (wi, wj) = if i < j {
-                (t[k], t[(k + 1) % 3])
-            } else {
-                (t[(k + 1) % 3], t[k])
-            };
-            edges.push((key, (wi, wj, n)));
-        }
     }
-    for group in sides_by_edge(&edges, pos.len()).chunk_by(|x, y| x.0 == y.0) {
-        let key = group[0].0;
-        let side0 = group[0].1;
+    let sides = sides_by_edge(mesh, pos.len());
+    for group in sides.chunk_by(|&x, &y| side(mesh, x).0 == side(mesh, y).0) {
+        let (key, wedges0) = side(mesh, group[0]);
         let border = group.len() == 1;
-        let seam = group.iter().any(|(_, s)| s.0 != side0.0 || s.1 != side0.1);
+        let seam = group.iter().any(|&x| side(mesh, x).1 != wedges0);
         if !border && !seam {
             continue;
         }
-        let sharp = group.len() == 2 && group[0].1.2.dot(group[1].1.2) < crease_cos;
+        let normal = |x: u32| unit_normal(&mesh.triangles[x as usize / 3]);
+        let sharp = group.len() == 2 && normal(group[0]).dot(normal(group[1])) < crease_cos;
         if seam && !sharp {
             smooth_seam[key.0 as usize] = true;
             smooth_seam[key.1 as usize] = true;
         }
         let (a, b) = (pos[key.0 as usize], pos[key.1 as usize]);
         let e = b - a;
-        for (_, s) in group {
-            let m = e.cross(s.2).normalize_or_zero();
+        for &x in group {
+            let m = e.cross(normal(x)).normalize_or_zero();
             if m == DVec3::ZERO {
                 continue;
             }
@@ -684,30 +675,46 @@ fn initial_quadrics(mesh: &TriMesh, pos: &[DVec3]) -> (Vec<Quadric>, Vec<bool>) 
     (q, smooth_seam)
 }
 
-/// The triangle sides ordered by edge (lower position, then higher) and, within an edge, by
-/// triangle: a counting sort by the lower position (linear, stable), then each position's few
-/// sides by the higher one. The same order as a stable sort of the whole list, which cost a
-/// tenth of the collapse order's time.
-fn sides_by_edge(
-    edges: &[((u32, u32), EdgeSide)],
-    positions: usize,
-) -> Vec<((u32, u32), EdgeSide)> {
+/// Side `x` of the mesh (side k of triangle t is 3 t + k, from corner k to corner k + 1): its
+/// edge (lower position, higher position) and its wedges at those two ends.
+fn side(mesh: &TriMesh, x: u32) -> ((u32, u32), (u32, u32)) {
+    let t = &mesh.triangles[x as usize / 3];
+    let k = x as usize % 3;
+    let (wi, wj) = (t[k], t[(k + 1) % 3]);
+    let (i, j) = (
+        mesh.wedge_position[wi as usize],
+        mesh.wedge_position[wj as usize],
+    );
+    if i < j {
+        ((i, j), (wi, wj))
+    } else {
+        ((j, i), (wj, wi))
+    }
+}
+
+/// Every triangle side (see [`side`]) ordered by edge (lower position, then higher) and, within
+/// an edge, by triangle: a counting sort by the lower position (linear, stable), then each
+/// position's few sides by the higher one. The same order as a stable sort of all sides by
+/// edge, which took a tenth of the collapse order's time; sides are indices, so no 40-byte
+/// records are copied.
+fn sides_by_edge(mesh: &TriMesh, positions: usize) -> Vec<u32> {
+    let count = 3 * mesh.triangles.len() as u32;
     let mut start = vec![0usize; positions + 1];
-    for e in edges {
-        start[e.0.0 as usize + 1] += 1;
+    for x in 0..count {
+        start[side(mesh, x).0.0 as usize + 1] += 1;
     }
     for i in 0..positions {
         start[i + 1] += start[i];
     }
     let mut next = start.clone();
-    let mut out = vec![((0, 0), (0, 0, DVec3::ZERO)); edges.len()];
-    for e in edges {
-        let slot = &mut next[e.0.0 as usize];
-        out[*slot] = *e;
+    let mut out = vec![0u32; count as usize];
+    for x in 0..count {
+        let slot = &mut next[side(mesh, x).0.0 as usize];
+        out[*slot] = x;
         *slot += 1;
     }
     for p in 0..positions {
-        out[start[p]..start[p + 1]].sort_by_key(|e| e.0.1);
+        out[start[p]..start[p + 1]].sort_by_key(|&x| side(mesh, x).0.1);
     }
     out
 }
@@ -731,17 +738,16 @@ impl<'a> State<'a> {
             .map(|t| t.map(|w| wedge_pos[w as usize]))
             .collect();
         // Lists sized once (a collapse adds to the kept position's list: room for a few more).
-        let mut degree = vec![0usize; np];
+        let mut degree = vec![0u32; np];
         for tri in &tri_p {
             for &p in tri {
                 degree[p as usize] += 1;
             }
         }
-        let mut pos_tris: Vec<Vec<u32>> =
-            degree.iter().map(|&d| Vec::with_capacity(d + 4)).collect();
+        let mut pos_tris = Lists::with_room(&degree, 4);
         for (t, tri) in mesh.triangles.iter().enumerate() {
             for &w in tri {
-                pos_tris[wedge_pos[w as usize] as usize].push(r.tri_new[t]);
+                pos_tris.push(wedge_pos[w as usize], r.tri_new[t]);
             }
         }
         let mut pos_wedges = vec![Vec::with_capacity(1); np];

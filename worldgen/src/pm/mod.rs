@@ -18,6 +18,7 @@ pub mod file;
 pub mod geom;
 pub mod gltf_input;
 mod heap;
+mod lists;
 pub mod locality;
 pub mod lod;
 pub mod measure;
