@@ -10,6 +10,7 @@ mod lighting;
 mod map_format;
 mod objects;
 mod pm;
+mod pm_prefix;
 mod render;
 mod soak;
 mod streaming;

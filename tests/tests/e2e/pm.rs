@@ -223,7 +223,7 @@ fn disconnected_parts_end_in_isolated_collapses() {
 }
 
 /// Points drawn uniformly by area on `tris` (a seeded generator, not the builder's lattice).
-fn random_points(tris: &[[DVec3; 3]], points: usize, seed: u64) -> Vec<DVec3> {
+pub(crate) fn random_points(tris: &[[DVec3; 3]], points: usize, seed: u64) -> Vec<DVec3> {
     let areas: Vec<f64> = tris
         .iter()
         .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).length() / 2.0)
@@ -277,7 +277,7 @@ pub(crate) fn reference_distance(
 
 /// Triangles bucketed by the grid cells their boxes overlap (written for this test, apart from
 /// worldgen's hierarchy), to decide "is some triangle within r of p" quickly.
-struct Buckets<'a> {
+pub(crate) struct Buckets<'a> {
     tris: &'a [[DVec3; 3]],
     lo: DVec3,
     cell: f64,
@@ -289,7 +289,7 @@ struct Buckets<'a> {
 
 impl<'a> Buckets<'a> {
     /// Buckets over the box `lo..hi` (holding every triangle and query point).
-    fn new(tris: &'a [[DVec3; 3]], lo: DVec3, hi: DVec3, cell: f64) -> Self {
+    pub(crate) fn new(tris: &'a [[DVec3; 3]], lo: DVec3, hi: DVec3, cell: f64) -> Self {
         let dims = [0, 1, 2].map(|k| ((hi[k] - lo[k]) / cell).floor() as usize + 1);
         let mut b = Buckets {
             tris,
@@ -331,7 +331,7 @@ impl<'a> Buckets<'a> {
     }
 
     /// Whether some triangle lies within `r` of `p`.
-    fn within(&self, p: DVec3, r: f64) -> bool {
+    pub(crate) fn within(&self, p: DVec3, r: f64) -> bool {
         let range = self.range(p - DVec3::splat(r), p + DVec3::splat(r));
         let mut found = false;
         cells(self.dims, range, |c| {
@@ -403,7 +403,7 @@ fn check_every_prefix(name: &str, pm: &PmMesh, points: usize, max_positions: usi
 
 /// Distance from a point to a triangle by barycentric clamping on the three edges and the
 /// interior (written independently of worldgen's kernel).
-fn segment_free_distance(p: DVec3, t: &[DVec3; 3]) -> f64 {
+pub(crate) fn segment_free_distance(p: DVec3, t: &[DVec3; 3]) -> f64 {
     let [a, b, c] = *t;
     let n = (b - a).cross(c - a);
     let seg = |s: DVec3, e: DVec3| {
