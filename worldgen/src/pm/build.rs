@@ -423,8 +423,8 @@ impl State<'_> {
 
     /// The cheapest collapse of `u`; flips are tested only with `check_flips` (otherwise when
     /// the collapse is about to be made). Also whether the key is the quadric cost alone (tier
-    /// 0: quadric, no flip test, u on no border and under no seam rule), see
-    /// [`collapse_order`]'s update of u's neighbours.
+    /// 0: quadric, no flip test, u on no border and under no seam rule), which lets
+    /// [`Queue::update_neighbour`] update u's entry without this evaluation.
     fn best(&self, u: u32, scratch: &mut Scratch, check_flips: bool) -> (Option<(Key, u32)>, bool) {
         let mut neighbours = std::mem::take(&mut scratch.neighbours);
         let border_u = self.neighbours_and_border(u, &mut neighbours, &mut scratch.uses);
