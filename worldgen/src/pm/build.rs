@@ -421,6 +421,19 @@ impl State<'_> {
         false
     }
 
+    /// Whether the collapse onto `v` with `key` beats `best` (equal keys: the lower input
+    /// index).
+    fn better(&self, key: &Key, v: u32, best: Option<&(Key, u32)>) -> bool {
+        match best {
+            None => true,
+            Some((b, bv)) => match key.cmp_key(b) {
+                Ordering::Less => true,
+                Ordering::Equal => self.orig[v as usize] < self.orig[*bv as usize],
+                Ordering::Greater => false,
+            },
+        }
+    }
+
     /// The cheapest collapse of `u`; flips are tested only with `check_flips` (otherwise when
     /// the collapse is about to be made). Also whether the key is the quadric cost alone (tier
     /// 0: quadric, no flip test, u on no border and under no seam rule), which lets
@@ -457,15 +470,7 @@ impl State<'_> {
                     cost,
                     tie: 0.0,
                 };
-                let better = match &best {
-                    None => true,
-                    Some((b, bv)) => match key.cmp_key(b) {
-                        Ordering::Less => true,
-                        Ordering::Equal => self.orig[v as usize] < self.orig[*bv as usize],
-                        Ordering::Greater => false,
-                    },
-                };
-                if better {
+                if self.better(&key, v, best.as_ref()) {
                     best = Some((key, v));
                 }
             }
@@ -474,15 +479,7 @@ impl State<'_> {
         }
         for &v in &neighbours {
             let k = self.evaluate(u, v, &ctx, scratch, check_flips);
-            let better = match &best {
-                None => true,
-                Some((b, bv)) => match k.cmp_key(b) {
-                    Ordering::Less => true,
-                    Ordering::Equal => self.orig[v as usize] < self.orig[*bv as usize],
-                    Ordering::Greater => false,
-                },
-            };
-            if better {
+            if self.better(&k, v, best.as_ref()) {
                 best = Some((k, v));
             }
         }

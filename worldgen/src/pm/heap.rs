@@ -79,19 +79,21 @@ impl<'a> PosHeap<'a> {
         self.place(i, e);
     }
 
+    /// The lesser of entry `i`'s children, if it has any.
+    fn lesser_child(&self, i: usize) -> Option<usize> {
+        let (l, n) = (2 * i + 1, self.heap.len());
+        if l >= n {
+            None
+        } else if l + 1 < n && self.less(&self.heap[l + 1], &self.heap[l]) {
+            Some(l + 1)
+        } else {
+            Some(l)
+        }
+    }
+
     /// Puts `e` into the hole at `i`, moving the lesser child up while it is less than `e`.
     fn down(&mut self, mut i: usize, e: HeapEntry) {
-        let n = self.heap.len();
-        loop {
-            let l = 2 * i + 1;
-            if l >= n {
-                break;
-            }
-            let m = if l + 1 < n && self.less(&self.heap[l + 1], &self.heap[l]) {
-                l + 1
-            } else {
-                l
-            };
+        while let Some(m) = self.lesser_child(i) {
             if !self.less(&self.heap[m], &e) {
                 break;
             }
@@ -143,18 +145,8 @@ impl<'a> PosHeap<'a> {
         }
         // Floyd's order: the hole goes down to a leaf along the lesser children (one
         // comparison a level), then the last entry, which came from the bottom, rises.
-        let n = self.heap.len();
         let mut hole = i;
-        loop {
-            let l = 2 * hole + 1;
-            if l >= n {
-                break;
-            }
-            let m = if l + 1 < n && self.less(&self.heap[l + 1], &self.heap[l]) {
-                l + 1
-            } else {
-                l
-            };
+        while let Some(m) = self.lesser_child(hole) {
             self.place(hole, self.heap[m]);
             hole = m;
         }
