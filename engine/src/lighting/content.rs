@@ -97,8 +97,8 @@ struct ThreadState {
 /// What the light threads share with the kind.
 #[derive(Debug)]
 struct Inner {
-    /// The streamer's world, attached by the first node job (or [`LightingContent::attach_world`]):
-    /// shared, never copied (a copy of a 32 km world is 2.8 GB).
+    /// The streamer's world, attached when the streamer is made (see
+    /// [`ContentKind::attach_world`]): shared, never copied (a copy of a 32 km world is 2.8 GB).
     world: std::sync::OnceLock<Arc<World>>,
     tree: QuadTree,
     canopy: Arc<Canopy>,
@@ -229,8 +229,8 @@ impl LightingContent {
     /// The kind's registered name.
     pub const NAME: &'static str = "lighting";
 
-    /// The kind for `world` (its quad tree; the light threads compute on the world attached by
-    /// the first node job, see [`Self::attach_world`]), lit through `canopy` (the vegetation
+    /// The kind for `world` (its quad tree; the light threads compute on the world the streamer
+    /// attaches, see [`ContentKind::attach_world`]), lit through `canopy` (the vegetation
     /// kind's), with `sun`, and [`default_light_threads`] threads.
     pub fn new(world: &World, canopy: Arc<Canopy>, sun: Sun) -> Self {
         Self::with_threads(world, canopy, sun, default_light_threads())
@@ -332,16 +332,6 @@ impl LightingContent {
         g
     }
 
-    /// Gives the light threads `world` (the first one given stays; a streamer's node jobs
-    /// attach its shared world). Grids are computed only once a world is attached.
-    pub fn attach_world(&self, world: &Arc<World>) {
-        // Called by every node job: only the first one clones the Arc.
-        if self.inner.world.get().is_none() && self.inner.world.set(Arc::clone(world)).is_ok() {
-            self.start_thread();
-            self.inner.poke();
-        }
-    }
-
     fn start_thread(&self) {
         let mut state = self.inner.state.lock().expect("state lock");
         if state.started || self.inner.world.get().is_none() {
@@ -366,6 +356,15 @@ impl ContentKind for LightingContent {
         Self::NAME
     }
 
+    /// Gives the light threads `world` (the first one given stays). Grids are computed only
+    /// once a world is attached.
+    fn attach_world(&self, world: &Arc<World>) {
+        if self.inner.world.set(Arc::clone(world)).is_ok() {
+            self.start_thread();
+            self.inner.poke();
+        }
+    }
+
     fn observe_camera(&self, camera_m: glam::DVec3) {
         self.set_camera(camera_m.truncate());
     }
@@ -376,7 +375,6 @@ impl ContentKind for LightingContent {
             move |s: &Shared, w: &mut NodeWork| {
                 let owner = LightGrid::owner(&s.tree, w.key);
                 debug_assert!(owner.level <= grid_level(&s.tree));
-                self.attach_world(&s.world);
                 let grid = self.grid_for(owner);
                 w.put(NodeLight {
                     grid,

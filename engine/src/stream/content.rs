@@ -6,7 +6,7 @@
 //! kind (upload and draw hooks) is a `render::NodeRenderer` registered next to it.
 
 use super::Shared;
-use crate::surface::Rect;
+use crate::surface::{Rect, World};
 use crate::terrain::bounds::NodeBounds;
 use crate::terrain::quadtree::NodeKey;
 use crate::terrain::tiles::{Tile, TileKey};
@@ -83,6 +83,11 @@ pub trait ContentKind: Any + Send + Sync + std::fmt::Debug {
     /// after the phases of the kinds registered before this one (so they may read those
     /// payloads), and put their result with [`NodeWork::put`].
     fn phases(self: Arc<Self>) -> Vec<Phase>;
+
+    /// Given the streamer's world once, when the streamer is made (shared, not copied). A kind
+    /// with work of its own off the node jobs, such as the light threads, keeps it. Default:
+    /// nothing.
+    fn attach_world(&self, _world: &Arc<World>) {}
 
     /// Told where the camera is at every streaming update (a kind with background work of its
     /// own, such as the light grids, does the nearest first). Default: nothing.

@@ -281,6 +281,9 @@ impl Streamer {
             tiles: Mutex::new(TileCache::new()),
             kinds,
         });
+        for k in &shared.kinds {
+            k.attach_world(&shared.world);
+        }
         let phases = Arc::new(phases);
         let levels = usize::from(tree.max_level) + 1;
         let queue = Arc::new(JobQueue::new(predict::CLASSES, levels));

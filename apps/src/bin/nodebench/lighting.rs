@@ -9,6 +9,7 @@ use engine::camera::Camera;
 use engine::lighting::content::LightingContent;
 use engine::lighting::grid::{GROUND_LAYER_M, LightGrid, Sun, grid_level};
 use engine::lighting::reference;
+use engine::stream::ContentKind;
 use engine::surface::World;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
 use engine::vegetation::Placer;
