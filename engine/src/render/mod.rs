@@ -67,6 +67,11 @@ pub enum GpuError {
     WritePng { path: String, reason: String },
 }
 
+/// Whether `adapter` is a CPU rasteriser (lavapipe), whose "GPU" memory is the process's RAM.
+pub fn is_cpu_adapter(adapter: &wgpu::Adapter) -> bool {
+    adapter.get_info().device_type == wgpu::DeviceType::Cpu
+}
+
 /// A device and its queue.
 pub struct Gpu {
     pub instance: wgpu::Instance,
@@ -147,11 +152,7 @@ impl Gpu {
             adapter: adapter.get_info().name,
             reason: e.to_string(),
         })?;
-        let anisotropy = if adapter.get_info().device_type == wgpu::DeviceType::Cpu {
-            1
-        } else {
-            8
-        };
+        let anisotropy = if is_cpu_adapter(&adapter) { 1 } else { 8 };
         Ok(Self {
             instance,
             adapter,

@@ -165,7 +165,7 @@ fn resident_breakdown(
     let mib = |b: u64| b as f64 / f64::from(1 << 20);
     let counters = gpu.device.get_internal_counters();
     let gpu_alive = counters.hal.buffer_memory.read() + counters.hal.texture_memory.read();
-    let cpu_adapter = gpu.adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+    let cpu_adapter = engine::render::is_cpu_adapter(&gpu.adapter);
     let gpu_in_ram = if cpu_adapter {
         u64::try_from(gpu_alive).unwrap_or(0)
     } else {
