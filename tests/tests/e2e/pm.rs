@@ -223,6 +223,17 @@ fn disconnected_parts_end_in_isolated_collapses() {
 }
 
 /// Points drawn uniformly by area on `tris` (a seeded generator, not the builder's lattice).
+/// Uniform numbers in [0, 1) from a seeded xorshift generator (the tests' own).
+pub(crate) fn xorshift(seed: u64) -> impl FnMut() -> f64 {
+    let mut x = seed.max(1);
+    move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 pub(crate) fn random_points(tris: &[[DVec3; 3]], points: usize, seed: u64) -> Vec<DVec3> {
     let areas: Vec<f64> = tris
         .iter()
@@ -235,13 +246,7 @@ pub(crate) fn random_points(tris: &[[DVec3; 3]], points: usize, seed: u64) -> Ve
         acc += a;
         cumulative.push(acc);
     }
-    let mut x = seed;
-    let mut rand = move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        (x >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rand = xorshift(seed);
     (0..points)
         .map(|_| {
             let r = rand() * total;

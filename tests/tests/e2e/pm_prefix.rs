@@ -11,7 +11,7 @@
 //!   moves a triangle, a new shape) is sampled at its centroid and at six random points, and
 //!   each sample must lie within the smallest stored error of the levels that draw that shape.
 
-use crate::pm::{Buckets, random_points, segment_free_distance};
+use crate::pm::{Buckets, random_points, segment_free_distance, xorshift};
 use glam::DVec3;
 use worldgen::pm::PmMesh;
 use worldgen::pm::measure::level_soup;
@@ -61,7 +61,7 @@ struct Witness {
 }
 
 /// One level of the walk, for the full-mesh-to-level side.
-struct Level<'a> {
+struct WalkLevel<'a> {
     p: usize,
     tol: f64,
     /// Triangles drawn (the first ones).
@@ -79,7 +79,7 @@ fn corners_at(pm: &PmMesh, s: &Shape) -> [DVec3; 3] {
     })
 }
 
-impl Level<'_> {
+impl WalkLevel<'_> {
     /// Gives every point whose witness changed or is now too far a new one: a triangle within
     /// the stored error, looked for first around the old witness (or the collapse), then among
     /// all the level's triangles. Panics when there is none.
@@ -130,16 +130,6 @@ impl Level<'_> {
 
 /// Points sampled on every triangle shape: the centroid and random ones.
 const SHAPE_POINTS: usize = 7;
-
-fn xorshift(seed: u64) -> impl FnMut() -> f64 {
-    let mut x = seed.max(1);
-    move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        (x >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// Checks both sides at every level of `pm` with `full_points` fixed points on the full mesh;
 /// returns the number of shapes sampled. Panics naming the level on the first failure.
@@ -276,7 +266,7 @@ pub(crate) fn check_every_level_incrementally(
         }
         // The full mesh to level p - 1.
         if alive > 0 {
-            let level = Level {
+            let level = WalkLevel {
                 p: p - 1,
                 tol: r[p - 2],
                 alive,

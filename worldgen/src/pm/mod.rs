@@ -19,7 +19,7 @@ pub mod geom;
 pub mod gltf_input;
 mod heap;
 mod lists;
-pub mod locality;
+mod locality;
 pub mod lod;
 pub mod measure;
 pub mod mesh;

@@ -87,7 +87,7 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
                 order_s.push(t0.elapsed().as_secs_f64());
             }
             order_s.sort_by(f64::total_cmp);
-            let median_s = order_s[order_s.len() / 2];
+            let median_s = apps::percentile(&order_s, 0.5);
             r.add(
                 "pm",
                 &format!("{name}: collapse order, {}", cost.name()),
@@ -180,7 +180,7 @@ pub(crate) fn section_pm(meshes: &Path, r: &mut Report, quick: bool) -> Vec<PmCu
         r.add(
             "pm",
             &format!("{name}: meshoptimizer simplify to 10 %"),
-            tris as f64 / secs[secs.len() / 2].max(1e-9) / 1e6,
+            tris as f64 / apps::percentile(&secs, 0.5).max(1e-9) / 1e6,
             "M input tri/s",
             &format!(
                 "one call, one core (one level per call, where the PM order gives every level); median of {ORDER_RUNS} runs"
