@@ -20,9 +20,11 @@ struct GroundDetail {
     material_tile_m: f32,
     finest_lod: f32,
     finest_texel_m: f32,
-    pad0: f32,
-    pad1: f32,
-    pad2: f32,
+    // Metres of a material's detail height of 1 (alpha 255).
+    max_relief_m: f32,
+    // Pixels up to this size (m) see the detail height as bumps of the ground's normal.
+    bump_px_m: f32,
+    pad: f32,
 };
 @group(2) @binding(3) var materials: texture_2d_array<f32>;
 @group(2) @binding(4) var ground_types: texture_2d<u32>;
@@ -103,28 +105,54 @@ fn fine_detail(rel: vec3<f32>, px_m: f32) -> f32 {
     return 1.0 + v;
 }
 
-// The material's detail at a pixel `rel` (camera-relative) of `px_m` metres: the ground type's
-// material luminance at the pixel's scale over its luminance at the finest node texel's scale
-// (what the node texture already holds), 1 where a pixel is a finest texel or larger, in full
-// from a third of one. Explicit mip levels, so pixels beyond that reach skip the lookups.
-fn material_detail(rel: vec3<f32>, px_m: f32) -> f32 {
+// The material's detail at a pixel `rel` (camera-relative) of `px_m` metres:
+// - `factor`: the ground type's material luminance at the pixel's scale over its luminance at
+//   the finest node texel's scale (what the node texture already holds), 1 where a pixel is a
+//   finest texel or larger, in full from a third of one;
+// - `slope`: the gradient (m/m, east and north) of the material's detail height at the
+//   pixel's scale (central differences one mip texel apart), in full where a pixel is a
+//   quarter of `bump_px_m` or less, none from `bump_px_m` on.
+// Both fade by metres per pixel only, so no node or level border can show. Explicit mip
+// levels, so pixels beyond both reaches skip the lookups.
+struct Detail {
+    factor: f32,
+    slope: vec2<f32>,
+};
+
+fn material_detail(rel: vec3<f32>, px_m: f32) -> Detail {
+    var out = Detail(1.0, vec2<f32>(0.0));
     let w = clamp((detail.finest_texel_m / px_m - 1.0) * 0.5, 0.0, 1.0);
-    if (w <= 0.0) {
-        return 1.0;
+    let wb = clamp((detail.bump_px_m / px_m - 1.0) / 3.0, 0.0, 1.0);
+    if (max(w, wb) <= 0.0) {
+        return out;
     }
     let g = detail.camera_cells + rel.xy / detail.ground_spacing_m;
     let size = vec2<i32>(textureDimensions(ground_types));
     let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), size - 1);
     let t = min(textureLoad(ground_types, at, 0).r, detail.ground_types - 1u);
-    // Material coordinates as the node texture's pass has them (engine::render::ground).
+    // Material coordinates as the node texture's pass has them (engine::render::ground); rows
+    // run south to north, so u is east and v north.
     let uv = detail.camera_tiles + rel.xy / detail.material_tile_m;
-    let texel_m = detail.material_tile_m / f32(textureDimensions(materials).x);
+    let texels = f32(textureDimensions(materials).x);
+    let texel_m = detail.material_tile_m / texels;
     let lod = max(log2(px_m / texel_m), 0.0);
-    let fine = textureSampleLevel(materials, material_sampler, uv, t, lod).rgb;
-    let coarse = textureSampleLevel(materials, material_sampler, uv, t, detail.finest_lod).rgb;
-    let luma = vec3<f32>(0.2126, 0.7152, 0.0722);
-    let ratio = dot(fine, luma) / max(dot(coarse, luma), 1e-4);
-    return mix(1.0, ratio, w);
+    if (w > 0.0) {
+        let fine = textureSampleLevel(materials, material_sampler, uv, t, lod).rgb;
+        let coarse = textureSampleLevel(materials, material_sampler, uv, t, detail.finest_lod).rgb;
+        let luma = vec3<f32>(0.2126, 0.7152, 0.0722);
+        let ratio = dot(fine, luma) / max(dot(coarse, luma), 1e-4);
+        out.factor = mix(1.0, ratio, w);
+    }
+    if (wb > 0.0) {
+        let step = exp2(lod) / texels;
+        let east = textureSampleLevel(materials, material_sampler, uv + vec2<f32>(step, 0.0), t, lod).a;
+        let west = textureSampleLevel(materials, material_sampler, uv - vec2<f32>(step, 0.0), t, lod).a;
+        let north = textureSampleLevel(materials, material_sampler, uv + vec2<f32>(0.0, step), t, lod).a;
+        let south = textureSampleLevel(materials, material_sampler, uv - vec2<f32>(0.0, step), t, lod).a;
+        let run_m = 2.0 * step * detail.material_tile_m;
+        out.slope = wb * detail.max_relief_m * vec2<f32>(east - west, north - south) / run_m;
+    }
+    return out;
 }
 
 fn terrain_color(in: TerrainOut) -> vec4<f32> {
@@ -141,16 +169,22 @@ fn terrain_color(in: TerrainOut) -> vec4<f32> {
     if (mode == 3u) {
         return vec4<f32>(albedo, 1.0);
     }
-    // Textured: the material's own detail; legend colours: procedural grain.
+    // Textured: the material's own detail and relief; legend colours: procedural grain.
     var factor = 1.0;
+    var normal = in.normal;
     if (textured) {
-        factor = material_detail(in.rel, max(px_m, 1e-6));
+        let d = material_detail(in.rel, max(px_m, 1e-6));
+        factor = d.factor;
+        // The surface z = f(x, y) + h(x, y): its normal is along (-f_x - h_x, -f_y - h_y, 1),
+        // and n / n.z is (-f_x, -f_y, 1).
+        let n = normalize(in.normal);
+        normal = n / max(n.z, 0.2) - vec3<f32>(d.slope, 0.0);
     } else {
         factor = fine_detail(in.rel, max(px_m, 1e-6));
     }
     let detailed = albedo * factor;
     let vis = light_at(in.light);
-    return lit_color(VertexOut(in.clip, in.rel, in.normal, detailed, in.fade, vis));
+    return lit_color(VertexOut(in.clip, in.rel, normal, detailed, in.fade, vis));
 }
 
 // Nodes in a cross-fade: dithered.

@@ -33,13 +33,23 @@ pub struct Material {
     pub albedo_srgb: Vec<[u8; 4]>,
     /// Detail height in [0, 255] (0.5 = the surface), row-major.
     pub height: Vec<u8>,
+    /// Metres between height 0 and height 255: the relief the terrain shader bumps the
+    /// ground's normal with near the camera (`render::ground_detail`), at most [`MAX_RELIEF_M`].
+    pub relief_m: f64,
 }
 
-/// How a type's noise looks: octaves as (lattice cells per tile side, weight), and the albedo
-/// contrast (the factor ranges over `1 +- contrast`).
+/// The largest material relief (m); the renderer stores heights in steps of it / 255.
+pub const MAX_RELIEF_M: f64 = 0.1;
+/// The relief of a material made from a map's image (m): grass or gravel scale, since an
+/// image's luminance says nothing of its true depth.
+pub const IMAGE_RELIEF_M: f64 = 0.03;
+
+/// How a type's noise looks: octaves as (lattice cells per tile side, weight), the albedo
+/// contrast (the factor ranges over `1 +- contrast`) and the relief of its detail height (m).
 struct Character {
     octaves: &'static [(u32, f64)],
     contrast: f64,
+    relief_m: f64,
 }
 
 fn character(name: &str) -> Character {
@@ -48,26 +58,31 @@ fn character(name: &str) -> Character {
         Character {
             octaves: &[(4, 0.7), (16, 0.3)],
             contrast: 0.06,
+            relief_m: 0.005,
         }
     } else if has("rock") || has("stone") || has("cliff") {
         Character {
             octaves: &[(4, 0.5), (8, 0.3), (32, 0.2), (256, 0.12)],
             contrast: 0.35,
+            relief_m: 0.08,
         }
     } else if has("grass") || has("meadow") {
         Character {
             octaves: &[(8, 0.3), (32, 0.3), (64, 0.4), (256, 0.3)],
             contrast: 0.25,
+            relief_m: 0.03,
         }
     } else if has("sand") {
         Character {
             octaves: &[(16, 0.4), (64, 0.6), (256, 0.4)],
             contrast: 0.12,
+            relief_m: 0.015,
         }
     } else {
         Character {
             octaves: &[(4, 0.3), (16, 0.4), (64, 0.3), (256, 0.2)],
             contrast: 0.22,
+            relief_m: 0.04,
         }
     }
 }
@@ -103,6 +118,7 @@ pub fn material(index: usize, t: &GroundType, seed: u64) -> Material {
         name: t.name.clone(),
         albedo_srgb,
         height,
+        relief_m: ch.relief_m,
     }
 }
 
@@ -159,6 +175,7 @@ pub fn material_from_image(t: &GroundType, image: &MaterialImage) -> Material {
             .iter()
             .map(|l| ((l - lo) / range * 255.0).round() as u8)
             .collect(),
+        relief_m: IMAGE_RELIEF_M,
     }
 }
 

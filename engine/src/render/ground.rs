@@ -5,7 +5,9 @@
 //! decal areas (fields, dirt, rock patches: each its box, an inside test and a soft edge) and
 //! its road and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around
 //! its segment, blended in file order (areas before segments); then its mip levels
-//! (`record_mips`). Not yet: the materials' detail height (made, not used).
+//! (`record_mips`). The materials' detail height rides in their alpha channel, which this pass
+//! ignores: the terrain shader bumps the ground's normal with it near the camera
+//! (`render::ground_detail`).
 //!
 //! Nodes recorded between two submissions share one set of buffers: each node's uniforms sit
 //! at a 256-byte dynamic offset, its segments and areas are instance ranges of the batch's
@@ -16,7 +18,9 @@ use super::Gpu;
 use super::frame::{sampler_entry, texture_entry, uint_texture_entry};
 use super::ground_pool::GroundSlot;
 use crate::ground::layout::{SIDE, lattice_index, texel_m};
-use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M, materials};
+use crate::ground::materials::{
+    MATERIAL_TEXELS, MATERIAL_TILE_M, MAX_RELIEF_M, Material, materials,
+};
 use crate::ground::pieces::NodeDecals;
 use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -218,22 +222,34 @@ fn ground_types_view(gpu: &Gpu, ground: &worldgen::Grid<u8>) -> wgpu::TextureVie
         .create_view(&wgpu::TextureViewDescriptor::default())
 }
 
-/// The legend's materials as one layer each of a mipmapped sRGB array (a grey one for an empty
-/// legend), and the layer count.
+/// The texels of `m` as the renderer stores them: sRGB albedo, and in alpha (linear in every
+/// format) the detail height in steps of [`MAX_RELIEF_M`] / 255 above the material's lowest.
+fn material_texels(m: &Material) -> Vec<[u8; 4]> {
+    let scale = (m.relief_m / MAX_RELIEF_M).clamp(0.0, 1.0);
+    m.albedo_srgb
+        .iter()
+        .zip(&m.height)
+        .map(|(&[r, g, b, _], &h)| [r, g, b, (f64::from(h) * scale).round() as u8])
+        .collect()
+}
+
+/// The legend's materials as one layer each of a mipmapped sRGB array (a flat grey one for an
+/// empty legend), and the layer count.
 fn materials_view(gpu: &Gpu, map: &worldgen::Map) -> (wgpu::TextureView, u32) {
     let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0);
     let mut mats: Vec<Vec<[u8; 4]>> = materials(&map.manifest.ground.legend, &map.materials, seed)
-        .into_iter()
-        .map(|m| m.albedo_srgb)
+        .iter()
+        .map(material_texels)
         .collect();
     if mats.is_empty() {
         mats.push(vec![
-            [128, 128, 128, 255];
+            [128, 128, 128, 0];
             (MATERIAL_TEXELS * MATERIAL_TEXELS) as usize
         ]);
     }
     let types = mats.len() as u32;
-    // Each layer's mip chain (2 x 2 box filter in linear light), levels in order.
+    // Each layer's mip chain (2 x 2 box filter in linear light; heights averaged), levels in
+    // order.
     let bytes: Vec<u8> = mats
         .iter()
         .flat_map(|m| {

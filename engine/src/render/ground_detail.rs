@@ -5,13 +5,16 @@
 //! texture cannot hold is added, it is 1 where a pixel is a texel or larger, and it fades in by
 //! metres per pixel only (no node or level border can show). The material is the ground type's
 //! at the pixel (the map's ground layer, with the node texture's noise-perturbed borders).
+//! Nearer still (pixels under [`BUMP_PX_M`]) the material's detail height, stored in the
+//! materials' alpha, bends the shading normal: the gradient of the height mip at the pixel's
+//! scale, so the bumps smooth out with distance before they fade by pixel size.
 //!
 //! Bindings 3 to 6 of the terrain's group 2: the materials array, the ground layer, a
 //! repeating sampler and a small uniform (`DetailUniform`), rewritten each frame from the camera.
 
 use super::Gpu;
 use crate::camera::Camera;
-use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M};
+use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M, MAX_RELIEF_M};
 
 /// Per-frame uniforms (mirrors `GroundDetail` in `terrain.wgsl`).
 #[repr(C)]
@@ -28,8 +31,17 @@ struct DetailUniform {
     finest_lod: f32,
     /// The finest node texel (m); 0 turns the detail off (no ground textures).
     finest_texel_m: f32,
-    pad: [f32; 3],
+    /// Metres of a material height of 1 (alpha 255): [`MAX_RELIEF_M`].
+    max_relief_m: f32,
+    /// Pixels up to this size (m) see the materials' relief ([`BUMP_PX_M`]).
+    bump_px_m: f32,
+    pad: f32,
 }
+
+/// Pixels up to this size see the ground materials' detail height as bumps of the ground's
+/// normal, in full up to a quarter of it (m). At 720p and a 60-degree view that is out to about
+/// 60 m, in full to 15 m; farther, centimetre relief is below a pixel.
+pub const BUMP_PX_M: f64 = 0.1;
 
 /// The detail bindings and the map numbers the uniform is made of.
 pub struct GroundDetail {
@@ -147,7 +159,9 @@ impl GroundDetail {
             material_tile_m: MATERIAL_TILE_M as f32,
             finest_lod: (self.finest_texel_m / material_texel_m).log2().max(0.0) as f32,
             finest_texel_m: self.finest_texel_m as f32,
-            pad: [0.0; 3],
+            max_relief_m: MAX_RELIEF_M as f32,
+            bump_px_m: BUMP_PX_M as f32,
+            pad: 0.0,
         };
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&u));
     }

@@ -705,6 +705,28 @@ fn area_decals_are_drawn_inside_their_outline_and_not_beyond() {
     assert_eq!(kinds.len(), 4, "only kinds {kinds:?} met");
 }
 
+/// The ground at a dry spot of the tiny map 12 m or more from every decal (on a 32 m lattice).
+fn dry_spot(world: &engine::surface::World) -> DVec3 {
+    let water = world.map.manifest.water_level_m;
+    let spot = (1..16)
+        .flat_map(|j| (1..16).map(move |i| [32.0 * f64::from(i), 32.0 * f64::from(j)]))
+        .find(|&p| {
+            world.height_m(p[0], p[1]) > water + 1.0
+                && world.map.decals.iter().all(|d| {
+                    d.points.windows(2).all(|s| {
+                        let (dist, _) = worldgen::roads::segment_closest(
+                            p,
+                            [s[0][0], s[0][1]],
+                            [s[1][0], s[1][1]],
+                        );
+                        dist > 12.0 + 0.5 * f64::from(d.width_m) + f64::from(d.falloff_m)
+                    })
+                })
+        })
+        .expect("a dry spot away from decals");
+    DVec3::new(spot[0], spot[1], world.height_m(spot[0], spot[1]))
+}
+
 /// Close up the ground shows its material's own texels below the finest node texel. Every
 /// ground type gets a material image of one-texel checks (7.8 mm at 512 texels over 4 m): the
 /// node textures (3.3 cm texels at best) hold only the checks' grey mean, so the texture-only
@@ -729,25 +751,7 @@ fn close_up_the_ground_shows_the_material_below_the_finest_texel() {
             .collect(),
     };
     world.map.materials = vec![Some(checks); world.map.manifest.ground.legend.len()];
-    // A dry spot 12 m or more from every decal.
-    let water = world.map.manifest.water_level_m;
-    let spot = (1..16)
-        .flat_map(|j| (1..16).map(move |i| [32.0 * f64::from(i), 32.0 * f64::from(j)]))
-        .find(|&p| {
-            world.height_m(p[0], p[1]) > water + 1.0
-                && world.map.decals.iter().all(|d| {
-                    d.points.windows(2).all(|s| {
-                        let (dist, _) = worldgen::roads::segment_closest(
-                            p,
-                            [s[0][0], s[0][1]],
-                            [s[1][0], s[1][1]],
-                        );
-                        dist > 12.0 + 0.5 * f64::from(d.width_m) + f64::from(d.falloff_m)
-                    })
-                })
-        })
-        .expect("a dry spot away from decals");
-    let ground = DVec3::new(spot[0], spot[1], world.height_m(spot[0], spot[1]));
+    let ground = dry_spot(&world);
     let mut v = tests::gpu::viewer(&g, world, 1.0);
     v.view.plants = false;
     let size = [128u32, 128];
@@ -789,5 +793,72 @@ fn close_up_the_ground_shows_the_material_below_the_finest_texel() {
     assert!(
         far < close / 3.0,
         "from 8 m the detail should be gone: luma range {far:.1} (close up {close:.1})"
+    );
+}
+
+/// Close up, the material's detail height bends the ground's shading normal. Every ground type
+/// gets a sawtooth image whose luminance (so its detail height, [`IMAGE_RELIEF_M`] over the
+/// tooth) rises to the east over 15 of every 16 texel columns, or its mirror rising to the
+/// west. From 0.5 m the ground under a sun in the west is brighter than under the same sun in
+/// the east where the teeth face west, and darker where they face east; without the relief
+/// both differences would be the terrain's own, equal for the two images.
+#[test]
+fn close_up_the_materials_relief_shades_the_ground() {
+    use engine::ground::materials::{IMAGE_RELIEF_M, MATERIAL_TEXELS};
+    use engine::lighting::grid::Sun;
+    let Some(g) = device() else { return };
+    let side = MATERIAL_TEXELS;
+    // Mean luma (sRGB bytes) over the central 64 x 64 pixels from 0.5 m above, sun in the west
+    // minus sun in the east, 40 degrees high; materials rising to the east or to the west.
+    let difference = |rising_east: bool| {
+        let mut world = tiny_world();
+        let sawtooth = worldgen::map::MaterialImage {
+            side,
+            rgba: (0..side * side)
+                .map(|k| {
+                    let i = k % side % 16;
+                    let step = if rising_east { i } else { 15 - i };
+                    let l = (40 + 12 * step) as u8;
+                    [l, l, l, 255]
+                })
+                .collect(),
+        };
+        world.map.materials = vec![Some(sawtooth); world.map.manifest.ground.legend.len()];
+        let ground = dry_spot(&world);
+        let mut v = tests::gpu::viewer(&g, world, 1.0);
+        v.view.plants = false;
+        let size = [128u32, 128];
+        let target = engine::render::Target::new(&g.device, size, engine::render::COLOR_FORMAT);
+        let eye = ground + DVec3::new(0.0, 0.0, 0.5);
+        let cam = Camera::look_at(eye, ground, 40f64.to_radians(), size);
+        let mut mean = |azimuth_deg: f64| {
+            let sun = Sun {
+                azimuth_deg,
+                elevation_deg: 40.0,
+            };
+            v.set_sun(sun, eye);
+            tests::gpu::settle(&g, &mut v, &target, &cam);
+            let img = target.read_rgba(&g).expect("readback");
+            let sum: f64 = (32..96)
+                .flat_map(|y| (32..96).map(move |x| (y * size[0] as usize + x) * 4))
+                .map(|k| {
+                    0.2126 * f64::from(img[k])
+                        + 0.7152 * f64::from(img[k + 1])
+                        + 0.0722 * f64::from(img[k + 2])
+                })
+                .sum();
+            sum / 4096.0
+        };
+        let (west, east) = (mean(270.0), mean(90.0));
+        west - east
+    };
+    let (facing_west, facing_east) = (difference(true), difference(false));
+    // The teeth slope by IMAGE_RELIEF_M over 15 texels (~12 cm): 14 degrees at 3 cm, so the sun
+    // meets them at 54 degrees from one side and 26 from the other.
+    const { assert!(IMAGE_RELIEF_M >= 0.02) };
+    assert!(
+        facing_west > 8.0 && facing_east < -8.0,
+        "teeth facing west should be brighter under a western sun and teeth facing east \
+         darker: luma west - east {facing_west:.1} and {facing_east:.1}"
     );
 }
