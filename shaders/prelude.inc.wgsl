@@ -100,16 +100,6 @@ fn light_at(c: vec4<f32>) -> vec2<f32> {
     return select(v, vec2<f32>(1.0), c.w < 0.0);
 }
 
-// The share of a pre-lit colour (billboard images, lit by the full sun and sky) that visibility
-// `vis` (sky, sun) leaves: the sun's part (on a surface facing it half-way) scaled by the sun
-// visibility, the sky's by the sky visibility.
-fn prelit_factor(vis: vec2<f32>) -> f32 {
-    let luma = vec3<f32>(0.2126, 0.7152, 0.0722);
-    let s = dot(frame.sun_color.rgb, luma) * max(frame.sun_dir.z, 0.0) * 0.5 + 1e-4;
-    let a = dot(mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5), luma);
-    return (s * vis.y + a * vis.x) / (s + a);
-}
-
 // 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
 fn bayer8(p: vec2<u32>) -> f32 {
     var v = 0u;

@@ -50,6 +50,9 @@ struct BillboardOut {
     @location(3) @interpolate(flat) fade: vec3<f32>,
     // Sky and sun visibility (`light_at`).
     @location(4) light: vec2<f32>,
+    // Horizontal unit vector from the camera to the quad: the bake's north (the quad's x is
+    // the bake's east turned to (-away.y, away.x)).
+    @location(5) @interpolate(flat) away: vec2<f32>,
 };
 
 @fragment
@@ -58,10 +61,13 @@ fn fs_plant(in: VertexOut) -> @location(0) vec4<f32> {
 }
 
 // Billboard images: one tile per look (species), baked at start-up from the plant meshes
-// (`vs_bake` / `fs_bake`): linear colour lit from the front, alpha = coverage. The impostor
-// pipeline binds a node's impostor texture here instead.
+// (`vs_bake` / `fs_bake`): linear albedo with alpha = coverage, and the unit normals seen
+// (x east, y north, z up, stored as n / 2 + 1/2 with alpha = coverage), so the quads are lit
+// when drawn, by the frame's sun and their light grid, like the meshes. The impostor pipeline
+// binds a node's impostor textures instead.
 @group(2) @binding(0) var atlas: texture_2d<f32>;
 @group(2) @binding(1) var atlas_sampler: sampler;
+@group(2) @binding(5) var atlas_normals: texture_2d<f32>;
 
 // Camera-facing (about the vertical axis) quads: 6 vertices per instance, no vertex buffer.
 @vertex
@@ -84,6 +90,7 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
     out.fade = node_fade(node);
     let local = inst.position.xy + right.xy * (corner.x * inst.radius);
     out.light = light_at(light_coords(node, local, corner.y * inst.height));
+    out.away = flat_dir / len;
     return out;
 }
 
@@ -91,22 +98,26 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     let look = min(in.look, MAX_LOOKS - 1u);
     let uv = vec2<f32>((f32(look) + 0.5 + 0.5 * in.uv.x) / f32(ATLAS_TILES), 1.0 - in.uv.y);
-    return billboard_pixel(in, textureSampleLevel(atlas, atlas_sampler, uv, 0.0));
+    let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
+    let normal = textureSampleLevel(atlas_normals, atlas_sampler, uv, 0.0);
+    return billboard_pixel(in, texel, normal);
 }
 
-// A billboard or impostor pixel: dither test, alpha test of its `texel`, fog.
-fn billboard_pixel(in: BillboardOut, texel: vec4<f32>) -> vec4<f32> {
+// A billboard or impostor pixel: dither test, alpha test of its `texel`, then lit like a mesh
+// with its baked `normal` turned to face the camera (both filtered against the bake's
+// transparent background, so divided by their coverage).
+fn billboard_pixel(in: BillboardOut, texel: vec4<f32>, normal: vec4<f32>) -> vec4<f32> {
     if (!in_dither(in.clip.xy, in.fade)) {
         discard;
     }
     if (texel.a < 0.5) {
         discard;
     }
-    let factor = prelit_factor(in.light);
-    if (u32(frame.fog.z + 0.5) == 4u) {
-        return fogged(vec3<f32>(0.6 * factor), in.rel);
-    }
-    return fogged(texel.rgb * factor, in.rel);
+    let baked = normal.xyz / max(normal.a, 1e-3) * 2.0 - 1.0;
+    let right = vec3<f32>(-in.away.y, in.away.x, 0.0);
+    let n = baked.x * right + baked.y * vec3<f32>(in.away, 0.0) + vec3<f32>(0.0, 0.0, baked.z);
+    let albedo = texel.rgb / texel.a;
+    return lit_color(VertexOut(in.clip, in.rel, n, albedo, in.fade, in.light));
 }
 
 // Baking the billboard images: the unit shape of look `inst.look` seen from the south (-y),
@@ -128,12 +139,16 @@ fn vs_bake(v: VertexIn, inst: PlantInstanceIn) -> BakeOut {
     return out;
 }
 
+// What the two bakes write: albedo and coverage, the normal and coverage.
+struct Baked {
+    @location(0) albedo: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+};
+
 @fragment
-fn fs_bake(in: BakeOut) -> @location(0) vec4<f32> {
+fn fs_bake(in: BakeOut) -> Baked {
     let n = normalize(in.normal);
-    let sun = max(dot(n, frame.sun_dir.xyz), 0.0);
-    let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
-    return vec4<f32>(in.albedo * (frame.sun_color.rgb * sun + ambient), 1.0);
+    return Baked(vec4<f32>(in.albedo, 1.0), vec4<f32>(n * 0.5 + 0.5, 1.0));
 }
 
 // Group billboards: per node, the group members of each cluster (an 8 x 8 grid over the node)
@@ -178,18 +193,20 @@ fn vs_group_bake(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> GroupB
 }
 
 @fragment
-fn fs_group_bake(in: GroupBakeOut) -> @location(0) vec4<f32> {
+fn fs_group_bake(in: GroupBakeOut) -> Baked {
     let uv = vec2<f32>((f32(in.look) + 0.5 + 0.5 * in.uv.x) / f32(ATLAS_TILES), 1.0 - in.uv.y);
     let texel = textureSampleLevel(atlas, atlas_sampler, uv, 0.0);
     if (texel.a < 0.5) {
         discard;
     }
-    return vec4<f32>(texel.rgb, 1.0);
+    let normal = textureSampleLevel(atlas_normals, atlas_sampler, uv, 0.0);
+    return Baked(vec4<f32>(texel.rgb / texel.a, 1.0), vec4<f32>(normal.xyz / normal.a, 1.0));
 }
 
 // Drawing the clusters: each node's impostor texture is one layer of a texture array; `look`
 // holds layer * CLUSTER_COUNT + the cluster's tile index.
 @group(2) @binding(3) var impostors: texture_2d_array<f32>;
+@group(2) @binding(4) var impostor_normals: texture_2d_array<f32>;
 
 @fragment
 fn fs_impostor(in: BillboardOut) -> @location(0) vec4<f32> {
@@ -197,5 +214,7 @@ fn fs_impostor(in: BillboardOut) -> @location(0) vec4<f32> {
     let t = in.look % CLUSTER_COUNT;
     let tile = vec2<f32>(f32(t % CLUSTERS_PER_SIDE), f32(t / CLUSTERS_PER_SIDE));
     let uv = (tile + vec2<f32>(0.5 + 0.5 * in.uv.x, 1.0 - in.uv.y)) / f32(CLUSTERS_PER_SIDE);
-    return billboard_pixel(in, textureSampleLevel(impostors, atlas_sampler, uv, layer, 0.0));
+    let texel = textureSampleLevel(impostors, atlas_sampler, uv, layer, 0.0);
+    let normal = textureSampleLevel(impostor_normals, atlas_sampler, uv, layer, 0.0);
+    return billboard_pixel(in, texel, normal);
 }

@@ -433,6 +433,8 @@ pub struct PipelineSpec<'a> {
     pub polygon_mode: wgpu::PolygonMode,
     pub depth: wgpu::DepthStencilState,
     pub format: wgpu::TextureFormat,
+    /// A second colour target (`@location(1)`): the normals of the vegetation bakes.
+    pub second_format: Option<wgpu::TextureFormat>,
 }
 
 impl<'a> PipelineSpec<'a> {
@@ -453,6 +455,7 @@ impl<'a> PipelineSpec<'a> {
             polygon_mode: wgpu::PolygonMode::Fill,
             depth: depth_state(true, wgpu::CompareFunction::Greater),
             format,
+            second_format: None,
         }
     }
 }
@@ -485,35 +488,48 @@ pub fn pipeline(
             module,
             entry_point: Some(spec.fs),
             compilation_options: wgpu::PipelineCompilationOptions::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: spec.format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
+            targets: &[spec.format]
+                .into_iter()
+                .chain(spec.second_format)
+                .map(|format| {
+                    Some(wgpu::ColorTargetState {
+                        format,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })
+                })
+                .collect::<Vec<_>>(),
         }),
         multiview_mask: None,
         cache: None,
     })
 }
 
-/// A bake pass: colour cleared to transparent, reversed-Z depth cleared to 0 (far).
+/// A bake pass: colour targets (one, or two where a bake writes normals too) cleared to
+/// transparent, reversed-Z depth cleared to 0 (far).
 pub fn bake_pass<'e>(
     enc: &'e mut wgpu::CommandEncoder,
     label: &str,
-    color: &wgpu::TextureView,
+    colors: &[&wgpu::TextureView],
     depth: &wgpu::TextureView,
 ) -> wgpu::RenderPass<'e> {
+    let attachments: Vec<_> = colors
+        .iter()
+        .map(|&view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        })
+        .collect();
     enc.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some(label),
-        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view: color,
-            depth_slice: None,
-            resolve_target: None,
-            ops: wgpu::Operations {
-                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                store: wgpu::StoreOp::Store,
-            },
-        })],
+        color_attachments: &attachments,
         depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
             view: depth,
             depth_ops: Some(wgpu::Operations {

@@ -128,7 +128,7 @@ impl TerrainReference {
             let mut pass = super::frame::bake_pass(
                 encoder,
                 "reference pass",
-                &target.color_view,
+                &[&target.color_view],
                 &target.depth_view,
             );
             pass.set_pipeline(&self.pipeline);

@@ -9,8 +9,8 @@
 use super::Gpu;
 use super::batches::{Batches, Item};
 use super::frame::{
-    DrawStats, FrameResources, PipelineSpec, ViewOptions, bake_pass, pipeline, sampler_entry,
-    srgb_to_linear, texture_entry, uniform_entry, uniform_group,
+    DrawStats, FrameResources, PipelineSpec, bake_pass, pipeline, sampler_entry, srgb_to_linear,
+    texture_entry, uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
 use super::impostors::ImpostorPages;
@@ -18,7 +18,6 @@ use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
 use super::suballoc::{Lease, Suballocator};
-use crate::camera::Camera;
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use crate::vegetation::content::VegetationContent;
@@ -40,6 +39,8 @@ pub const MAX_LOOKS: u32 = 16;
 /// Billboard atlas: one tile per look, linear colour + coverage.
 const ATLAS_TILE_PX: [u32; 2] = [64, 128];
 const ATLAS_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// The billboard atlas's normals (n / 2 + 1/2, alpha = coverage).
+const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 /// Group billboards: the tile size of a cluster in a node's impostor texture.
 const IMPOSTOR_TILE_PX: u32 = 32;
 const IMPOSTOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -199,22 +200,28 @@ impl std::fmt::Debug for VegetationRenderer {
     }
 }
 
+/// The atlas's bind group: albedo (binding 0), sampler (1), normals (5), and the looks (2)
+/// where `looks` is given.
 fn texture_group(
     device: &wgpu::Device,
     label: &str,
     layout: &wgpu::BindGroupLayout,
-    view: &wgpu::TextureView,
+    [albedo, normals]: [&wgpu::TextureView; 2],
     sampler: &wgpu::Sampler,
     looks: Option<&wgpu::Buffer>,
 ) -> wgpu::BindGroup {
     let mut entries = vec![
         wgpu::BindGroupEntry {
             binding: 0,
-            resource: wgpu::BindingResource::TextureView(view),
+            resource: wgpu::BindingResource::TextureView(albedo),
         },
         wgpu::BindGroupEntry {
             binding: 1,
             resource: wgpu::BindingResource::Sampler(sampler),
+        },
+        wgpu::BindGroupEntry {
+            binding: 5,
+            resource: wgpu::BindingResource::TextureView(normals),
         },
     ];
     if let Some(b) = looks {
@@ -228,6 +235,27 @@ fn texture_group(
         layout,
         entries: &entries,
     })
+}
+
+/// A triangle-list pipeline of `module`: `names` label, vertex and fragment entry points, into
+/// `format` and, for a bake, its normals target `second`.
+fn triangles_pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    (names, buffers): ([&str; 3], &[Option<wgpu::VertexBufferLayout<'_>>]),
+    (format, second): (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+) -> wgpu::RenderPipeline {
+    let [label, vs, fs] = names;
+    pipeline(
+        device,
+        module,
+        layout,
+        &PipelineSpec {
+            second_format: second,
+            ..PipelineSpec::triangles(label, vs, fs, buffers, format)
+        },
+    )
 }
 
 /// A texture that a bake renders into and renderers then sample.
@@ -298,10 +326,11 @@ impl VegetationRenderer {
         let atlas = [
             texture_entry(0, wgpu::TextureViewDimension::D2),
             sampler_entry(1),
+            texture_entry(5, wgpu::TextureViewDimension::D2),
         ];
         let atlas_layout = layout(
             "vegetation atlas + looks layout",
-            &[atlas[0], atlas[1], looks_entry],
+            &[atlas[0], atlas[1], atlas[2], looks_entry],
         );
         let texture_layout = layout("vegetation texture layout", &atlas);
         let looks_layout = layout("vegetation looks layout", &[looks_entry]);
@@ -335,18 +364,12 @@ impl VegetationRenderer {
             ],
             immediate_size: 0,
         });
-        let format = frame.color_format;
+        let format = (frame.color_format, None);
         let make = |layout: &wgpu::PipelineLayout,
                     names: [&str; 3],
                     buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
-                    format| {
-            let [label, vs, fs] = names;
-            pipeline(
-                device,
-                &module,
-                layout,
-                &PipelineSpec::triangles(label, vs, fs, buffers, format),
-            )
+                    formats| {
+            triangles_pipeline(device, &module, layout, (names, buffers), formats)
         };
         let mesh_buffers = [Some(MeshVertex::LAYOUT), Some(PlantInstance::LAYOUT)];
         let quads = [Some(PlantInstance::LAYOUT)];
@@ -372,13 +395,13 @@ impl VegetationRenderer {
             &bake_layout,
             ["billboard bake", "vs_bake", "fs_bake"],
             &mesh_buffers,
-            ATLAS_FORMAT,
+            (ATLAS_FORMAT, Some(NORMAL_FORMAT)),
         );
         let group_bake = make(
             &group_bake_layout,
             ["impostor bake", "vs_group_bake", "fs_group_bake"],
             &quads,
-            IMPOSTOR_FORMAT,
+            (IMPOSTOR_FORMAT, Some(IMPOSTOR_FORMAT)),
         );
         let meshes = PlantMeshes::generate();
         let (shape_vertices, shape_indices) = shape_buffers(device, &meshes);
@@ -389,7 +412,11 @@ impl VegetationRenderer {
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let atlas_size = [ATLAS_TILE_PX[0] * MAX_LOOKS, ATLAS_TILE_PX[1]];
-        let atlas_view = bake_target(device, "billboard atlas", atlas_size, ATLAS_FORMAT);
+        let atlas_views = [
+            bake_target(device, "billboard atlas", atlas_size, ATLAS_FORMAT),
+            bake_target(device, "billboard normals", atlas_size, NORMAL_FORMAT),
+        ];
+        let atlas_pair = [&atlas_views[0], &atlas_views[1]];
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("vegetation sampler"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -410,7 +437,7 @@ impl VegetationRenderer {
                 device,
                 "billboard atlas",
                 &atlas_layout,
-                &atlas_view,
+                atlas_pair,
                 &sampler,
                 Some(&looks_buffer),
             ),
@@ -418,7 +445,7 @@ impl VegetationRenderer {
                 device,
                 "billboard atlas texture",
                 &texture_layout,
-                &atlas_view,
+                atlas_pair,
                 &sampler,
                 None,
             ),
@@ -433,7 +460,7 @@ impl VegetationRenderer {
             merged: false,
             bakes: None,
         };
-        renderer.bake_atlas(gpu, frame, &bake, &looks_group, &atlas_view, atlas_size);
+        renderer.bake_atlas(gpu, frame, &bake, &looks_group, atlas_pair, atlas_size);
         renderer
     }
 
@@ -447,19 +474,17 @@ impl VegetationRenderer {
     }
 
     /// Renders every look's billboard image from its high-detail mesh into the atlas (seen
-    /// from the south, lit by the frame's sun and sky).
+    /// from the south): albedo and normals, lit only when drawn.
     fn bake_atlas(
         &self,
         gpu: &Gpu,
         frame: &FrameResources,
         bake: &wgpu::RenderPipeline,
         looks_group: &wgpu::BindGroup,
-        atlas_view: &wgpu::TextureView,
+        atlas_views: [&wgpu::TextureView; 2],
         atlas_size: [u32; 2],
     ) {
         let device = &gpu.device;
-        let cam = Camera::look_at(DVec3::ZERO, DVec3::new(0.0, 1.0, 0.0), 1.0, [64, 64]);
-        frame.write_uniforms(&gpu.queue, &cam, &ViewOptions::default());
         let instances: Vec<PlantInstance> = (0..MAX_LOOKS)
             .map(|i| PlantInstance {
                 position: [0.0; 3],
@@ -480,7 +505,7 @@ impl VegetationRenderer {
             label: Some("billboard bake"),
         });
         {
-            let mut pass = bake_pass(&mut enc, "billboard bake pass", atlas_view, &depth_view);
+            let mut pass = bake_pass(&mut enc, "billboard bake pass", &atlas_views, &depth_view);
             pass.set_pipeline(bake);
             pass.set_bind_group(0, &frame.group, &[]);
             pass.set_bind_group(2, looks_group, &[]);
@@ -564,7 +589,8 @@ impl VegetationRenderer {
         let mut impostors = None;
         let mut texture_bytes = 0;
         if !members.is_empty() {
-            let Some((layer, layer_view)) = self.impostors.lease(&gpu.device, &self.sampler) else {
+            let Some((layer, layer_views)) = self.impostors.lease(&gpu.device, &self.sampler)
+            else {
                 log::warn!("impostor pages full: node {key:?} has no plants drawn");
                 return None;
             };
@@ -603,7 +629,7 @@ impl VegetationRenderer {
                 kind: PlantDraw::Impostor,
                 kept: veg.clusters.kept,
             });
-            self.bake_impostors(gpu, frame, key, &uniforms, &members, &layer_view);
+            self.bake_impostors(gpu, frame, key, &uniforms, &members, &layer_views);
             impostors = Some(layer);
             texture_bytes = self.impostors.layer_bytes();
         }
@@ -638,8 +664,8 @@ impl VegetationRenderer {
         })
     }
 
-    /// Renders a node's group members into its impostor layer `layer_view` (one tile per
-    /// cluster, seen from the south).
+    /// Renders a node's group members into its impostor layer's albedo and normal views
+    /// `layer_views` (one tile per cluster, seen from the south).
     fn bake_impostors(
         &mut self,
         gpu: &Gpu,
@@ -647,7 +673,7 @@ impl VegetationRenderer {
         key: NodeKey,
         clusters: &[ClusterUniform; CLUSTER_COUNT],
         members: &[PlantInstance],
-        layer_view: &wgpu::TextureView,
+        layer_views: &[wgpu::TextureView; 2],
     ) {
         let device = &gpu.device;
         let label = format!("node {}/{}/{} impostors", key.level, key.ix, key.iy);
@@ -674,7 +700,8 @@ impl VegetationRenderer {
             })
         });
         {
-            let mut pass = bake_pass(enc, &label, layer_view, &self.impostors.bake_depth);
+            let targets = [&layer_views[0], &layer_views[1]];
+            let mut pass = bake_pass(enc, &label, &targets, &self.impostors.bake_depth);
             pass.set_pipeline(&self.group_bake);
             pass.set_bind_group(0, &frame.group, &[]);
             pass.set_bind_group(1, &cluster_group, &[]);
