@@ -7,7 +7,7 @@ use crate::report::{Report, bar};
 use crate::terrain::flight_nodes;
 use engine::camera::Camera;
 use engine::lighting::content::LightingContent;
-use engine::lighting::grid::{GROUND_LAYER_M, LightGrid, Sun, grid_level};
+use engine::lighting::grid::{COLUMNS, GROUND_LAYER_M, LightGrid, Sun, grid_level};
 use engine::lighting::reference;
 use engine::stream::ContentKind;
 use engine::surface::World;
@@ -90,47 +90,7 @@ pub(crate) fn section_lighting(
         );
     }
 
-    // Agreement with the reference on random points of the timed grids.
-    let points = if quick { 40 } else { 300 };
-    let b = bar(points as u64, "lighting reference");
-    let (mut sky_ok, mut sun_ok) = (0usize, 0usize);
-    for i in 0..points {
-        let g = &grids[i % grids.len()];
-        let rect = tree.rect(g.key);
-        let x = rect.min[0] + (rect.max[0] - rect.min[0]) * unit3(17, i as i64, 0);
-        let y = rect.min[1] + (rect.max[1] - rect.min[1]) * unit3(17, i as i64, 1);
-        // From the ground to a third above the canopy's top.
-        let hi = 1.3 * g.layers_m[g.layers_m.len() - 1];
-        let above = GROUND_LAYER_M + (hi - GROUND_LAYER_M) * unit3(17, i as i64, 2).powi(2);
-        let (g_sky, g_sun) = g.sample(x, y, above);
-        let (r_sky, r_sun) = reference::visibility(world, &canopy, x, y, above, SUN);
-        sky_ok += usize::from((g_sky - r_sky).abs() <= TOLERANCE);
-        sun_ok += usize::from((g_sun - r_sun).abs() <= TOLERANCE);
-        b.inc(1);
-    }
-    b.finish_and_clear();
-    let share = |ok: usize| 100.0 * ok as f64 / points as f64;
-    let ref_params = format!(
-        "{points} random points in {} grids, heights from the ground to 1.3 x the canopy top, tolerance {TOLERANCE}, \
-         reference: {} azimuths x {} bands marched on the finest surface",
-        grids.len(),
-        reference::REF_AZIMUTHS,
-        reference::REF_BANDS
-    );
-    r.add(
-        "lighting",
-        "sky visibility within tolerance of the reference",
-        share(sky_ok),
-        "%",
-        &ref_params,
-    );
-    r.add(
-        "lighting",
-        "sun visibility within tolerance of the reference",
-        share(sun_ok),
-        "%",
-        &ref_params,
-    );
+    reference_agreement(world, &canopy, tree, &grids, r, quick);
 
     // Relighting after a sun change, by the lighting kind's own threads: every grid the
     // flight's drawn nodes and their ancestors hold (the coarser nodes own theirs).
@@ -184,5 +144,102 @@ pub(crate) fn section_lighting(
         relight_s * 1e3,
         "ms",
         &format!("{params}; azimuth turned by 30 deg"),
+    );
+}
+
+/// Agreement with the reference on random points of `grids`: the share of points whose sky and
+/// whose sun visibility are within [`TOLERANCE`], interpolated as the shaders do and at the
+/// nearest grid sample.
+fn reference_agreement(
+    world: &World,
+    canopy: &Canopy,
+    tree: &QuadTree,
+    grids: &[LightGrid],
+    r: &mut Report,
+    quick: bool,
+) {
+    // Agreement with the reference on random points of the timed grids.
+    let points = if quick { 40 } else { 300 };
+    let b = bar(points as u64, "lighting reference");
+    let (mut sky_ok, mut sun_ok) = (0usize, 0usize);
+    // The same at the grid sample nearest to each point (no interpolation): what the
+    // computation itself gets right, apart from the grid's resolution.
+    let (mut sky_at_sample, mut sun_at_sample) = (0usize, 0usize);
+    for i in 0..points {
+        let g = &grids[i % grids.len()];
+        let rect = tree.rect(g.key);
+        let x = rect.min[0] + (rect.max[0] - rect.min[0]) * unit3(17, i as i64, 0);
+        let y = rect.min[1] + (rect.max[1] - rect.min[1]) * unit3(17, i as i64, 1);
+        // From the ground to a third above the canopy's top.
+        let hi = 1.3 * g.layers_m[g.layers_m.len() - 1];
+        let above = GROUND_LAYER_M + (hi - GROUND_LAYER_M) * unit3(17, i as i64, 2).powi(2);
+        let (g_sky, g_sun) = g.sample(x, y, above);
+        let (r_sky, r_sun) = reference::visibility(world, canopy, x, y, above, SUN);
+        sky_ok += usize::from((g_sky - r_sky).abs() <= TOLERANCE);
+        sun_ok += usize::from((g_sun - r_sun).abs() <= TOLERANCE);
+        let last = (COLUMNS - 1) as f64;
+        let col = ((x - g.origin_m[0]) / g.spacing_m).round().clamp(0.0, last) as usize;
+        let row = ((y - g.origin_m[1]) / g.spacing_m).round().clamp(0.0, last) as usize;
+        let layer = (0..g.layers_m.len())
+            .min_by(|&a, &b| {
+                (g.layers_m[a] - above)
+                    .abs()
+                    .total_cmp(&(g.layers_m[b] - above).abs())
+            })
+            .unwrap_or(0);
+        let k = LightGrid::index(layer, row, col);
+        let (s_sky, s_sun) = reference::visibility(
+            world,
+            canopy,
+            g.origin_m[0] + col as f64 * g.spacing_m,
+            g.origin_m[1] + row as f64 * g.spacing_m,
+            g.layers_m[layer],
+            SUN,
+        );
+        let stored = |v: u8| f64::from(v) / 255.0;
+        sky_at_sample += usize::from((stored(g.sky[k]) - s_sky).abs() <= TOLERANCE);
+        sun_at_sample += usize::from((stored(g.sun[k]) - s_sun).abs() <= TOLERANCE);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    let share = |ok: usize| 100.0 * ok as f64 / points as f64;
+    let ref_params = format!(
+        "{points} random points in {} grids, heights from the ground to 1.3 x the canopy top, tolerance {TOLERANCE}, \
+         reference: {} azimuths x {} bands marched on the finest surface",
+        grids.len(),
+        reference::REF_AZIMUTHS,
+        reference::REF_BANDS
+    );
+    r.add(
+        "lighting",
+        "sky visibility within tolerance of the reference",
+        share(sky_ok),
+        "%",
+        &ref_params,
+    );
+    r.add(
+        "lighting",
+        "sun visibility within tolerance of the reference",
+        share(sun_ok),
+        "%",
+        &ref_params,
+    );
+    let sample_params = format!(
+        "{ref_params}; at the grid sample nearest to each point, its stored value against the \
+         reference there (no interpolation)"
+    );
+    r.add(
+        "lighting",
+        "sky visibility within tolerance at the grid's own samples",
+        share(sky_at_sample),
+        "%",
+        &sample_params,
+    );
+    r.add(
+        "lighting",
+        "sun visibility within tolerance at the grid's own samples",
+        share(sun_at_sample),
+        "%",
+        &sample_params,
     );
 }
