@@ -29,6 +29,9 @@ struct Node {
     // The node's light grid (engine::render::light_pool::LightLease::entry): x its tile in the
     // pool or -1, y columns per metre, zw the node's south-west corner in the grid's columns.
     light: vec4<f32>,
+    // xy: more of the renderer's own (terrain: the node's south-west corner in metres from that
+    // of the node whose ground texture it shows); zw: unused.
+    more: vec4<f32>,
 };
 
 // The light-grid pool (engine::render::light_pool): tiles of COLUMNS x COLUMNS x LAYERS

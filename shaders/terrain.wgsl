@@ -59,7 +59,9 @@ fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
     // Texel columns run east from the west border, rows north from the south border; the
     // texture's row 0 is the north border's.
     let border = f32(GROUND_BORDER) / f32(GROUND_SIDE);
-    let t = border + v.position.xy * node.hi_level.w;
+    // The texture may be an ancestor's while the node's own is not made yet: `more.xy` is the
+    // node's corner in that texture's node.
+    let t = border + (v.position.xy + node.more.xy) * node.hi_level.w;
     out.uv = vec2<f32>(t.x, 1.0 - t.y);
     out.layer = i32(round(node.hi_level.z));
     out.light = light_coords(node, v.position.xy, 0.0);

@@ -10,6 +10,7 @@ use crate::render::lighting::LightingRenderer;
 use crate::render::reference::TerrainReference;
 use crate::render::scene::{DrawnNode, FrameDraws, Scene};
 use crate::render::sky::{BoundsLines, SkyRenderer};
+use crate::render::terrain::TerrainRenderer;
 use crate::render::{Gpu, GpuTimer};
 use crate::stream::{StreamSettings, Streamer};
 use crate::surface::World;
@@ -90,6 +91,10 @@ pub struct FrameStats {
     /// Drawn nodes whose light grid has not arrived yet (drawn fully lit); 0 without light
     /// grids.
     pub unlit_nodes: usize,
+    /// Drawn nodes whose own ground texture is not made yet, showing an ancestor's; and those
+    /// showing none (legend colours). 0 without ground textures.
+    pub borrowed_textures: usize,
+    pub untextured_nodes: usize,
 }
 
 impl FrameStats {
@@ -286,6 +291,7 @@ impl Viewer {
         let st = &self.streamer.stats;
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
         let wanted_missing = self.wanted_not_drawn();
+        let terrain = self.scene.renderer::<TerrainRenderer>();
         self.frame += 1;
         FrameStats {
             frame: self.frame,
@@ -333,6 +339,8 @@ impl Viewer {
                 .scene
                 .renderer::<LightingRenderer>()
                 .map_or(0, |r| r.unlit_drawn),
+            borrowed_textures: terrain.map_or(0, |t| t.borrowed_textures),
+            untextured_nodes: terrain.map_or(0, |t| t.untextured),
         }
     }
 
@@ -396,17 +404,34 @@ impl Viewer {
     /// benchmarks). True when no job is in flight and every wanted node is drawn.
     pub fn stream_only(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64) -> bool {
         self.streamer.update(cam, dt_s);
-        self.upload(gpu, self.streamer.settings.gpu_budget_s);
-        self.scene.finish_uploads(gpu);
-        self.streamer.in_flight() == 0 && self.wanted_not_drawn() == 0
+        self.upload_and_finish(gpu);
+        self.streamer.in_flight() == 0
+            && self.wanted_not_drawn() == 0
+            && self.textures_pending() == 0
     }
 
     /// [`Self::stream_only`] with the camera's predicted path (`Streamer::update_along`): the
     /// streaming of a frame whose path is known (benchmarks), uploads included, nothing drawn.
     pub fn stream_along(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
         self.streamer.update_along(cam, dt_s, future);
-        self.upload(gpu, self.streamer.settings.gpu_budget_s);
-        self.scene.finish_uploads(gpu);
+        self.upload_and_finish(gpu);
+    }
+
+    /// The GPU phases under the frame's budget, then the renderers' deferred work (node
+    /// textures) in what they left of it, as a frame does them.
+    fn upload_and_finish(&mut self, gpu: &Gpu) {
+        let budget_s = self.streamer.settings.gpu_budget_s;
+        let t0 = Instant::now();
+        let (_, expected_gpu_s) = self.upload(gpu, budget_s);
+        let left_s = budget_s - t0.elapsed().as_secs_f64() - expected_gpu_s;
+        self.scene.finish_uploads(gpu, left_s);
+    }
+
+    /// Node ground textures queued and not made yet (drawn nodes show an ancestor's meanwhile).
+    pub fn textures_pending(&self) -> usize {
+        self.scene
+            .renderer::<TerrainRenderer>()
+            .map_or(0, TerrainRenderer::textures_pending)
     }
 
     /// The streamer's GPU phases under `budget_s`, with every renderer's upload hook; returns

@@ -377,12 +377,12 @@ pub mod gpu {
             .expect("GPU finishes the frame")
     }
 
-    /// Renders frames until every wanted node is shown and no job is left, then a few more so
-    /// fades end. Returns the last frame's statistics.
+    /// Renders frames until every wanted node is shown, no job is left and every node texture
+    /// is made, then a few more so fades end. Returns the last frame's statistics.
     pub fn settle(g: &Gpu, v: &mut Viewer, target: &Target, cam: &Camera) -> FrameStats {
         for _ in 0..20_000 {
             let st = frame(g, v, target, cam, 0.05);
-            if v.streamer.in_flight() == 0 && st.pop_debt_nodes == 0 {
+            if v.streamer.in_flight() == 0 && st.pop_debt_nodes == 0 && v.textures_pending() == 0 {
                 // Light grids are computed in the background: every frame from here draws with
                 // all the grids its nodes hold (wait for that event, then draw).
                 let mut last = st;

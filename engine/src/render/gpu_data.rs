@@ -34,6 +34,10 @@ pub struct NodeEntry {
     /// The node's light grid ([`super::light_pool::LightLease::entry`]): x its tile in the pool
     /// or -1, y columns per metre, zw the node's south-west corner in the grid's columns.
     pub light: [f32; 4],
+    /// xy: more of the renderer's own (terrain: the node's south-west corner in metres from
+    /// that of the node whose ground texture it shows: 0 for its own, more for an ancestor's
+    /// while its own is not made yet); zw: unused.
+    pub more: [f32; 4],
 }
 
 /// Mirrors `VertexIn` (28 bytes): terrain vertices and plant-shape vertices.
@@ -57,6 +61,6 @@ impl MeshVertex {
     };
 }
 
-const _: () = assert!(std::mem::size_of::<NodeEntry>() == 48);
+const _: () = assert!(std::mem::size_of::<NodeEntry>() == 64);
 const _: () = assert!(std::mem::size_of::<MeshVertex>() == 28);
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 2 * 64 + 6 * 16);

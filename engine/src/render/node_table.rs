@@ -10,7 +10,7 @@ use super::frame::FrameResources;
 use super::gpu_data::NodeEntry;
 use super::suballoc::{Lease, Suballocator};
 
-/// Node slots a table holds (resident nodes of one renderer; 3 MiB of entries at 2 per slot).
+/// Node slots a table holds (resident nodes of one renderer; 4 MiB of entries at 2 per slot).
 pub const TABLE_SLOTS: u32 = 1 << 15;
 
 pub struct NodeTable {
@@ -73,9 +73,10 @@ impl NodeTable {
     }
 
     /// Sets entry `index` for this frame: the node at `origin_m` (south-west corner) drawn at
-    /// `level` with dither interval `dither`, two numbers only its renderer reads (`extra`;
-    /// terrain: the node's ground-texture layer and texture coordinates per metre) and its light
-    /// grid (`light`: `LightLease::entry` or `NO_LIGHT`).
+    /// `level` with dither interval `dither`, four numbers only its renderer reads (`extra`;
+    /// terrain: the ground-texture layer it shows, texture coordinates per metre and its corner
+    /// in that texture's node, m) and its light grid (`light`: `LightLease::entry` or
+    /// `NO_LIGHT`).
     #[allow(clippy::too_many_arguments, reason = "one entry's fields")]
     pub fn set(
         &mut self,
@@ -84,7 +85,7 @@ impl NodeTable {
         origin_m: [f64; 2],
         level: u8,
         dither: [f32; 2],
-        extra: [f32; 2],
+        extra: [f32; 4],
         light: [f32; 4],
     ) {
         let [x, y, z] = frame.offset_m(origin_m);
@@ -93,6 +94,7 @@ impl NodeTable {
             offset_lo: [x, y, z, dither[0]],
             hi_level: [dither[1], f32::from(level), extra[0], extra[1]],
             light,
+            more: [extra[2], extra[3], 0.0, 0.0],
         };
         self.written = self.written.max(i + 1);
     }

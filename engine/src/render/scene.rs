@@ -58,9 +58,14 @@ pub trait NodeRenderer: std::any::Any {
     }
 
     /// Submit what the upload hooks recorded (one submission per frame instead of one per
-    /// node). [`Scene::render`] calls it before any renderer's `prepare`, so everything a frame
-    /// samples is submitted before the frame.
-    fn finish_uploads(&mut self, _gpu: &Gpu) {}
+    /// node), and record and submit the work a renderer defers to here (node ground textures)
+    /// within `time_left_s` of expected GPU time (what the nodes' GPU phases left of the frame's
+    /// budget), at least one item. Returns the expected GPU time it used. [`Scene::render`]
+    /// calls it before any renderer's `prepare`, so everything a frame samples is submitted
+    /// before the frame.
+    fn finish_uploads(&mut self, _gpu: &Gpu, _time_left_s: f64) -> f64 {
+        0.0
+    }
 
     /// Before the pass: choose this frame's draws, set their node-table entries and upload the
     /// frame's batches.
@@ -110,11 +115,13 @@ impl Scene {
             .find_map(|r| (r.as_ref() as &dyn std::any::Any).downcast_ref::<T>())
     }
 
-    /// Submits what the renderers' upload hooks recorded (also done by [`Self::render`]).
-    pub fn finish_uploads(&mut self, gpu: &Gpu) {
+    /// Submits what the renderers' upload hooks recorded and the work they defer, within
+    /// `time_left_s` of expected GPU time (also done by [`Self::render`]); returns the time left.
+    pub fn finish_uploads(&mut self, gpu: &Gpu, mut time_left_s: f64) -> f64 {
         for r in &mut self.renderers {
-            r.finish_uploads(gpu);
+            time_left_s -= r.finish_uploads(gpu, time_left_s);
         }
+        time_left_s
     }
 
     /// The GPU phase of a node: every renderer's upload hook. Returns the bytes uploaded.
@@ -137,7 +144,13 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
-        self.finish_uploads(gpu);
+        let t0 = std::time::Instant::now();
+        let left_s = self.finish_uploads(gpu, draws.upload_time_left_s);
+        // What the deferred work took on the frame thread is not left for `prepare` either.
+        let draws = &FrameDraws {
+            upload_time_left_s: left_s - t0.elapsed().as_secs_f64(),
+            ..*draws
+        };
         for r in &mut self.renderers {
             r.prepare(gpu, &mut self.frame, draws);
         }

@@ -2,11 +2,15 @@
 //! (pages), drawn as one multi-draw per mesh page and ground-texture page (each node mesh one
 //! indirect record whose first instance is the node's slot in the node table), filled or as
 //! wireframe. The ground's colour is the node's ground texture where the ground kind is
-//! registered: its upload hook renders the texture ([`super::ground`]) into a layer of the
-//! renderer's [`GroundPool`] (the terrain shading is the texture's only reader), and the layer
-//! is given back when the node's GPU object drops; close up, the materials' own detail below
-//! the finest texel multiplies it ([`super::ground_detail`]). Without one, the map's
-//! ground-type legend colours the vertices (with procedural grain close up).
+//! registered: its upload hook queues the texture, and `finish_uploads` renders queued textures
+//! ([`super::ground`]), coarsest first, within what the frame's GPU budget leaves, into layers
+//! of the renderer's [`GroundPool`] (the terrain shading is the texture's only reader); a layer
+//! is given back when the node's GPU object drops, and a queued texture whose node dropped is
+//! never made. So a node is drawn as soon as its mesh is uploaded: until its own texture is
+//! made it shows its nearest resident ancestor's (coarser, the same place), or the legend
+//! colours. Close up, the materials' own detail below the finest texel multiplies it
+//! ([`super::ground_detail`]). Without ground textures, the map's ground-type legend colours
+//! the vertices (with procedural grain close up).
 
 use super::Gpu;
 use super::batch_timer::BatchTimer;
@@ -28,8 +32,9 @@ use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{NodeWork, Shared};
 use crate::surface::World;
 use crate::terrain::mesh::NodeMesh;
-use crate::terrain::quadtree::QuadTree;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
+use std::sync::{Arc, OnceLock, Weak};
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
 
 /// Vertices and indices in one page of the mesh pool: 858 grid nodes (1,221 vertices and
@@ -70,8 +75,9 @@ pub struct TerrainNodeGpu {
     /// Part 0: vertices, part 1: indices (relative to the node's first vertex).
     mesh: Lease,
     slot: Lease,
-    /// The node's ground texture, and its texture coordinates per metre.
-    ground: Option<(GroundSlot, f32)>,
+    /// The node's ground texture and its texture coordinates per metre, once made (the queue
+    /// of textures to make holds a weak reference).
+    ground: Arc<OnceLock<(GroundSlot, f32)>>,
     pub bytes: usize,
 }
 
@@ -86,10 +92,41 @@ impl TerrainNodeGpu {
         self.mesh.len[1] / 3
     }
 
-    /// The node's ground-texture layer, if it has one.
+    /// The node's ground-texture layer, if it has been made.
     pub fn ground_slot(&self) -> Option<&GroundSlot> {
-        self.ground.as_ref().map(|g| &g.0)
+        self.ground.get().map(|g| &g.0)
     }
+}
+
+/// A node texture waiting to be made: the node, what it draws, and where the texture goes
+/// (gone when the node's GPU object dropped: then it is not made).
+struct PendingTexture {
+    key: NodeKey,
+    pieces: NodeGround,
+    target: Weak<OnceLock<(GroundSlot, f32)>>,
+}
+
+/// The ground texture drawn node `key` shows, and the node's south-west corner in metres from
+/// that of the texture's node: its own, else while it is not made its nearest resident
+/// ancestor's that is (the same ground, coarser), else none.
+fn shown_texture<'a>(
+    node: &'a TerrainNodeGpu,
+    key: NodeKey,
+    draws: &FrameDraws<'a>,
+) -> Option<(&'a (GroundSlot, f32), [f32; 2])> {
+    if let Some(own) = node.ground.get() {
+        return Some((own, [0.0; 2]));
+    }
+    key.ancestors().find_map(|a| {
+        let i = draws.ancestors.binary_search_by_key(&a, |d| d.key).ok()?;
+        let up = draws.ancestors[i].work.gpu.get::<TerrainNodeGpu>()?;
+        let g = up.ground.get()?;
+        let corner_m = [
+            (node.origin_m[0] - up.origin_m[0]) as f32,
+            (node.origin_m[1] - up.origin_m[1]) as f32,
+        ];
+        Some((g, corner_m))
+    })
 }
 
 /// One page of the mesh pool.
@@ -110,10 +147,13 @@ const TEXTURE_GPU_PRIOR_S: f64 = 0.5e-3;
 /// The ground page of nodes without a ground texture.
 const NO_TEXTURE: u32 = u32::MAX;
 
-/// Node ground textures: the pass that renders them, the layer pool they live in, the passes
-/// recorded since the last submission, and bind group 2 per pool page.
+/// Node ground textures: the pass that renders them, the layer pool they live in, the textures
+/// waiting to be made, the passes recorded since the last submission, and bind group 2 per pool
+/// page.
 struct GroundTextures {
     texturer: GroundTexturer,
+    tree: QuadTree,
+    pending: Vec<PendingTexture>,
     pool: GroundPool,
     /// The map's decals (the nodes' pieces refer to them by index).
     decals: Vec<worldgen::map::Decal>,
@@ -150,6 +190,10 @@ pub struct TerrainRenderer {
     culled: u32,
     /// This frame's batches are recorded as multi-draws (else as plain loops).
     merged: bool,
+    /// Drawn nodes this frame that show an ancestor's ground texture, and that show none
+    /// (legend colours), their own not made yet.
+    pub borrowed_textures: usize,
+    pub untextured: usize,
 }
 
 impl std::fmt::Debug for TerrainRenderer {
@@ -279,6 +323,8 @@ impl TerrainRenderer {
             triangles: 0,
             culled: 0,
             merged: false,
+            borrowed_textures: 0,
+            untextured: 0,
         }
     }
 
@@ -306,6 +352,8 @@ impl TerrainRenderer {
         self.ground = Some(GroundTextures {
             pool: GroundPool::new(pool_budget_bytes, texturer.mip_source_layout()),
             texturer,
+            tree,
+            pending: Vec::new(),
             decals: world.map.decals.clone(),
             encoder: None,
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
@@ -323,20 +371,27 @@ impl TerrainRenderer {
             .map_or((0, 0), |g| (g.pool.layers_in_use(), g.pool.bytes()))
     }
 
+    /// Node textures queued and not made yet (their nodes still resident or not).
+    pub fn textures_pending(&self) -> usize {
+        self.ground.as_ref().map_or(0, |g| g.pending.len())
+    }
+
     /// Renders node `key`'s ground texture into a new pool layer (recorded; submitted by
     /// `finish_uploads`). None without ground textures or when the pool is full.
     fn render_ground(
         &mut self,
         gpu: &Gpu,
-        tree: &QuadTree,
-        key: crate::terrain::quadtree::NodeKey,
+        key: NodeKey,
         pieces: &NodeGround,
     ) -> Option<(GroundSlot, f32)> {
         let g = self.ground.as_mut()?;
+        let tree = &g.tree;
         let Some(slot) = g.pool.lease(&gpu.device) else {
             g.refused += 1;
             if g.refused == 1 {
-                log::warn!("ground texture pool full: nodes are drawn with legend colours");
+                log::warn!(
+                    "ground texture pool full: nodes show an ancestor's texture or legend colours"
+                );
             }
             return None;
         };
@@ -452,7 +507,7 @@ impl TerrainRenderer {
             aabb_m: mesh.aabb_m(tree),
             mesh: lease,
             slot,
-            ground: None,
+            ground: Arc::new(OnceLock::new()),
             bytes: vertices.len() * std::mem::size_of::<MeshVertex>() + mesh.indices.len() * 4,
         })
     }
@@ -473,30 +528,59 @@ impl NodeRenderer for TerrainRenderer {
         let Some(mesh) = work.get::<NodeMesh>() else {
             return 0;
         };
-        let Some(mut node) = self.upload_mesh(&gpu.device, &gpu.queue, tree, mesh) else {
+        let Some(node) = self.upload_mesh(&gpu.device, &gpu.queue, tree, mesh) else {
             return 0;
         };
-        if let Some(pieces) = work.get::<NodeGround>() {
-            node.ground = self.render_ground(gpu, tree, work.key, pieces);
-            if node.ground.is_some()
-                && let Some(g) = &self.ground
-            {
-                work.gpu_estimate_s += g.timer.per_item_s();
-            }
+        if let Some(pieces) = work.get::<NodeGround>()
+            && let Some(g) = self.ground.as_mut()
+        {
+            g.pending.push(PendingTexture {
+                key: work.key,
+                pieces: pieces.clone(),
+                target: Arc::downgrade(&node.ground),
+            });
         }
         let bytes = node.bytes;
         work.gpu.put(node);
         bytes
     }
 
-    fn finish_uploads(&mut self, gpu: &Gpu) {
-        if let Some(g) = self.ground.as_mut()
-            && let Some(mut enc) = g.encoder.take()
-        {
+    fn finish_uploads(&mut self, gpu: &Gpu, time_left_s: f64) -> f64 {
+        let Some(g) = self.ground.as_mut() else {
+            return 0.0;
+        };
+        // Coarsest first (they stand in for the finer ones), in arrival order within a level;
+        // textures of dropped nodes are forgotten.
+        let mut queue = std::mem::take(&mut g.pending);
+        queue.retain(|p| p.target.strong_count() > 0);
+        queue.sort_by_key(|p| p.key.level);
+        let per_texture_s = g.timer.per_item_s();
+        let mut spent_s = 0.0;
+        let mut waiting = Vec::new();
+        for p in queue {
+            let Some(target) = p.target.upgrade() else {
+                continue;
+            };
+            if spent_s > 0.0 && spent_s + per_texture_s > time_left_s {
+                waiting.push(p);
+                continue;
+            }
+            if let Some(made) = self.render_ground(gpu, p.key, &p.pieces) {
+                // Only this queue sets a node's texture, once.
+                let _ = target.set(made);
+                spent_s += per_texture_s;
+            }
+        }
+        let Some(g) = self.ground.as_mut() else {
+            return spent_s;
+        };
+        g.pending = waiting;
+        if let Some(mut enc) = g.encoder.take() {
             g.timer.before_submit(&mut enc);
             g.texturer.submit(gpu, enc);
             g.timer.after_submit();
         }
+        spent_s
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
@@ -504,6 +588,8 @@ impl NodeRenderer for TerrainRenderer {
         self.batches.clear();
         self.triangles = 0;
         self.merged = draws.view.multi_draw(gpu);
+        self.borrowed_textures = 0;
+        self.untextured = 0;
         let mut visible = 0;
         for d in draws.drawn {
             let Some(node) = d.work.gpu.get::<TerrainNodeGpu>() else {
@@ -513,9 +599,21 @@ impl NodeRenderer for TerrainRenderer {
                 && draws.frustum.intersects_aabb(node.aabb_m.0, node.aabb_m.1)
             {
                 let slot = self.table.first_entry(&node.slot);
-                let (page, extra) = node.ground.as_ref().map_or((NO_TEXTURE, [-1.0, 0.0]), |g| {
-                    (g.0.page(), [g.0.layer() as f32, g.1])
-                });
+                let shown = shown_texture(node, d.key, draws);
+                if self.ground.is_some() && node.ground.get().is_none() {
+                    if shown.is_some() {
+                        self.borrowed_textures += 1;
+                    } else {
+                        self.untextured += 1;
+                    }
+                }
+                let (page, extra) = match shown {
+                    Some((g, corner_m)) => {
+                        let extra = [g.0.layer() as f32, g.1, corner_m[0], corner_m[1]];
+                        (g.0.page(), extra)
+                    }
+                    None => (NO_TEXTURE, [-1.0, 0.0, 0.0, 0.0]),
+                };
                 let light = light_entry(draws.tree, d.work);
                 self.table.set(
                     frame,

@@ -738,7 +738,7 @@ impl VegetationRenderer {
                 GroupDither::Full => [0.0, 1.0],
             };
             self.table
-                .set(frame, entry, p.origin_m, level, interval, [0.0; 2], light);
+                .set(frame, entry, p.origin_m, level, interval, [0.0; 4], light);
             let first_instance = base + g.first;
             let quads = |key| {
                 (
@@ -812,10 +812,11 @@ impl NodeRenderer for VegetationRenderer {
     }
 
     /// Submits the impostor bakes recorded since the last call.
-    fn finish_uploads(&mut self, gpu: &Gpu) {
+    fn finish_uploads(&mut self, gpu: &Gpu, _time_left_s: f64) -> f64 {
         if let Some(enc) = self.bakes.take() {
             gpu.queue.submit([enc.finish()]);
         }
+        0.0
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {

@@ -862,3 +862,117 @@ fn close_up_the_materials_relief_shades_the_ground() {
          darker: luma west - east {facing_west:.1} and {facing_east:.1}"
     );
 }
+
+/// The terrain renderer of [`a_node_without_its_own_texture_shows_its_ancestors`]: ground
+/// textures in a pool of one page, so once the page is taken (coarsest nodes first) finer nodes
+/// get no texture of their own.
+fn one_page_terrain(
+    gpu: &engine::render::Gpu,
+    frame: &engine::render::frame::FrameResources,
+    shared: &engine::stream::Shared,
+) -> Box<dyn engine::render::scene::NodeRenderer> {
+    let legend: Vec<[u8; 3]> = shared
+        .world
+        .map
+        .manifest
+        .ground
+        .legend
+        .iter()
+        .map(|t| t.color)
+        .collect();
+    Box::new(
+        TerrainRenderer::new(gpu, frame, &legend).with_ground_textures(
+            gpu,
+            &shared.world,
+            LAYERS_PER_PAGE as usize * LAYER_BYTES,
+        ),
+    )
+}
+
+/// A drawn node whose own ground texture is not made (queued, or here refused by a full pool)
+/// shows its nearest resident ancestor's texture at the right place: in the texture-only view
+/// the picture stays close to the one drawn with every node's own texture, much closer than
+/// the legend colours the terrain had without textures, and no drawn node is left without one.
+#[test]
+fn a_node_without_its_own_texture_shows_its_ancestors() {
+    use engine::render::frame::GroundView;
+    use engine::render::{COLOR_FORMAT, Target};
+    use engine::viewer::Viewer;
+    let Some(g) = device() else { return };
+    let world = tiny_world();
+    let ground = dry_spot(&world);
+    let eye = ground + DVec3::new(-40.0, -60.0, 45.0);
+    let cam = Camera::look_at(eye, ground, 70f64.to_radians(), [480, 300]);
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let settings = StreamSettings {
+        workers: 1,
+        tau_px: 0.3,
+        ..StreamSettings::default()
+    };
+    // Texture-only pictures: every node's own texture, one page of textures, legend colours.
+    let picture = |kinds: &[engine::kinds::Registration]| {
+        let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, kinds);
+        v.view.ground_view = GroundView::TextureOnly;
+        v.view.plants = false;
+        tests::gpu::settle(&g, &mut v, &target, &cam);
+        let t = v
+            .scene
+            .renderer::<TerrainRenderer>()
+            .expect("a terrain renderer");
+        let counts = (t.borrowed_textures, t.untextured, t.ground_pool_use().0);
+        (target.read_rgba(&g).expect("readback"), counts)
+    };
+    let all = engine::kinds::registered(&world);
+    let one_page: Vec<_> = all
+        .iter()
+        .map(|r| engine::kinds::Registration {
+            kind: r.kind.clone(),
+            renderer: if r.kind.name() == "terrain" {
+                Some(one_page_terrain as engine::kinds::RendererFactory)
+            } else {
+                r.renderer
+            },
+        })
+        .collect();
+    let legend: Vec<_> = all
+        .iter()
+        .filter(|r| r.kind.name() != engine::ground::content::GroundContent::NAME)
+        .map(|r| engine::kinds::Registration {
+            kind: r.kind.clone(),
+            renderer: r.renderer,
+        })
+        .collect();
+    let (own, (own_borrowed, _, own_layers)) = picture(&all);
+    let (shared, (borrowed, bare, layers)) = picture(&one_page);
+    let (colours, _) = picture(&legend);
+    assert_eq!(
+        own_borrowed, 0,
+        "with room for every texture none is borrowed"
+    );
+    assert!(
+        own_layers > LAYERS_PER_PAGE as usize,
+        "the view needs more than one page of textures ({own_layers} layers)"
+    );
+    assert_eq!(layers, LAYERS_PER_PAGE as usize, "the small pool is full");
+    assert!(
+        borrowed >= 5,
+        "only {borrowed} drawn nodes show an ancestor's texture"
+    );
+    assert_eq!(bare, 0, "drawn nodes with no texture at all: {bare}");
+    let mean_difference = |a: &[u8], b: &[u8]| {
+        a.chunks_exact(4)
+            .zip(b.chunks_exact(4))
+            .map(|(p, q)| (0..3).map(|c| f64::from(p[c].abs_diff(q[c]))).sum::<f64>() / 3.0)
+            .sum::<f64>()
+            / (a.len() / 4) as f64
+    };
+    let (to_shared, to_colours) = (
+        mean_difference(&own, &shared),
+        mean_difference(&own, &colours),
+    );
+    assert!(
+        to_shared < 0.5 * to_colours,
+        "ancestors' textures differ from the nodes' own by {to_shared:.2} / 255 on average, \
+         the legend colours by {to_colours:.2}"
+    );
+}

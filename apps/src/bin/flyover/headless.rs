@@ -212,7 +212,7 @@ fn resident_breakdown(
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 25] = [
+    let rows: [(&str, Vec<f64>); 26] = [
         (
             "streaming update (selection + bookkeeping)",
             col(|s| s.update_ms),
@@ -294,6 +294,10 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "drawn nodes still without their light grid (drawn fully lit)",
             col(|s| s.unlit_nodes as f64),
+        ),
+        (
+            "drawn nodes showing an ancestor's ground texture (their own not made yet)",
+            col(|s| s.borrowed_textures as f64),
         ),
     ];
     println!("| per frame | median | p95 | max |\n|---|---:|---:|---:|");

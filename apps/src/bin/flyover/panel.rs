@@ -151,6 +151,10 @@ pub(crate) fn panel(
         "light grids: {} drawn nodes still without their grid (drawn fully lit)",
         s.unlit_nodes
     ));
+    ui.label(format!(
+        "ground textures: {} drawn nodes show an ancestor's (their own not made yet), {} none",
+        s.borrowed_textures, s.untextured_nodes
+    ));
     ui.label(extra);
 }
 

@@ -5,8 +5,10 @@ use crate::open_world;
 use crate::report::{Report, bar};
 use anyhow::{Result, bail};
 use engine::camera::Camera;
+use engine::ground::content::NodeGround;
 use engine::lighting::content::{LightingContent, NodeLight};
 use engine::render::Gpu;
+use engine::render::terrain::TerrainNodeGpu;
 use engine::stream::Streamer;
 use engine::surface::World;
 use engine::viewer::Viewer;
@@ -213,8 +215,10 @@ pub(crate) fn section_streaming(
         let (mut debt_frames, mut worst_excess, mut frame_times) =
             (0usize, 0.0f64, Vec::with_capacity(frames));
         // Light debt: frames with a visible drawn node whose light grid is not computed yet
-        // (drawn fully lit), and the share of such nodes over all frames.
+        // (drawn fully lit), and the share of such nodes over all frames; texture debt: the
+        // same for nodes whose own ground texture is not made yet (they show an ancestor's).
         let (mut unlit_frames, mut unlit_nodes, mut lit_checked) = (0usize, 0usize, 0usize);
+        let (mut bare_frames, mut bare_nodes, mut textured_checked) = (0usize, 0usize, 0usize);
         let mut on_cpu_times = Vec::with_capacity(frames);
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
@@ -226,14 +230,17 @@ pub(crate) fn section_streaming(
             if let Some(d) = on_cpu.and_then(|t| t.try_elapsed().ok()) {
                 on_cpu_times.push(d.as_secs_f64());
             }
-            let (excess, unlit, checked) = frame_debts(s, cam, tau);
-            lit_checked += checked;
-            if excess > 0.0 {
+            let debts = frame_debts(s, cam, tau);
+            lit_checked += debts.lit_checked;
+            if debts.excess_px > 0.0 {
                 debt_frames += 1;
-                worst_excess = worst_excess.max(excess);
+                worst_excess = worst_excess.max(debts.excess_px);
             }
-            unlit_frames += usize::from(unlit > 0);
-            unlit_nodes += unlit;
+            unlit_frames += usize::from(debts.unlit > 0);
+            unlit_nodes += debts.unlit;
+            textured_checked += debts.textured_checked;
+            bare_frames += usize::from(debts.without_texture > 0);
+            bare_nodes += debts.without_texture;
             b.inc(1);
             // Real time: frame f ends at (f + 1) * dt.
             let due = (f + 1) as f64 * dt;
@@ -282,16 +289,33 @@ pub(crate) fn section_streaming(
                     unlit_nodes as f64 / lit_checked.max(1) as f64,
                 )
             }),
+            texture_debt: (textures && gpu.is_some()).then(|| {
+                (
+                    bare_frames as f64 / frames as f64,
+                    bare_nodes as f64 / textured_checked.max(1) as f64,
+                )
+            }),
         };
         outcome.report(r, &params);
     }
     Ok(())
 }
 
-/// One frame's debts: the largest excess over `tau` of a visible drawn node (pop debt when
-/// above 0), and of the visible drawn nodes with a light grid, how many still lack it, and how
-/// many were checked.
-fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> (f64, usize, usize) {
+/// One frame's debts over its visible drawn nodes.
+#[derive(Default)]
+struct FrameDebts {
+    /// The largest excess over tau (pop debt when above 0).
+    excess_px: f64,
+    /// Nodes with a light grid, and how many of them still lack it.
+    lit_checked: usize,
+    unlit: usize,
+    /// Nodes with a ground texture, and how many of them do not have their own made yet.
+    textured_checked: usize,
+    without_texture: usize,
+}
+
+/// One frame's debts (see [`FrameDebts`]).
+fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> FrameDebts {
     // Pop debt: a visible drawn node whose own error, projected at its own distance,
     // is over tau (a finer level exists but is not shown yet). Every drawn node is
     // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
@@ -312,8 +336,7 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> (f64, usize, usize) {
         .chain(ideal.unknown_bounds.iter().copied())
         .flat_map(|key| std::iter::once(key).chain(key.ancestors()))
         .collect();
-    let mut excess = 0.0f64;
-    let (mut unlit, mut checked) = (0, 0);
+    let mut out = FrameDebts::default();
     for d in s.draw_list() {
         let Some(res) = s.resident(d.key) else {
             continue; // not resident: nothing drawn
@@ -325,8 +348,13 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> (f64, usize, usize) {
             continue;
         }
         if let Some(l) = res.work.get::<NodeLight>() {
-            checked += 1;
-            unlit += usize::from(l.grid.grid().is_none());
+            out.lit_checked += 1;
+            out.unlit += usize::from(l.grid.grid().is_none());
+        }
+        if res.work.get::<NodeGround>().is_some() {
+            out.textured_checked += 1;
+            let own = res.work.gpu.get::<TerrainNodeGpu>();
+            out.without_texture += usize::from(own.is_none_or(|t| t.ground_slot().is_none()));
         }
         if d.key.level == tree.max_level {
             continue;
@@ -340,9 +368,9 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> (f64, usize, usize) {
             Some(&frustum),
             cam.near_m,
         );
-        excess = excess.max(px - tau);
+        out.excess_px = out.excess_px.max(px - tau);
     }
-    (excess, unlit, checked)
+    out
 }
 
 /// The machine's own scheduling noise, next to the bookkeeping rows: a fixed amount of
@@ -414,6 +442,9 @@ struct FlightOutcome {
     /// With light grids: the share of frames with a visible drawn node still without its grid,
     /// and the share of visible drawn nodes (over all frames) without it.
     light_debt: Option<(f64, f64)>,
+    /// With ground textures rendered: the same for nodes whose own texture is not made yet
+    /// (drawn with their nearest resident ancestor's).
+    texture_debt: Option<(f64, f64)>,
 }
 
 impl FlightOutcome {
@@ -497,6 +528,23 @@ impl FlightOutcome {
                 100.0 * nodes,
                 "%",
                 params,
+            );
+        }
+        if let Some((frames, nodes)) = self.texture_debt {
+            let params = format!("{params}; such a node shows its nearest ancestor's texture");
+            r.add(
+                "streaming",
+                "texture debt (frames with a drawn node still without its own ground texture)",
+                100.0 * frames,
+                "%",
+                &params,
+            );
+            r.add(
+                "streaming",
+                "drawn nodes without their own ground texture (share over all frames)",
+                100.0 * nodes,
+                "%",
+                &params,
             );
         }
         r.add(
