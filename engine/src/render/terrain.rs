@@ -599,7 +599,11 @@ impl NodeRenderer for TerrainRenderer {
                 && draws.frustum.intersects_aabb(node.aabb_m.0, node.aabb_m.1)
             {
                 let slot = self.table.first_entry(&node.slot);
-                let shown = shown_texture(node, d.key, draws);
+                let shown = self
+                    .ground
+                    .is_some()
+                    .then(|| shown_texture(node, d.key, draws))
+                    .flatten();
                 if self.ground.is_some() && node.ground.get().is_none() {
                     if shown.is_some() {
                         self.borrowed_textures += 1;
