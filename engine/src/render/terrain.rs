@@ -129,6 +129,18 @@ fn shown_texture<'a>(
     })
 }
 
+/// The sRGB colours of the map's ground legend, in legend order.
+pub fn legend_srgb(world: &World) -> Vec<[u8; 3]> {
+    world
+        .map
+        .manifest
+        .ground
+        .legend
+        .iter()
+        .map(|g| g.color)
+        .collect()
+}
+
 /// One page of the mesh pool.
 struct MeshPage {
     vertices: wgpu::Buffer,
@@ -423,16 +435,7 @@ impl TerrainRenderer {
     /// The registered constructor: colours from the map's legend, ground textures when the
     /// ground kind is registered (pool cap [`GROUND_POOL_CAP_BYTES`]).
     pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
-        let legend: Vec<[u8; 3]> = shared
-            .world
-            .map
-            .manifest
-            .ground
-            .legend
-            .iter()
-            .map(|g| g.color)
-            .collect();
-        let renderer = Self::new(gpu, frame, &legend);
+        let renderer = Self::new(gpu, frame, &legend_srgb(&shared.world));
         if shared.kind::<GroundContent>().is_none() {
             return Box::new(renderer);
         }

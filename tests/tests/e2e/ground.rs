@@ -871,15 +871,7 @@ fn one_page_terrain(
     frame: &engine::render::frame::FrameResources,
     shared: &engine::stream::Shared,
 ) -> Box<dyn engine::render::scene::NodeRenderer> {
-    let legend: Vec<[u8; 3]> = shared
-        .world
-        .map
-        .manifest
-        .ground
-        .legend
-        .iter()
-        .map(|t| t.color)
-        .collect();
+    let legend = engine::render::terrain::legend_srgb(&shared.world);
     Box::new(
         TerrainRenderer::new(gpu, frame, &legend).with_ground_textures(
             gpu,
