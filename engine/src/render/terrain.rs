@@ -555,7 +555,6 @@ impl NodeRenderer for TerrainRenderer {
         // Coarsest first (they stand in for the finer ones), in arrival order within a level;
         // textures of dropped nodes are forgotten.
         let mut queue = std::mem::take(&mut g.pending);
-        queue.retain(|p| p.target.strong_count() > 0);
         queue.sort_by_key(|p| p.key.level);
         let per_texture_s = g.timer.per_item_s();
         let mut spent_s = 0.0;

@@ -727,6 +727,21 @@ fn dry_spot(world: &engine::surface::World) -> DVec3 {
     DVec3::new(spot[0], spot[1], world.height_m(spot[0], spot[1]))
 }
 
+/// A close-up set-up on the tiny map: `image` as every ground type's material, a viewer without
+/// plants, the ground at a [`dry_spot`] and a 128 x 128 target.
+fn close_up(
+    g: &engine::render::Gpu,
+    mut world: engine::surface::World,
+    image: worldgen::map::MaterialImage,
+) -> (engine::viewer::Viewer, DVec3, Target) {
+    world.map.materials = vec![Some(image); world.map.manifest.ground.legend.len()];
+    let ground = dry_spot(&world);
+    let mut v = tests::gpu::viewer(g, world, 1.0);
+    v.view.plants = false;
+    let target = Target::new(&g.device, [128, 128], engine::render::COLOR_FORMAT);
+    (v, ground, target)
+}
+
 /// Close up the ground shows its material's own texels below the finest node texel. Every
 /// ground type gets a material image of one-texel checks (7.8 mm at 512 texels over 4 m): the
 /// node textures (3.3 cm texels at best) hold only the checks' grey mean, so the texture-only
@@ -736,7 +751,7 @@ fn dry_spot(world: &engine::surface::World) -> DVec3 {
 fn close_up_the_ground_shows_the_material_below_the_finest_texel() {
     use engine::render::frame::GroundView;
     let Some(g) = device() else { return };
-    let mut world = tiny_world();
+    let world = tiny_world();
     let side = engine::ground::materials::MATERIAL_TEXELS;
     let checks = worldgen::map::MaterialImage {
         side,
@@ -750,12 +765,8 @@ fn close_up_the_ground_shows_the_material_below_the_finest_texel() {
             })
             .collect(),
     };
-    world.map.materials = vec![Some(checks); world.map.manifest.ground.legend.len()];
-    let ground = dry_spot(&world);
-    let mut v = tests::gpu::viewer(&g, world, 1.0);
-    v.view.plants = false;
-    let size = [128u32, 128];
-    let target = engine::render::Target::new(&g.device, size, engine::render::COLOR_FORMAT);
+    let (mut v, ground, target) = close_up(&g, world, checks);
+    let size = target.size;
     // Luma range (max - min) over the central 64 x 64 pixels of the view from `above` metres.
     let mut contrast = |above: f64, view: GroundView| {
         v.view.ground_view = view;
@@ -811,7 +822,7 @@ fn close_up_the_materials_relief_shades_the_ground() {
     // Mean luma (sRGB bytes) over the central 64 x 64 pixels from 0.5 m above, sun in the west
     // minus sun in the east, 40 degrees high; materials rising to the east or to the west.
     let difference = |rising_east: bool| {
-        let mut world = tiny_world();
+        let world = tiny_world();
         let sawtooth = worldgen::map::MaterialImage {
             side,
             rgba: (0..side * side)
@@ -823,12 +834,8 @@ fn close_up_the_materials_relief_shades_the_ground() {
                 })
                 .collect(),
         };
-        world.map.materials = vec![Some(sawtooth); world.map.manifest.ground.legend.len()];
-        let ground = dry_spot(&world);
-        let mut v = tests::gpu::viewer(&g, world, 1.0);
-        v.view.plants = false;
-        let size = [128u32, 128];
-        let target = engine::render::Target::new(&g.device, size, engine::render::COLOR_FORMAT);
+        let (mut v, ground, target) = close_up(&g, world, sawtooth);
+        let size = target.size;
         let eye = ground + DVec3::new(0.0, 0.0, 0.5);
         let cam = Camera::look_at(eye, ground, 40f64.to_radians(), size);
         let mut mean = |azimuth_deg: f64| {
