@@ -78,7 +78,7 @@ fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> ObjectOut {
     var node: Node;
     node.light = draw.light;
     let local = draw.base_local.xy + (rel.xy - draw.base_rel.xy);
-    out.light = light_at(light_coords(node, local, max(rel.z - draw.base_rel.z, 0.0)));
+    out.light = node_light(node, local, max(rel.z - draw.base_rel.z, 0.0));
     out.uv = v.uv;
     return out;
 }
@@ -120,7 +120,7 @@ fn vs_hlod(v: HlodIn) -> ObjectOut {
     var node: Node;
     node.light = draw.light;
     let local = draw.base_local.xy + (rel.xy - draw.base_rel.xy);
-    out.light = light_at(light_coords(node, local, max(rel.z - draw.base_rel.z, 0.0)));
+    out.light = node_light(node, local, max(rel.z - draw.base_rel.z, 0.0));
     out.uv = vec2<f32>(0.0);
     return out;
 }

@@ -30,7 +30,8 @@ struct Node {
     // pool or -1, y columns per metre, zw the node's south-west corner in the grid's columns.
     light: vec4<f32>,
     // xy: more of the renderer's own (terrain: the node's south-west corner in metres from that
-    // of the node whose ground texture it shows); zw: unused.
+    // of the node whose ground texture it shows); z: its sides toward a coarser light grid
+    // (engine::lighting::seams::SideSteps), w: its width in its grid's columns (`node_light`).
     more: vec4<f32>,
 };
 
@@ -70,21 +71,13 @@ struct VertexOut {
     @location(2) albedo: vec3<f32>,
     // The node's `node_fade` (one node per primitive).
     @location(3) @interpolate(flat) fade: vec3<f32>,
-    // Sky and sun visibility (`light_at`).
+    // Sky and sun visibility (`node_light`).
     @location(4) light: vec2<f32>,
 };
 
-// Where a point of node `n` (`local_xy` from the node's south-west corner, `above_m` over the
-// ground) samples the light-grid pool: xyz texture coordinates, w < 0 for a node without a
-// grid. Affine in the position, so it may be interpolated.
-fn light_coords(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
-    let tiles = light_info.tiles.x;
-    let side = f32(LIGHT_COLUMNS);
-    let slot = max(n.light.x, 0.0);
-    let tile = vec2<f32>(slot % tiles, floor(slot / tiles));
-    let g = clamp(n.light.zw + local_xy * n.light.y, vec2<f32>(0.0), vec2<f32>(side - 1.0));
-    let uv = (tile * side + 0.5 + g) / (tiles * side);
-    // Fractional layer of `above_m` between the layer heights.
+// The light-grid pool's texture coordinate across the layers for `above_m` over the ground
+// (the fractional layer between the grids' layer heights).
+fn light_layer_w(above_m: f32) -> f32 {
     var layer = 0.0;
     for (var i = 0u; i + 1u < LIGHT_LAYERS; i = i + 1u) {
         let lo = light_info.layers_m[i / 4u][i % 4u];
@@ -93,14 +86,76 @@ fn light_coords(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
             layer = f32(i) + clamp((above_m - lo) / max(hi - lo, 1e-3), 0.0, 1.0);
         }
     }
-    let w = (layer + 0.5) / f32(LIGHT_LAYERS);
-    return vec4<f32>(uv, w, select(1.0, -1.0, n.light.x < 0.0));
+    return (layer + 0.5) / f32(LIGHT_LAYERS);
 }
 
-// Sky and sun visibility at `light_coords` `c` (trilinear), 1 and 1 without a grid.
-fn light_at(c: vec4<f32>) -> vec2<f32> {
-    let v = textureSampleLevel(light_grids, light_sampler, c.xyz, 0.0).rg;
-    return select(v, vec2<f32>(1.0), c.w < 0.0);
+// Sky and sun visibility at column coordinates `g` of the grid in pool tile `slot`, layer
+// coordinate `w` (trilinear; clamped to the tile's sample centres, so tiles never bleed).
+fn light_fetch(slot: f32, g: vec2<f32>, w: f32) -> vec2<f32> {
+    let tiles = light_info.tiles.x;
+    let side = f32(LIGHT_COLUMNS);
+    let tile = vec2<f32>(slot % tiles, floor(slot / tiles));
+    let c = clamp(g, vec2<f32>(0.0), vec2<f32>(side - 1.0));
+    let uv = (tile * side + 0.5 + c) / (tiles * side);
+    return textureSampleLevel(light_grids, light_sampler, vec3<f32>(uv, w), 0.0).rg;
+}
+
+// `light_fetch` reading only every `k.x`-th column along x and every `k.y`-th along y (linear
+// between them; 1: every column): what a grid `k` times coarser holds there.
+fn light_decimated(slot: f32, g: vec2<f32>, w: f32, k: vec2<f32>) -> vec2<f32> {
+    let coarse = k > vec2<f32>(1.0);
+    let lo = select(g, floor(g / k) * k, coarse);
+    let t = select(vec2<f32>(0.0), (g - lo) / k, coarse);
+    let step = select(vec2<f32>(0.0), k, coarse);
+    let south = mix(light_fetch(slot, lo, w), light_fetch(slot, lo + vec2<f32>(step.x, 0.0), w), t.x);
+    let north = mix(light_fetch(slot, lo + vec2<f32>(0.0, step.y), w), light_fetch(slot, lo + step, w), t.x);
+    return mix(south, north, t.y);
+}
+
+// Sky and sun visibility of a point of node `n` (`local_xy` from its south-west corner,
+// `above_m` over the ground) from the node's light grid (1 and 1 without one). Near a side
+// whose drawn neighbour uses a coarser grid (`n.more.z`, engine::lighting::seams), the grid is
+// read at that grid's columns only, blending back to every column within one of its column
+// steps from the side: both nodes show the same values along the side.
+fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec2<f32> {
+    if (n.light.x < 0.0) {
+        return vec2<f32>(1.0);
+    }
+    let slot = n.light.x;
+    let g = n.light.zw + local_xy * n.light.y;
+    let w = light_layer_w(above_m);
+    let code = u32(n.more.z + 0.5);
+    if (code == 0u) {
+        return light_fetch(slot, g, w);
+    }
+    // Column steps toward the west, east, south and north neighbours (1: not coarser).
+    let k = vec4<f32>(
+        f32(1u << (code & 7u)),
+        f32(1u << ((code >> 3u) & 7u)),
+        f32(1u << ((code >> 6u) & 7u)),
+        f32(1u << ((code >> 9u) & 7u)),
+    );
+    let lo = n.light.zw;
+    let hi = lo + vec2<f32>(n.more.w);
+    let d = vec4<f32>(g.x - lo.x, hi.x - g.x, g.y - lo.y, hi.y - g.y);
+    // 1 on a side toward a coarser grid, 0 one of its steps inward (steps are at most the
+    // node's width, so the two weights of an axis never sum above 1).
+    let wt = select(vec4<f32>(0.0), clamp(1.0 - d / k, vec4<f32>(0.0), vec4<f32>(1.0)), k > vec4<f32>(1.0));
+    // South and north sides run along x (they decimate x); west and east along y.
+    let ax = array<f32, 3>(max(1.0 - wt.z - wt.w, 0.0), wt.z, wt.w);
+    let kx = array<f32, 3>(1.0, k.z, k.w);
+    let ay = array<f32, 3>(max(1.0 - wt.x - wt.y, 0.0), wt.x, wt.y);
+    let ky = array<f32, 3>(1.0, k.x, k.y);
+    var sum = vec2<f32>(0.0);
+    for (var i = 0u; i < 3u; i = i + 1u) {
+        for (var j = 0u; j < 3u; j = j + 1u) {
+            let a = ax[i] * ay[j];
+            if (a > 0.0) {
+                sum = sum + a * light_decimated(slot, g, w, vec2<f32>(kx[i], ky[j]));
+            }
+        }
+    }
+    return sum;
 }
 
 // 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
@@ -143,7 +198,8 @@ fn level_color(level: f32) -> vec3<f32> {
 }
 
 // A lit, fogged, dithered surface pixel (terrain and plant meshes); debug mode 1 colours it by
-// the node's level, 4 makes it grey (lighting only).
+// the node's level, 4 makes it grey (lighting only), 5 shows the light grid's values (red sky,
+// green sun visibility; unshaded, no fog).
 fn lit_pixel(in: VertexOut) -> vec4<f32> {
     if (!in_dither(in.clip.xy, in.fade)) {
         discard;
@@ -155,6 +211,9 @@ fn lit_pixel(in: VertexOut) -> vec4<f32> {
 // [0, 1): every pixel is theirs). A shader without `discard` keeps the early depth test.
 fn lit_color(in: VertexOut) -> vec4<f32> {
     let mode = u32(frame.fog.z + 0.5);
+    if (mode == 5u) {
+        return vec4<f32>(in.light, 0.0, 1.0);
+    }
     var albedo = in.albedo;
     if (mode == 1u) {
         albedo = level_color(in.fade.z);

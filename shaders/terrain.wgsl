@@ -41,8 +41,9 @@ struct TerrainOut {
     @location(4) uv: vec2<f32>,
     // The node's layer in `ground_page`, or -1 without a texture.
     @location(5) @interpolate(flat) layer: i32,
-    // Where the ground layer of the node's light grid is sampled (`light_coords`).
-    @location(6) light: vec4<f32>,
+    // Sky and sun visibility of the ground layer of the node's light grid at the vertex
+    // (`node_light`: at a grid-level node's vertices, its columns).
+    @location(6) light: vec2<f32>,
 };
 
 // The draw's first instance is the node's slot in the node table.
@@ -64,7 +65,7 @@ fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
     let t = border + (v.position.xy + node.more.xy) * node.hi_level.w;
     out.uv = vec2<f32>(t.x, 1.0 - t.y);
     out.layer = i32(round(node.hi_level.z));
-    out.light = light_coords(node, v.position.xy, 0.0);
+    out.light = node_light(node, v.position.xy, 0.0);
     return out;
 }
 
@@ -185,8 +186,7 @@ fn terrain_color(in: TerrainOut) -> vec4<f32> {
         factor = fine_detail(in.rel, max(px_m, 1e-6));
     }
     let detailed = albedo * factor;
-    let vis = light_at(in.light);
-    return lit_color(VertexOut(in.clip, in.rel, normal, detailed, in.fade, vis));
+    return lit_color(VertexOut(in.clip, in.rel, normal, detailed, in.fade, in.light));
 }
 
 // Nodes in a cross-fade: dithered.

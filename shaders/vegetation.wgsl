@@ -37,7 +37,7 @@ fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
     let look = plant_looks[min(inst.look, MAX_LOOKS - 1u)];
     out.albedo = select(look.rgb, TRUNK, v.tag == 0u);
     out.fade = node_fade(node);
-    out.light = light_at(light_coords(node, inst.position.xy + turned.xy, turned.z));
+    out.light = node_light(node, inst.position.xy + turned.xy, turned.z);
     return out;
 }
 
@@ -48,7 +48,7 @@ struct BillboardOut {
     @location(1) uv: vec2<f32>,
     @location(2) @interpolate(flat) look: u32,
     @location(3) @interpolate(flat) fade: vec3<f32>,
-    // Sky and sun visibility (`light_at`).
+    // Sky and sun visibility (`node_light`).
     @location(4) light: vec2<f32>,
     // Horizontal unit vector from the camera to the quad: the bake's north (the quad's x is
     // the bake's east turned to (-away.y, away.x)).
@@ -89,7 +89,7 @@ fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> Billboa
     out.look = inst.look;
     out.fade = node_fade(node);
     let local = inst.position.xy + right.xy * (corner.x * inst.radius);
-    out.light = light_at(light_coords(node, local, corner.y * inst.height));
+    out.light = node_light(node, local, corner.y * inst.height);
     out.away = flat_dir / len;
     return out;
 }

@@ -319,7 +319,6 @@ pub mod terrain {
     }
 }
 
-/// GPU helpers: a headless device (lavapipe here and in CI) and a settled viewer.
 /// Unit direction of the ray through the centre of pixel (`px`, `py`) of `cam` (row 0 at the
 /// top), as the renderer's projection places it.
 pub fn pixel_ray(cam: &engine::camera::Camera, px: u32, py: u32) -> glam::DVec3 {
@@ -330,6 +329,38 @@ pub fn pixel_ray(cam: &engine::camera::Camera, px: u32, py: u32) -> glam::DVec3 
     (cam.forward + cam.right() * sx + cam.up * sy).normalize()
 }
 
+/// Where the ray through pixel (`px`, `py`) first meets the map's finest surface, if it does
+/// more than 2 m inside the map's border (ray-marched with steps no longer than half the
+/// height above the surface, so the point is within 5 cm above it).
+pub fn ground_hit(
+    world: &engine::surface::World,
+    cam: &engine::camera::Camera,
+    px: u32,
+    py: u32,
+) -> Option<glam::DVec3> {
+    let dir = pixel_ray(cam, px, py);
+    let (o, s) = (world.origin_m(), world.size_m());
+    let mut t = 0.0;
+    for _ in 0..4000 {
+        let p = cam.position_m + dir * t;
+        // A few metres of margin inside the border: the skirts there may be seen edge-on.
+        if p.x < o[0] + 2.0
+            || p.y < o[1] + 2.0
+            || p.x > o[0] + s[0] - 2.0
+            || p.y > o[1] + s[1] - 2.0
+        {
+            return None;
+        }
+        let above = p.z - world.height_m(p.x, p.y);
+        if above <= 0.0 {
+            return Some(p);
+        }
+        t += (above * 0.5).max(0.05);
+    }
+    None
+}
+
+/// GPU helpers: a headless device (lavapipe here and in CI) and a settled viewer.
 pub mod gpu {
     use engine::camera::Camera;
     use engine::render::{COLOR_FORMAT, Gpu, Target};

@@ -10,9 +10,13 @@
 //! [`CANOPY_AZIMUTHS`] x [`SKY_BANDS`] (equal bands of `s`) rays through the canopy.
 //!
 //! **Horizons** are marched on the finest surface near the column (a lattice of `F` at
-//! [`NEAR_SPACING_M`] over the node widened by [`NEAR_MARGIN_M`], bilinear between its points,
-//! read up to one spacing less than the margin from the column) and on the map heights beyond
-//! (bilinear), out to [`HORIZON_REACH_M`], with steps that grow with the distance. **Canopy transmittance** is `exp(-optical depth)` of
+//! [`NEAR_SPACING_M`] over a block of columns widened by [`NEAR_MARGIN_M`], bilinear between
+//! its points, read up to one spacing less than the margin from the column) and on the map
+//! heights beyond (bilinear), out to [`HORIZON_REACH_M`], with steps that grow with the
+//! distance. None of this depends on the grid's level: a column of a coarse grid holds the same
+//! bytes as the finer grids' column at the same place (every other column of a grid is a column
+//! of its parent's grid), which is what lets a node blend seamlessly toward a coarser
+//! neighbour's grid (`render::light_pool`). **Canopy transmittance** is `exp(-optical depth)` of
 //! [`Canopy::extinction_per_m`] summed at midpoints along the ray until it leaves the canopy.
 //! **Sun visibility**: 1 when the sun is above the horizon along its own azimuth, else 0, times
 //! the canopy transmittance toward it.
@@ -69,10 +73,10 @@ pub const CANOPY_AZIMUTHS: usize = 8;
 pub const SKY_BANDS: usize = 3;
 /// How far horizons are marched (m).
 pub const HORIZON_REACH_M: f64 = 4000.0;
-/// Spacing of the finest-surface lattice near a grid-level node (m; half a column spacing at
-/// every level).
+/// Spacing of the finest-surface lattice near a column (m; half a grid-level column spacing,
+/// the same at every level).
 pub const NEAR_SPACING_M: f64 = 2.0;
-/// How far beyond a grid-level node that lattice reaches (m; 16 column spacings at every level).
+/// How far beyond its block of columns that lattice reaches (m, at every level).
 pub const NEAR_MARGIN_M: f64 = 64.0;
 /// Midpoint samples of a sky ray through the canopy.
 pub const CANOPY_STEPS: usize = 12;
@@ -140,42 +144,69 @@ pub struct LightGrid {
 /// share gets the same bytes in both.
 struct HorizonHeights<'a> {
     world: &'a World,
-    /// Spacing of `near` (m).
-    spacing_m: f64,
+    /// The lattice ([`NEAR_SPACING_M`] apart), row-major, row 0 south.
     near: Vec<f64>,
-    /// Points along each side of `near`.
-    n: usize,
+    /// Points along x and along y.
+    n: [usize; 2],
     /// Global lattice index of `near`'s point (0, 0).
     first: [i64; 2],
     tree_origin_m: [f64; 2],
     map_at: GridPlacement,
     /// Ray points up to this far (horizontally) from their column read the lattice: inside the
-    /// window of every node the column belongs to (its margin less one spacing).
+    /// window of the block the column belongs to (its margin less one spacing).
     near_reach_m: f64,
 }
 
-impl HorizonHeights<'_> {
+impl<'a> HorizonHeights<'a> {
+    /// The lattice of `n` points from global index `first` (from `tree_origin_m`), read within
+    /// one spacing less than [`NEAR_MARGIN_M`] of a column.
+    fn new(world: &'a World, tree_origin_m: [f64; 2], first: [i64; 2], n: [usize; 2]) -> Self {
+        let axis = |a: usize| -> Vec<f64> {
+            (0..n[a] as i64)
+                .map(|i| tree_origin_m[a] + (first[a] + i) as f64 * NEAR_SPACING_M)
+                .collect()
+        };
+        Self {
+            world,
+            near: world.heights_on_lattice(&axis(0), &axis(1)),
+            n,
+            first,
+            tree_origin_m,
+            map_at: GridPlacement {
+                origin_m: world.origin_m(),
+                spacing_m: world.map.manifest.heights.spacing_m,
+            },
+            near_reach_m: NEAR_MARGIN_M - NEAR_SPACING_M,
+        }
+    }
+
     /// The height at a ray point `r_m` (horizontally) from its column.
     fn height_m(&self, x_m: f64, y_m: f64, r_m: f64) -> f64 {
         if r_m > self.near_reach_m {
             return bilinear(&self.world.map.heights, self.map_at, x_m, y_m);
         }
-        let gx = (x_m - self.tree_origin_m[0]) / self.spacing_m;
-        let gy = (y_m - self.tree_origin_m[1]) / self.spacing_m;
+        let gx = (x_m - self.tree_origin_m[0]) / NEAR_SPACING_M;
+        let gy = (y_m - self.tree_origin_m[1]) / NEAR_SPACING_M;
         let (fx, fy) = (gx.floor(), gy.floor());
         let (i, j) = (fx as i64 - self.first[0], fy as i64 - self.first[1]);
-        let last = self.n as i64 - 1;
-        if (0..last).contains(&i) && (0..last).contains(&j) {
+        if (0..self.n[0] as i64 - 1).contains(&i) && (0..self.n[1] as i64 - 1).contains(&j) {
             let (tx, ty) = (gx - fx, gy - fy);
-            let k = j as usize * self.n + i as usize;
+            let nx = self.n[0];
+            let k = j as usize * nx + i as usize;
             let (a, b) = (self.near[k], self.near[k + 1]);
-            let (c, d) = (self.near[k + self.n], self.near[k + self.n + 1]);
+            let (c, d) = (self.near[k + nx], self.near[k + nx + 1]);
             let lo = a + (b - a) * tx;
             let hi = c + (d - c) * tx;
             lo + (hi - lo) * ty
         } else {
             bilinear(&self.world.map.heights, self.map_at, x_m, y_m)
         }
+    }
+
+    /// The lattice point at global index (`i`, `j`) (inside the window).
+    fn point_m(&self, i: i64, j: i64) -> f64 {
+        let (a, b) = ((i - self.first[0]) as usize, (j - self.first[1]) as usize);
+        self.near[b * self.n[0] + a]
     }
 }
 
@@ -232,37 +263,30 @@ impl LightGrid {
         sun: Sun,
     ) -> Self {
         // Columns and lattice points by global index from the tree's origin (see
-        // `HorizonHeights`): a border column shared with a neighbour has the same coordinates.
+        // `HorizonHeights`): a column shared with a neighbour, or with a grid of another level,
+        // has the same coordinates.
         let o = tree.origin_m;
         let side_m = tree.node_size_m(key.level);
         let spacing_m = side_m / (COLUMNS - 1) as f64;
-        let near_spacing_m = spacing_m * (NEAR_SPACING_M / COLUMN_SPACING_M);
         let per_node = (COLUMNS - 1) as i64;
+        // Lattice points per column spacing (2 at the grid level, twice as many a level
+        // coarser).
+        let ratio = (spacing_m / NEAR_SPACING_M).round() as i64;
         let col0 = [i64::from(key.ix) * per_node, i64::from(key.iy) * per_node];
         let column_m = |axis: usize, c: usize| o[axis] + (col0[axis] + c as i64) as f64 * spacing_m;
         let origin = [column_m(0, 0), column_m(1, 0)];
-        let ratio = (COLUMN_SPACING_M / NEAR_SPACING_M).round() as i64;
         let margin = (NEAR_MARGIN_M / NEAR_SPACING_M).round() as i64;
-        let n_near = (per_node * ratio + 2 * margin + 1) as usize;
-        let first = [col0[0] * ratio - margin, col0[1] * ratio - margin];
-        let axis = |a: usize| -> Vec<f64> {
-            (0..n_near as i64)
-                .map(|i| o[a] + (first[a] + i) as f64 * near_spacing_m)
-                .collect()
-        };
-        let (xs, ys) = (axis(0), axis(1));
-        let heights = HorizonHeights {
-            world,
-            spacing_m: near_spacing_m,
-            near: world.heights_on_lattice(&xs, &ys),
-            n: n_near,
-            first,
-            tree_origin_m: o,
-            map_at: GridPlacement {
-                origin_m: world.origin_m(),
-                spacing_m: world.map.manifest.heights.spacing_m,
-            },
-            near_reach_m: (margin - 1) as f64 * near_spacing_m,
+        // The lattice near a block of columns (their window widened by the margin): one block
+        // at the grid level, blocks of at most [`GRID_SIDE_M`] a level coarser, so a coarse
+        // grid's lattice is never larger than a grid-level one's.
+        let block_cols = ((GRID_SIDE_M / spacing_m).round() as usize).max(1);
+        let lattice = |c: std::ops::Range<usize>, r: std::ops::Range<usize>| {
+            let first = [
+                (col0[0] + c.start as i64) * ratio - margin,
+                (col0[1] + r.start as i64) * ratio - margin,
+            ];
+            let count = |n: usize| ((n as i64 - 1) * ratio + 2 * margin + 1) as usize;
+            HorizonHeights::new(world, o, first, [count(c.len()), count(r.len())])
         };
         // No canopy anywhere a canopy ray can reach: every transmittance is 1 (open ground,
         // water, rock; most of many maps). A ray climbs out of the canopy within
@@ -314,77 +338,85 @@ impl LightGrid {
         let per_canopy = HORIZON_AZIMUTHS / CANOPY_AZIMUTHS;
         // Highest tangent of the terrain seen from each layer, per direction (per column).
         let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
-        for row in 0..COLUMNS {
-            for col in 0..COLUMNS {
-                let (x, y) = (column_m(0, col), column_m(1, row));
-                // The column's ground is a lattice point: exactly the finest surface.
-                let k = (row * ratio as usize + margin as usize) * n_near
-                    + col * ratio as usize
-                    + margin as usize;
-                let ground = heights.near[k];
-                out.ground_m[row * COLUMNS + col] = ground as f32;
-                for (best, dir) in tan_max.iter_mut().zip(&dirs) {
-                    *best = [f64::NEG_INFINITY; LAYERS];
-                    for (&r, &inv_r) in distances.iter().zip(&inverse) {
-                        let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r, r) - ground;
-                        for (b, lh) in best.iter_mut().zip(&layers_m) {
-                            *b = b.max((dh - lh) * inv_r);
-                        }
-                    }
-                }
-                for (l, &lh) in layers_m.iter().enumerate() {
-                    let p0 = DVec3::new(x, y, ground + lh);
-                    let under = canopy_near && lh < canopy.top_m;
-                    // Canopy transmittance per canopy azimuth and band.
-                    let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
-                    if under {
-                        for (c, t) in trans.iter_mut().enumerate() {
-                            let dir = dirs[c * per_canopy];
-                            for (b, tb) in t.iter_mut().enumerate() {
-                                let s = (b as f64 + 0.5) / SKY_BANDS as f64;
-                                let (sin_e, cos_e) = (s.sqrt(), (1.0 - s).sqrt());
-                                let w = DVec3::new(dir[0] * cos_e, dir[1] * cos_e, sin_e);
-                                *tb = canopy_transmittance(
-                                    &heights,
-                                    canopy,
-                                    (p0, w),
-                                    lh,
-                                    (CANOPY_STEPS, 1.0),
-                                );
+        let blocks = || {
+            (0..COLUMNS)
+                .step_by(block_cols)
+                .map(|s| s..(s + block_cols).min(COLUMNS))
+        };
+        for (rows, cols) in blocks().flat_map(|r| blocks().map(move |c| (r.clone(), c))) {
+            let heights = lattice(cols.clone(), rows.clone());
+            for row in rows {
+                for col in cols.clone() {
+                    let (x, y) = (column_m(0, col), column_m(1, row));
+                    // The column's ground is a lattice point: exactly the finest surface.
+                    let ground = heights.point_m(
+                        (col0[0] + col as i64) * ratio,
+                        (col0[1] + row as i64) * ratio,
+                    );
+                    out.ground_m[row * COLUMNS + col] = ground as f32;
+                    for (best, dir) in tan_max.iter_mut().zip(&dirs) {
+                        *best = [f64::NEG_INFINITY; LAYERS];
+                        for (&r, &inv_r) in distances.iter().zip(&inverse) {
+                            let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r, r) - ground;
+                            for (b, lh) in best.iter_mut().zip(&layers_m) {
+                                *b = b.max((dh - lh) * inv_r);
                             }
                         }
                     }
-                    let mut sky = 0.0;
-                    for (a, tan) in tan_max.iter().take(HORIZON_AZIMUTHS).enumerate() {
-                        let s_h = sin2_of_tan(tan[l]);
-                        // The canopy azimuth nearest to horizon azimuth `a`.
-                        let c = ((a + per_canopy / 2) / per_canopy) % CANOPY_AZIMUTHS;
-                        for (b, tb) in trans[c].iter().enumerate() {
-                            let (lo, hi) = (
-                                b as f64 / SKY_BANDS as f64,
-                                (b + 1) as f64 / SKY_BANDS as f64,
-                            );
-                            sky += tb * (hi - s_h.max(lo)).max(0.0);
+                    for (l, &lh) in layers_m.iter().enumerate() {
+                        let p0 = DVec3::new(x, y, ground + lh);
+                        let under = canopy_near && lh < canopy.top_m;
+                        // Canopy transmittance per canopy azimuth and band.
+                        let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
+                        if under {
+                            for (c, t) in trans.iter_mut().enumerate() {
+                                let dir = dirs[c * per_canopy];
+                                for (b, tb) in t.iter_mut().enumerate() {
+                                    let s = (b as f64 + 0.5) / SKY_BANDS as f64;
+                                    let (sin_e, cos_e) = (s.sqrt(), (1.0 - s).sqrt());
+                                    let w = DVec3::new(dir[0] * cos_e, dir[1] * cos_e, sin_e);
+                                    *tb = canopy_transmittance(
+                                        &heights,
+                                        canopy,
+                                        (p0, w),
+                                        lh,
+                                        (CANOPY_STEPS, 1.0),
+                                    );
+                                }
+                            }
                         }
+                        let mut sky = 0.0;
+                        for (a, tan) in tan_max.iter().take(HORIZON_AZIMUTHS).enumerate() {
+                            let s_h = sin2_of_tan(tan[l]);
+                            // The canopy azimuth nearest to horizon azimuth `a`.
+                            let c = ((a + per_canopy / 2) / per_canopy) % CANOPY_AZIMUTHS;
+                            for (b, tb) in trans[c].iter().enumerate() {
+                                let (lo, hi) = (
+                                    b as f64 / SKY_BANDS as f64,
+                                    (b + 1) as f64 / SKY_BANDS as f64,
+                                );
+                                sky += tb * (hi - s_h.max(lo)).max(0.0);
+                            }
+                        }
+                        sky /= HORIZON_AZIMUTHS as f64;
+                        let lit = sun.elevation_deg > 0.0 && tan_max[HORIZON_AZIMUTHS][l] < sun_tan;
+                        let sun_vis = if !lit {
+                            0.0
+                        } else if under {
+                            canopy_transmittance(
+                                &heights,
+                                canopy,
+                                (p0, toward),
+                                lh,
+                                (SUN_CANOPY_STEPS, 2.0),
+                            )
+                        } else {
+                            1.0
+                        };
+                        let i = Self::index(l, row, col);
+                        out.sky[i] = to_byte(sky);
+                        out.sun[i] = to_byte(sun_vis);
                     }
-                    sky /= HORIZON_AZIMUTHS as f64;
-                    let lit = sun.elevation_deg > 0.0 && tan_max[HORIZON_AZIMUTHS][l] < sun_tan;
-                    let sun_vis = if !lit {
-                        0.0
-                    } else if under {
-                        canopy_transmittance(
-                            &heights,
-                            canopy,
-                            (p0, toward),
-                            lh,
-                            (SUN_CANOPY_STEPS, 2.0),
-                        )
-                    } else {
-                        1.0
-                    };
-                    let i = Self::index(l, row, col);
-                    out.sky[i] = to_byte(sky);
-                    out.sun[i] = to_byte(sun_vis);
                 }
             }
         }
@@ -504,5 +536,64 @@ mod tests {
         }
         // Not a constant field: the test would pass on anything uniform.
         assert!(a.sky.iter().any(|&v| v != a.sky[0]));
+    }
+
+    /// A grid a level coarser holds exactly the values of its four children's grids at its
+    /// columns (every other column of theirs), and the same again a level up: a node can blend
+    /// toward a coarser neighbour's grid without a step at their border. Under a low sun, so
+    /// that terrain shadows (the values that depend most on the terrain near the column) vary.
+    #[test]
+    fn coarser_grids_equal_finer_ones_where_columns_coincide() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        let mut map = worldgen::Map::load(&dir).expect("tiny map loads");
+        map.manifest.origin_m = [1234.567, -89.0123];
+        let world = World::new(map);
+        let canopy = Canopy::new(&world, &Placer::new(&world));
+        let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let level = grid_level(&tree);
+        assert!(
+            level >= 2,
+            "the tiny map has two levels above its grid level"
+        );
+        let sun = Sun {
+            azimuth_deg: 250.0,
+            elevation_deg: 12.0,
+        };
+        let grid = |level, ix, iy| {
+            LightGrid::compute(&world, &canopy, &tree, NodeKey { level, ix, iy }, sun)
+        };
+        let mut compared = 0;
+        let mut shaded = 0;
+        for (coarse_level, cix, ciy) in [(level - 1, 0, 1), (level - 2, 0, 0)] {
+            let coarse = grid(coarse_level, cix, ciy);
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let fine = grid(coarse_level + 1, 2 * cix + dx, 2 * ciy + dy);
+                let half = (COLUMNS - 1) / 2;
+                for r in 0..=half {
+                    for c in 0..=half {
+                        let (cr, cc) = (dy as usize * half + r, dx as usize * half + c);
+                        let (fr, fc) = (2 * r, 2 * c);
+                        assert_eq!(
+                            coarse.ground_m[cr * COLUMNS + cc],
+                            fine.ground_m[fr * COLUMNS + fc]
+                        );
+                        for l in 0..LAYERS {
+                            let (i, j) = (LightGrid::index(l, cr, cc), LightGrid::index(l, fr, fc));
+                            assert_eq!(
+                                (coarse.sky[i], coarse.sun[i]),
+                                (fine.sky[j], fine.sun[j]),
+                                "level {coarse_level} child ({dx}, {dy}) layer {l} column ({r}, {c})"
+                            );
+                            compared += 1;
+                            shaded += usize::from(fine.sun[j] < 255);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            compared > 10_000 && shaded > 100,
+            "{compared} compared, {shaded} shaded"
+        );
     }
 }

@@ -10,9 +10,13 @@
 //! terrain horizon nor the vegetation canopy hides) and the sun visibility (terrain shadow times
 //! the canopy's transmittance toward the sun, [`grid::Sun`]).
 //!
+//! Grids of every level compute a column identically, so a coarse grid's columns hold the finer
+//! grids' bytes; [`seams`] finds the drawn nodes that must read their grid at a coarser
+//! neighbour's columns along a side to meet it without a step.
+//!
 //! [`content`] makes grids a node-content kind (shared by a grid node's descendants, relit in
 //! the background when the sun changes); `render::lighting` uploads them into slots of one 3D
-//! texture that the terrain and vegetation shaders sample trilinearly.
+//! texture that the terrain, vegetation and object shaders sample trilinearly.
 //!
 //! Not yet done (issue 17): ambient colour with a ground bounce, a dominant light direction.
 
@@ -20,5 +24,6 @@ pub mod content;
 pub mod grid;
 #[cfg(feature = "measure")]
 pub mod reference;
+pub mod seams;
 
 pub use grid::{LightGrid, Sun};

@@ -42,6 +42,9 @@ pub struct ViewOptions {
     pub sun: Sun,
     /// Debug view: everything grey, lit by the light grids alone (sky and sun visibility).
     pub lighting_only: bool,
+    /// Debug view: the light grids' raw values, unshaded and without fog (red: sky visibility,
+    /// green: sun visibility; 1 where a node has no grid yet).
+    pub light_values: bool,
     /// Level choice of progressive-mesh objects (STRENGTH, MINVERTS, ZDISP, fixed level, MORPH;
     /// their tau is the streamer's).
     pub pm_lod: crate::objects::lod::PmLodSettings,
@@ -79,10 +82,11 @@ pub fn texels_per_pixel_of(linear_rgb: [f32; 3]) -> Option<f32> {
 
 impl ViewOptions {
     /// The shaders' debug mode: 1 colour by level, 2 texel density, 3 ground texture only,
-    /// 4 lighting only, 0 none.
+    /// 4 lighting only, 5 light-grid values, 0 none.
     pub fn debug_mode(&self) -> f32 {
         match (self.color_by_level, self.ground_view) {
             (true, _) => 1.0,
+            (false, _) if self.light_values => 5.0,
             (false, _) if self.lighting_only => 4.0,
             (false, GroundView::Shaded) => 0.0,
             (false, GroundView::TexelDensity) => 2.0,
@@ -111,6 +115,7 @@ impl Default for ViewOptions {
             ground_view: GroundView::Shaded,
             sun: Sun::default(),
             lighting_only: false,
+            light_values: false,
             pm_lod: crate::objects::lod::PmLodSettings::default(),
             pm_color_by_lod: false,
             texture_mip_view: false,

@@ -36,7 +36,8 @@ pub struct NodeEntry {
     pub light: [f32; 4],
     /// xy: more of the renderer's own (terrain: the node's south-west corner in metres from
     /// that of the node whose ground texture it shows: 0 for its own, more for an ancestor's
-    /// while its own is not made yet); zw: unused.
+    /// while its own is not made yet); z: the node's sides toward a coarser light grid
+    /// (`lighting::seams::SideSteps`), w: its width in its grid's columns.
     pub more: [f32; 4],
 }
 

@@ -1,7 +1,7 @@
 //! The light-grid pool: one 3D texture (`Rg8Unorm`: sky and sun visibility) of
 //! [`POOL_TILES`] x [`POOL_TILES`] tiles, each a grid's `COLUMNS x COLUMNS x LAYERS` samples,
 //! bound in the frame group (binding 1, with a clamping linear sampler at 2 and the layer
-//! heights at 3) so that every renderer's shaders sample it (`light_coords` and `light_at` in
+//! heights at 3) so that every renderer's shaders sample it (`node_light` in
 //! the prelude). The hardware filters trilinearly inside a tile: coordinates are clamped to the
 //! tile's sample centres, so neighbouring tiles never bleed in.
 //!
@@ -11,6 +11,7 @@
 
 use crate::lighting::content::SharedGrid;
 use crate::lighting::grid::{COLUMNS, LAYERS};
+use crate::lighting::seams::SideSteps;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use rustc_hash::FxHashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -62,10 +63,11 @@ impl LightLease {
     }
 
     /// The node-table numbers of node `key` shaded by this grid: tile, columns per metre and
-    /// the node's south-west corner in the grid's columns.
+    /// the node's south-west corner in the grid's columns ([`NO_LIGHT`]'s before the grid is
+    /// written).
     pub fn entry(&self, tree: &QuadTree, key: NodeKey) -> [f32; 4] {
         if !self.written() {
-            return NO_LIGHT;
+            return NO_LIGHT.grid;
         }
         let grid = tree.rect(self.grid.key);
         let node = tree.rect(key);
@@ -79,8 +81,22 @@ impl LightLease {
     }
 }
 
+/// A node's light numbers for its node-table entry (`Node.light` and `Node.more.zw` in the
+/// prelude).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightEntry {
+    /// [`LightLease::entry`].
+    pub grid: [f32; 4],
+    /// The node's sides toward a coarser grid (a [`SideSteps`] code) and its width in the grid's
+    /// columns (`lighting::seams`).
+    pub seam: [f32; 2],
+}
+
 /// The node-table numbers of a node without a grid (the shaders light it fully).
-pub const NO_LIGHT: [f32; 4] = [-1.0, 0.0, 0.0, 0.0];
+pub const NO_LIGHT: LightEntry = LightEntry {
+    grid: [-1.0, 0.0, 0.0, 0.0],
+    seam: [0.0, 0.0],
+};
 
 pub struct LightPool {
     texture: wgpu::Texture,
@@ -91,6 +107,9 @@ pub struct LightPool {
     leases: Mutex<FxHashMap<NodeKey, Weak<LightLease>>>,
     /// Grids that found no free tile (drawn fully lit), for statistics.
     pub refused: AtomicU64,
+    /// This frame's drawn nodes that blend toward a coarser neighbour's grid
+    /// (`lighting::seams::coarser_sides`, found by the lighting renderer's `prepare`).
+    pub seams: FxHashMap<NodeKey, SideSteps>,
 }
 
 impl std::fmt::Debug for LightPool {
@@ -136,6 +155,7 @@ impl LightPool {
             free: Arc::new(Mutex::new((0..POOL_TILES * POOL_TILES).rev().collect())),
             leases: Mutex::new(FxHashMap::default()),
             refused: AtomicU64::new(0),
+            seams: FxHashMap::default(),
         }
     }
 

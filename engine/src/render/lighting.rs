@@ -1,16 +1,18 @@
 //! The light-grid kind's renderer: it draws nothing itself. Its upload hook gives a node the
 //! pool tile of the grid that shades it ([`super::light_pool::LightPool::lease`]) and stores
-//! the lease as the node's [`NodeLightGpu`]; the terrain and vegetation renderers put
+//! the lease as the node's [`NodeLightGpu`]; the terrain, vegetation and object renderers put
 //! [`light_entry`] into their node-table entries (fully lit until the grid arrives). Each
 //! frame `prepare` writes the tiles of drawn grids that arrived or were relit since (a sun
-//! change), nearest first as the light thread makes them.
+//! change), nearest first as the light thread makes them, and finds the drawn nodes that blend
+//! toward a coarser neighbour's grid (`lighting::seams`); it runs before the other renderers'.
 
 use super::Gpu;
 use super::frame::{DrawStats, FrameResources};
-use super::light_pool::{LightLease, NO_LIGHT};
+use super::light_pool::{LightEntry, LightLease, NO_LIGHT};
 use super::scene::{FrameDraws, NodeRenderer};
 use crate::lighting::content::{LightingContent, NodeLight};
-use crate::lighting::grid::layer_heights_m;
+use crate::lighting::grid::{grid_level, layer_heights_m};
+use crate::lighting::seams::{coarser_sides, node_columns};
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::QuadTree;
 use std::sync::Arc;
@@ -19,11 +21,23 @@ use std::sync::Arc;
 #[derive(Debug, Clone)]
 pub struct NodeLightGpu(pub Arc<LightLease>);
 
-/// The node-table numbers of `work`'s light grid, [`NO_LIGHT`] without one.
-pub fn light_entry(tree: &QuadTree, work: &NodeWork) -> [f32; 4] {
-    work.gpu
-        .get::<NodeLightGpu>()
-        .map_or(NO_LIGHT, |l| l.0.entry(tree, work.key))
+/// The node-table numbers of `work`'s light grid this frame, [`NO_LIGHT`] without one.
+pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> LightEntry {
+    let Some(l) = work.gpu.get::<NodeLightGpu>() else {
+        return NO_LIGHT;
+    };
+    let grid = l.0.entry(tree, work.key);
+    if grid == NO_LIGHT.grid {
+        return NO_LIGHT;
+    }
+    let steps = frame.light.seams.get(&work.key).map_or(0, |s| s.0);
+    LightEntry {
+        grid,
+        seam: [
+            f32::from(steps),
+            node_columns(work.key.level, grid_level(tree)) as f32,
+        ],
+    }
 }
 
 #[derive(Debug, Default)]
@@ -73,6 +87,13 @@ impl NodeRenderer for LightingRenderer {
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.unlit_drawn = 0;
+        let lit: Vec<_> = draws
+            .drawn
+            .iter()
+            .filter(|d| d.work.gpu.get::<NodeLightGpu>().is_some())
+            .map(|d| d.key)
+            .collect();
+        frame.light.seams = coarser_sides(draws.tree, &lit);
         for d in draws.drawn.iter().chain(draws.ancestors) {
             if let Some(l) = d.work.gpu.get::<NodeLightGpu>() {
                 frame.light.refresh(&gpu.queue, &l.0);

@@ -8,6 +8,7 @@
 
 use super::frame::FrameResources;
 use super::gpu_data::NodeEntry;
+use super::light_pool::LightEntry;
 use super::suballoc::{Lease, Suballocator};
 
 /// Node slots a table holds (resident nodes of one renderer; 4 MiB of entries at 2 per slot).
@@ -75,8 +76,7 @@ impl NodeTable {
     /// Sets entry `index` for this frame: the node at `origin_m` (south-west corner) drawn at
     /// `level` with dither interval `dither`, four numbers only its renderer reads (`extra`;
     /// terrain: the ground-texture layer it shows, texture coordinates per metre and its corner
-    /// in that texture's node, m) and its light grid (`light`: `LightLease::entry` or
-    /// `NO_LIGHT`).
+    /// in that texture's node, m) and its light grid (`light`: `lighting::light_entry`).
     #[allow(clippy::too_many_arguments, reason = "one entry's fields")]
     pub fn set(
         &mut self,
@@ -86,15 +86,15 @@ impl NodeTable {
         level: u8,
         dither: [f32; 2],
         extra: [f32; 4],
-        light: [f32; 4],
+        light: LightEntry,
     ) {
         let [x, y, z] = frame.offset_m(origin_m);
         let i = index as usize;
         self.entries[i] = NodeEntry {
             offset_lo: [x, y, z, dither[0]],
             hi_level: [dither[1], f32::from(level), extra[0], extra[1]],
-            light,
-            more: [extra[2], extra[3], 0.0, 0.0],
+            light: light.grid,
+            more: [extra[2], extra[3], light.seam[0], light.seam[1]],
         };
         self.written = self.written.max(i + 1);
     }

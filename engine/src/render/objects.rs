@@ -494,7 +494,7 @@ impl NodeRenderer for ObjectsRenderer {
         bytes
     }
 
-    fn prepare(&mut self, gpu: &Gpu, _frame: &mut FrameResources, draws: &FrameDraws<'_>) {
+    fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.frame_no += 1;
         self.items.clear();
         self.stats = ObjectStats::default();
@@ -510,7 +510,7 @@ impl NodeRenderer for ObjectsRenderer {
                 continue;
             };
             // Objects are lit by the drawing node's light grid (sky and sun visibility).
-            let light = light_entry(draws.tree, node.work);
+            let light = light_entry(frame, draws.tree, node.work).grid;
             if self.hlod_item(draws, node_index, objects, light, &mut uniforms) {
                 continue;
             }

@@ -620,7 +620,7 @@ impl NodeRenderer for TerrainRenderer {
                     }
                     None => (NO_TEXTURE, [-1.0, 0.0, 0.0, 0.0]),
                 };
-                let light = light_entry(draws.tree, d.work);
+                let light = light_entry(frame, draws.tree, d.work);
                 self.table.set(
                     frame,
                     slot,

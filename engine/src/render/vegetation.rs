@@ -14,6 +14,7 @@ use super::frame::{
 };
 use super::gpu_data::MeshVertex;
 use super::impostors::ImpostorPages;
+use super::light_pool::LightEntry;
 use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
@@ -719,7 +720,7 @@ impl VegetationRenderer {
         &mut self,
         frame: &FrameResources,
         p: &PlantsGpu,
-        (level, light): (u8, [f32; 4]),
+        (level, light): (u8, LightEntry),
         dither: [f32; 2],
         drawn: bool,
         is_ancestor: bool,
@@ -835,7 +836,7 @@ impl NodeRenderer for VegetationRenderer {
                         .ancestors
                         .binary_search_by_key(&d.key, |a| a.key)
                         .is_ok();
-                    let node = (d.key.level, light_entry(draws.tree, d.work));
+                    let node = (d.key.level, light_entry(frame, draws.tree, d.work));
                     self.plan_node(
                         frame,
                         p,
@@ -852,7 +853,7 @@ impl NodeRenderer for VegetationRenderer {
                     && p.groups.iter().any(|g| g.kept)
                     && visible(p)
                 {
-                    let node = (a.key.level, light_entry(draws.tree, a.work));
+                    let node = (a.key.level, light_entry(frame, draws.tree, a.work));
                     self.plan_node(frame, p, node, [0.0, 1.0], false, true, GroupDither::Full);
                 }
             }

@@ -278,31 +278,6 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
     }
 }
 
-/// Whether the ray through pixel (px, py) hits the map's finest surface inside the map
-/// (ray-marched with steps no longer than half the height above ground).
-fn ray_hits_ground(world: &engine::surface::world::World, cam: &Camera, px: u32, py: u32) -> bool {
-    let dir = tests::pixel_ray(cam, px, py);
-    let (o, s) = (world.origin_m(), world.size_m());
-    let mut t = 0.0;
-    for _ in 0..4000 {
-        let p = cam.position_m + dir * t;
-        // A few metres of margin inside the border: the skirts there may be seen edge-on.
-        if p.x < o[0] + 2.0
-            || p.y < o[1] + 2.0
-            || p.x > o[0] + s[0] - 2.0
-            || p.y > o[1] + s[1] - 2.0
-        {
-            return false;
-        }
-        let above = p.z - world.height_m(p.x, p.y);
-        if above <= 0.0 {
-            return true;
-        }
-        t += (above * 0.5).max(0.05);
-    }
-    false
-}
-
 /// Renders the terrain over a magenta clear colour (no sky) from 50 cameras aimed at the ground,
 /// each after settling and during the cross-fades of a move to the next camera: no pixel whose
 /// ray hits the ground may stay magenta.
@@ -342,7 +317,7 @@ fn no_leaked_pixels_from_fifty_cameras_including_fades() {
                 for qx in 0..size[0] {
                     let p = &px[((py * size[0] + qx) * 4) as usize..][..4];
                     assert!(
-                        !(magenta(p) && ray_hits_ground(&world, cam, qx, py)),
+                        !(magenta(p) && tests::ground_hit(&world, cam, qx, py).is_some()),
                         "camera {i} ({what}): leaked pixel at ({qx}, {py}); {} nodes drawn",
                         v.drawn_keys().len()
                     );

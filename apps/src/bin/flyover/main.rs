@@ -130,6 +130,9 @@ pub(crate) struct Cli {
     /// Debug view: everything grey, lit by the light grids alone.
     #[arg(long)]
     pub(crate) lighting_only: bool,
+    /// Debug view: the light grids' raw values (red: sky visibility, green: sun visibility).
+    #[arg(long)]
+    pub(crate) light_values: bool,
     /// Headless: before the first frame, stream its view until ready and its light grids are
     /// computed (pictures of a settled view; the frames' statistics then start warm).
     #[arg(long)]
@@ -257,6 +260,7 @@ pub(crate) fn make_viewer(
     let mut viewer = Viewer::with_kinds(gpu, format, world, settings(cli), &kinds);
     viewer.view.ground_view = cli.ground_view.into();
     viewer.view.lighting_only = cli.lighting_only;
+    viewer.view.light_values = cli.light_values;
     viewer.view.pm_lod = PmLodSettings {
         strength: cli.pm_strength,
         min_vertices: cli.pm_min_vertices,

@@ -56,6 +56,10 @@ pub(crate) fn panel(
         &mut view.lighting_only,
         "lighting only (grey, light grids alone)",
     );
+    ui.checkbox(
+        &mut view.light_values,
+        "light-grid values (red sky, green sun visibility)",
+    );
     ui.horizontal(|ui| {
         ui.label("ground:");
         ui.radio_value(&mut view.ground_view, GroundView::Shaded, "lit");

@@ -80,6 +80,26 @@ pub(crate) fn section_lighting(
         secs,
         &format!("{} of the {params} (grid level), 1 core", sample.len()),
     );
+    // Coarser grids (each column computed as at the grid level, so the lattice near their
+    // columns costs more): the ancestors of the first timed grid, one level up and two.
+    for up in 1..=2u8 {
+        let Some(key) = sample
+            .first()
+            .filter(|k| k.level >= up)
+            .map(|k| k.ancestor_at(k.level - up))
+        else {
+            continue;
+        };
+        let t0 = Instant::now();
+        let _ = LightGrid::compute(world, &canopy, tree, key, SUN);
+        r.add(
+            "lighting",
+            &format!("grid computation, {up} level(s) coarser"),
+            t0.elapsed().as_secs_f64() * 1e3,
+            "ms",
+            &format!("one {} m grid, 1 core", tree.node_size_m(key.level)),
+        );
+    }
     if let Some(g) = grids.first() {
         r.add(
             "lighting",
