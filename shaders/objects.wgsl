@@ -53,7 +53,7 @@ struct ObjectOut {
     @location(1) normal: vec3<f32>,
     @location(2) albedo: vec3<f32>,
     @location(3) @interpolate(flat) fade: vec3<f32>,
-    @location(4) light: vec2<f32>,
+    @location(4) light: vec4<f32>,
     @location(5) uv: vec2<f32>,
 };
 

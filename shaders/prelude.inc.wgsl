@@ -36,7 +36,8 @@ struct Node {
 };
 
 // The light-grid pool (engine::render::light_pool): tiles of COLUMNS x COLUMNS x LAYERS
-// samples, r sky and g sun visibility.
+// samples: r sky visibility, g the canopy's transmittance toward the sun, b the sun's
+// elevation over the terrain horizon toward it (`light_visibility`), a unused.
 struct LightInfo {
     // Heights of the layers above the ground (m), 7 used.
     layers_m: array<vec4<f32>, 2>,
@@ -71,8 +72,9 @@ struct VertexOut {
     @location(2) albedo: vec3<f32>,
     // The node's `node_fade` (one node per primitive).
     @location(3) @interpolate(flat) fade: vec3<f32>,
-    // Sky and sun visibility (`node_light`).
-    @location(4) light: vec2<f32>,
+    // The light grid's values (`node_light`; `light_visibility` turns them into sky and sun
+    // visibility per pixel, so a terrain shadow's edge stays sharp between columns).
+    @location(4) light: vec4<f32>,
 };
 
 // The light-grid pool's texture coordinate across the layers for `above_m` over the ground
@@ -89,20 +91,20 @@ fn light_layer_w(above_m: f32) -> f32 {
     return (layer + 0.5) / f32(LIGHT_LAYERS);
 }
 
-// Sky and sun visibility at column coordinates `g` of the grid in pool tile `slot`, layer
-// coordinate `w` (trilinear; clamped to the tile's sample centres, so tiles never bleed).
-fn light_fetch(slot: f32, g: vec2<f32>, w: f32) -> vec2<f32> {
+// The grid values at column coordinates `g` of the grid in pool tile `slot`, layer coordinate
+// `w` (trilinear; clamped to the tile's sample centres, so tiles never bleed).
+fn light_fetch(slot: f32, g: vec2<f32>, w: f32) -> vec4<f32> {
     let tiles = light_info.tiles.x;
     let side = f32(LIGHT_COLUMNS);
     let tile = vec2<f32>(slot % tiles, floor(slot / tiles));
     let c = clamp(g, vec2<f32>(0.0), vec2<f32>(side - 1.0));
     let uv = (tile * side + 0.5 + c) / (tiles * side);
-    return textureSampleLevel(light_grids, light_sampler, vec3<f32>(uv, w), 0.0).rg;
+    return textureSampleLevel(light_grids, light_sampler, vec3<f32>(uv, w), 0.0);
 }
 
 // `light_fetch` reading only every `k.x`-th column along x and every `k.y`-th along y (linear
 // between them; 1: every column): what a grid `k` times coarser holds there.
-fn light_decimated(slot: f32, g: vec2<f32>, w: f32, k: vec2<f32>) -> vec2<f32> {
+fn light_decimated(slot: f32, g: vec2<f32>, w: f32, k: vec2<f32>) -> vec4<f32> {
     let coarse = k > vec2<f32>(1.0);
     let lo = select(g, floor(g / k) * k, coarse);
     let t = select(vec2<f32>(0.0), (g - lo) / k, coarse);
@@ -112,14 +114,14 @@ fn light_decimated(slot: f32, g: vec2<f32>, w: f32, k: vec2<f32>) -> vec2<f32> {
     return mix(south, north, t.y);
 }
 
-// Sky and sun visibility of a point of node `n` (`local_xy` from its south-west corner,
-// `above_m` over the ground) from the node's light grid (1 and 1 without one). Near a side
+// The light-grid values of a point of node `n` (`local_xy` from its south-west corner,
+// `above_m` over the ground; fully lit without a grid), for `light_visibility`. Near a side
 // whose drawn neighbour uses a coarser grid (`n.more.z`, engine::lighting::seams), the grid is
 // read at that grid's columns only, blending back to every column within one of its column
 // steps from the side: both nodes show the same values along the side.
-fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec2<f32> {
+fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
     if (n.light.x < 0.0) {
-        return vec2<f32>(1.0);
+        return vec4<f32>(1.0, 1.0, 1.0, 0.0);
     }
     let slot = n.light.x;
     let g = n.light.zw + local_xy * n.light.y;
@@ -146,7 +148,7 @@ fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec2<f32> {
     let kx = array<f32, 3>(1.0, k.z, k.w);
     let ay = array<f32, 3>(max(1.0 - wt.x - wt.y, 0.0), wt.x, wt.y);
     let ky = array<f32, 3>(1.0, k.x, k.y);
-    var sum = vec2<f32>(0.0);
+    var sum = vec4<f32>(0.0);
     for (var i = 0u; i < 3u; i = i + 1u) {
         for (var j = 0u; j < 3u; j = j + 1u) {
             let a = ax[i] * ay[j];
@@ -156,6 +158,14 @@ fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec2<f32> {
         }
     }
     return sum;
+}
+
+// Sky and sun visibility from interpolated grid values `v` (`node_light`): the sun is the
+// canopy's transmittance times the share of its disc above the terrain horizon
+// (engine::lighting::grid::terrain_lit).
+fn light_visibility(v: vec4<f32>) -> vec2<f32> {
+    let margin_rad = (2.0 * v.z - 1.0) * LIGHT_MARGIN_RANGE_RAD;
+    return vec2<f32>(v.x, v.y * clamp(0.5 + margin_rad / SUN_DIAMETER_RAD, 0.0, 1.0));
 }
 
 // 8 x 8 ordered-dither threshold in [0, 1): each pixel belongs to exactly one node of a fade.
@@ -211,8 +221,9 @@ fn lit_pixel(in: VertexOut) -> vec4<f32> {
 // [0, 1): every pixel is theirs). A shader without `discard` keeps the early depth test.
 fn lit_color(in: VertexOut) -> vec4<f32> {
     let mode = u32(frame.fog.z + 0.5);
+    let vis = light_visibility(in.light);
     if (mode == 5u) {
-        return vec4<f32>(in.light, 0.0, 1.0);
+        return vec4<f32>(vis, 0.0, 1.0);
     }
     var albedo = in.albedo;
     if (mode == 1u) {
@@ -223,9 +234,9 @@ fn lit_color(in: VertexOut) -> vec4<f32> {
     }
     let n = normalize(in.normal);
     // The light grid's visibilities scale the direct sun (shadow) and the sky (occlusion).
-    let sun = max(dot(n, frame.sun_dir.xyz), 0.0) * in.light.y;
+    let sun = max(dot(n, frame.sun_dir.xyz), 0.0) * vis.y;
     let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
-    return fogged(albedo * (frame.sun_color.rgb * sun + ambient * in.light.x), in.rel);
+    return fogged(albedo * (frame.sun_color.rgb * sun + ambient * vis.x), in.rel);
 }
 
 // A hash of an integer lattice point to [0, 1] (value-noise corners; ground textures and the

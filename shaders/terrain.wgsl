@@ -41,9 +41,9 @@ struct TerrainOut {
     @location(4) uv: vec2<f32>,
     // The node's layer in `ground_page`, or -1 without a texture.
     @location(5) @interpolate(flat) layer: i32,
-    // Sky and sun visibility of the ground layer of the node's light grid at the vertex
-    // (`node_light`: at a grid-level node's vertices, its columns).
-    @location(6) light: vec2<f32>,
+    // The ground layer of the node's light grid at the vertex (`node_light`: at a grid-level
+    // node's vertices, its columns), turned into visibilities per pixel (`light_visibility`).
+    @location(6) light: vec4<f32>,
 };
 
 // The draw's first instance is the node's slot in the node table.

@@ -48,8 +48,8 @@ struct BillboardOut {
     @location(1) uv: vec2<f32>,
     @location(2) @interpolate(flat) look: u32,
     @location(3) @interpolate(flat) fade: vec3<f32>,
-    // Sky and sun visibility (`node_light`).
-    @location(4) light: vec2<f32>,
+    // The light grid's values (`node_light`).
+    @location(4) light: vec4<f32>,
     // Horizontal unit vector from the camera to the quad: the bake's north (the quad's x is
     // the bake's east turned to (-away.y, away.x)).
     @location(5) @interpolate(flat) away: vec2<f32>,

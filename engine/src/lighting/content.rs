@@ -23,9 +23,9 @@ use rustc_hash::FxHashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, Weak};
 
-/// Bytes of one grid on the GPU (sky and sun, one byte each per sample), counted in the
+/// Bytes of one grid on the GPU (four bytes a sample, `render::light_pool`), counted in the
 /// node-cache budget by the node that owns the grid.
-pub const GRID_GPU_BYTES: usize = COLUMNS * COLUMNS * LAYERS * 2;
+pub const GRID_GPU_BYTES: usize = COLUMNS * COLUMNS * LAYERS * 4;
 
 /// Keys kept by [`LightingContent::computed_keys`].
 pub const LOG_LEN: usize = 4096;

@@ -18,8 +18,11 @@
 //! of its parent's grid), which is what lets a node blend seamlessly toward a coarser
 //! neighbour's grid (`render::light_pool`). **Canopy transmittance** is `exp(-optical depth)` of
 //! [`Canopy::extinction_per_m`] summed at midpoints along the ray until it leaves the canopy.
-//! **Sun visibility**: 1 when the sun is above the horizon along its own azimuth, else 0, times
-//! the canopy transmittance toward it.
+//! **Sun visibility** is the share of the sun's disc above the terrain horizon along its own
+//! azimuth ([`terrain_lit`]) times the canopy transmittance toward it. A sample stores the two
+//! factors apart, the first as the sun's elevation over the horizon ([`margin_to_byte`]): both
+//! are interpolated first and multiplied after, so a terrain shadow's edge falls where the
+//! interpolated horizon crosses the sun instead of being smeared over a column spacing.
 //!
 //! Values are stored as bytes (1/255 steps); the tests compare them with a ray-marched
 //! reference on the finest surface (tests/tests/e2e/lighting.rs).
@@ -41,7 +44,7 @@ pub const COLUMNS: usize = (GRID_SIDE_M / COLUMN_SPACING_M) as usize + 1;
 /// sampling does not shadow the sample.
 pub const GROUND_LAYER_M: f64 = 0.25;
 /// Layers of a grid.
-pub const LAYERS: usize = 7;
+pub const LAYERS: usize = 8;
 
 /// The layer heights above the finest surface (m) under `canopy`: the ground layer, the top of
 /// every canopy layer (the light changes fastest with height just there: above a species' top
@@ -127,8 +130,14 @@ pub struct LightGrid {
     pub ground_m: Vec<f32>,
     /// Sky visibility in 1/255 steps, `[layer][row][col]`.
     pub sky: Vec<u8>,
-    /// Sun visibility in 1/255 steps, `[layer][row][col]`.
+    /// The canopy's transmittance toward the sun in 1/255 steps, `[layer][row][col]` (0 with
+    /// the sun below the horizontal).
     pub sun: Vec<u8>,
+    /// The sun's elevation over the terrain horizon toward it ([`margin_to_byte`]),
+    /// `[layer][row][col]`: interpolated, then turned into the terrain's shadow
+    /// ([`terrain_lit`]), it places a shadow's edge between columns where the horizon crosses
+    /// the sun, not halfway.
+    pub sun_margin: Vec<u8>,
     /// The sun the grid was lit for.
     pub sun_dir: Sun,
     /// Heights of the layers above the ground (m), [`layer_heights_m`] of the canopy.
@@ -244,7 +253,7 @@ impl LightGrid {
 
     /// Bytes the grid holds (its heights and both visibilities).
     pub fn bytes(&self) -> usize {
-        self.ground_m.len() * 4 + self.sky.len() + self.sun.len()
+        self.ground_m.len() * 4 + self.sky.len() + self.sun.len() + self.sun_margin.len()
     }
 
     /// The node whose grid shades node `key`: its ancestor at [`grid_level`], or itself when it
@@ -318,11 +327,6 @@ impl LightGrid {
         } else {
             [0.0, 1.0]
         });
-        let sun_tan = if flat > 1e-9 {
-            toward.z / flat
-        } else {
-            f64::INFINITY
-        };
         let layers_m = layer_heights_m(canopy);
         let cells = COLUMNS * COLUMNS;
         let mut out = Self {
@@ -332,6 +336,7 @@ impl LightGrid {
             ground_m: vec![0.0; cells],
             sky: vec![0; LAYERS * cells],
             sun: vec![0; LAYERS * cells],
+            sun_margin: vec![0; LAYERS * cells],
             sun_dir: sun,
             layers_m,
         };
@@ -399,8 +404,12 @@ impl LightGrid {
                             }
                         }
                         sky /= HORIZON_AZIMUTHS as f64;
-                        let lit = sun.elevation_deg > 0.0 && tan_max[HORIZON_AZIMUTHS][l] < sun_tan;
-                        let sun_vis = if !lit {
+                        // The sun's elevation over the terrain horizon toward it, and the
+                        // canopy's transmittance toward it (wherever the terrain shadows, too:
+                        // both are interpolated before they are combined, `sample`).
+                        let margin =
+                            sun.elevation_deg.to_radians() - tan_max[HORIZON_AZIMUTHS][l].atan();
+                        let transmittance = if sun.elevation_deg <= 0.0 {
                             0.0
                         } else if under {
                             canopy_transmittance(
@@ -415,7 +424,8 @@ impl LightGrid {
                         };
                         let i = Self::index(l, row, col);
                         out.sky[i] = to_byte(sky);
-                        out.sun[i] = to_byte(sun_vis);
+                        out.sun[i] = to_byte(transmittance);
+                        out.sun_margin[i] = margin_to_byte(margin);
                     }
                 }
             }
@@ -449,13 +459,45 @@ impl LightGrid {
             }
             sum
         };
-        (get(&self.sky), get(&self.sun))
+        let margin = margin_of_unit(get(&self.sun_margin));
+        (get(&self.sky), get(&self.sun) * terrain_lit(margin))
+    }
+
+    /// Sky and sun visibility at sample `i` (no interpolation).
+    pub fn at_sample(&self, i: usize) -> (f64, f64) {
+        let unit = |v: u8| f64::from(v) / 255.0;
+        let lit = terrain_lit(margin_of_unit(unit(self.sun_margin[i])));
+        (unit(self.sky[i]), unit(self.sun[i]) * lit)
     }
 }
 
 /// An optical depth beyond which a ray counts as blocked: `exp(-6)` = 0.0025, under half a
 /// byte step.
 const OPAQUE_DEPTH: f64 = 6.0;
+
+/// The sun's elevation over the terrain horizon is stored within +-this (rad): 10 degrees,
+/// steps of 0.08 degrees.
+pub const SUN_MARGIN_RANGE_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
+/// The sun's apparent diameter (rad, 0.53 degrees): the terrain's shadow goes from none to full
+/// while the horizon crosses it.
+pub const SUN_DIAMETER_RAD: f64 = 0.53 * std::f64::consts::PI / 180.0;
+
+/// The byte of a sun margin (rad), clamped to [`SUN_MARGIN_RANGE_RAD`].
+pub fn margin_to_byte(margin_rad: f64) -> u8 {
+    to_byte(0.5 + 0.5 * margin_rad / SUN_MARGIN_RANGE_RAD)
+}
+
+/// The margin (rad) of a stored value scaled to [0, 1] (a byte / 255, or a filtered texel).
+pub fn margin_of_unit(v: f64) -> f64 {
+    (2.0 * v - 1.0) * SUN_MARGIN_RANGE_RAD
+}
+
+/// The share of the sun's disc above the terrain horizon for a margin (rad): linear across the
+/// disc's diameter.
+pub fn terrain_lit(margin_rad: f64) -> f64 {
+    (0.5 + margin_rad / SUN_DIAMETER_RAD).clamp(0.0, 1.0)
+}
 
 fn to_byte(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
@@ -523,13 +565,13 @@ mod tests {
                 let (ae, e) = (LightGrid::index(l, k, last), LightGrid::index(l, k, 0));
                 let (an, n) = (LightGrid::index(l, last, k), LightGrid::index(l, 0, k));
                 assert_eq!(
-                    (a.sky[ae], a.sun[ae]),
-                    (east.sky[e], east.sun[e]),
+                    (a.sky[ae], a.sun[ae], a.sun_margin[ae]),
+                    (east.sky[e], east.sun[e], east.sun_margin[e]),
                     "east {l} {k}"
                 );
                 assert_eq!(
-                    (a.sky[an], a.sun[an]),
-                    (north.sky[n], north.sun[n]),
+                    (a.sky[an], a.sun[an], a.sun_margin[an]),
+                    (north.sky[n], north.sun[n], north.sun_margin[n]),
                     "north {l} {k}"
                 );
             }
@@ -580,12 +622,12 @@ mod tests {
                         for l in 0..LAYERS {
                             let (i, j) = (LightGrid::index(l, cr, cc), LightGrid::index(l, fr, fc));
                             assert_eq!(
-                                (coarse.sky[i], coarse.sun[i]),
-                                (fine.sky[j], fine.sun[j]),
+                                (coarse.sky[i], coarse.sun[i], coarse.sun_margin[i]),
+                                (fine.sky[j], fine.sun[j], fine.sun_margin[j]),
                                 "level {coarse_level} child ({dx}, {dy}) layer {l} column ({r}, {c})"
                             );
                             compared += 1;
-                            shaded += usize::from(fine.sun[j] < 255);
+                            shaded += usize::from(fine.at_sample(j).1 < 0.5);
                         }
                     }
                 }

@@ -1,4 +1,5 @@
-//! The light-grid pool: one 3D texture (`Rg8Unorm`: sky and sun visibility) of
+//! The light-grid pool: one 3D texture (`Rgba8Unorm`: sky visibility, the canopy's
+//! transmittance toward the sun, the sun's margin over the terrain horizon, one unused) of
 //! [`POOL_TILES`] x [`POOL_TILES`] tiles, each a grid's `COLUMNS x COLUMNS x LAYERS` samples,
 //! bound in the frame group (binding 1, with a clamping linear sampler at 2 and the layer
 //! heights at 3) so that every renderer's shaders sample it (`node_light` in
@@ -17,13 +18,15 @@ use rustc_hash::FxHashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 
-/// Tiles along each side of the pool texture: 2,304 grids resident at once (35 MB), those of
+/// Tiles along each side of the pool texture: 2,304 grids resident at once (80 MB), those of
 /// as many resident nodes at the grid level or coarser (finer nodes share their ancestor's). A
 /// grid that finds the pool full is drawn fully lit (logged once, counted in
 /// `LightPool::refused`).
 pub const POOL_TILES: u32 = 48;
 /// Texels of one tile along x and y.
 const TILE: u32 = COLUMNS as u32;
+/// Bytes of one texel (one sample).
+pub const TEXEL_BYTES: u32 = 4;
 
 /// Mirrors the prelude's `LightInfo`: the layer heights above the ground (m, [`LAYERS`] of
 /// them, the rest repeat the last) and the pool's tiles per side.
@@ -130,7 +133,7 @@ impl LightPool {
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::Rg8Unorm,
+            format: wgpu::TextureFormat::Rgba8Unorm,
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         });
@@ -211,10 +214,9 @@ impl LightPool {
         let Some(grid) = lease.grid.grid() else {
             return;
         };
-        let mut texels = Vec::with_capacity(grid.sky.len() * 2);
-        for (&sky, &sun) in grid.sky.iter().zip(&grid.sun) {
-            texels.push(sky);
-            texels.push(sun);
+        let mut texels = Vec::with_capacity(grid.sky.len() * TEXEL_BYTES as usize);
+        for ((&sky, &sun), &margin) in grid.sky.iter().zip(&grid.sun).zip(&grid.sun_margin) {
+            texels.extend([sky, sun, margin, 0]);
         }
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
@@ -230,7 +232,7 @@ impl LightPool {
             &texels,
             wgpu::TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(TILE * 2),
+                bytes_per_row: Some(TILE * TEXEL_BYTES),
                 rows_per_image: Some(TILE),
             },
             wgpu::Extent3d {

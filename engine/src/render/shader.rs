@@ -38,8 +38,12 @@ fn prelude_text() -> std::borrow::Cow<'static, str> {
 
 /// The prelude's own constants (the light grids' shape).
 fn prelude_constants() -> String {
-    use crate::lighting::grid::{COLUMNS, LAYERS};
-    format!("const LIGHT_COLUMNS: u32 = {COLUMNS}u;\nconst LIGHT_LAYERS: u32 = {LAYERS}u;\n")
+    use crate::lighting::grid::{COLUMNS, LAYERS, SUN_DIAMETER_RAD, SUN_MARGIN_RANGE_RAD};
+    format!(
+        "const LIGHT_COLUMNS: u32 = {COLUMNS}u;\nconst LIGHT_LAYERS: u32 = {LAYERS}u;\n\
+         const LIGHT_MARGIN_RANGE_RAD: f32 = {SUN_MARGIN_RANGE_RAD:?};\n\
+         const SUN_DIAMETER_RAD: f32 = {SUN_DIAMETER_RAD:?};\n"
+    )
 }
 
 /// The assembled source of renderer file `name` with its generated `constants` (WGSL `const`

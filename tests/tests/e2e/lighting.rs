@@ -104,12 +104,14 @@ pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
 
 /// On 300 random points of the hard tiny map (`cliff_world`: a 100 m cliff, spikes, a flat sea,
 /// the tiny map's forests; columns anywhere in four random grid nodes, heights from the ground
-/// to above the canopy) under a low sun (15 degrees, east: the cliff's shadow falls west), the grid's trilinear sky and sun visibility agree with
-/// the ray-marched reference within 0.05 for at least 95 % of the points (sky) and 90 % (sun).
+/// to above the canopy) under a low sun (15 degrees, east: the cliff's shadow falls west), the
+/// grid's trilinear sky and sun visibility agree with the ray-marched reference within 0.05 for
+/// at least 95 % of the points, sky and sun (measured: 99.3 and 96.3 %).
 /// Why those bounds: the grid's bytes and its 16 horizon azimuths cost ~0.01; between columns
-/// 4 m apart the grid interpolates what the reference resolves, which matters most at shadow
-/// edges (hard 0/1 in the reference: every point within ~2 m of one can disagree by up to 1)
-/// and at forest edges.
+/// 4 m apart and layers a few metres apart the grid interpolates what the reference resolves,
+/// which matters most under crowns (a crown's shadow is about as wide as a column spacing) and
+/// at terrain shadow edges (hard 0/1 in the reference; the grid interpolates the sun's margin
+/// over the horizon and decides after, so it places them within a fraction of a column).
 #[test]
 fn grid_visibility_agrees_with_a_ray_marched_reference() {
     let world = tests::terrain::cliff_world();
@@ -164,7 +166,7 @@ fn grid_visibility_agrees_with_a_ray_marched_reference() {
         "sky: {sky_ok} of {points} within 0.05"
     );
     assert!(
-        sun_ok as f64 >= 0.90 * n,
+        sun_ok as f64 >= 0.95 * n,
         "sun: {sun_ok} of {points} within 0.05"
     );
 }
@@ -589,9 +591,9 @@ fn billboards_are_lit_by_the_sun_of_the_frame() {
 /// pixel is labelled with the grid level of the drawn node under it (its ray marched on the
 /// finest surface). Changes between neighbouring pixels across a border of grid levels are no
 /// larger than those inside a level near the border (within 8 px): their mean and the mean of
-/// their largest 2 % stay within 1.1 times (measured: 0.84 and 0.67 at 10 degrees, 0.90 and
+/// their largest 2 % stay within 1.1 times (measured: 0.83 and 0.75 at 10 degrees, 0.90 and
 /// 0.83 at 30). Without the blend toward the coarser grid (`node_light` reading every column)
-/// they were 1.50 and 1.44, and 1.52 and 2.17, and the test failed.
+/// they were 1.52 and 1.26 at 10 degrees, and the test failed.
 #[test]
 fn no_step_where_light_grids_of_two_levels_meet() {
     use engine::camera::Camera;
