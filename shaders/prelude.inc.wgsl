@@ -37,12 +37,16 @@ struct Node {
 
 // The light-grid pool (engine::render::light_pool): tiles of COLUMNS x COLUMNS x LAYERS
 // samples: r sky visibility, g the canopy's transmittance toward the sun, b the sun's
-// elevation over the terrain horizon toward it (`light_visibility`), a unused.
+// elevation over the terrain horizon toward it (`light_visibility`), a the ground's bounce
+// (engine::lighting::grid::LightGrid::bounce_at: the sunlit terrain hiding the sky, per unit
+// albedo and sun irradiance).
 struct LightInfo {
     // Heights of the layers above the ground (m), 7 used.
     layers_m: array<vec4<f32>, 2>,
     // x: tiles per side.
     tiles: vec4<f32>,
+    // rgb: the map's mean ground albedo (linear): the colour of the light the terrain bounces.
+    ground_albedo: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -209,7 +213,7 @@ fn level_color(level: f32) -> vec3<f32> {
 
 // A lit, fogged, dithered surface pixel (terrain and plant meshes); debug mode 1 colours it by
 // the node's level, 4 makes it grey (lighting only), 5 shows the light grid's values (red sky,
-// green sun visibility; unshaded, no fog).
+// green sun visibility, blue the ground's bounce; unshaded, no fog).
 fn lit_pixel(in: VertexOut) -> vec4<f32> {
     if (!in_dither(in.clip.xy, in.fade)) {
         discard;
@@ -223,7 +227,7 @@ fn lit_color(in: VertexOut) -> vec4<f32> {
     let mode = u32(frame.fog.z + 0.5);
     let vis = light_visibility(in.light);
     if (mode == 5u) {
-        return vec4<f32>(vis, 0.0, 1.0);
+        return vec4<f32>(vis, in.light.w, 1.0);
     }
     var albedo = in.albedo;
     if (mode == 1u) {
@@ -236,7 +240,9 @@ fn lit_color(in: VertexOut) -> vec4<f32> {
     // The light grid's visibilities scale the direct sun (shadow) and the sky (occlusion).
     let sun = max(dot(n, frame.sun_dir.xyz), 0.0) * vis.y;
     let ambient = mix(frame.sky_horizon.rgb * 0.35, frame.sky_zenith.rgb * 0.6, 0.5 + 0.5 * n.z);
-    return fogged(albedo * (frame.sun_color.rgb * sun + ambient * vis.x), in.rel);
+    // One bounce: the sunlit terrain that hides the sky, in the ground's colour.
+    let bounce = light_info.ground_albedo.rgb * frame.sun_color.rgb * in.light.w;
+    return fogged(albedo * (frame.sun_color.rgb * sun + ambient * vis.x + bounce), in.rel);
 }
 
 // A hash of an integer lattice point to [0, 1] (value-noise corners; ground textures and the

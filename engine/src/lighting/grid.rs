@@ -18,6 +18,13 @@
 //! of its parent's grid), which is what lets a node blend seamlessly toward a coarser
 //! neighbour's grid (`render::light_pool`). **Canopy transmittance** is `exp(-optical depth)` of
 //! [`Canopy::extinction_per_m`] summed at midpoints along the ray until it leaves the canopy.
+//! **Ground bounce** ([`LightGrid::bounce_at`]): in the same horizon march, each band of
+//! elevations where the terrain rises above the running horizon is weighted (in `sin^2` of the
+//! elevation, as the sky) by `max(0, n . s)` of the terrain seen there: its slope along the ray
+//! from the previous march point (a cliff between two points is seen as its face), across the
+//! ray from central differences. The terrain is taken as lit wherever it faces the sun (the
+//! shadows cast on it are left out).
+//!
 //! **Sun visibility** is the share of the sun's disc above the terrain horizon along its own
 //! azimuth ([`terrain_lit`]) times the canopy transmittance toward it. A sample stores the two
 //! factors apart, the first as the sun's elevation over the horizon ([`margin_to_byte`]): both
@@ -138,6 +145,10 @@ pub struct LightGrid {
     /// ([`terrain_lit`]), it places a shadow's edge between columns where the horizon crosses
     /// the sun, not halfway.
     pub sun_margin: Vec<u8>,
+    /// The ground's bounce in 1/255 steps, `[layer][row][col]`: the irradiance of a
+    /// horizontal receiver from the terrain that hides its sky, per unit sun irradiance and
+    /// unit albedo of that terrain ([`LightGrid::bounce_at`]).
+    pub bounce: Vec<u8>,
     /// The sun the grid was lit for.
     pub sun_dir: Sun,
     /// Heights of the layers above the ground (m), [`layer_heights_m`] of the canopy.
@@ -167,6 +178,80 @@ struct HorizonHeights<'a> {
 }
 
 impl<'a> HorizonHeights<'a> {
+    /// `max(0, n . toward)` for the terrain a ray along horizontal unit `dir` sees between
+    /// its points `r0_m` and `r_m` from the column, heights `dh0_m` and `dh_m` over the column's
+    /// ground, the second at (`x_m`, `y_m`): the normal's slope along the ray is the profile's
+    /// between the two points (a cliff between them is seen as its face, not as the ground
+    /// above it), across the ray the surface's at the second point (central differences over
+    /// 2 % of the distance, at least a quarter of the lattice's spacing).
+    fn facing_sun(
+        &self,
+        (x_m, y_m): (f64, f64),
+        dir: [f64; 2],
+        (r0_m, dh0_m): (f64, f64),
+        (r_m, dh_m): (f64, f64),
+        toward: DVec3,
+    ) -> f64 {
+        let e = (0.02 * r_m).max(0.25 * NEAR_SPACING_M);
+        // The points are up to `r + e` from the column: read them as such (the lattice only
+        // within its reach), so every grid holding the column reads the same heights.
+        let (cx, cy) = (-dir[1] * e, dir[0] * e);
+        let across = (self.height_m(x_m + cx, y_m + cy, r_m + e)
+            - self.height_m(x_m - cx, y_m - cy, r_m + e))
+            / (2.0 * e);
+        let along = (dh_m - dh0_m) / (r_m - r0_m);
+        let gradient = [
+            along * dir[0] - across * dir[1],
+            along * dir[1] + across * dir[0],
+        ];
+        DVec3::new(-gradient[0], -gradient[1], 1.0)
+            .normalize()
+            .dot(toward)
+            .max(0.0)
+    }
+
+    /// Marches the horizons of the column at (`x`, `y`), ground `ground_m`, along `dirs` (the
+    /// horizon azimuths, then the sun's) at `distances` (and their inverses): per direction and
+    /// layer the highest tangent of the terrain into `tan_max`. Returns per layer the ground's
+    /// bounce summed over the horizon azimuths: the cosine-weighted share of the sky hidden by
+    /// terrain, each hidden band weighted by how squarely the terrain seen there faces the sun.
+    fn march_column(
+        &self,
+        (x, y, ground): (f64, f64, f64),
+        (dirs, distances, inverse): (&[[f64; 2]], &[f64], &[f64]),
+        layers_m: &[f64; LAYERS],
+        toward: DVec3,
+        tan_max: &mut [[f64; LAYERS]],
+    ) -> [f64; LAYERS] {
+        let mut bounce = [0.0f64; LAYERS];
+        for (d, (best, dir)) in tan_max.iter_mut().zip(dirs).enumerate() {
+            *best = [f64::NEG_INFINITY; LAYERS];
+            let is_azimuth = d < HORIZON_AZIMUTHS;
+            // The previous ray point (distance, height over the ground).
+            let mut previous = (0.0, 0.0);
+            for (&r, &inv_r) in distances.iter().zip(inverse) {
+                let (px, py) = (x + dir[0] * r, y + dir[1] * r);
+                let dh = self.height_m(px, py, r) - ground;
+                // Computed when some layer first sees terrain this high.
+                let mut facing = None;
+                for ((b, lh), add) in best.iter_mut().zip(layers_m).zip(&mut bounce) {
+                    let t = (dh - lh) * inv_r;
+                    if t > *b {
+                        if is_azimuth && t > 0.0 && toward.z > 0.0 {
+                            let f = *facing.get_or_insert_with(|| {
+                                self.facing_sun((px, py), *dir, previous, (r, dh), toward)
+                            });
+                            *add += f * (sin2_of_tan(t) - sin2_of_tan(*b));
+                        }
+                        *b = t;
+                    }
+                }
+                previous = (r, dh);
+            }
+        }
+        bounce
+    }
+
     /// The lattice of `n` points from global index `first` (from `tree_origin_m`), read within
     /// one spacing less than [`NEAR_MARGIN_M`] of a column.
     fn new(world: &'a World, tree_origin_m: [f64; 2], first: [i64; 2], n: [usize; 2]) -> Self {
@@ -253,7 +338,11 @@ impl LightGrid {
 
     /// Bytes the grid holds (its heights and both visibilities).
     pub fn bytes(&self) -> usize {
-        self.ground_m.len() * 4 + self.sky.len() + self.sun.len() + self.sun_margin.len()
+        self.ground_m.len() * 4
+            + self.sky.len()
+            + self.sun.len()
+            + self.sun_margin.len()
+            + self.bounce.len()
     }
 
     /// The node whose grid shades node `key`: its ancestor at [`grid_level`], or itself when it
@@ -337,6 +426,7 @@ impl LightGrid {
             sky: vec![0; LAYERS * cells],
             sun: vec![0; LAYERS * cells],
             sun_margin: vec![0; LAYERS * cells],
+            bounce: vec![0; LAYERS * cells],
             sun_dir: sun,
             layers_m,
         };
@@ -359,15 +449,13 @@ impl LightGrid {
                         (col0[1] + row as i64) * ratio,
                     );
                     out.ground_m[row * COLUMNS + col] = ground as f32;
-                    for (best, dir) in tan_max.iter_mut().zip(&dirs) {
-                        *best = [f64::NEG_INFINITY; LAYERS];
-                        for (&r, &inv_r) in distances.iter().zip(&inverse) {
-                            let dh = heights.height_m(x + dir[0] * r, y + dir[1] * r, r) - ground;
-                            for (b, lh) in best.iter_mut().zip(&layers_m) {
-                                *b = b.max((dh - lh) * inv_r);
-                            }
-                        }
-                    }
+                    let bounce = heights.march_column(
+                        (x, y, ground),
+                        (&dirs, &distances, &inverse),
+                        &layers_m,
+                        toward,
+                        &mut tan_max,
+                    );
                     for (l, &lh) in layers_m.iter().enumerate() {
                         let p0 = DVec3::new(x, y, ground + lh);
                         let under = canopy_near && lh < canopy.top_m;
@@ -426,6 +514,7 @@ impl LightGrid {
                         out.sky[i] = to_byte(sky);
                         out.sun[i] = to_byte(transmittance);
                         out.sun_margin[i] = margin_to_byte(margin);
+                        out.bounce[i] = to_byte(bounce[l] / HORIZON_AZIMUTHS as f64);
                     }
                 }
             }
@@ -436,6 +525,19 @@ impl LightGrid {
     /// Trilinear sky and sun visibility at world (`x_m`, `y_m`), `above_m` above the ground
     /// (clamped to the grid's columns and layers), as the shaders will sample it.
     pub fn sample(&self, x_m: f64, y_m: f64, above_m: f64) -> (f64, f64) {
+        let get = |v: &[u8]| self.trilinear(v, x_m, y_m, above_m);
+        let margin = margin_of_unit(get(&self.sun_margin));
+        (get(&self.sky), get(&self.sun) * terrain_lit(margin))
+    }
+
+    /// Trilinear ground bounce ([`LightGrid::bounce_at`]) at world (`x_m`, `y_m`), `above_m`
+    /// above the ground, as the shaders sample it.
+    pub fn sample_bounce(&self, x_m: f64, y_m: f64, above_m: f64) -> f64 {
+        self.trilinear(&self.bounce, x_m, y_m, above_m)
+    }
+
+    /// Trilinear interpolation of one of the grid's byte fields, scaled to [0, 1].
+    fn trilinear(&self, v: &[u8], x_m: f64, y_m: f64, above_m: f64) -> f64 {
         let gx = ((x_m - self.origin_m[0]) / self.spacing_m).clamp(0.0, (COLUMNS - 1) as f64);
         let gy = ((y_m - self.origin_m[1]) / self.spacing_m).clamp(0.0, (COLUMNS - 1) as f64);
         let (c0, r0) = (
@@ -447,20 +549,25 @@ impl LightGrid {
         let a = above_m.clamp(h[0], h[h.len() - 1]);
         let l0 = (0..h.len() - 1).rfind(|&l| h[l] <= a).unwrap_or(0);
         let fz = (a - h[l0]) / (h[l0 + 1] - h[l0]);
-        let get = |v: &[u8]| {
-            let mut sum = 0.0;
-            for (dl, wz) in [(0, 1.0 - fz), (1, fz)] {
-                for (dr, wy) in [(0, 1.0 - fy), (1, fy)] {
-                    for (dc, wx) in [(0, 1.0 - fx), (1, fx)] {
-                        let i = Self::index(l0 + dl, r0 + dr, c0 + dc);
-                        sum += wz * wy * wx * f64::from(v[i]) / 255.0;
-                    }
+        let mut sum = 0.0;
+        for (dl, wz) in [(0, 1.0 - fz), (1, fz)] {
+            for (dr, wy) in [(0, 1.0 - fy), (1, fy)] {
+                for (dc, wx) in [(0, 1.0 - fx), (1, fx)] {
+                    let i = Self::index(l0 + dl, r0 + dr, c0 + dc);
+                    sum += wz * wy * wx * f64::from(v[i]) / 255.0;
                 }
             }
-            sum
-        };
-        let margin = margin_of_unit(get(&self.sun_margin));
-        (get(&self.sky), get(&self.sun) * terrain_lit(margin))
+        }
+        sum
+    }
+
+    /// The ground's bounce at sample `i`: `(1/pi) * integral of max(0, n . s) cos(theta)` over
+    /// the directions where terrain hides the sky (its normal `n` where the horizon march meets
+    /// it, `s` toward the sun, `theta` from the zenith). Times the terrain's albedo and the sun's
+    /// irradiance, the light that terrain reflects onto a horizontal receiver, taking the
+    /// terrain as lit wherever it faces the sun (its own cast shadows are left out).
+    pub fn bounce_at(&self, i: usize) -> f64 {
+        f64::from(self.bounce[i]) / 255.0
     }
 
     /// Sky and sun visibility at sample `i` (no interpolation).

@@ -7,8 +7,11 @@
 //! neighbouring grids and computed from the same world positions, so both hold the same values)
 //! with layers at fixed heights above the finest surface up to the tree tops. Each sample holds
 //! the sky visibility (the share of a horizontal receiver's cosine-weighted sky that neither the
-//! terrain horizon nor the vegetation canopy hides) and the sun visibility (terrain shadow times
-//! the canopy's transmittance toward the sun, [`grid::Sun`]).
+//! terrain horizon nor the vegetation canopy hides), the sun visibility (terrain shadow times
+//! the canopy's transmittance toward the sun, [`grid::Sun`]) and the ground's bounce (the
+//! sunlit terrain that hides the sky, per unit albedo and sun irradiance; the shaders colour it
+//! with the map's mean ground albedo, so the ambient light takes the ground's colour where
+//! terrain hides the sky).
 //!
 //! Grids of every level compute a column identically, so a coarse grid's columns hold the finer
 //! grids' bytes; [`seams`] finds the drawn nodes that must read their grid at a coarser
@@ -18,7 +21,8 @@
 //! the background when the sun changes); `render::lighting` uploads them into slots of one 3D
 //! texture that the terrain, vegetation and object shaders sample trilinearly.
 //!
-//! Not yet done (issue 17): ambient colour with a ground bounce, a dominant light direction.
+//! Not done (issue 17): a dominant light direction; the bounce leaves out the shadows cast on
+//! the terrain that bounces the light.
 
 pub mod content;
 pub mod grid;

@@ -94,3 +94,41 @@ pub fn visibility(
     };
     (sky, sun_vis)
 }
+
+/// The ground's bounce at (`x_m`, `y_m`), `above_m` metres over `F` (the quantity of
+/// `LightGrid::bounce_at`): over [`REF_AZIMUTHS`] x [`REF_BANDS`] directions of a horizontal
+/// receiver's sky (equal weight), each ray is marched on `F` (steps of 1 % of the distance, at
+/// least 0.25 m, out to 4 km) to the first point below the surface; there `F`'s normal (central
+/// differences over 0.25 m) gives `max(0, n . s)`. Like the grid, it takes the terrain as lit
+/// wherever it faces the sun.
+pub fn bounce(world: &World, x_m: f64, y_m: f64, above_m: f64, sun: Sun) -> f64 {
+    if sun.elevation_deg <= 0.0 {
+        return 0.0;
+    }
+    let toward = sun.toward();
+    let p = DVec3::new(x_m, y_m, world.height_m(x_m, y_m) + above_m);
+    let mut sum = 0.0;
+    for a in 0..REF_AZIMUTHS {
+        let phi = std::f64::consts::TAU * (a as f64 + 0.5) / REF_AZIMUTHS as f64;
+        for b in 0..REF_BANDS {
+            let s = (b as f64 + 0.5) / REF_BANDS as f64;
+            let c = (1.0 - s).sqrt();
+            let w = DVec3::new(phi.sin() * c, phi.cos() * c, s.sqrt());
+            let mut t = 0.25f64;
+            while t * c <= 4000.0 {
+                let q = p + w * t;
+                if q.z < world.height_m(q.x, q.y) {
+                    let e = 0.25;
+                    let gx =
+                        (world.height_m(q.x + e, q.y) - world.height_m(q.x - e, q.y)) / (2.0 * e);
+                    let gy =
+                        (world.height_m(q.x, q.y + e) - world.height_m(q.x, q.y - e)) / (2.0 * e);
+                    sum += DVec3::new(-gx, -gy, 1.0).normalize().dot(toward).max(0.0);
+                    break;
+                }
+                t += (0.01 * t).max(0.25);
+            }
+        }
+    }
+    sum / (REF_AZIMUTHS * REF_BANDS) as f64
+}

@@ -42,8 +42,8 @@ pub struct ViewOptions {
     pub sun: Sun,
     /// Debug view: everything grey, lit by the light grids alone (sky and sun visibility).
     pub lighting_only: bool,
-    /// Debug view: the light grids' raw values, unshaded and without fog (red: sky visibility,
-    /// green: sun visibility; 1 where a node has no grid yet).
+    /// Debug view: the light grids' values, unshaded and without fog (red: sky visibility,
+    /// green: sun visibility, blue: the ground's bounce; 1, 1, 0 where a node has no grid yet).
     pub light_values: bool,
     /// Level choice of progressive-mesh objects (STRENGTH, MINVERTS, ZDISP, fixed level, MORPH;
     /// their tau is the streamer's).

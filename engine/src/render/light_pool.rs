@@ -1,5 +1,6 @@
 //! The light-grid pool: one 3D texture (`Rgba8Unorm`: sky visibility, the canopy's
-//! transmittance toward the sun, the sun's margin over the terrain horizon, one unused) of
+//! transmittance toward the sun, the sun's margin over the terrain horizon, the ground's
+//! bounce) of
 //! [`POOL_TILES`] x [`POOL_TILES`] tiles, each a grid's `COLUMNS x COLUMNS x LAYERS` samples,
 //! bound in the frame group (binding 1, with a clamping linear sampler at 2 and the layer
 //! heights at 3) so that every renderer's shaders sample it (`node_light` in
@@ -29,13 +30,16 @@ const TILE: u32 = COLUMNS as u32;
 pub const TEXEL_BYTES: u32 = 4;
 
 /// Mirrors the prelude's `LightInfo`: the layer heights above the ground (m, [`LAYERS`] of
-/// them, the rest repeat the last) and the pool's tiles per side.
+/// them, the rest repeat the last), the pool's tiles per side and the ground's albedo.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct LightInfo {
     pub layers_m: [[f32; 4]; 2],
     /// x: tiles per side, yzw: unused.
     pub tiles: [f32; 4],
+    /// rgb: the map's mean ground albedo (linear), the colour of the light the terrain bounces
+    /// (a grid sample's bounce times it and the sun's colour); w: unused.
+    pub ground_albedo: [f32; 4],
 }
 
 /// `LightLease::written` before the first write.
@@ -162,8 +166,9 @@ impl LightPool {
         }
     }
 
-    /// Writes the layer heights the grids use (the same for every grid of a map).
-    pub fn set_layers(&self, queue: &wgpu::Queue, layers_m: &[f64; LAYERS]) {
+    /// Writes the layer heights the grids use (the same for every grid of a map) and the
+    /// map's mean ground albedo (linear RGB).
+    pub fn set_map(&self, queue: &wgpu::Queue, layers_m: &[f64; LAYERS], ground_albedo: [f32; 3]) {
         let mut l = [0.0f32; 8];
         for (i, v) in l.iter_mut().enumerate() {
             *v = layers_m[i.min(LAYERS - 1)] as f32;
@@ -171,6 +176,7 @@ impl LightPool {
         let info = LightInfo {
             layers_m: [[l[0], l[1], l[2], l[3]], [l[4], l[5], l[6], l[7]]],
             tiles: [POOL_TILES as f32, 0.0, 0.0, 0.0],
+            ground_albedo: [ground_albedo[0], ground_albedo[1], ground_albedo[2], 0.0],
         };
         queue.write_buffer(&self.info, 0, bytemuck::bytes_of(&info));
     }
@@ -215,8 +221,9 @@ impl LightPool {
             return;
         };
         let mut texels = Vec::with_capacity(grid.sky.len() * TEXEL_BYTES as usize);
-        for ((&sky, &sun), &margin) in grid.sky.iter().zip(&grid.sun).zip(&grid.sun_margin) {
-            texels.extend([sky, sun, margin, 0]);
+        let samples = grid.sky.iter().zip(&grid.sun).zip(&grid.sun_margin);
+        for (((&sky, &sun), &margin), &bounce) in samples.zip(&grid.bounce) {
+            texels.extend([sky, sun, margin, bounce]);
         }
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {

@@ -10,10 +10,13 @@ use super::Gpu;
 use super::frame::{DrawStats, FrameResources};
 use super::light_pool::{LightEntry, LightLease, NO_LIGHT};
 use super::scene::{FrameDraws, NodeRenderer};
+use super::terrain::legend_srgb;
+use crate::color::srgb_to_linear;
 use crate::lighting::content::{LightingContent, NodeLight};
 use crate::lighting::grid::{grid_level, layer_heights_m};
 use crate::lighting::seams::{coarser_sides, node_columns};
 use crate::stream::{NodeWork, Shared};
+use crate::surface::World;
 use crate::terrain::quadtree::QuadTree;
 use std::sync::Arc;
 
@@ -40,6 +43,26 @@ pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> 
     }
 }
 
+/// The map's mean ground albedo (linear RGB): its legend colours weighted by the cells of each
+/// ground type.
+pub fn mean_ground_albedo(world: &World) -> [f32; 3] {
+    let legend = legend_srgb(world);
+    let mut cells = vec![0u64; legend.len()];
+    for &t in world.map.ground.data() {
+        if let Some(c) = cells.get_mut(usize::from(t)) {
+            *c += 1;
+        }
+    }
+    let total = cells.iter().sum::<u64>().max(1) as f64;
+    let mut out = [0.0f32; 3];
+    for (srgb, &n) in legend.iter().zip(&cells) {
+        for (o, &v) in out.iter_mut().zip(srgb) {
+            *o += (srgb_to_linear(v) * n as f64 / total) as f32;
+        }
+    }
+    out
+}
+
 #[derive(Debug, Default)]
 pub struct LightingRenderer {
     /// Drawn nodes still without their grid this frame (drawn fully lit).
@@ -50,9 +73,11 @@ impl LightingRenderer {
     /// The renderer; writes the grids' layer heights into the pool's uniform.
     pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
         if let Some(kind) = shared.kind::<LightingContent>() {
-            frame
-                .light
-                .set_layers(&gpu.queue, &layer_heights_m(kind.canopy()));
+            frame.light.set_map(
+                &gpu.queue,
+                &layer_heights_m(kind.canopy()),
+                mean_ground_albedo(&shared.world),
+            );
         }
         Box::new(Self::default())
     }

@@ -130,7 +130,8 @@ pub(crate) struct Cli {
     /// Debug view: everything grey, lit by the light grids alone.
     #[arg(long)]
     pub(crate) lighting_only: bool,
-    /// Debug view: the light grids' raw values (red: sky visibility, green: sun visibility).
+    /// Debug view: the light grids' values (red: sky visibility, green: sun visibility, blue:
+    /// the ground's bounce).
     #[arg(long)]
     pub(crate) light_values: bool,
     /// Headless: before the first frame, stream its view until ready and its light grids are

@@ -58,7 +58,7 @@ pub(crate) fn panel(
     );
     ui.checkbox(
         &mut view.light_values,
-        "light-grid values (red sky, green sun visibility)",
+        "light-grid values (red sky, green sun, blue bounce)",
     );
     ui.horizontal(|ui| {
         ui.label("ground:");

@@ -1,5 +1,5 @@
 //! Section `lighting`: light grids against the ray-marched reference (the share of points whose
-//! sky and whose sun visibility agree within the tolerance), computation time per grid, bytes
+//! sky, sun visibility and ground bounce agree within the tolerance), computation time per grid, bytes
 //! per grid, and the time the lighting kind's threads take to light, and after a sun change to
 //! relight, every grid the flight's drawn nodes hold.
 
@@ -106,7 +106,7 @@ pub(crate) fn section_lighting(
             "bytes per grid",
             g.bytes() as f64,
             "B",
-            "heights f32 + sky, canopy transmittance toward the sun and sun margin u8 per sample",
+            "heights f32 + sky, canopy transmittance toward the sun, sun margin and bounce u8 per sample",
         );
     }
 
@@ -185,6 +185,8 @@ fn reference_agreement(
     // The same at the grid sample nearest to each point (no interpolation): what the
     // computation itself gets right, apart from the grid's resolution.
     let (mut sky_at_sample, mut sun_at_sample) = (0usize, 0usize);
+    // The ground's bounce on every third point: within the tolerance, and within 0.02.
+    let (mut bounce_n, mut bounce_ok, mut bounce_close) = (0usize, 0usize, 0usize);
     for i in 0..points {
         let g = &grids[i % grids.len()];
         let rect = tree.rect(g.key);
@@ -197,6 +199,13 @@ fn reference_agreement(
         let (r_sky, r_sun) = reference::visibility(world, canopy, x, y, above, SUN);
         sky_ok += usize::from((g_sky - r_sky).abs() <= TOLERANCE);
         sun_ok += usize::from((g_sun - r_sun).abs() <= TOLERANCE);
+        if i % 3 == 0 {
+            let d =
+                (g.sample_bounce(x, y, above) - reference::bounce(world, x, y, above, SUN)).abs();
+            bounce_n += 1;
+            bounce_ok += usize::from(d <= TOLERANCE);
+            bounce_close += usize::from(d <= 0.02);
+        }
         let last = (COLUMNS - 1) as f64;
         let col = ((x - g.origin_m[0]) / g.spacing_m).round().clamp(0.0, last) as usize;
         let row = ((y - g.origin_m[1]) / g.spacing_m).round().clamp(0.0, last) as usize;
@@ -243,6 +252,27 @@ fn reference_agreement(
         share(sun_ok),
         "%",
         &ref_params,
+    );
+    let bounce_params = format!(
+        "{bounce_n} of the points (every third), reference: the first terrain hit of {} x {} \
+         rays marched on the finest surface, its normal facing the sun",
+        reference::REF_AZIMUTHS,
+        reference::REF_BANDS
+    );
+    let bounce_share = |ok: usize| 100.0 * ok as f64 / bounce_n.max(1) as f64;
+    r.add(
+        "lighting",
+        "ground bounce within tolerance of the reference",
+        bounce_share(bounce_ok),
+        "%",
+        &format!("{bounce_params}, tolerance {TOLERANCE}"),
+    );
+    r.add(
+        "lighting",
+        "ground bounce within 0.02 of the reference",
+        bounce_share(bounce_close),
+        "%",
+        &bounce_params,
     );
     let sample_params = format!(
         "{ref_params}; at the grid sample nearest to each point, its stored value against the \
