@@ -377,7 +377,7 @@ impl LightGrid {
         // The lattice near a block of columns (their window widened by the margin): one block
         // at the grid level, blocks of at most [`GRID_SIDE_M`] a level coarser, so a coarse
         // grid's lattice is never larger than a grid-level one's.
-        let block_cols = ((GRID_SIDE_M / spacing_m).round() as usize).max(1);
+        let block_cols = (GRID_SIDE_M / spacing_m).round() as usize + 1;
         let lattice = |c: std::ops::Range<usize>, r: std::ops::Range<usize>| {
             let first = [
                 (col0[0] + c.start as i64) * ratio - margin,

@@ -42,6 +42,9 @@ pub struct LightInfo {
     pub ground_albedo: [f32; 4],
 }
 
+// The prelude's `LightInfo` holds eight layer heights.
+const _: () = assert!(LAYERS <= 8, "LightInfo.layers_m holds 8 heights");
+
 /// `LightLease::written` before the first write.
 const NOT_WRITTEN: u64 = u64::MAX;
 

@@ -70,7 +70,8 @@ pub struct LightingRenderer {
 }
 
 impl LightingRenderer {
-    /// The renderer; writes the grids' layer heights into the pool's uniform.
+    /// The renderer; writes the grids' layer heights and the map's mean ground albedo into the
+    /// pool's uniform.
     pub fn create(gpu: &Gpu, frame: &FrameResources, shared: &Shared) -> Box<dyn NodeRenderer> {
         if let Some(kind) = shared.kind::<LightingContent>() {
             frame.light.set_map(
