@@ -647,16 +647,22 @@ mod tests {
     use super::*;
     use crate::vegetation::placement::Placer;
 
-    /// Neighbouring grids hold exactly the same values (ground, sky, sun, every layer) in the
-    /// columns they share, on a map moved to an origin with a fraction of a metre.
-    #[test]
-    fn shared_border_columns_are_identical() {
+    /// The tiny map moved to an origin with a fraction of a metre, its canopy and its tree.
+    fn shifted_tiny() -> (World, Canopy, QuadTree) {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
         let mut map = worldgen::Map::load(&dir).expect("tiny map loads");
         map.manifest.origin_m = [1234.567, -89.0123];
         let world = World::new(map);
         let canopy = Canopy::new(&world, &Placer::new(&world));
         let tree = QuadTree::new(world.origin_m(), world.size_m());
+        (world, canopy, tree)
+    }
+
+    /// Neighbouring grids hold exactly the same values (ground, sky, sun, every layer) in the
+    /// columns they share, on a map moved to an origin with a fraction of a metre.
+    #[test]
+    fn shared_border_columns_are_identical() {
+        let (world, canopy, tree) = shifted_tiny();
         let level = grid_level(&tree);
         let at = |ix, iy| {
             let key = NodeKey { level, ix, iy };
@@ -693,12 +699,7 @@ mod tests {
     /// that terrain shadows (the values that depend most on the terrain near the column) vary.
     #[test]
     fn coarser_grids_equal_finer_ones_where_columns_coincide() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let mut map = worldgen::Map::load(&dir).expect("tiny map loads");
-        map.manifest.origin_m = [1234.567, -89.0123];
-        let world = World::new(map);
-        let canopy = Canopy::new(&world, &Placer::new(&world));
-        let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let (world, canopy, tree) = shifted_tiny();
         let level = grid_level(&tree);
         assert!(
             level >= 2,

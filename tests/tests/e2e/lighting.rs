@@ -51,6 +51,21 @@ impl<'a> Grids<'a> {
     }
 }
 
+/// A straight V valley running north-south through the middle of the tiny map's extent, 100 m
+/// deep with 45-degree walls and flat plateaus beyond (`bare_world`), and a point of its floor
+/// (x, y).
+fn valley_world() -> (World, f64, f64) {
+    let tiny = tiny_world();
+    let (o, s) = (tiny.origin_m(), tiny.size_m());
+    let spacing = tiny.map.manifest.heights.spacing_m as f32;
+    let bare = bare_world(|x, _| ((x as f32 - 64.0).abs() * spacing).min(100.0));
+    (
+        bare,
+        o[0] + 64.0 * f64::from(spacing),
+        o[1] + 0.5 * s[1] + 1.0,
+    )
+}
+
 fn canopy_of(world: &World) -> Canopy {
     Canopy::new(world, &Placer::new(world))
 }
@@ -268,13 +283,9 @@ fn a_cliff_casts_a_shadow_of_the_analytic_length_and_a_flat_sea_is_fully_lit() {
 /// gets less sky than the nearest clearing (no canopy within 20 m) by at least 0.2.
 #[test]
 fn a_valley_is_darker_than_the_ridge_and_a_forest_floor_darker_than_a_clearing() {
-    let tiny = tiny_world();
-    let (o, s) = (tiny.origin_m(), tiny.size_m());
-    let spacing = tiny.map.manifest.heights.spacing_m as f32;
-    let bare = bare_world(|x, _| ((x as f32 - 64.0).abs() * spacing).min(100.0));
+    let (bare, xc, y) = valley_world();
     let canopy = canopy_of(&bare);
     let mut grids = Grids::new(&bare, &canopy, Sun::default());
-    let (xc, y) = (o[0] + 64.0 * f64::from(spacing), o[1] + 0.5 * s[1] + 1.0);
     let floor = grids.at(xc, y, GROUND_LAYER_M).0;
     let ridge = grids.at(xc + 100.0, y, GROUND_LAYER_M).0;
     println!("valley floor sky {floor:.3} (analytic 0.707), ridge sky {ridge:.3}");
@@ -284,6 +295,8 @@ fn a_valley_is_darker_than_the_ridge_and_a_forest_floor_darker_than_a_clearing()
     );
     assert!(ridge > 0.97, "ridge sky {ridge}");
 
+    let tiny = tiny_world();
+    let (o, s) = (tiny.origin_m(), tiny.size_m());
     let canopy = canopy_of(&tiny);
     let mut grids = Grids::new(&tiny, &canopy, Sun::default());
     let mut best = (f64::NEG_INFINITY, 0.0, 0.0);
@@ -345,12 +358,8 @@ fn a_valley_is_darker_than_the_ridge_and_a_forest_floor_darker_than_a_clearing()
 /// ground beyond the valley, where nothing hides the sky, the bounce is 0.
 #[test]
 fn the_ground_bounce_on_a_valley_floor_agrees_with_the_reference_and_the_planar_value() {
-    let tiny = tiny_world();
-    let (o, s) = (tiny.origin_m(), tiny.size_m());
-    let spacing = tiny.map.manifest.heights.spacing_m as f32;
-    let bare = bare_world(|x, _| ((x as f32 - 64.0).abs() * spacing).min(100.0));
+    let (bare, xc, y) = valley_world();
     let canopy = canopy_of(&bare);
-    let (xc, y) = (o[0] + 64.0 * f64::from(spacing), o[1] + 0.5 * s[1] + 1.0);
     for elevation_deg in [30.0f64, 60.0] {
         let sun = Sun {
             azimuth_deg: 90.0,
@@ -671,16 +680,12 @@ fn rendered_ground_bounce_is_the_grids() {
     let Some(g) = tests::gpu::device() else {
         return;
     };
-    let tiny = tiny_world();
-    let (o, s) = (tiny.origin_m(), tiny.size_m());
-    let spacing = tiny.map.manifest.heights.spacing_m as f32;
-    let bare = bare_world(|x, _| ((x as f32 - 64.0).abs() * spacing).min(100.0));
+    let (bare, xc, y) = valley_world();
     let canopy = canopy_of(&bare);
     let sun = Sun {
         azimuth_deg: 90.0,
         elevation_deg: 30.0,
     };
-    let (xc, y) = (o[0] + 64.0 * f64::from(spacing), o[1] + 0.5 * s[1]);
     let cam = Camera::look_at(
         DVec3::new(xc, y - 80.0, 260.0),
         DVec3::new(xc, y, 0.0),
