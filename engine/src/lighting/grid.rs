@@ -336,7 +336,7 @@ impl LightGrid {
         (layer * COLUMNS + row) * COLUMNS + col
     }
 
-    /// Bytes the grid holds (its heights and both visibilities).
+    /// Bytes the grid holds (its heights and its four byte fields).
     pub fn bytes(&self) -> usize {
         self.ground_m.len() * 4
             + self.sky.len()
