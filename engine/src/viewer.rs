@@ -227,6 +227,7 @@ impl Viewer {
                     key: d.key,
                     work: &self.streamer.resident(d.key)?.work,
                     dither: [d.dither_lo, d.dither_hi],
+                    decimation: d.decimation,
                 })
             })
             .collect();
@@ -243,6 +244,7 @@ impl Viewer {
                     key,
                     work: &self.streamer.resident(key)?.work,
                     dither: [0.0, 1.0],
+                    decimation: 0,
                 })
             })
             .collect();
@@ -472,7 +474,7 @@ impl Viewer {
 }
 
 /// The GPU reference of a frame: the terrain meshes the terrain renderer draws (in the frustum,
-/// with a non-empty dither interval), as one draw.
+/// with a non-empty dither interval, each with its decimation), as one draw.
 fn record_reference(
     reference: &mut TerrainReference,
     gpu: &Gpu,
@@ -481,12 +483,17 @@ fn record_reference(
     size: [u32; 2],
     draws: &FrameDraws<'_>,
 ) {
-    let meshes: Vec<&crate::terrain::mesh::NodeMesh> = draws
+    let meshes: Vec<(&crate::terrain::mesh::NodeMesh, u8)> = draws
         .drawn
         .iter()
         .filter(|d| d.dither[1] > d.dither[0])
-        .filter_map(|d| d.work.get::<crate::terrain::mesh::NodeMesh>())
-        .filter(|m| {
+        .filter_map(|d| {
+            Some((
+                d.work.get::<crate::terrain::mesh::NodeMesh>()?,
+                d.decimation,
+            ))
+        })
+        .filter(|(m, _)| {
             let (lo, hi) = m.aabb_m(draws.tree);
             draws.frustum.intersects_aabb(lo, hi)
         })

@@ -248,7 +248,7 @@ pub mod terrain {
     /// Builds a node mesh the way the engine does (tiles for small nodes).
     pub use engine::terrain::mesh::build_with_tiles as build_mesh;
 
-    /// The meshes of every selected node, by key.
+    /// The meshes of every selected node as drawn (each with its decimation), by key.
     pub fn build_selection(
         world: &World,
         tree: &QuadTree,
@@ -258,7 +258,15 @@ pub mod terrain {
     ) -> std::collections::HashMap<engine::terrain::quadtree::NodeKey, NodeMesh> {
         sel.nodes
             .iter()
-            .map(|s| (s.key, build_mesh(world, tree, cache, tiles, s.key)))
+            .map(|s| {
+                let m = build_mesh(world, tree, cache, tiles, s.key);
+                let m = if s.decimation > 0 {
+                    m.decimated(s.decimation)
+                } else {
+                    m
+                };
+                (s.key, m)
+            })
             .collect()
     }
 

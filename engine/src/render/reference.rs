@@ -9,7 +9,7 @@ use super::frame::{FrameResources, PipelineSpec, node_offset_m, pipeline};
 use super::target::Target;
 use super::timer::GpuTimer;
 use crate::camera::Camera;
-use crate::terrain::mesh::NodeMesh;
+use crate::terrain::mesh::{MAX_DECIMATION, NODE_VERTS, NodeMesh, grid_indices};
 use wgpu::util::DeviceExt;
 
 /// The assembled shader source (prelude + `reference.wgsl`).
@@ -85,14 +85,22 @@ impl TerrainReference {
         encoder: &mut wgpu::CommandEncoder,
         size: [u32; 2],
         cam: &Camera,
-        meshes: &[&NodeMesh],
+        meshes: &[(&NodeMesh, u8)],
     ) {
         if let Some(t) = self.timer.as_mut() {
             t.harvest(gpu);
         }
         let mut positions: Vec<[f32; 3]> = Vec::new();
         let mut indices: Vec<u32> = Vec::new();
-        for m in meshes {
+        // The triangles each node is drawn with: its own, or a grid's decimated ones.
+        let decimated: Vec<Vec<u32>> = (0..=MAX_DECIMATION).map(|d| grid_indices(d).0).collect();
+        for &(m, decimation) in meshes {
+            let grid = m.positions.len() == NODE_VERTS * NODE_VERTS + 4 * NODE_VERTS;
+            let drawn = if decimation > 0 && grid {
+                &decimated[usize::from(decimation.min(MAX_DECIMATION))]
+            } else {
+                &m.indices
+            };
             let o = node_offset_m(m.origin_m, cam.position_m);
             let base = positions.len() as u32;
             positions.extend(
@@ -100,7 +108,7 @@ impl TerrainReference {
                     .iter()
                     .map(|p| [p[0] + o[0], p[1] + o[1], p[2] + o[2]]),
             );
-            indices.extend(m.indices.iter().map(|i| i + base));
+            indices.extend(drawn.iter().map(|i| i + base));
         }
         self.triangles = indices.len() as u64 / 3;
         if indices.is_empty() {

@@ -15,6 +15,8 @@ pub struct DrawnNode<'a> {
     pub key: NodeKey,
     pub work: &'a NodeWork,
     pub dither: [f32; 2],
+    /// Halvings of the vertex spacing its terrain grid is drawn with (0: every vertex).
+    pub decimation: u8,
 }
 
 /// What a frame draws: the camera, the view options, the drawn nodes and the resident

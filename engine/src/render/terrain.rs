@@ -31,7 +31,7 @@ use crate::ground::content::{GroundContent, NodeGround};
 use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{NodeWork, Shared};
 use crate::surface::World;
-use crate::terrain::mesh::NodeMesh;
+use crate::terrain::mesh::{MAX_DECIMATION, NODE_VERTS, NodeMesh, grid_indices};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 use std::sync::{Arc, OnceLock, Weak};
@@ -74,6 +74,9 @@ pub struct TerrainNodeGpu {
     pub aabb_m: (DVec3, DVec3),
     /// Part 0: vertices, part 1: indices (relative to the node's first vertex).
     mesh: Lease,
+    /// Per decimation (0 ..= `MAX_DECIMATION`): first index (from the lease's) and count of
+    /// the triangles drawn with it (a mesh not laid out as a grid draws all of them each time).
+    ranges: [[u32; 2]; DECIMATIONS],
     slot: Lease,
     /// The node's ground texture and its texture coordinates per metre, once made (the queue
     /// of textures to make holds a weak reference).
@@ -87,9 +90,20 @@ impl std::fmt::Debug for TerrainNodeGpu {
     }
 }
 
+/// Index ranges a node mesh has on the GPU, one per decimation.
+const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
+
 impl TerrainNodeGpu {
-    pub fn triangles(&self) -> u32 {
-        self.mesh.len[1] / 3
+    /// Triangles drawn with `decimation` halvings of the vertex spacing (clamped to the most
+    /// there are).
+    pub fn triangles(&self, decimation: u8) -> u32 {
+        self.range(decimation)[1] / 3
+    }
+
+    /// First index (in the page) and index count drawn with `decimation`.
+    fn range(&self, decimation: u8) -> [u32; 2] {
+        let [first, count] = self.ranges[usize::from(decimation).min(DECIMATIONS - 1)];
+        [self.mesh.start[1] + first, count]
     }
 
     /// The node's ground-texture layer, if it has been made.
@@ -462,7 +476,19 @@ impl TerrainRenderer {
                 tag: u32::from(*g),
             })
             .collect();
-        let lengths = [vertices.len() as u32, mesh.indices.len() as u32];
+        // A grid mesh as `mesh::build` lays it out also keeps its decimated triangles.
+        let grid = mesh.decimation == 0
+            && mesh.positions.len() == NODE_VERTS * NODE_VERTS + 4 * NODE_VERTS;
+        let mut indices = mesh.indices.clone();
+        let mut ranges = [[0, indices.len() as u32]; DECIMATIONS];
+        if grid {
+            for (d, range) in ranges.iter_mut().enumerate().skip(1) {
+                let (coarse, _) = grid_indices(d as u8);
+                *range = [indices.len() as u32, coarse.len() as u32];
+                indices.extend_from_slice(&coarse);
+            }
+        }
+        let lengths = [vertices.len() as u32, indices.len() as u32];
         let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
             log::warn!(
                 "terrain mesh pool or node table full: node {:?} is not drawn",
@@ -503,15 +529,16 @@ impl TerrainRenderer {
         queue.write_buffer(
             &page.indices,
             u64::from(lease.start[1]) * 4,
-            bytemuck::cast_slice(&mesh.indices),
+            bytemuck::cast_slice(&indices),
         );
         Some(TerrainNodeGpu {
             origin_m: mesh.origin_m,
             aabb_m: mesh.aabb_m(tree),
             mesh: lease,
+            ranges,
             slot,
             ground: Arc::new(OnceLock::new()),
-            bytes: vertices.len() * std::mem::size_of::<MeshVertex>() + mesh.indices.len() * 4,
+            bytes: vertices.len() * std::mem::size_of::<MeshVertex>() + indices.len() * 4,
         })
     }
 }
@@ -632,17 +659,18 @@ impl NodeRenderer for TerrainRenderer {
                 );
                 let m = &node.mesh;
                 let fading = d.dither[0] > 0.0 || d.dither[1] < 1.0;
+                let [first_index, index_count] = node.range(d.decimation);
                 self.batches.push(
                     (fading, m.page, page),
                     Item::Indexed(DrawIndexedIndirectArgs {
-                        index_count: m.len[1],
+                        index_count,
                         instance_count: 1,
-                        first_index: m.start[1],
+                        first_index,
                         base_vertex: m.start[0] as i32,
                         first_instance: slot,
                     }),
                 );
-                self.triangles += u64::from(node.triangles());
+                self.triangles += u64::from(index_count / 3);
                 visible += 1;
             }
         }

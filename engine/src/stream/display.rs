@@ -11,6 +11,9 @@ pub struct DrawNode {
     pub key: NodeKey,
     pub dither_lo: f32,
     pub dither_hi: f32,
+    /// Halvings of the vertex spacing its grid mesh is drawn with (see
+    /// [`crate::terrain::select::decimation`]).
+    pub decimation: u8,
 }
 
 /// A fade to children that must finish before the parent's projected error reaches tau plans
@@ -112,6 +115,26 @@ impl Streamer {
         ))
     }
 
+    /// How coarsely drawn node `key`'s grid may be drawn: its decimation at the display's split
+    /// threshold (`split_factor * tau`), from its resident ancestors' bounds; 0 when off or
+    /// without a camera.
+    fn decimation(&self, key: NodeKey) -> u8 {
+        match self.camera {
+            Some(cam) if self.settings.decimate && self.settings.fixed_level.is_none() => {
+                crate::terrain::select::decimation(
+                    &self.shared.tree,
+                    key,
+                    cam.position_m,
+                    cam.k_px(),
+                    cam.near_m,
+                    self.settings.split_factor * self.settings.tau_px,
+                    |a| self.resident.get(&a)?.work.bounds,
+                )
+            }
+            _ => 0,
+        }
+    }
+
     pub(super) fn children_drawable(&self, key: NodeKey) -> bool {
         key.level < self.shared.tree.max_level
             && key
@@ -144,6 +167,7 @@ impl Streamer {
                     key,
                     dither_lo: lo,
                     dither_hi: hi,
+                    decimation: self.decimation(key),
                 });
                 continue;
             }
@@ -154,6 +178,7 @@ impl Streamer {
                     key,
                     dither_lo: mid,
                     dither_hi: hi,
+                    decimation: self.decimation(key),
                 });
             }
             for c in key.children() {

@@ -127,6 +127,9 @@ pub struct StreamSettings {
     pub prefetch_factor: f64,
     /// Debug: show every node at this level (no pixel-error test), like seed 003's MLFIX.
     pub fixed_level: Option<u8>,
+    /// Draw grid meshes through every 2nd or 4th vertex where the ancestor meshes that shows
+    /// stay within `split_factor * tau` (`terrain::select::decimation`).
+    pub decimate: bool,
 }
 
 impl StreamSettings {
@@ -152,6 +155,7 @@ impl Default for StreamSettings {
             prefetch_factor: 0.5,
             fixed_level: None,
             vegetation_occlusion: false,
+            decimate: true,
         }
     }
 }

@@ -12,6 +12,14 @@
 //! point of every coarser neighbour's border along it, found exactly from a few samples of `F`
 //! (the neighbour's border vertices bracketing and inside the side; [`skirt_bottoms`]), so no
 //! neighbour's bounds are needed. Same-level neighbours share border vertices exactly.
+//!
+//! **Decimated drawing.** A node may be drawn through every `2^d`-th vertex ([`grid_indices`],
+//! `d <=` [`MAX_DECIMATION`]): that surface is its level-`L - d` ancestor's mesh over the node,
+//! since both interpolate `F` at the same points. Its border then interpolates the ancestor's
+//! lattice along each side, so a neighbour's skirt must also reach below the lattices of the
+//! node's own ancestors along that side. Those with a vertex spacing of at most the node's size
+//! have their points among the node's border vertices (so above `z_min`); the coarser ones are
+//! bracketed from outside the side and are measured like a coarser neighbour.
 
 use crate::surface::world::World;
 use crate::terrain::bounds::{BoundsCache, NodeBounds, interpolate_grid};
@@ -20,6 +28,15 @@ use crate::terrain::tiles::{TILE_SIZE_M, TILE_SPACING_M, Tile, TileKey};
 
 /// Vertices per node side.
 pub const NODE_VERTS: usize = NODE_QUADS as usize + 1;
+
+/// The most halvings of a grid mesh's vertex spacing a node may be drawn with (see the module
+/// docs): a node drawn with `d` halvings shows `(32 / 2^d)^2 x 2` surface triangles.
+pub const MAX_DECIMATION: u8 = 2;
+const _: () = assert!(
+    (NODE_QUADS as usize).is_multiple_of(1 << MAX_DECIMATION)
+        && crate::terrain::bounds::BLOCKS_PER_SIDE >= 1 << MAX_DECIMATION,
+    "a decimated grid keeps whole quads, and an ancestor's blocks tile the node"
+);
 
 /// One node's mesh, ready to upload.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,6 +55,9 @@ pub struct NodeMesh {
     pub bounds: NodeBounds,
     /// Skirt bottom height per side (West, East, South, North).
     pub skirt_bottom_m: [f64; 4],
+    /// Halvings of the vertex spacing `indices` draw with (0: every vertex; see
+    /// [`NodeMesh::decimated`]).
+    pub decimation: u8,
 }
 
 impl NodeMesh {
@@ -56,19 +76,33 @@ impl NodeMesh {
         )
     }
 
-    /// Height of the regular grid triangulation of the mesh's 33 x 33 vertices at a world
-    /// position inside the node: the drawn surface of a grid mesh (as built here), not of a
-    /// TIN. To measure any mesh through its own triangles use
-    /// [`super::mesh_surface::MeshSurface`].
+    /// Height of the regular grid triangulation of the mesh's 33 x 33 vertices (every
+    /// `2^decimation`-th of them) at a world position inside the node: the drawn surface of a
+    /// grid mesh (as built here), not of a TIN. To measure any mesh through its own triangles
+    /// use [`super::mesh_surface::MeshSurface`].
     pub fn grid_height_at(&self, tree: &QuadTree, x_m: f64, y_m: f64) -> f64 {
-        let s = tree.spacing_m(self.key.level);
-        let z: Vec<f32> = self.positions[..NODE_VERTS * NODE_VERTS]
-            .iter()
-            .map(|p| p[2])
+        let step = 1usize << self.decimation;
+        let quads = NODE_QUADS as usize / step;
+        let s = tree.spacing_m(self.key.level) * step as f64;
+        let z: Vec<f32> = (0..=quads)
+            .flat_map(|j| (0..=quads).map(move |i| (i * step, j * step)))
+            .map(|(i, j)| self.positions[j * NODE_VERTS + i][2])
             .collect();
-        let gx = ((x_m - self.origin_m[0]) / s).clamp(0.0, f64::from(NODE_QUADS));
-        let gy = ((y_m - self.origin_m[1]) / s).clamp(0.0, f64::from(NODE_QUADS));
-        interpolate_grid(&z, NODE_QUADS as usize, gx, gy)
+        let gx = ((x_m - self.origin_m[0]) / s).clamp(0.0, quads as f64);
+        let gy = ((y_m - self.origin_m[1]) / s).clamp(0.0, quads as f64);
+        interpolate_grid(&z, quads, gx, gy)
+    }
+
+    /// The same grid mesh drawn with `steps` halvings of its vertex spacing (the indices of
+    /// [`grid_indices`]; the vertices are kept). Only for meshes built by [`build`].
+    pub fn decimated(&self, steps: u8) -> NodeMesh {
+        let (indices, surface_index_count) = grid_indices(steps);
+        NodeMesh {
+            indices,
+            surface_index_count,
+            decimation: steps,
+            ..self.clone()
+        }
     }
 
     /// Bytes of vertex and index data (as uploaded: 28 bytes a vertex, 4 an index).
@@ -173,8 +207,14 @@ pub fn skirt_bottoms(world: &World, tree: &QuadTree, key: NodeKey, b: &NodeBound
             let Some(n) = tree.neighbour_across(key, *side, level) else {
                 continue;
             };
-            if key.ancestors().any(|a| a == n) || !tree.overlaps_map(n) {
-                continue; // an ancestor, never drawn next to this node
+            if !tree.overlaps_map(n) {
+                continue;
+            }
+            // An ancestor's lattice along the side shows where a neighbour inside it is drawn
+            // decimated (module docs); while its spacing is at most this node's size, its
+            // points are this node's border vertices, all above `z_min`.
+            if key.ancestors().any(|a| a == n) && 1u64 << (key.level - level) <= NODE_QUADS.into() {
+                continue;
             }
             lowest = lowest.min(neighbour_border_min(world, tree, key, *side, n));
         }
@@ -297,47 +337,18 @@ pub fn build(
             ground.push(g[(j + 1) * w + i + 1]);
         }
     }
-    let mut indices = Vec::with_capacity(
-        NODE_QUADS as usize * NODE_QUADS as usize * 6 + 4 * NODE_QUADS as usize * 6,
-    );
-    let vid = |i: usize, j: usize| (j * n + i) as u32;
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let (a, b, c, d) = (vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1));
-            indices.extend_from_slice(&[a, b, c, a, c, d]);
-        }
-    }
-    let surface_index_count = indices.len() as u32;
-    // Skirts: per side, a copy of the border vertices at the skirt bottom, joined by quads.
+    // Skirts: per side, a copy of the border vertices at the skirt bottom (joined by
+    // [`grid_indices`]).
     for (k, side) in Side::ALL.iter().enumerate() {
-        let border: Vec<u32> = (0..n)
-            .map(|t| match side {
-                Side::West => vid(0, t),
-                Side::East => vid(n - 1, t),
-                Side::South => vid(t, 0),
-                Side::North => vid(t, n - 1),
-            })
-            .collect();
-        let base = positions.len() as u32;
-        for &v in &border {
-            let p = positions[v as usize];
+        for t in 0..n {
+            let v = border_vertex(*side, t);
+            let p = positions[v];
             positions.push([p[0], p[1], skirt_bottom_m[k] as f32]);
-            normals.push(normals[v as usize]);
-            ground.push(ground[v as usize]);
-        }
-        // Outward-facing: on West/North the border runs so that (top t, top t+1, bottom) is
-        // counter-clockwise seen from outside.
-        let flip = matches!(side, Side::East | Side::South);
-        for t in 0..n - 1 {
-            let (top0, top1) = (border[t], border[t + 1]);
-            let (bot0, bot1) = (base + t as u32, base + t as u32 + 1);
-            if flip {
-                indices.extend_from_slice(&[top0, bot0, bot1, top0, bot1, top1]);
-            } else {
-                indices.extend_from_slice(&[top0, top1, bot1, top0, bot1, bot0]);
-            }
+            normals.push(normals[v]);
+            ground.push(ground[v]);
         }
     }
+    let (indices, surface_index_count) = grid_indices(0);
     NodeMesh {
         key,
         origin_m: r.min,
@@ -348,5 +359,57 @@ pub fn build(
         surface_index_count,
         bounds: own,
         skirt_bottom_m,
+        decimation: 0,
     }
+}
+
+/// Index of grid vertex `t` along `side` (West and East run south to north, South and North
+/// west to east).
+fn border_vertex(side: Side, t: usize) -> usize {
+    let n = NODE_VERTS;
+    match side {
+        Side::West => t * n,
+        Side::East => t * n + n - 1,
+        Side::South => t,
+        Side::North => (n - 1) * n + t,
+    }
+}
+
+/// The triangles of a grid mesh as [`build`] lays out its vertices (the grid row-major, then
+/// each side's skirt vertices in [`Side::ALL`] order), through every `2^steps`-th vertex:
+/// the indices, counter-clockwise seen from above (skirts seen from outside), and how many of
+/// them are the surface's.
+pub fn grid_indices(steps: u8) -> (Vec<u32>, u32) {
+    let step = 1usize << steps;
+    let n = NODE_VERTS;
+    let quads = NODE_QUADS as usize / step;
+    let mut indices = Vec::with_capacity((quads * quads + 4 * quads) * 6);
+    let vid = |i: usize, j: usize| (j * step * n + i * step) as u32;
+    for j in 0..quads {
+        for i in 0..quads {
+            let (a, b, c, d) = (vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1));
+            indices.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+    }
+    let surface_index_count = indices.len() as u32;
+    for (k, side) in Side::ALL.iter().enumerate() {
+        let base = (n * n + k * n) as u32;
+        // Outward-facing: on West/North the border runs so that (top t, top t+1, bottom) is
+        // counter-clockwise seen from outside.
+        let flip = matches!(side, Side::East | Side::South);
+        for q in 0..quads {
+            let (t0, t1) = (q * step, (q + 1) * step);
+            let (top0, top1) = (
+                border_vertex(*side, t0) as u32,
+                border_vertex(*side, t1) as u32,
+            );
+            let (bot0, bot1) = (base + t0 as u32, base + t1 as u32);
+            if flip {
+                indices.extend_from_slice(&[top0, bot0, bot1, top0, bot1, top1]);
+            } else {
+                indices.extend_from_slice(&[top0, top1, bot1, top0, bot1, bot0]);
+            }
+        }
+    }
+    (indices, surface_index_count)
 }

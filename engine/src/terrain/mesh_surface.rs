@@ -102,6 +102,7 @@ mod tests {
             surface_index_count: 6,
             bounds: NodeBounds::exact(0.0, 10.0),
             skirt_bottom_m: [0.0; 4],
+            decimation: 0,
         };
         (mesh, tree)
     }

@@ -10,7 +10,8 @@
 
 use crate::camera::{Camera, Frustum, distance_to_aabb};
 use crate::surface::world::World;
-use crate::terrain::bounds::{BoundsCache, NodeBounds, block_rect};
+use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
+use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 
@@ -77,6 +78,54 @@ pub fn projected_error_px(
     out
 }
 
+/// How many halvings of its grid mesh's vertex spacing node `key` may be drawn with (at most
+/// [`MAX_DECIMATION`]) at threshold `tau_px`, seen from `eye_m` with pixel factor `k_px`.
+///
+/// Drawn with `d` halvings, the node shows its level-`L - d` ancestor's mesh over its own
+/// square (see [`crate::terrain::mesh`]), whose error there is bounded by the ancestor's blocks
+/// covering that square (each block's error projected from its own box, as in
+/// [`projected_error_px`], without frustum culling). `bounds` gives the ancestors' bounds; an
+/// unknown one stops the search. The node's own vegetation is drawn as before, so its term
+/// does not change.
+pub fn decimation(
+    tree: &QuadTree,
+    key: NodeKey,
+    eye_m: DVec3,
+    k_px: f64,
+    near_m: f64,
+    tau_px: f64,
+    mut bounds: impl FnMut(NodeKey) -> Option<NodeBounds>,
+) -> u8 {
+    let mut out = 0;
+    let mut ancestor = key;
+    for d in 1..=MAX_DECIMATION.min(key.level) {
+        let Some(a) = ancestor.parent() else { break };
+        ancestor = a;
+        let Some(b) = bounds(a) else { break };
+        // The ancestor's blocks over the node: `per x per` of them from (ox, oy).
+        let per = BLOCKS_PER_SIDE >> d;
+        let cell = |i: u32| (i % (1 << d)) as usize * per;
+        let (ox, oy) = (cell(key.ix), cell(key.iy));
+        let within = (oy..oy + per).all(|by| {
+            (ox..ox + per).all(|bx| {
+                let i = by * BLOCKS_PER_SIDE + bx;
+                let e = b.blocks[i].error_m;
+                if e <= 0.0 {
+                    return true;
+                }
+                let (lo, hi) = block_aabb(tree, a, &b, i);
+                let dist = distance_to_aabb(eye_m, lo, hi).max(near_m);
+                dist > 0.0 && e * k_px / dist <= tau_px
+            })
+        });
+        if !within {
+            break;
+        }
+        out = d;
+    }
+    out
+}
+
 /// One selected node.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Selected {
@@ -85,6 +134,9 @@ pub struct Selected {
     pub dist_m: f64,
     /// Projected error bound in pixels at `dist_m`.
     pub error_px: f64,
+    /// Halvings of the vertex spacing its grid mesh is drawn with ([`decimation`]; 0 unless the
+    /// selection was asked for them).
+    pub decimation: u8,
 }
 
 /// The result of one selection.
@@ -110,6 +162,8 @@ pub struct SelectParams {
     pub max_level: u8,
     /// Frustum culling on (off: select everywhere, e.g. for shadow or debug).
     pub cull: bool,
+    /// Find each node's [`decimation`] (off: every node is drawn through all its vertices).
+    pub decimate: bool,
 }
 
 impl SelectParams {
@@ -119,6 +173,7 @@ impl SelectParams {
             tau_px,
             max_level: tree.max_level,
             cull: true,
+            decimate: true,
         }
     }
 }
@@ -174,6 +229,7 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
                 bounds: b,
                 dist_m: dist,
                 error_px,
+                decimation: 0,
             });
         }
     }
@@ -217,6 +273,19 @@ pub fn select_occluded(
         },
     );
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
+    if p.decimate {
+        for s in &mut out.nodes {
+            s.decimation = decimation(
+                tree,
+                s.key,
+                cam.position_m,
+                cam.k_px(),
+                0.0,
+                p.tau_px,
+                |k| Some(cache.get(world, tree, k)),
+            );
+        }
+    }
     out
 }
 

@@ -237,6 +237,7 @@ mod tests {
             surface_index_count: 0,
             bounds: NodeBounds::exact(0.0, 0.0),
             skirt_bottom_m: [0.0; 4],
+            decimation: 0,
         }
     }
 

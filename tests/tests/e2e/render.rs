@@ -161,6 +161,7 @@ fn quad(key: NodeKey, origin_m: [f64; 2], size_m: f32, z_m: f32, ground: u8) -> 
         surface_index_count: 6,
         bounds: NodeBounds::exact(f64::from(z_m), f64::from(z_m)),
         skirt_bottom_m: [f64::from(z_m); 4],
+        decimation: 0,
     }
 }
 
@@ -236,6 +237,7 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
                 key,
                 work: w,
                 dither: [0.0, 1.0],
+                decimation: 0,
             })
             .collect();
         let draws = FrameDraws {

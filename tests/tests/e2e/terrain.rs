@@ -19,7 +19,8 @@ use tests::terrain::{
 use worldgen::noise::unit3;
 
 /// Dense true error per block of a node, measured once.
-struct TrueErrors(Map<NodeKey, [(f64, f64); BLOCKS]>);
+/// Dense true errors per block of a node's mesh, by node and decimation (how it is drawn).
+struct TrueErrors(Map<(NodeKey, u8), [(f64, f64); BLOCKS]>);
 
 impl TrueErrors {
     fn get(
@@ -29,13 +30,14 @@ impl TrueErrors {
         cache: &mut BoundsCache,
         tiles: &mut TileCache,
         key: NodeKey,
+        decimation: u8,
     ) -> [(f64, f64); BLOCKS] {
-        if let Some(v) = self.0.get(&key) {
+        if let Some(v) = self.0.get(&(key, decimation)) {
             return *v;
         }
-        let m = build_mesh(world, tree, cache, tiles, key);
+        let m = build_mesh(world, tree, cache, tiles, key).decimated(decimation);
         let v = measure_true_block_errors(world, tree, &m);
-        self.0.insert(key, v);
+        self.0.insert((key, decimation), v);
         v
     }
 }
@@ -183,7 +185,7 @@ fn errors_are_monotone_and_bound_every_descendant() {
             }
             // The true error of every node on the chain is bounded by each ancestor's error.
             for (d, &desc) in chain.iter().enumerate().step_by(3) {
-                let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, desc);
+                let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, desc, 0);
                 for &anc in &chain[d..] {
                     let a = cache.get(&world, &tree, anc);
                     for (i, &(true_err, _)) in blocks.iter().enumerate() {
@@ -280,6 +282,7 @@ fn selected_nodes_respect_the_pixel_threshold() {
         let mut truth = TrueErrors(Map::new());
         let mut worst_ratio: f64 = 0.0;
         let (mut nodes, mut empty, mut finest_over) = (0usize, 0usize, 0usize);
+        let mut decimated = [0usize; 3];
         for tau in [1.0, 2.0, 4.0] {
             for i in 0..50 {
                 let cam = random_camera(&world, 5 + tau as u64, i, 30.0, 400.0, [320, 240]);
@@ -302,7 +305,8 @@ fn selected_nodes_respect_the_pixel_threshold() {
                     );
                     over += u32::from(s.error_px > tau);
                     // The true error of each block in view, projected from the block's box.
-                    let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, s.key);
+                    let blocks =
+                        truth.get(&world, &tree, &mut cache, &mut tiles, s.key, s.decimation);
                     let mut px = 0.0f64;
                     for (bi, &(true_err, _)) in blocks.iter().enumerate() {
                         let (lo, hi) = block_aabb(&tree, s.key, &s.bounds, bi);
@@ -319,24 +323,32 @@ fn selected_nodes_respect_the_pixel_threshold() {
                         s.key,
                         s.error_px
                     );
-                    if !finest {
+                    // A node drawn decimated shows an ancestor's mesh, allowed only within tau.
+                    if !finest || s.decimation > 0 {
                         assert!(
                             px <= tau,
-                            "{name} tau {tau} camera {i}: {:?} shows {px:.3} px",
-                            s.key
+                            "{name} tau {tau} camera {i}: {:?} (decimation {}) shows {px:.3} px",
+                            s.key,
+                            s.decimation
                         );
                     }
                     worst_ratio = worst_ratio.max(px / tau);
                     nodes += 1;
+                    decimated[usize::from(s.decimation)] += 1;
                 }
                 assert_eq!(over, sel.over_tau_at_finest);
                 finest_over += over as usize;
             }
         }
         println!(
-            "{name}: {nodes} selected nodes checked; worst true error = {worst_ratio:.3} of tau; {finest_over} finest-level nodes over tau (reported)"
+            "{name}: {nodes} selected nodes checked ({decimated:?} drawn with 0 / 1 / 2 halvings of their vertex spacing); worst true error = {worst_ratio:.3} of tau; {finest_over} finest-level nodes over tau (reported)"
         );
         assert!(nodes > 1000);
+        // Both decimations occur, so the checks above cover them.
+        assert!(
+            decimated[1] > 100 && decimated[2] > 100,
+            "{name}: decimations {decimated:?}"
+        );
         if name == "tiny" {
             // Ordinary terrain seen from 30 m up never needs more than the finest level.
             assert_eq!(finest_over, 0);
@@ -551,11 +563,20 @@ fn watertight_where_neighbours_differ_by_many_levels() {
             let keys = path_partition(&tree, o[0] + x, o[1] + y);
             let max_diff = keys.iter().map(|k| tree.max_level - k.level).max().unwrap();
             assert!(max_diff >= 5);
-            let meshes: Map<NodeKey, NodeMesh> = keys
+            let full: Map<NodeKey, NodeMesh> = keys
                 .iter()
                 .map(|&k| (k, build_mesh(&world, &tree, &mut cache, &mut tiles, k)))
                 .collect();
-            for i in 0..4i64 {
+            // The same partition with nodes drawn through every 2nd or 4th vertex, mixed
+            // (whatever the selection would choose): every neighbour pairing of lattices.
+            let mixed: Map<NodeKey, NodeMesh> = full
+                .iter()
+                .map(|(&k, m)| {
+                    let d = ((k.ix + 2 * k.iy + u32::from(k.level)) % 3) as u8;
+                    (k, m.decimated(d.min(k.level)))
+                })
+                .collect();
+            for (i, meshes) in (0..8i64).zip([&full, &mixed].into_iter().cycle()) {
                 let z = world.height_m(o[0] + x, o[1] + y);
                 let yaw = std::f64::consts::TAU * unit3(3, i, k as i64);
                 let (ex, ey) = (o[0] + x - 30.0 * yaw.cos(), o[1] + y - 30.0 * yaw.sin());
@@ -567,7 +588,7 @@ fn watertight_where_neighbours_differ_by_many_levels() {
                     70f64.to_radians(),
                     [48, 36],
                 );
-                let (below, holes) = count_holes(&world, &tree, &meshes, &cam);
+                let (below, holes) = count_holes(&world, &tree, meshes, &cam);
                 assert_eq!(
                     holes, 0,
                     "{name} point {k} view {i}: {holes} of {below} rays fell through"
@@ -576,7 +597,7 @@ fn watertight_where_neighbours_differ_by_many_levels() {
                     below > 200,
                     "{name} point {k} view {i}: only {below} ground rays"
                 );
-                let (gaps, seam) = seam_holes(&tree, &meshes, &cam);
+                let (gaps, seam) = seam_holes(&tree, meshes, &cam);
                 assert_eq!(
                     seam, 0,
                     "{name} point {k} view {i}: {seam} of {gaps} seam gaps are open"
@@ -587,7 +608,7 @@ fn watertight_where_neighbours_differ_by_many_levels() {
                 );
                 // Control: the same views through the same meshes without skirts find open
                 // seams, so the checks above can fail.
-                let bare = without_skirts(&meshes);
+                let bare = without_skirts(meshes);
                 open_without_skirts += seam_holes(&tree, &bare, &cam).1;
                 open_without_skirts += count_holes(&world, &tree, &bare, &cam).1;
             }
@@ -595,6 +616,59 @@ fn watertight_where_neighbours_differ_by_many_levels() {
         assert!(
             open_without_skirts > 0,
             "{name}: removing the skirts opened no gap: the watertightness checks cannot fail"
+        );
+    }
+}
+
+/// A node drawn with `d` halvings of its vertex spacing shows exactly its level-`L - d`
+/// ancestor's mesh over its square (what the selection bounds it by), read through its own
+/// decimated triangles; and with all of them it differs (so the check can fail).
+#[test]
+fn a_decimated_node_draws_its_ancestors_mesh() {
+    use engine::terrain::mesh_surface::MeshSurface;
+    for world in [tiny_world(), cliff_world()] {
+        let tree = tree_of(&world);
+        let mut cache = BoundsCache::new();
+        let mut tiles = TileCache::new();
+        let o = world.origin_m();
+        let (mut checked, mut full_differs) = (0, 0);
+        for c in 0..12i64 {
+            let (x, y) = (
+                o[0] + world.size_m()[0] * unit3(21, c, 0),
+                o[1] + world.size_m()[1] * unit3(21, c, 1),
+            );
+            for level in 2..=tree.max_level {
+                let key = tree.key_at(level, x, y).unwrap();
+                let own = build_mesh(&world, &tree, &mut cache, &mut tiles, key);
+                let r = tree.rect(key);
+                let mut ancestor = key;
+                for d in 1..=engine::terrain::mesh::MAX_DECIMATION {
+                    ancestor = ancestor.parent().unwrap();
+                    let up = build_mesh(&world, &tree, &mut cache, &mut tiles, ancestor);
+                    let drawn = own.decimated(d);
+                    let surface = MeshSurface::new(&drawn, &tree);
+                    let full = MeshSurface::new(&own, &tree);
+                    for p in 0..40i64 {
+                        let (px, py) = (
+                            r.min[0] + (r.max[0] - r.min[0]) * unit3(22, p, c),
+                            r.min[1] + (r.max[1] - r.min[1]) * unit3(23, p, c),
+                        );
+                        let want = up.grid_height_at(&tree, px, py);
+                        let got = surface.height_at(px, py);
+                        assert!(
+                            (got - want).abs() <= 1e-4 * (1.0 + want.abs() * 1e-3),
+                            "{key:?} decimated {d}: {got} against the ancestor's {want}"
+                        );
+                        assert!((drawn.grid_height_at(&tree, px, py) - want).abs() <= 1e-4);
+                        full_differs += usize::from((full.height_at(px, py) - want).abs() > 1e-3);
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            checked > 1000 && full_differs > 100,
+            "{checked} {full_differs}"
         );
     }
 }

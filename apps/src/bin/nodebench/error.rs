@@ -17,6 +17,9 @@ use engine::terrain::tin;
 /// and the bounds' check lattice.
 const MAX_SAMPLES_PER_QUAD: u32 = 2;
 
+/// The sample key of a node's TIN (grids use their decimation).
+const TIN: u8 = u8::MAX;
+
 /// Cached entries (meshes and sample sets together) above which [`MeshCache`] starts over. The
 /// finest distance ratios the baseline tuning tries select hundreds of thousands of nodes, whose
 /// meshes and samples (about 100 KiB a node) would not fit in memory: a run on the 8 km map
@@ -29,8 +32,8 @@ const MAX_CACHED_ENTRIES: usize = 40_000;
 struct MeshCache {
     grid: std::collections::HashMap<NodeKey, NodeMesh>,
     tin: std::collections::HashMap<NodeKey, NodeMesh>,
-    /// Keyed by node and whether the mesh is the TIN.
-    samples: std::collections::HashMap<(NodeKey, bool), measure::ErrorSamples>,
+    /// Keyed by node and what is drawn: the grid's decimation, or [`TIN`].
+    samples: std::collections::HashMap<(NodeKey, u8), measure::ErrorSamples>,
 }
 
 impl MeshCache {
@@ -91,17 +94,27 @@ fn measure_view(
     meshes_cache.trim();
     let mut meshes = Vec::with_capacity(sel.nodes.len());
     let mut tris = 0;
+    let kind = |s: &engine::terrain::select::Selected| {
+        if tin_target.is_some() {
+            TIN
+        } else {
+            s.decimation
+        }
+    };
     for s in &sel.nodes {
+        // Each grid node as drawn: through every 2^decimation-th vertex.
         let m = match tin_target {
             Some(f) => meshes_cache
                 .tin(world, tree, cache, tiles, s.key, f)
                 .clone(),
-            None => meshes_cache.grid(world, tree, cache, tiles, s.key).clone(),
+            None => meshes_cache
+                .grid(world, tree, cache, tiles, s.key)
+                .decimated(s.decimation),
         };
         tris += m.indices.len() / 3;
         meshes_cache
             .samples
-            .entry((s.key, tin_target.is_some()))
+            .entry((s.key, kind(s)))
             .or_insert_with(|| measure::node_error_samples(world, tree, &m, MAX_SAMPLES_PER_QUAD));
         meshes.push(m);
     }
@@ -109,7 +122,7 @@ fn measure_view(
     let samples: Vec<_> = sel
         .nodes
         .iter()
-        .map(|s| &meshes_cache.samples[&(s.key, tin_target.is_some())])
+        .map(|s| &meshes_cache.samples[&(s.key, kind(s))])
         .collect();
     e.max_px = e.max_px.max(measure::view_max_error_px(&samples, cam));
     (tris, e)
@@ -161,7 +174,7 @@ fn terrain_only(
     tau: f64,
     per_side: u32,
 ) -> (usize, ViewError) {
-    let sel = engine::terrain::select::traverse(
+    let mut sel = engine::terrain::select::traverse(
         tree,
         cam,
         true,
@@ -171,6 +184,18 @@ fn terrain_only(
         },
         |_, _, _, px| px > tau,
     );
+    // Drawn like the full selection: each node as coarsely as its ancestors' bounds allow.
+    for s in &mut sel.nodes {
+        s.decimation = engine::terrain::select::decimation(
+            tree,
+            s.key,
+            cam.position_m,
+            cam.k_px(),
+            0.0,
+            tau,
+            |k| Some(ctx.0.get(world, tree, k)),
+        );
+    }
     measure_view(world, tree, ctx, cam, &sel, per_side, None)
 }
 
