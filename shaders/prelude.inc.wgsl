@@ -124,13 +124,19 @@ fn light_decimated(slot: f32, g: vec2<f32>, w: f32, k: vec2<f32>) -> vec4<f32> {
 // read at that grid's columns only, blending back to every column within one of its column
 // steps from the side: both nodes show the same values along the side.
 fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
-    if (n.light.x < 0.0) {
+    return grid_light(n.light, n.more, local_xy, above_m);
+}
+
+// `node_light` from the node's `light` and `more` fields (which a vertex stage may hand to the
+// fragment stage as flat values).
+fn grid_light(light: vec4<f32>, more: vec4<f32>, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
+    if (light.x < 0.0) {
         return vec4<f32>(1.0, 1.0, 1.0, 0.0);
     }
-    let slot = n.light.x;
-    let g = n.light.zw + local_xy * n.light.y;
+    let slot = light.x;
+    let g = light.zw + local_xy * light.y;
     let w = light_layer_w(above_m);
-    let code = u32(n.more.z + 0.5);
+    let code = u32(more.z + 0.5);
     if (code == 0u) {
         return light_fetch(slot, g, w);
     }
@@ -141,8 +147,8 @@ fn node_light(n: Node, local_xy: vec2<f32>, above_m: f32) -> vec4<f32> {
         f32(1u << ((code >> 6u) & 7u)),
         f32(1u << ((code >> 9u) & 7u)),
     );
-    let lo = n.light.zw;
-    let hi = lo + vec2<f32>(n.more.w);
+    let lo = light.zw;
+    let hi = lo + vec2<f32>(more.w);
     let d = vec4<f32>(g.x - lo.x, hi.x - g.x, g.y - lo.y, hi.y - g.y);
     // 1 on a side toward a coarser grid, 0 one of its steps inward (steps are at most the
     // node's width, so the two weights of an axis never sum above 1).

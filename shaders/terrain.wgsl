@@ -41,9 +41,12 @@ struct TerrainOut {
     @location(4) uv: vec2<f32>,
     // The node's layer in `ground_page`, or -1 without a texture.
     @location(5) @interpolate(flat) layer: i32,
-    // The ground layer of the node's light grid at the vertex (`node_light`: at a grid-level
-    // node's vertices, its columns), turned into visibilities per pixel (`light_visibility`).
-    @location(6) light: vec4<f32>,
+    // The node's light-grid fields (`Node.light`, `Node.more`) and the point's position from
+    // the node's corner: the ground layer of the grid is read per pixel (`grid_light`), so a
+    // node drawn through fewer vertices shows the same light.
+    @location(6) @interpolate(flat) light_node: vec4<f32>,
+    @location(7) @interpolate(flat) light_more: vec4<f32>,
+    @location(8) local: vec2<f32>,
 };
 
 // The draw's first instance is the node's slot in the node table.
@@ -65,7 +68,9 @@ fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
     let t = border + (v.position.xy + node.more.xy) * node.hi_level.w;
     out.uv = vec2<f32>(t.x, 1.0 - t.y);
     out.layer = i32(round(node.hi_level.z));
-    out.light = node_light(node, v.position.xy, 0.0);
+    out.light_node = node.light;
+    out.light_more = node.more;
+    out.local = v.position.xy;
     return out;
 }
 
@@ -186,7 +191,8 @@ fn terrain_color(in: TerrainOut) -> vec4<f32> {
         factor = fine_detail(in.rel, max(px_m, 1e-6));
     }
     let detailed = albedo * factor;
-    return lit_color(VertexOut(in.clip, in.rel, normal, detailed, in.fade, in.light));
+    let light = grid_light(in.light_node, in.light_more, in.local, 0.0);
+    return lit_color(VertexOut(in.clip, in.rel, normal, detailed, in.fade, light));
 }
 
 // Nodes in a cross-fade: dithered.
