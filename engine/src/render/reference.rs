@@ -9,7 +9,7 @@ use super::frame::{FrameResources, PipelineSpec, node_offset_m, pipeline};
 use super::target::Target;
 use super::timer::GpuTimer;
 use crate::camera::Camera;
-use crate::terrain::mesh::{MAX_DECIMATION, NODE_VERTS, NodeMesh, grid_indices};
+use crate::terrain::mesh::NodeMesh;
 use wgpu::util::DeviceExt;
 
 /// The assembled shader source (prelude + `reference.wgsl`).
@@ -92,15 +92,8 @@ impl TerrainReference {
         }
         let mut positions: Vec<[f32; 3]> = Vec::new();
         let mut indices: Vec<u32> = Vec::new();
-        // The triangles each node is drawn with: its own, or a grid's decimated ones.
-        let decimated: Vec<Vec<u32>> = (0..=MAX_DECIMATION).map(|d| grid_indices(d).0).collect();
         for &(m, decimation) in meshes {
-            let grid = m.positions.len() == NODE_VERTS * NODE_VERTS + 4 * NODE_VERTS;
-            let drawn = if decimation > 0 && grid {
-                &decimated[usize::from(decimation.min(MAX_DECIMATION))]
-            } else {
-                &m.indices
-            };
+            let drawn = m.drawn_indices(decimation);
             let o = node_offset_m(m.origin_m, cam.position_m);
             let base = positions.len() as u32;
             positions.extend(

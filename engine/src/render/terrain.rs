@@ -31,7 +31,7 @@ use crate::ground::content::{GroundContent, NodeGround};
 use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{NodeWork, Shared};
 use crate::surface::World;
-use crate::terrain::mesh::{MAX_DECIMATION, NODE_VERTS, NodeMesh, grid_indices};
+use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 use std::sync::{Arc, OnceLock, Weak};
@@ -94,12 +94,6 @@ impl std::fmt::Debug for TerrainNodeGpu {
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
 
 impl TerrainNodeGpu {
-    /// Triangles drawn with `decimation` halvings of the vertex spacing (clamped to the most
-    /// there are).
-    pub fn triangles(&self, decimation: u8) -> u32 {
-        self.range(decimation)[1] / 3
-    }
-
     /// First index (in the page) and index count drawn with `decimation`.
     fn range(&self, decimation: u8) -> [u32; 2] {
         let [first, count] = self.ranges[usize::from(decimation).min(DECIMATIONS - 1)];
@@ -476,18 +470,17 @@ impl TerrainRenderer {
                 tag: u32::from(*g),
             })
             .collect();
-        // A grid mesh as `mesh::build` lays it out also keeps its decimated triangles.
-        let grid = mesh.decimation == 0
-            && mesh.positions.len() == NODE_VERTS * NODE_VERTS + 4 * NODE_VERTS;
+        // A mesh that decimates also keeps its decimated triangles (after its own).
         let mut indices = mesh.indices.clone();
-        let mut ranges = [[0, indices.len() as u32]; DECIMATIONS];
-        if grid {
-            for (d, range) in ranges.iter_mut().enumerate().skip(1) {
-                let (coarse, _) = grid_indices(d as u8);
-                *range = [indices.len() as u32, coarse.len() as u32];
-                indices.extend_from_slice(&coarse);
+        let ranges: [[u32; 2]; DECIMATIONS] = std::array::from_fn(|d| {
+            let drawn = mesh.drawn_indices(d as u8);
+            if d == 0 || !mesh.decimates() {
+                return [0, drawn.len() as u32];
             }
-        }
+            let first = indices.len() as u32;
+            indices.extend_from_slice(drawn);
+            [first, drawn.len() as u32]
+        });
         let lengths = [vertices.len() as u32, indices.len() as u32];
         let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
             log::warn!(

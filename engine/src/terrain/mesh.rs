@@ -96,12 +96,28 @@ impl NodeMesh {
     /// The same grid mesh drawn with `steps` halvings of its vertex spacing (the indices of
     /// [`grid_indices`]; the vertices are kept). Only for meshes built by [`build`].
     pub fn decimated(&self, steps: u8) -> NodeMesh {
-        let (indices, surface_index_count) = grid_indices(steps);
+        let g = grid_indices(steps);
         NodeMesh {
-            indices,
-            surface_index_count,
+            indices: g.indices.clone(),
+            surface_index_count: g.surface_index_count,
             decimation: steps,
             ..self.clone()
+        }
+    }
+
+    /// Whether the mesh can be drawn decimated: all its vertices drawn, laid out as [`build`]
+    /// lays them out (the grid, then the four skirts), so [`grid_indices`] apply to it.
+    pub fn decimates(&self) -> bool {
+        self.decimation == 0 && self.positions.len() == NODE_VERTS * NODE_VERTS + 4 * NODE_VERTS
+    }
+
+    /// The indices drawn with `decimation` halvings: the grid's decimated triangles where the
+    /// mesh [`decimates`](Self::decimates), else its own.
+    pub fn drawn_indices(&self, decimation: u8) -> &[u32] {
+        if decimation > 0 && self.decimates() {
+            &grid_indices(decimation).indices
+        } else {
+            &self.indices
         }
     }
 
@@ -348,15 +364,15 @@ pub fn build(
             ground.push(ground[v]);
         }
     }
-    let (indices, surface_index_count) = grid_indices(0);
+    let g = grid_indices(0);
     NodeMesh {
         key,
         origin_m: r.min,
         positions,
         normals,
         ground,
-        indices,
-        surface_index_count,
+        indices: g.indices.clone(),
+        surface_index_count: g.surface_index_count,
         bounds: own,
         skirt_bottom_m,
         decimation: 0,
@@ -375,11 +391,26 @@ fn border_vertex(side: Side, t: usize) -> usize {
     }
 }
 
+/// The triangles of a grid mesh through every `2^steps`-th vertex (`steps <=`
+/// [`MAX_DECIMATION`]).
+#[derive(Debug)]
+pub struct GridIndices {
+    /// Counter-clockwise seen from above (skirts seen from outside).
+    pub indices: Vec<u32>,
+    /// How many of `indices` are the surface's (the skirts' follow).
+    pub surface_index_count: u32,
+}
+
+/// The [`GridIndices`] of `steps` halvings, the same for every grid node (made once).
+pub fn grid_indices(steps: u8) -> &'static GridIndices {
+    static ALL: std::sync::OnceLock<[GridIndices; MAX_DECIMATION as usize + 1]> =
+        std::sync::OnceLock::new();
+    &ALL.get_or_init(|| std::array::from_fn(|d| grid_triangles(d as u8)))[usize::from(steps)]
+}
+
 /// The triangles of a grid mesh as [`build`] lays out its vertices (the grid row-major, then
-/// each side's skirt vertices in [`Side::ALL`] order), through every `2^steps`-th vertex:
-/// the indices, counter-clockwise seen from above (skirts seen from outside), and how many of
-/// them are the surface's.
-pub fn grid_indices(steps: u8) -> (Vec<u32>, u32) {
+/// each side's skirt vertices in [`Side::ALL`] order), through every `2^steps`-th vertex.
+fn grid_triangles(steps: u8) -> GridIndices {
     let step = 1usize << steps;
     let n = NODE_VERTS;
     let quads = NODE_QUADS as usize / step;
@@ -411,5 +442,8 @@ pub fn grid_indices(steps: u8) -> (Vec<u32>, u32) {
             }
         }
     }
-    (indices, surface_index_count)
+    GridIndices {
+        indices,
+        surface_index_count,
+    }
 }

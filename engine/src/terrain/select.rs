@@ -48,16 +48,7 @@ pub fn projected_error_px(
     frustum: Option<&Frustum>,
     near_m: f64,
 ) -> f64 {
-    let px = |error_m: f64, dist_m: f64| {
-        let d = dist_m.max(near_m);
-        if error_m <= 0.0 {
-            0.0
-        } else if d > 0.0 {
-            error_m * k_px / d
-        } else {
-            f64::INFINITY
-        }
-    };
+    let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
     let (lo, hi) = node_aabb(tree, key, b);
     let node_dist_m = distance_to_aabb(eye_m, lo, hi);
     let mut out = px(b.vegetation_error_m, node_dist_m);
@@ -76,6 +67,19 @@ pub fn projected_error_px(
         out = block_px;
     }
     out
+}
+
+/// An error of `error_m` seen `dist_m` away (at least `near_m`) in pixels: 0 without error,
+/// infinite at distance 0.
+fn error_px(error_m: f64, dist_m: f64, k_px: f64, near_m: f64) -> f64 {
+    let d = dist_m.max(near_m);
+    if error_m <= 0.0 {
+        0.0
+    } else if d > 0.0 {
+        error_m * k_px / d
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// How many halvings of its grid mesh's vertex spacing node `key` may be drawn with (at most
@@ -109,13 +113,9 @@ pub fn decimation(
         let within = (oy..oy + per).all(|by| {
             (ox..ox + per).all(|bx| {
                 let i = by * BLOCKS_PER_SIDE + bx;
-                let e = b.blocks[i].error_m;
-                if e <= 0.0 {
-                    return true;
-                }
                 let (lo, hi) = block_aabb(tree, a, &b, i);
-                let dist = distance_to_aabb(eye_m, lo, hi).max(near_m);
-                dist > 0.0 && e * k_px / dist <= tau_px
+                let dist_m = distance_to_aabb(eye_m, lo, hi);
+                error_px(b.blocks[i].error_m, dist_m, k_px, near_m) <= tau_px
             })
         });
         if !within {
@@ -274,19 +274,33 @@ pub fn select_occluded(
     );
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     if p.decimate {
-        for s in &mut out.nodes {
-            s.decimation = decimation(
-                tree,
-                s.key,
-                cam.position_m,
-                cam.k_px(),
-                0.0,
-                p.tau_px,
-                |k| Some(cache.get(world, tree, k)),
-            );
-        }
+        decimate(&mut out, tree, cam, p.tau_px, |k| {
+            Some(cache.get(world, tree, k))
+        });
     }
     out
+}
+
+/// Sets every selected node's [`decimation`] at threshold `tau_px` for `cam` (`bounds` gives
+/// the ancestors' bounds).
+pub fn decimate(
+    sel: &mut Selection,
+    tree: &QuadTree,
+    cam: &Camera,
+    tau_px: f64,
+    mut bounds: impl FnMut(NodeKey) -> Option<NodeBounds>,
+) {
+    for s in &mut sel.nodes {
+        s.decimation = decimation(
+            tree,
+            s.key,
+            cam.position_m,
+            cam.k_px(),
+            0.0,
+            tau_px,
+            &mut bounds,
+        );
+    }
 }
 
 #[cfg(test)]

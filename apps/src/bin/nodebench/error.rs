@@ -185,17 +185,9 @@ fn terrain_only(
         |_, _, _, px| px > tau,
     );
     // Drawn like the full selection: each node as coarsely as its ancestors' bounds allow.
-    for s in &mut sel.nodes {
-        s.decimation = engine::terrain::select::decimation(
-            tree,
-            s.key,
-            cam.position_m,
-            cam.k_px(),
-            0.0,
-            tau,
-            |k| Some(ctx.0.get(world, tree, k)),
-        );
-    }
+    engine::terrain::select::decimate(&mut sel, tree, cam, tau, |k| {
+        Some(ctx.0.get(world, tree, k))
+    });
     measure_view(world, tree, ctx, cam, &sel, per_side, None)
 }
 

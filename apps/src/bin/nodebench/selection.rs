@@ -4,7 +4,7 @@ use crate::report::{Report, bar};
 use engine::camera::Camera;
 use engine::surface::World;
 use engine::terrain::bounds::BoundsCache;
-use engine::terrain::mesh::{MAX_DECIMATION, grid_indices};
+use engine::terrain::mesh::grid_indices;
 use engine::terrain::quadtree::QuadTree;
 use engine::terrain::select::{SelectParams, Selection, select};
 use std::time::Instant;
@@ -12,18 +12,15 @@ use std::time::Instant;
 /// Triangles drawn for a selection of grid nodes, each with its decimation (32 x 32 x 2 surface
 /// + 4 x 32 x 2 skirt triangles undecimated, a quarter as many surface ones per halving).
 pub(crate) fn triangles(sel: &Selection) -> usize {
-    let per: Vec<usize> = (0..=MAX_DECIMATION)
-        .map(|d| grid_indices(d).0.len() / 3)
-        .collect();
     sel.nodes
         .iter()
-        .map(|s| per[usize::from(s.decimation)])
+        .map(|s| grid_indices(s.decimation).indices.len() / 3)
         .sum()
 }
 
 /// The same selection's triangles with every node drawn through all its vertices.
 fn triangles_undecimated(sel: &Selection) -> usize {
-    sel.nodes.len() * grid_indices(0).0.len() / 3
+    sel.nodes.len() * grid_indices(0).indices.len() / 3
 }
 
 pub(crate) fn section_selection(
