@@ -255,24 +255,42 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
         .iter()
         .map(|r| [r.between_m(c), r.between_m(0.5 * c)])
         .collect();
+    // The cells are visited in square tiles that share their region bounds and lie in one
+    // block, so per-tile extremes give exactly the per-cell results below (subtracting or adding
+    // the same `between` keeps the order of rounded values).
+    let tile = regions.group.min(cells_per_block);
+    let tiles = m / tile;
+    let children_at = |at: usize| if depth_below >= 1 { children[at] } else { 0.0 };
     // Pass 1: height ranges, and the errors measured at lattice points (true values: lower
-    // bounds of each block's error; the grandchildren's are 0 there, their vertices).
+    // bounds of each block's error; the grandchildren's are 0 there, their vertices). Per tile
+    // also its points' largest own and children's errors, for pass 2.
     let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
-    for j in 0..m {
-        for i in 0..m {
-            let [between, _] = between[regions.index(i, j)];
-            let block = &mut blocks[block_of(i, j)];
-            for at in corners(i, j) {
-                block.lo = block.lo.min(lattice[at] - between);
-                block.hi = block.hi.max(lattice[at] + between);
-                let children_at = if depth_below >= 1 { children[at] } else { 0.0 };
-                block.measured = block.measured.max(own[at]).max(children_at);
+    let mut tile_max = vec![[0.0f64; 2]; tiles * tiles];
+    for tj in 0..tiles {
+        for ti in 0..tiles {
+            let (i0, j0) = (ti * tile, tj * tile);
+            let [between, _] = between[regions.index(i0, j0)];
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            let [mut own_max, mut children_max] = [0.0f64; 2];
+            for j in j0..=j0 + tile {
+                for at in j * w + i0..=j * w + i0 + tile {
+                    lo = lo.min(lattice[at]);
+                    hi = hi.max(lattice[at]);
+                    own_max = own_max.max(own[at]);
+                    children_max = children_max.max(children_at(at));
+                }
             }
+            let block = &mut blocks[block_of(i0, j0)];
+            block.lo = block.lo.min(lo - between);
+            block.hi = block.hi.max(hi + between);
+            block.measured = block.measured.max(own_max).max(children_max);
+            tile_max[tj * tiles + ti] = [own_max, children_max];
         }
     }
     // Pass 2: per cell, corner errors plus the between-points bound; cells whose bound may be
     // more than `refine::SLACK` over their block's measured error are refined by branch and
-    // bound ([`super::refine`]).
+    // bound ([`super::refine`]). A tile whose largest corner errors pass passes as a whole (each
+    // cell's bound is at most the tile's); the others are taken cell by cell.
     let refiner = super::refine::Refiner {
         world,
         origin_m: r.min,
@@ -293,27 +311,44 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
         block.children = block.children.max(e[1]);
         block.deeper = block.deeper.max(e[2]);
     };
-    for j in 0..m {
-        for i in 0..m {
-            let b = block_of(i, j);
-            let ks = corners(i, j);
-            let (own_max, children_max) = ks.iter().fold((0.0f64, 0.0f64), |(o, ch), &k| {
-                (o.max(own[k]), ch.max(children[k]))
-            });
-            let [whole, half] = between[regions.index(i, j)];
+    let worst = |e: super::refine::Errors| e.iter().copied().fold(0.0, f64::max);
+    for tj in 0..tiles {
+        for ti in 0..tiles {
+            let (i0, j0) = (ti * tile, tj * tile);
+            let b = block_of(i0, j0);
+            let [whole, half] = between[regions.index(i0, j0)];
+            let [own_max, children_max] = tile_max[tj * tiles + ti];
             let e = refiner.bounds([own_max, children_max, 0.0], whole, half);
-            if e.iter().copied().fold(0.0, f64::max) > blocks[b].measured * super::refine::SLACK {
-                loose[b].push(super::refine::Cell {
-                    x0: i as f64,
-                    y0: j as f64,
-                    size: 1.0,
-                    corners: ks.map(|k| [own[k], children[k], 0.0]),
-                    region: *regions.at(i, j),
-                });
-            } else {
+            if worst(e) <= blocks[b].measured * super::refine::SLACK {
                 take(&mut blocks[b], e);
+                continue;
+            }
+            for j in j0..j0 + tile {
+                for i in i0..i0 + tile {
+                    let ks = corners(i, j);
+                    let (own_max, children_max) = ks
+                        .iter()
+                        .fold((0.0f64, 0.0f64), |(o, ch), &k| (o.max(own[k]), ch.max(children[k])));
+                    let e = refiner.bounds([own_max, children_max, 0.0], whole, half);
+                    if worst(e) > blocks[b].measured * super::refine::SLACK {
+                        loose[b].push(super::refine::Cell {
+                            x0: i as f64,
+                            y0: j as f64,
+                            size: 1.0,
+                            corners: ks.map(|k| [own[k], children[k], 0.0]),
+                            region: *regions.at(i, j),
+                        });
+                    } else {
+                        take(&mut blocks[b], e);
+                    }
+                }
             }
         }
+    }
+    // Refined in row-major order of the cells, whatever the tiles' order (the refinement's ties
+    // go by order).
+    for cells in &mut loose {
+        cells.sort_by(|a, b| a.y0.total_cmp(&b.y0).then(a.x0.total_cmp(&b.x0)));
     }
     for (b, cells) in loose.into_iter().enumerate() {
         if !cells.is_empty() {
