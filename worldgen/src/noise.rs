@@ -140,14 +140,45 @@ pub fn gradient_lattice(seed: u64, xs: &[f64], ys: &[f64]) -> Vec<f64> {
         .map(|(x, y)| DIRECTIONS_16[(corner_hash(seed, x, y) >> 60) as usize])
         .collect();
     let mut out = Vec::with_capacity(xs.len() * ys.len());
+    // Per row, each noise cell's corner gradients with the y parts of `blend`'s dot products
+    // (the same products, so the same values), computed once for the row's points in the cell.
+    let mut used = first_x.clone();
+    used.sort_unstable();
+    used.dedup();
+    let mut cells: Vec<([f64; 4], [f64; 4])> = vec![([0.0; 4], [0.0; 4]); cw.saturating_sub(1)];
     for (&(_, fy, v), &r) in rows.iter().zip(&first_y) {
-        for (&(_, fx, u), &c) in cols.iter().zip(&first_x) {
+        for &c in &used {
             let k = r * cw + c;
             let g = [corner[k], corner[k + 1], corner[k + cw], corner[k + cw + 1]];
-            out.push(blend(g, fx, fy, u, v));
+            cells[c] = (
+                g.map(|g| g.0),
+                [
+                    g[0].1 * fy,
+                    g[1].1 * fy,
+                    g[2].1 * (fy - 1.0),
+                    g[3].1 * (fy - 1.0),
+                ],
+            );
         }
+        out.extend(cols.iter().zip(&first_x).map(|(&(_, fx, u), &c)| {
+            let (gx, gy) = cells[c];
+            blend_terms(gx, gy, fx, u, v)
+        }));
     }
     out
+}
+
+/// [`blend`] from the corner gradients' x parts `gx` and the y parts of the four dot products
+/// `y` (already multiplied), with the same operations in the same order.
+#[inline]
+fn blend_terms(gx: [f64; 4], y: [f64; 4], fx: f64, u: f64, v: f64) -> f64 {
+    let n00 = gx[0] * fx + y[0];
+    let n10 = gx[1] * (fx - 1.0) + y[1];
+    let n01 = gx[2] * fx + y[2];
+    let n11 = gx[3] * (fx - 1.0) + y[3];
+    let a = n00 + u * (n10 - n00);
+    let b = n01 + u * (n11 - n01);
+    (a + v * (b - a)) * std::f64::consts::SQRT_2
 }
 
 /// Fractional Brownian motion: `octaves` layers of gradient noise, frequency x2 and amplitude
