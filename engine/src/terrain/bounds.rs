@@ -326,9 +326,10 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
             for j in j0..j0 + tile {
                 for i in i0..i0 + tile {
                     let ks = corners(i, j);
-                    let (own_max, children_max) = ks
-                        .iter()
-                        .fold((0.0f64, 0.0f64), |(o, ch), &k| (o.max(own[k]), ch.max(children[k])));
+                    let (own_max, children_max) =
+                        ks.iter().fold((0.0f64, 0.0f64), |(o, ch), &k| {
+                            (o.max(own[k]), ch.max(children[k]))
+                        });
                     let e = refiner.bounds([own_max, children_max, 0.0], whole, half);
                     if worst(e) > blocks[b].measured * super::refine::SLACK {
                         loose[b].push(super::refine::Cell {
