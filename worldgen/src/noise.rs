@@ -106,14 +106,18 @@ pub fn gradient(seed: u64, x: f64, y: f64) -> f64 {
 /// north-west, north-east), the position's fractions and their fades.
 #[inline]
 fn blend(g: [(f64, f64); 4], fx: f64, fy: f64, u: f64, v: f64) -> f64 {
-    let n00 = g[0].0 * fx + g[0].1 * fy;
-    let n10 = g[1].0 * (fx - 1.0) + g[1].1 * fy;
-    let n01 = g[2].0 * fx + g[2].1 * (fy - 1.0);
-    let n11 = g[3].0 * (fx - 1.0) + g[3].1 * (fy - 1.0);
-    let a = n00 + u * (n10 - n00);
-    let b = n01 + u * (n11 - n01);
-    // sqrt(2) scales the theoretical range of 2-D gradient noise to about [-1, 1].
-    (a + v * (b - a)) * std::f64::consts::SQRT_2
+    blend_terms(g.map(|g| g.0), y_terms(g, fy), fx, u, v)
+}
+
+/// The y parts of [`blend`]'s four dot products (gradient times offset from its corner).
+#[inline]
+fn y_terms(g: [(f64, f64); 4], fy: f64) -> [f64; 4] {
+    [
+        g[0].1 * fy,
+        g[1].1 * fy,
+        g[2].1 * (fy - 1.0),
+        g[3].1 * (fy - 1.0),
+    ]
 }
 
 /// [`gradient`] at every point of the lattice `xs` x `ys` (row-major, one row per `ys` entry),
@@ -140,8 +144,8 @@ pub fn gradient_lattice(seed: u64, xs: &[f64], ys: &[f64]) -> Vec<f64> {
         .map(|(x, y)| DIRECTIONS_16[(corner_hash(seed, x, y) >> 60) as usize])
         .collect();
     let mut out = Vec::with_capacity(xs.len() * ys.len());
-    // Per row, each noise cell's corner gradients with the y parts of `blend`'s dot products
-    // (the same products, so the same values), computed once for the row's points in the cell.
+    // Per row, each used noise cell's corner gradients and the y parts of `blend`'s dot
+    // products, computed once for the row's points in the cell (`blend` computes the same).
     let mut used = first_x.clone();
     used.sort_unstable();
     used.dedup();
@@ -150,15 +154,7 @@ pub fn gradient_lattice(seed: u64, xs: &[f64], ys: &[f64]) -> Vec<f64> {
         for &c in &used {
             let k = r * cw + c;
             let g = [corner[k], corner[k + 1], corner[k + cw], corner[k + cw + 1]];
-            cells[c] = (
-                g.map(|g| g.0),
-                [
-                    g[0].1 * fy,
-                    g[1].1 * fy,
-                    g[2].1 * (fy - 1.0),
-                    g[3].1 * (fy - 1.0),
-                ],
-            );
+            cells[c] = (g.map(|g| g.0), y_terms(g, fy));
         }
         out.extend(cols.iter().zip(&first_x).map(|(&(_, fx, u), &c)| {
             let (gx, gy) = cells[c];
@@ -169,7 +165,7 @@ pub fn gradient_lattice(seed: u64, xs: &[f64], ys: &[f64]) -> Vec<f64> {
 }
 
 /// [`blend`] from the corner gradients' x parts `gx` and the y parts of the four dot products
-/// `y` (already multiplied), with the same operations in the same order.
+/// `y` ([`y_terms`]): the dot products are `gx * (fx or fx - 1) + y`, then blended.
 #[inline]
 fn blend_terms(gx: [f64; 4], y: [f64; 4], fx: f64, u: f64, v: f64) -> f64 {
     let n00 = gx[0] * fx + y[0];
@@ -178,6 +174,7 @@ fn blend_terms(gx: [f64; 4], y: [f64; 4], fx: f64, u: f64, v: f64) -> f64 {
     let n11 = gx[3] * (fx - 1.0) + y[3];
     let a = n00 + u * (n10 - n00);
     let b = n01 + u * (n11 - n01);
+    // sqrt(2) scales the theoretical range of 2-D gradient noise to about [-1, 1].
     (a + v * (b - a)) * std::f64::consts::SQRT_2
 }
 
