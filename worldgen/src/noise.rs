@@ -157,8 +157,8 @@ pub fn gradient_lattice(seed: u64, xs: &[f64], ys: &[f64]) -> Vec<f64> {
             cells[c] = (g.map(|g| g.0), y_terms(g, fy));
         }
         out.extend(cols.iter().zip(&first_x).map(|(&(_, fx, u), &c)| {
-            let (gx, gy) = cells[c];
-            blend_terms(gx, gy, fx, u, v)
+            let (gx, y) = cells[c];
+            blend_terms(gx, y, fx, u, v)
         }));
     }
     out

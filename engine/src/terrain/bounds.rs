@@ -259,6 +259,10 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
     // block, so per-tile extremes give exactly the per-cell results below (subtracting or adding
     // the same `between` keeps the order of rounded values).
     let tile = regions.group.min(cells_per_block);
+    debug_assert!(
+        cells_per_block.is_multiple_of(tile) && regions.group.is_multiple_of(tile),
+        "tiles must lie in one block and one region group"
+    );
     let tiles = m / tile;
     let children_at = |at: usize| if depth_below >= 1 { children[at] } else { 0.0 };
     // Pass 1: height ranges, and the errors measured at lattice points (true values: lower
