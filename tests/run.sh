@@ -94,6 +94,7 @@ grep -q '"section": "selection"' "$smoke/nodebench.json"
 grep -q '"machine"' "$smoke/nodebench.json"
 grep -q '"section": "gpu"' "$smoke/nodebench.json"
 grep -q '"section": "soak"' "$smoke/nodebench.json"
+grep -q '"section": "bookkeeping"' "$smoke/nodebench.json"
 test -s "$smoke/speed_vs_error.png"
 if [ -d ../shared/data/meshes ]; then
   grep -q '"section": "pm"' "$smoke/nodebench.json"

@@ -412,16 +412,10 @@ impl Viewer {
             && self.textures_pending() == 0
     }
 
-    /// [`Self::stream_only`] with the camera's predicted path (`Streamer::update_along`): the
-    /// streaming of a frame whose path is known (benchmarks), uploads included, nothing drawn.
-    pub fn stream_along(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
-        self.streamer.update_along(cam, dt_s, future);
-        self.upload_and_finish(gpu);
-    }
-
     /// The GPU phases under the frame's budget, then the renderers' deferred work (node
-    /// textures) in what they left of it, as a frame does them.
-    fn upload_and_finish(&mut self, gpu: &Gpu) {
+    /// textures) in what they left of it, as a frame does them after the streamer's update
+    /// (benchmarks call the two halves apart to time them apart).
+    pub fn upload_and_finish(&mut self, gpu: &Gpu) {
         let budget_s = self.streamer.settings.gpu_budget_s;
         let t0 = Instant::now();
         let (_, expected_gpu_s) = self.upload(gpu, budget_s);

@@ -1,6 +1,7 @@
 //! `nodebench`: the headless node-generation benchmark. Prints Markdown tables, optionally writes
 //! JSON rows and a speed-against-error plot. See `--help`. One file per section.
 
+mod bookkeeping;
 mod buildings;
 mod error;
 mod gpu;
@@ -26,7 +27,7 @@ use report::Report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-const SECTIONS: [&str; 13] = [
+const SECTIONS: [&str; 14] = [
     "tiles",
     "terrain",
     "selection",
@@ -36,6 +37,7 @@ const SECTIONS: [&str; 13] = [
     "pm",
     "buildings",
     "streaming",
+    "bookkeeping",
     "gpu",
     "textures",
     "soak",
@@ -60,7 +62,9 @@ const SECTIONS: [&str; 13] = [
 /// (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
 /// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
-/// jobs, pop debt, bookkeeping per frame), `gpu` (when an adapter exists: the automatic flight
+/// jobs, pop debt, bookkeeping per frame), `bookkeeping` (the streamer's update per frame on
+/// settled views of those flights, workers idle: its own cost without a flight's scheduling
+/// noise), `gpu` (when an adapter exists: the automatic flight
 /// rendered offscreen at 720p and 1440p, the frame pass timed with timestamp queries next to a
 /// same-run one-draw terrain reference, draw calls), `textures` (when an adapter exists: one
 /// ground texture per sampled node, CPU and GPU time, bytes), `soak` (when an adapter exists:
@@ -77,8 +81,8 @@ struct Cli {
     #[arg(long, default_value = "maps/default")]
     map: PathBuf,
     /// Run only these sections (comma-separated): tiles, terrain, selection, error, vegetation,
-    /// lighting, pm, buildings, streaming, gpu, textures, soak, worlds (worlds runs only when
-    /// named here).
+    /// lighting, pm, buildings, streaming, bookkeeping, gpu, textures, soak, worlds (worlds runs
+    /// only when named here).
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// A few seconds in total: fewer items, cameras and thresholds (used by the test script).
@@ -212,6 +216,15 @@ fn run(cli: &Cli) -> Result<()> {
             workers,
             [vh * 16 / 9, vh],
             adapter.as_ref().map(|(g, name)| (g, name.as_str())),
+        )?;
+    }
+    if want("bookkeeping") {
+        bookkeeping::section_bookkeeping(
+            &cli.map,
+            &mut report,
+            cli.quick,
+            workers,
+            [vh * 16 / 9, vh],
         )?;
     }
     let mut adapter_name = adapter

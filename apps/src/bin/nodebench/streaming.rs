@@ -16,7 +16,7 @@ use std::time::Instant;
 
 /// A closed loop over the map at `above_m` over the ground (or the water), flown at
 /// `speed_m_s`: the camera `t_s` seconds into the flight.
-fn loop_camera(
+pub(crate) fn loop_camera(
     world: &World,
     (speed_m_s, above_m): (f64, f64),
     t_s: f64,
@@ -37,7 +37,8 @@ fn loop_camera(
 }
 
 /// Flights: (speed m/s, height above the ground m). The last is a jet.
-const FLIGHTS: [(f64, f64); 4] = [(50.0, 40.0), (150.0, 40.0), (300.0, 40.0), (1000.0, 1000.0)];
+pub(crate) const FLIGHTS: [(f64, f64); 4] =
+    [(50.0, 40.0), (150.0, 40.0), (300.0, 40.0), (1000.0, 1000.0)];
 
 /// A flight's streaming: the streamer alone, or with a GPU the viewer's streaming with every
 /// renderer's upload hook (ground textures rendered under the per-frame GPU budget), nothing
@@ -117,14 +118,48 @@ impl<'g> Flight<'g> {
         }
     }
 
-    /// One frame's streaming: update along the predicted path, then the GPU phases.
-    fn frame(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
+    /// One frame's streaming: the update along the predicted path, then the GPU phases;
+    /// returns the time of each.
+    fn frame(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) -> [Span; 2] {
+        let t = Span::start();
+        self.streamer_mut().update_along(cam, dt_s, future);
+        let update = t.stop();
+        let t = Span::start();
         match self {
             Flight::Cpu(s) => {
-                s.update_along(cam, dt_s, future);
                 s.run_gpu_phases();
             }
-            Flight::Gpu(gpu, v) => v.stream_along(gpu, cam, dt_s, future),
+            Flight::Gpu(gpu, v) => v.upload_and_finish(gpu),
+        }
+        [update, t.stop()]
+    }
+}
+
+/// A span of the frame thread's time: wall clock and, where the platform reports it, on-CPU
+/// time (the wall clock less the time the OS gave other threads).
+#[derive(Clone, Copy)]
+struct Span {
+    wall_s: f64,
+    on_cpu_s: Option<f64>,
+}
+
+/// A span being timed.
+struct SpanStart(Instant, Option<cpu_time::ThreadTime>);
+
+impl Span {
+    fn start() -> SpanStart {
+        SpanStart(Instant::now(), cpu_time::ThreadTime::try_now().ok())
+    }
+}
+
+impl SpanStart {
+    fn stop(self) -> Span {
+        Span {
+            wall_s: self.0.elapsed().as_secs_f64(),
+            on_cpu_s: self
+                .1
+                .and_then(|t| t.try_elapsed().ok())
+                .map(|d| d.as_secs_f64()),
         }
     }
 }
@@ -219,17 +254,10 @@ pub(crate) fn section_streaming(
         // same for nodes whose own ground texture is not made yet (they show an ancestor's).
         let (mut unlit_frames, mut unlit_nodes, mut lit_checked) = (0usize, 0usize, 0usize);
         let (mut bare_frames, mut bare_nodes, mut textured_checked) = (0usize, 0usize, 0usize);
-        let mut on_cpu_times = Vec::with_capacity(frames);
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
-            let t = Instant::now();
-            let on_cpu = cpu_time::ThreadTime::try_now().ok();
-            flight_run.frame(cam, dt, &future[f]);
+            frame_times.push(flight_run.frame(cam, dt, &future[f]));
             let s = flight_run.streamer();
-            frame_times.push(t.elapsed().as_secs_f64());
-            if let Some(d) = on_cpu.and_then(|t| t.try_elapsed().ok()) {
-                on_cpu_times.push(d.as_secs_f64());
-            }
             let debts = frame_debts(s, cam, tau);
             lit_checked += debts.lit_checked;
             if debts.excess_px > 0.0 {
@@ -281,8 +309,7 @@ pub(crate) fn section_streaming(
             cancelled,
             debt_share: debt_frames as f64 / frames as f64,
             worst_excess_px: worst_excess,
-            frame_times_s: frame_times,
-            on_cpu_times_s: on_cpu_times,
+            frame_times,
             light_debt: lighting.then(|| {
                 (
                     unlit_frames as f64 / frames as f64,
@@ -435,10 +462,8 @@ struct FlightOutcome {
     /// Share of frames with pop debt.
     debt_share: f64,
     worst_excess_px: f64,
-    frame_times_s: Vec<f64>,
-    /// The same spans' on-CPU time of the frame thread (empty where the platform does not
-    /// report it).
-    on_cpu_times_s: Vec<f64>,
+    /// Per frame: the streamer's update (the bookkeeping) and the GPU phases.
+    frame_times: Vec<[Span; 2]>,
     /// With light grids: the share of frames with a visible drawn node still without its grid,
     /// and the share of visible drawn nodes (over all frames) without it.
     light_debt: Option<(f64, f64)>,
@@ -448,7 +473,7 @@ struct FlightOutcome {
 }
 
 impl FlightOutcome {
-    fn report(mut self, r: &mut Report, params: &str) {
+    fn report(self, r: &mut Report, params: &str) {
         let mut request: Vec<f64> = self
             .latencies
             .iter()
@@ -554,33 +579,56 @@ impl FlightOutcome {
             "px",
             params,
         );
-        self.frame_times_s.sort_by(f64::total_cmp);
-        let fq = |p: f64| apps::percentile(&self.frame_times_s, p);
-        r.add(
-            "streaming",
-            "bookkeeping per frame p50 (update + GPU phases)",
-            fq(0.5) * 1e6,
-            "µs",
-            params,
-        );
-        r.add(
-            "streaming",
-            "bookkeeping per frame p99",
-            fq(0.99) * 1e6,
-            "µs",
-            params,
-        );
-        if !self.on_cpu_times_s.is_empty() {
-            self.on_cpu_times_s.sort_by(f64::total_cmp);
+        report_frame_times(&self.frame_times, r, params);
+    }
+}
+
+/// The rows of a flight's per-frame times: the update (bookkeeping), the GPU phases and both.
+fn report_frame_times(frame_times: &[[Span; 2]], r: &mut Report, params: &str) {
+    let spans = [
+        (
+            "bookkeeping per frame (the streamer's update)",
+            frame_times.iter().map(|[u, _]| *u).collect::<Vec<_>>(),
+        ),
+        (
+            "GPU phases per frame (uploads under the GPU budget)",
+            frame_times.iter().map(|[_, g]| *g).collect(),
+        ),
+        (
+            "update + GPU phases per frame",
+            frame_times
+                .iter()
+                .map(|[u, g]| Span {
+                    wall_s: u.wall_s + g.wall_s,
+                    on_cpu_s: u.on_cpu_s.zip(g.on_cpu_s).map(|(a, b)| a + b),
+                })
+                .collect(),
+        ),
+    ];
+    for (name, spans) in spans {
+        let mut wall: Vec<f64> = spans.iter().map(|s| s.wall_s).collect();
+        let mut on_cpu: Vec<f64> = spans.iter().filter_map(|s| s.on_cpu_s).collect();
+        wall.sort_by(f64::total_cmp);
+        on_cpu.sort_by(f64::total_cmp);
+        for (q_name, q) in [("p50", 0.5), ("p99", 0.99)] {
             r.add(
                 "streaming",
-                "bookkeeping per frame p99, on-CPU time of the frame thread",
-                apps::percentile(&self.on_cpu_times_s, 0.99) * 1e6,
+                &format!("{name} {q_name}"),
+                apps::percentile(&wall, q) * 1e6,
+                "µs",
+                params,
+            );
+        }
+        if !on_cpu.is_empty() {
+            r.add(
+                "streaming",
+                &format!("{name} p99, on-CPU time of the frame thread"),
+                apps::percentile(&on_cpu, 0.99) * 1e6,
                 "µs",
                 &format!(
                     "{params}; the wall-clock row less the time the OS gave other threads \
-                     (with as many workers as cores, a worker can hold the frame thread's core \
-                     for a scheduler tick)"
+                         (with as many workers as cores, a worker can hold the frame thread's \
+                         core for a scheduler tick)"
                 ),
             );
         }

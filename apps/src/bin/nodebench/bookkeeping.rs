@@ -1,0 +1,111 @@
+//! Section `bookkeeping`: the streamer's per-frame update on settled views, with the workers
+//! idle, so the rows show the update's own cost without the scheduling noise
+//! of a flight (the `streaming` section's bookkeeping rows include that noise).
+
+use crate::open_world;
+use crate::report::{Report, bar};
+use crate::streaming::{FLIGHTS, loop_camera};
+use anyhow::{Result, bail};
+use engine::lighting::content::LightingContent;
+use engine::stream::{StreamSettings, Streamer};
+use std::time::Instant;
+
+/// Views per flight (evenly spaced in time over the first `VIEW_SPAN_S` seconds).
+const VIEWS: usize = 4;
+const VIEW_SPAN_S: f64 = 12.0;
+
+pub(crate) fn section_bookkeeping(
+    world_path: &std::path::Path,
+    r: &mut Report,
+    quick: bool,
+    workers: usize,
+    viewport_px: [u32; 2],
+) -> Result<()> {
+    let dt = 1.0 / 60.0;
+    let frames = if quick { 20 } else { 240 };
+    let tau = 2.0;
+    let flights: Vec<(f64, f64)> = if quick {
+        vec![FLIGHTS[2]]
+    } else {
+        FLIGHTS.to_vec()
+    };
+    for flight in flights {
+        let (speed, above) = flight;
+        let world = open_world(world_path)?;
+        // Light grids off: settling would wait for hundreds of grids, and the update's cost
+        // does not depend on them (their threads would be idle while measured anyway).
+        let kinds = engine::kinds::registered(&world)
+            .iter()
+            .filter(|k| k.kind.name() != LightingContent::NAME)
+            .map(|k| std::sync::Arc::clone(&k.kind))
+            .collect();
+        let settings = StreamSettings {
+            tau_px: tau,
+            ..StreamSettings::default()
+        }
+        .with_workers(workers);
+        let mut s = Streamer::new(world, settings, kinds);
+        let (mut wall, mut on_cpu, mut selection) = (Vec::new(), Vec::new(), Vec::new());
+        let b = bar((VIEWS * frames) as u64, &format!("bookkeeping {speed} m/s"));
+        for v in 0..VIEWS {
+            let t_s = VIEW_SPAN_S * v as f64 / VIEWS as f64;
+            let world = &s.shared.world;
+            let cam = loop_camera(world, flight, t_s, viewport_px);
+            // The path ahead as a flight predicts it, so every prefetch part is computed.
+            let future: Vec<_> = engine::stream::predict::PREDICT_HORIZONS_S
+                .iter()
+                .map(|&h| (h, loop_camera(world, flight, t_s + h, viewport_px)))
+                .collect();
+            // Settle with the path ahead prefetched too.
+            let t0 = Instant::now();
+            loop {
+                s.update_along(&cam, dt, &future);
+                s.run_gpu_phases();
+                if s.in_flight() == 0 && s.needed().iter().all(|&k| s.is_ready(k)) {
+                    break;
+                }
+                if t0.elapsed().as_secs_f64() > 300.0 {
+                    bail!("bookkeeping at {speed} m/s: view {v} did not settle within 300 s");
+                }
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            for _ in 0..frames {
+                let t = Instant::now();
+                let c = cpu_time::ThreadTime::try_now().ok();
+                s.update_along(&cam, dt, &future);
+                wall.push(t.elapsed().as_secs_f64());
+                if let Some(d) = c.and_then(|c| c.try_elapsed().ok()) {
+                    on_cpu.push(d.as_secs_f64());
+                }
+                selection.push(s.stats.last_selection_s);
+                b.inc(1);
+            }
+        }
+        b.finish_and_clear();
+        let params = format!(
+            "{speed} m/s at {above} m: {VIEWS} settled views of the streaming flight, \
+             {frames} updates each with its predicted path (one prefetch part computed again \
+             per update), tau {tau} px, light grids off, workers idle"
+        );
+        for (name, mut times) in [
+            ("streaming update per frame", wall),
+            ("streaming update per frame, on-CPU time", on_cpu),
+            ("  of which the selections", selection),
+        ] {
+            if times.is_empty() {
+                continue;
+            }
+            times.sort_by(f64::total_cmp);
+            for (q_name, q) in [("p50", 0.5), ("p99", 0.99)] {
+                r.add(
+                    "bookkeeping",
+                    &format!("{name} {q_name}"),
+                    apps::percentile(&times, q) * 1e6,
+                    "µs",
+                    &params,
+                );
+            }
+        }
+    }
+    Ok(())
+}
