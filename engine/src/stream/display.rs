@@ -103,11 +103,11 @@ impl Streamer {
         cam: &crate::camera::Camera,
         frustum: &crate::camera::Frustum,
     ) -> Option<f64> {
-        let b = self.resident.get(&key)?.work.bounds?;
+        let b = self.resident.get(&key)?.work.bounds.as_ref()?;
         Some(crate::terrain::select::projected_error_px(
             &self.shared.tree,
             key,
-            &b,
+            b,
             cam.position_m,
             cam.k_px(),
             Some(frustum),
@@ -128,7 +128,7 @@ impl Streamer {
                     cam.k_px(),
                     cam.near_m,
                     self.settings.split_factor * self.settings.tau_px,
-                    |a| self.resident.get(&a)?.work.bounds,
+                    |a| self.resident.get(&a)?.work.bounds.as_ref(),
                 )
             }
             _ => 0,

@@ -49,6 +49,7 @@ use crate::camera::Camera;
 use crate::surface::World;
 use crate::terrain::bounds::NodeBounds;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::terrain::select::Reached;
 use crate::terrain::tiles::TileCache;
 use crossbeam_channel::Receiver;
 use jobs::{JobResult, Request, RequestState};
@@ -367,11 +368,15 @@ impl Streamer {
     /// before it shows, instead of appearing coarse and fading to its children on screen.
     pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
         let known = self.shared.bounds.known();
-        let sel = crate::terrain::select::traverse_in(
+        let mut wanted = FxHashSet::with_capacity_and_hasher(
+            self.wanted.len() + self.wanted.len() / 4,
+            rustc_hash::FxBuildHasher,
+        );
+        crate::terrain::select::walk(
             &self.shared.tree,
             cam,
             Some(cam.frustum_widened(GUARD_BAND)),
-            |key| known.get(&key).copied(),
+            |key| known.get(&key),
             |key: NodeKey, b: &NodeBounds, dist, px| match self.settings.fixed_level {
                 Some(level) => key.level < level,
                 None if self.settings.vegetation_occlusion && px > tau_px => {
@@ -386,12 +391,13 @@ impl Streamer {
                 }
                 None => px > tau_px,
             },
+            |reached| {
+                wanted.insert(match reached {
+                    Reached::Selected { key, .. } | Reached::Unknown(key) => key,
+                });
+            },
         );
-        sel.nodes
-            .iter()
-            .map(|n| n.key)
-            .chain(sel.unknown_bounds)
-            .collect()
+        wanted
     }
 
     /// Every ancestor of the nodes in `wanted`.

@@ -91,21 +91,22 @@ fn error_px(error_m: f64, dist_m: f64, k_px: f64, near_m: f64) -> f64 {
 /// [`projected_error_px`], without frustum culling). `bounds` gives the ancestors' bounds; an
 /// unknown one stops the search. The node's own vegetation is drawn as before, so its term
 /// does not change.
-pub fn decimation(
+pub fn decimation<B: std::borrow::Borrow<NodeBounds>>(
     tree: &QuadTree,
     key: NodeKey,
     eye_m: DVec3,
     k_px: f64,
     near_m: f64,
     tau_px: f64,
-    mut bounds: impl FnMut(NodeKey) -> Option<NodeBounds>,
+    mut bounds: impl FnMut(NodeKey) -> Option<B>,
 ) -> u8 {
     let mut out = 0;
     let mut ancestor = key;
     for d in 1..=MAX_DECIMATION.min(key.level) {
         let Some(a) = ancestor.parent() else { break };
         ancestor = a;
-        let Some(b) = bounds(a) else { break };
+        let Some(owned) = bounds(a) else { break };
+        let b = owned.borrow();
         // The ancestor's blocks over the node: `per x per` of them from (ox, oy).
         let per = BLOCKS_PER_SIDE >> d;
         let cell = |i: u32| (i % (1 << d)) as usize * per;
@@ -113,7 +114,7 @@ pub fn decimation(
         let within = (oy..oy + per).all(|by| {
             (ox..ox + per).all(|bx| {
                 let i = by * BLOCKS_PER_SIDE + bx;
-                let (lo, hi) = block_aabb(tree, a, &b, i);
+                let (lo, hi) = block_aabb(tree, a, b, i);
                 let dist_m = distance_to_aabb(eye_m, lo, hi);
                 error_px(b.blocks[i].error_m, dist_m, k_px, near_m) <= tau_px
             })
@@ -199,9 +200,68 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
     cam: &Camera,
     frustum: Option<Frustum>,
     mut bounds: impl FnMut(NodeKey) -> B,
-    mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
+    split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
 ) -> Selection {
     let mut out = Selection::default();
+    let walked = walk(
+        tree,
+        cam,
+        frustum,
+        |key| bounds(key).into(),
+        split,
+        |reached| match reached {
+            Reached::Selected {
+                key,
+                bounds,
+                dist_m,
+                error_px,
+            } => out.nodes.push(Selected {
+                key,
+                bounds,
+                dist_m,
+                error_px,
+                decimation: 0,
+            }),
+            Reached::Unknown(key) => out.unknown_bounds.push(key),
+        },
+    );
+    out.visited = walked.visited;
+    out.culled = walked.culled;
+    out
+}
+
+/// What [`walk`] reached: a selected node with its bounds (as the bounds source gave them),
+/// distance and projected error, or a node whose bounds are unknown.
+#[derive(Debug)]
+pub enum Reached<B> {
+    Selected {
+        key: NodeKey,
+        bounds: B,
+        dist_m: f64,
+        error_px: f64,
+    },
+    Unknown(NodeKey),
+}
+
+/// Nodes a [`walk`] visited and culled.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Walked {
+    pub visited: u32,
+    pub culled: u32,
+}
+
+/// The traversal of [`traverse_in`], handing each node it reaches to `reached` instead of
+/// collecting them, with the bounds as `bounds` gives them: a source that lends its bounds
+/// (`&NodeBounds`) lets a per-frame selection run without copying any.
+pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
+    tree: &QuadTree,
+    cam: &Camera,
+    frustum: Option<Frustum>,
+    mut bounds: impl FnMut(NodeKey) -> Option<B>,
+    mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
+    mut reached: impl FnMut(Reached<B>),
+) -> Walked {
+    let mut out = Walked::default();
     let k = cam.k_px();
     let mut stack = vec![NodeKey::ROOT];
     while let Some(key) = stack.pop() {
@@ -209,27 +269,27 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
             continue;
         }
         out.visited += 1;
-        let Some(b) = bounds(key).into() else {
-            out.unknown_bounds.push(key);
+        let Some(owned) = bounds(key) else {
+            reached(Reached::Unknown(key));
             continue;
         };
-        let (min, max) = node_aabb(tree, key, &b);
+        let b = owned.borrow();
+        let (min, max) = node_aabb(tree, key, b);
         if frustum.is_some_and(|f| !f.intersects_aabb(min, max)) {
             out.culled += 1;
             continue;
         }
-        let dist = distance_to_aabb(cam.position_m, min, max);
-        let error_px = projected_error_px(tree, key, &b, cam.position_m, k, frustum.as_ref(), 0.0);
-        if key.level < tree.max_level && split(key, &b, dist, error_px) {
+        let dist_m = distance_to_aabb(cam.position_m, min, max);
+        let error_px = projected_error_px(tree, key, b, cam.position_m, k, frustum.as_ref(), 0.0);
+        if key.level < tree.max_level && split(key, b, dist_m, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order.
             stack.extend(key.children().into_iter().rev());
         } else {
-            out.nodes.push(Selected {
+            reached(Reached::Selected {
                 key,
-                bounds: b,
-                dist_m: dist,
+                bounds: owned,
+                dist_m,
                 error_px,
-                decimation: 0,
             });
         }
     }
