@@ -36,10 +36,13 @@ impl Streamer {
         } else {
             1.0
         };
-        let mut fade_px = FxHashMap::default();
+        // Sized like last frame's, so they are not grown node by node.
+        let mut fade_px =
+            FxHashMap::with_capacity_and_hasher(self.fade_px.len(), rustc_hash::FxBuildHasher);
         let view = self.camera.map(|cam| (cam, cam.frustum()));
         let mut stack = vec![NodeKey::ROOT];
-        let mut seen: FxHashSet<NodeKey> = FxHashSet::default();
+        let mut seen: FxHashSet<NodeKey> =
+            FxHashSet::with_capacity_and_hasher(self.split.len() + 64, rustc_hash::FxBuildHasher);
         while let Some(key) = stack.pop() {
             if !self.resident.contains_key(&key) {
                 continue;

@@ -402,7 +402,9 @@ impl Streamer {
 
     /// Every ancestor of the nodes in `wanted`.
     fn ancestors_of(wanted: &FxHashSet<NodeKey>) -> FxHashSet<NodeKey> {
-        let mut ancestors = FxHashSet::default();
+        // Sized once: a quad tree's inner nodes are about a third of its leaves.
+        let mut ancestors =
+            FxHashSet::with_capacity_and_hasher(wanted.len() / 2 + 16, rustc_hash::FxBuildHasher);
         for &k in wanted {
             // Stop at the first ancestor already in the set: its own ancestors are there too.
             for a in k.ancestors() {
@@ -423,6 +425,8 @@ impl Streamer {
         ancestors: &FxHashSet<NodeKey>,
     ) -> FxHashSet<NodeKey> {
         let mut out: FxHashSet<NodeKey> = wanted.clone();
+        // Each ancestor and its children not wanted: sized once instead of grown.
+        out.reserve(2 * ancestors.len());
         for &a in ancestors {
             out.insert(a);
             out.extend(

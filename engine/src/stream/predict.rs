@@ -124,7 +124,8 @@ impl Streamer {
                 nodes: self.needed_for(&wanted, &ancestors),
             };
         }
-        let mut out = FxHashMap::default();
+        let mut out =
+            FxHashMap::with_capacity_and_hasher(self.prefetch.len(), rustc_hash::FxBuildHasher);
         for (part, p) in self.prefetch_parts.iter().enumerate() {
             let class = if part + 1 == PREFETCH_PARTS {
                 CLASSES - 1

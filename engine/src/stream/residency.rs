@@ -19,6 +19,29 @@ impl Streamer {
         p
     }
 
+    /// The bytes of the resident nodes [`Self::pinned`] holds, without building that set:
+    /// the resident nodes needed, prefetched or in a fade, then the drawn ones not among them.
+    fn pinned_bytes(&self) -> usize {
+        let held = |k: &NodeKey| {
+            self.needed.contains(k) || self.prefetch.contains(k) || self.split.contains_key(k)
+        };
+        let kept: usize = self
+            .resident
+            .iter()
+            .filter(|(k, _)| held(k))
+            .map(|(_, r)| r.bytes)
+            .sum();
+        // The draw list names each node once.
+        let drawn_only: usize = self
+            .drawn
+            .iter()
+            .filter(|d| !held(&d.key))
+            .filter_map(|d| self.resident.get(&d.key))
+            .map(|r| r.bytes)
+            .sum();
+        kept + drawn_only
+    }
+
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
     /// budget. Pinned nodes alone may exceed it; then nothing else is kept.
     pub(super) fn evict(&mut self) {
@@ -64,12 +87,15 @@ impl Streamer {
             self.resident.values().map(|r| r.bytes).sum::<usize>()
         );
         self.stats.resident_bytes = self.resident_bytes;
-        self.stats.pinned_bytes = self
-            .pinned()
-            .iter()
-            .filter_map(|k| self.resident.get(k))
-            .map(|r| r.bytes)
-            .sum();
+        self.stats.pinned_bytes = self.pinned_bytes();
+        debug_assert_eq!(
+            self.stats.pinned_bytes,
+            self.pinned()
+                .iter()
+                .filter_map(|k| self.resident.get(k))
+                .map(|r| r.bytes)
+                .sum::<usize>()
+        );
         self.stats.wanted = self.wanted.len();
         self.stats.drawn = self.drawn.len();
     }
