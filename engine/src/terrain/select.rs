@@ -263,13 +263,15 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
 ) -> Walked {
     let mut out = Walked::default();
     let k = cam.k_px();
-    let mut stack = vec![NodeKey::ROOT];
-    while let Some(key) = stack.pop() {
-        if !tree.overlaps_map(key) {
-            continue;
-        }
+    // Each node's bounds are looked up when it is pushed, all four children together: their
+    // lookups are independent, so their cache misses overlap instead of following each other.
+    let mut stack = Vec::new();
+    if tree.overlaps_map(NodeKey::ROOT) {
+        stack.push((NodeKey::ROOT, bounds(NodeKey::ROOT)));
+    }
+    while let Some((key, found)) = stack.pop() {
         out.visited += 1;
-        let Some(owned) = bounds(key) else {
+        let Some(owned) = found else {
             reached(Reached::Unknown(key));
             continue;
         };
@@ -282,8 +284,15 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
         let dist_m = distance_to_aabb(cam.position_m, min, max);
         let error_px = projected_error_px(tree, key, b, cam.position_m, k, frustum.as_ref(), 0.0);
         if key.level < tree.max_level && split(key, b, dist_m, error_px) {
-            // Children pushed in reverse so the output is in SW, SE, NW, NE order.
-            stack.extend(key.children().into_iter().rev());
+            // Children pushed in reverse so the output is in SW, SE, NW, NE order; those
+            // outside the map are skipped.
+            let children = key.children().map(|c| tree.overlaps_map(c).then_some(c));
+            let found = children.map(|c| c.map(&mut bounds));
+            for (c, f) in children.into_iter().zip(found).rev() {
+                if let Some(c) = c {
+                    stack.push((c, f.flatten()));
+                }
+            }
         } else {
             reached(Reached::Selected {
                 key,
