@@ -3,7 +3,7 @@
 
 use super::Streamer;
 use crate::terrain::quadtree::NodeKey;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 
 /// One node to draw this frame, with its dither interval (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,14 +41,17 @@ impl Streamer {
             FxHashMap::with_capacity_and_hasher(self.fade_px.len(), rustc_hash::FxBuildHasher);
         let view = self.camera.map(|cam| (cam, cam.frustum()));
         let mut stack = vec![NodeKey::ROOT];
-        let mut seen: FxHashSet<NodeKey> =
-            FxHashSet::with_capacity_and_hasher(self.split.len() + 64, rustc_hash::FxBuildHasher);
+        // The new split states: a node the walk does not reach, or whose state reaches 0,
+        // has none. (Each node is reached once, after its parent and before its children, so
+        // the old states read below are all from the last frame.)
+        let mut split: FxHashMap<NodeKey, f32> =
+            FxHashMap::with_capacity_and_hasher(self.split.len() + 64, rustc_hash::FxBuildHasher);
         while let Some(key) = stack.pop() {
             if !self.resident.contains_key(&key) {
                 continue;
             }
-            seen.insert(key);
-            let wants_split = self.to_split.contains(&key) && self.children_drawable(key);
+            let drawable = self.children_drawable(key);
+            let wants_split = self.to_split.contains(&key) && drawable;
             let s = self.split.get(&key).copied().unwrap_or(0.0);
             // A node may only merge back once its children are no longer split themselves.
             let children_merged = key
@@ -83,19 +86,12 @@ impl Streamer {
                 (s - step).max(target)
             };
             // Children must be resident to show them at all.
-            let ns = if ns > 0.0 && !self.children_drawable(key) {
-                0.0
-            } else {
-                ns
-            };
-            if ns > 0.0 {
-                self.split.insert(key, ns);
+            if ns > 0.0 && drawable {
+                split.insert(key, ns);
                 stack.extend(key.children());
-            } else {
-                self.split.remove(&key);
             }
         }
-        self.split.retain(|k, _| seen.contains(k));
+        self.split = split;
         self.fade_px = fade_px;
     }
 

@@ -485,14 +485,21 @@ impl Streamer {
             self.cancel(&mut pending, k);
         }
         // Request what is missing, each node in its class; promote requests whose time to
-        // need came closer.
-        let mut missing: Vec<(usize, NodeKey)> = self
+        // need came closer. Resident nodes needed or prefetched are marked used this frame
+        // in the same pass.
+        let frame = self.frame;
+        let mut missing: Vec<(usize, NodeKey)> = Vec::new();
+        for (class, k) in self
             .needed
             .iter()
             .map(|&k| (0, k))
             .chain(prefetch.iter().map(|(&k, &c)| (c, k)))
-            .filter(|(_, k)| !self.resident.contains_key(k))
-            .collect();
+        {
+            match self.resident.get_mut(&k) {
+                Some(r) => r.last_used_frame = frame,
+                None => missing.push((class, k)),
+            }
+        }
         missing.sort_unstable();
         for (class, k) in missing {
             match self.requests.get_mut(&k) {
@@ -512,12 +519,6 @@ impl Streamer {
         }
         drop(pending);
         self.queue.wake_workers();
-        let frame = self.frame;
-        for k in self.needed.iter().chain(&self.prefetch) {
-            if let Some(r) = self.resident.get_mut(k) {
-                r.last_used_frame = frame;
-            }
-        }
         self.advance_fades(dt_s);
         self.drawn = self.compute_draw_list();
         self.evict();
