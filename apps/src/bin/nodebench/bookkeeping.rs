@@ -10,6 +10,10 @@ use engine::lighting::content::LightingContent;
 use engine::stream::{StreamSettings, Streamer};
 use std::time::Instant;
 
+/// Bytes written between updates for the cold-cache rows: more than this machine's caches
+/// (L2 2 MiB per core, L3 32 MiB shared).
+const SWEEP_BYTES: usize = 32 << 20;
+
 /// Views per flight (evenly spaced in time over the first `VIEW_SPAN_S` seconds).
 const VIEWS: usize = 4;
 const VIEW_SPAN_S: f64 = 12.0;
@@ -46,6 +50,9 @@ pub(crate) fn section_bookkeeping(
         .with_workers(workers);
         let mut s = Streamer::new(world, settings, kinds);
         let (mut wall, mut on_cpu, mut selection) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut cold, mut cold_selection) = (Vec::new(), Vec::new());
+        // Written between updates to evict the caches, as a frame's uploads and drawing do.
+        let mut sweep = vec![0u8; SWEEP_BYTES];
         let b = bar((VIEWS * frames) as u64, &format!("bookkeeping {speed} m/s"));
         for v in 0..VIEWS {
             let t_s = VIEW_SPAN_S * v as f64 / VIEWS as f64;
@@ -69,11 +76,26 @@ pub(crate) fn section_bookkeeping(
                 }
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }
-            for _ in 0..frames {
+            for f in 0..frames {
+                // Every other update after a sweep of the caches.
+                let after_sweep = f % 2 == 1;
+                if after_sweep {
+                    for (i, v) in sweep.iter_mut().enumerate().step_by(64) {
+                        *v = v.wrapping_add(i as u8);
+                    }
+                    std::hint::black_box(&mut sweep);
+                }
                 let t = Instant::now();
                 let c = cpu_time::ThreadTime::try_now().ok();
                 s.update_along(&cam, dt, &future);
-                wall.push(t.elapsed().as_secs_f64());
+                let elapsed_s = t.elapsed().as_secs_f64();
+                if after_sweep {
+                    cold.push(elapsed_s);
+                    cold_selection.push(s.stats.last_selection_s);
+                    b.inc(1);
+                    continue;
+                }
+                wall.push(elapsed_s);
                 if let Some(d) = c.and_then(|c| c.try_elapsed().ok()) {
                     on_cpu.push(d.as_secs_f64());
                 }
@@ -85,12 +107,20 @@ pub(crate) fn section_bookkeeping(
         let params = format!(
             "{speed} m/s at {above} m: {VIEWS} settled views of the streaming flight, \
              {frames} updates each with its predicted path (one prefetch part computed again \
-             per update), tau {tau} px, light grids off, workers idle"
+             per update; every other one after writing 32 MiB, the cold rows), tau {tau} px, light grids off, workers idle"
         );
         for (name, mut times) in [
-            ("streaming update per frame", wall),
-            ("streaming update per frame, on-CPU time", on_cpu),
+            ("streaming update per frame, caches warm", wall),
+            (
+                "streaming update per frame, caches warm, on-CPU time",
+                on_cpu,
+            ),
             ("  of which the selections", selection),
+            (
+                "streaming update per frame, caches cold (after writing 32 MiB)",
+                cold,
+            ),
+            ("  of which the selections", cold_selection),
         ] {
             if times.is_empty() {
                 continue;

@@ -620,17 +620,19 @@ fn report_frame_times(frame_times: &[[Span; 2]], r: &mut Report, params: &str) {
             );
         }
         if !on_cpu.is_empty() {
-            r.add(
-                "streaming",
-                &format!("{name} p99, on-CPU time of the frame thread"),
-                apps::percentile(&on_cpu, 0.99) * 1e6,
-                "µs",
-                &format!(
-                    "{params}; the wall-clock row less the time the OS gave other threads \
+            for (q_name, q) in [("p50", 0.5), ("p99", 0.99)] {
+                r.add(
+                    "streaming",
+                    &format!("{name} {q_name}, on-CPU time of the frame thread"),
+                    apps::percentile(&on_cpu, q) * 1e6,
+                    "µs",
+                    &format!(
+                        "{params}; the wall-clock row less the time the OS gave other threads \
                          (with as many workers as cores, a worker can hold the frame thread's \
                          core for a scheduler tick)"
-                ),
-            );
+                    ),
+                );
+            }
         }
     }
 }
