@@ -1,6 +1,7 @@
 //! Section `bookkeeping`: the streamer's per-frame update on settled views, with the workers
-//! idle, so the rows show the update's own cost without the scheduling noise
-//! of a flight (the `streaming` section's bookkeeping rows include that noise).
+//! idle, so the rows show the update's own cost without the noise of a flight. They are a
+//! floor: in a flight (the `streaming` section's bookkeeping rows) the workers compete with the
+//! update for caches and memory, and the same update costs more.
 
 use crate::open_world;
 use crate::report::{Report, bar};
