@@ -263,8 +263,8 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
 ) -> Walked {
     let mut out = Walked::default();
     let k = cam.k_px();
-    // Each node's bounds are looked up when it is pushed, all four children together: their
-    // lookups are independent, so their cache misses overlap instead of following each other.
+    // Each node's bounds are looked up when it is pushed, a split node's children one after
+    // another: no lookup waits for another's result, so their cache misses can overlap.
     let mut stack = Vec::new();
     if tree.overlaps_map(NodeKey::ROOT) {
         stack.push((NodeKey::ROOT, bounds(NodeKey::ROOT)));
@@ -286,11 +286,10 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
         if key.level < tree.max_level && split(key, b, dist_m, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order; those
             // outside the map are skipped.
-            let children = key.children().map(|c| tree.overlaps_map(c).then_some(c));
-            let found = children.map(|c| c.map(&mut bounds));
-            for (c, f) in children.into_iter().zip(found).rev() {
-                if let Some(c) = c {
-                    stack.push((c, f.flatten()));
+            for c in key.children().into_iter().rev() {
+                if tree.overlaps_map(c) {
+                    let found = bounds(c);
+                    stack.push((c, found));
                 }
             }
         } else {
