@@ -5,7 +5,7 @@
 
 use crate::open_world;
 use crate::report::{Report, bar};
-use crate::streaming::{FLIGHTS, loop_camera};
+use crate::streaming::{FLIGHTS, P50_P99, Span, loop_camera};
 use anyhow::{Result, bail};
 use engine::lighting::content::LightingContent;
 use engine::stream::{StreamSettings, Streamer};
@@ -86,20 +86,17 @@ pub(crate) fn section_bookkeeping(
                     }
                     std::hint::black_box(&mut sweep);
                 }
-                let t = Instant::now();
-                let c = cpu_time::ThreadTime::try_now().ok();
+                let t = Span::start();
                 s.update_along(&cam, dt, &future);
-                let elapsed_s = t.elapsed().as_secs_f64();
+                let span = t.stop();
                 if after_sweep {
-                    cold.push(elapsed_s);
+                    cold.push(span.wall_s);
                     cold_selection.push(s.stats.last_selection_s);
                     b.inc(1);
                     continue;
                 }
-                wall.push(elapsed_s);
-                if let Some(d) = c.and_then(|c| c.try_elapsed().ok()) {
-                    on_cpu.push(d.as_secs_f64());
-                }
+                wall.push(span.wall_s);
+                on_cpu.extend(span.on_cpu_s);
                 selection.push(s.stats.last_selection_s);
                 b.inc(1);
             }
@@ -110,7 +107,7 @@ pub(crate) fn section_bookkeeping(
              {frames} updates each with its predicted path (one prefetch part computed again \
              per update; every other one after writing 32 MiB, the cold rows), tau {tau} px, light grids off, workers idle"
         );
-        for (name, mut times) in [
+        for (name, times) in [
             ("streaming update per frame, caches warm", wall),
             (
                 "streaming update per frame, caches warm, on-CPU time",
@@ -123,19 +120,9 @@ pub(crate) fn section_bookkeeping(
             ),
             ("  of which the selections", cold_selection),
         ] {
-            if times.is_empty() {
-                continue;
-            }
-            times.sort_by(f64::total_cmp);
-            for (q_name, q) in [("p50", 0.5), ("p99", 0.99)] {
-                r.add(
-                    "bookkeeping",
-                    &format!("{name} {q_name}"),
-                    apps::percentile(&times, q) * 1e6,
-                    "µs",
-                    &params,
-                );
-            }
+            r.quantiles("bookkeeping", times, &P50_P99, &params, |q| {
+                format!("{name} {q}")
+            });
         }
     }
     Ok(())

@@ -36,17 +36,36 @@ impl Report {
         });
     }
 
-    /// p50 / p95 / max rows of a list of per-item durations (seconds).
-    pub(crate) fn timings(&mut self, section: &str, what: &str, mut secs: Vec<f64>, params: &str) {
+    /// p50 / p95 / p99 / max rows of a list of per-item durations (seconds).
+    pub(crate) fn timings(&mut self, section: &str, what: &str, secs: Vec<f64>, params: &str) {
+        self.quantiles(section, secs, &[0.5, 0.95, 0.99, 1.0], params, |q| {
+            format!("{what} {q}")
+        });
+    }
+
+    /// Rows (µs) of the `quantiles` (1 is the max) of per-item durations (seconds), each named
+    /// `name("p50")`, `name("max")` ...; none when there are no durations.
+    pub(crate) fn quantiles(
+        &mut self,
+        section: &str,
+        mut secs: Vec<f64>,
+        quantiles: &[f64],
+        params: &str,
+        name: impl Fn(&str) -> String,
+    ) {
         if secs.is_empty() {
             return;
         }
         secs.sort_by(f64::total_cmp);
-        let q = |p: f64| apps::percentile(&secs, p);
-        self.add(section, &format!("{what} p50"), q(0.5) * 1e6, "µs", params);
-        self.add(section, &format!("{what} p95"), q(0.95) * 1e6, "µs", params);
-        self.add(section, &format!("{what} p99"), q(0.99) * 1e6, "µs", params);
-        self.add(section, &format!("{what} max"), q(1.0) * 1e6, "µs", params);
+        for &q in quantiles {
+            let label = if q >= 1.0 {
+                "max".to_string()
+            } else {
+                format!("p{}", (q * 100.0).round())
+            };
+            let value = apps::percentile(&secs, q) * 1e6;
+            self.add(section, &name(&label), value, "µs", params);
+        }
     }
 
     /// The rows as a Markdown table.

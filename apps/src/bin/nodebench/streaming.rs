@@ -138,22 +138,22 @@ impl<'g> Flight<'g> {
 /// A span of the frame thread's time: wall clock and, where the platform reports it, on-CPU
 /// time (the wall clock less the time the OS gave other threads).
 #[derive(Clone, Copy)]
-struct Span {
-    wall_s: f64,
-    on_cpu_s: Option<f64>,
+pub(crate) struct Span {
+    pub(crate) wall_s: f64,
+    pub(crate) on_cpu_s: Option<f64>,
 }
 
 /// A span being timed.
-struct SpanStart(Instant, Option<cpu_time::ThreadTime>);
+pub(crate) struct SpanStart(Instant, Option<cpu_time::ThreadTime>);
 
 impl Span {
-    fn start() -> SpanStart {
+    pub(crate) fn start() -> SpanStart {
         SpanStart(Instant::now(), cpu_time::ThreadTime::try_now().ok())
     }
 }
 
 impl SpanStart {
-    fn stop(self) -> Span {
+    pub(crate) fn stop(self) -> Span {
         Span {
             wall_s: self.0.elapsed().as_secs_f64(),
             on_cpu_s: self
@@ -440,19 +440,12 @@ fn scheduling_noise(r: &mut Report, frames: usize, dt: f64, busy: usize) {
         }
         stop.store(true, std::sync::atomic::Ordering::Relaxed);
     });
-    times.sort_by(f64::total_cmp);
     let params = format!(
         "fixed ~1 ms of work per frame, {frames} frames at 60 Hz, {busy} busy low-priority thread(s)"
     );
-    for (name, q) in [("p50", 0.5), ("p99", 0.99)] {
-        r.add(
-            "streaming",
-            &format!("scheduling noise reference {name}"),
-            apps::percentile(&times, q) * 1e6,
-            "µs",
-            &params,
-        );
-    }
+    r.quantiles("streaming", times, &P50_P99, &params, |q| {
+        format!("scheduling noise reference {q}")
+    });
 }
 
 /// What one streaming flight measured.
@@ -605,34 +598,21 @@ fn report_frame_times(frame_times: &[[Span; 2]], r: &mut Report, params: &str) {
                 .collect(),
         ),
     ];
+    let on_cpu_params = format!(
+        "{params}; the wall-clock row less the time the OS gave other threads (with as many \
+         workers as cores, a worker can hold the frame thread's core for a scheduler tick)"
+    );
     for (name, spans) in spans {
-        let mut wall: Vec<f64> = spans.iter().map(|s| s.wall_s).collect();
-        let mut on_cpu: Vec<f64> = spans.iter().filter_map(|s| s.on_cpu_s).collect();
-        wall.sort_by(f64::total_cmp);
-        on_cpu.sort_by(f64::total_cmp);
-        for (q_name, q) in [("p50", 0.5), ("p99", 0.99)] {
-            r.add(
-                "streaming",
-                &format!("{name} {q_name}"),
-                apps::percentile(&wall, q) * 1e6,
-                "µs",
-                params,
-            );
-        }
-        if !on_cpu.is_empty() {
-            for (q_name, q) in [("p50", 0.5), ("p99", 0.99)] {
-                r.add(
-                    "streaming",
-                    &format!("{name} {q_name}, on-CPU time of the frame thread"),
-                    apps::percentile(&on_cpu, q) * 1e6,
-                    "µs",
-                    &format!(
-                        "{params}; the wall-clock row less the time the OS gave other threads \
-                         (with as many workers as cores, a worker can hold the frame thread's \
-                         core for a scheduler tick)"
-                    ),
-                );
-            }
-        }
+        let wall = spans.iter().map(|s| s.wall_s).collect();
+        r.quantiles("streaming", wall, &P50_P99, params, |q| {
+            format!("{name} {q}")
+        });
+        let on_cpu = spans.iter().filter_map(|s| s.on_cpu_s).collect();
+        r.quantiles("streaming", on_cpu, &P50_P99, &on_cpu_params, |q| {
+            format!("{name} {q}, on-CPU time of the frame thread")
+        });
     }
 }
+
+/// The quantiles of the per-frame rows.
+pub(crate) const P50_P99: [f64; 2] = [0.5, 0.99];
