@@ -8,7 +8,7 @@ use crate::lighting::content::LightingContent;
 use crate::render::frame::{DrawStats, ViewOptions};
 use crate::render::lighting::LightingRenderer;
 use crate::render::reference::TerrainReference;
-use crate::render::scene::{DrawnNode, FrameDraws, Scene};
+use crate::render::scene::{DrawnNode, FrameDraws, RenderTimes, Scene};
 use crate::render::sky::{BoundsLines, SkyRenderer};
 use crate::render::terrain::TerrainRenderer;
 use crate::render::{Gpu, GpuTimer};
@@ -30,6 +30,11 @@ pub struct FrameStats {
     pub upload_ms: f64,
     /// Building the draw list and recording the command buffer.
     pub encode_ms: f64,
+    /// Of `encode_ms`: building the draw list (drawn nodes and their resident ancestors).
+    pub draw_list_ms: f64,
+    /// Of `encode_ms`: the scene's parts (deferred GPU work, each renderer's prepare,
+    /// recording the pass).
+    pub render: RenderTimes,
     /// Waiting for the GPU to finish the frame (headless; windowed, the present waits).
     pub gpu_wait_ms: f64,
     /// GPU time of the frame pass (sky, terrain, vegetation) from timestamp queries (a recent
@@ -248,6 +253,7 @@ impl Viewer {
                 })
             })
             .collect();
+        let t_draw_list = Instant::now();
         if let Some(t) = self.timer.as_mut() {
             t.harvest(gpu);
         }
@@ -301,6 +307,8 @@ impl Viewer {
             update_ms: ms(t0, t1),
             upload_ms: ms(t1, t2),
             encode_ms: ms(t2, t3),
+            draw_list_ms: ms(t2, t_draw_list),
+            render: self.scene.last_times.clone(),
             gpu_wait_ms: 0.0,
             gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
             gpu_reference_ms: self.reference.as_ref().and_then(TerrainReference::last_ms),

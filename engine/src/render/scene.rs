@@ -8,6 +8,7 @@ use super::frame::{DrawStats, FrameResources, ViewOptions};
 use crate::camera::{Camera, Frustum};
 use crate::stream::NodeWork;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
+use std::time::Instant;
 
 /// One drawn node: its prepared content and its dither interval.
 #[derive(Debug, Clone, Copy)]
@@ -83,10 +84,22 @@ pub trait NodeRenderer: std::any::Any {
     );
 }
 
+/// Where the frame thread's time went in [`Scene::render`] (wall clock, ms), per renderer by
+/// name in drawing order: the work deferred to the frame (`finish_uploads`: node ground textures,
+/// submitting what the upload hooks recorded), `prepare`; and recording the pass.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct RenderTimes {
+    pub deferred_ms: Vec<(&'static str, f64)>,
+    pub prepare_ms: Vec<(&'static str, f64)>,
+    pub record_ms: f64,
+}
+
 /// The frame resources and the renderers, in drawing order.
 pub struct Scene {
     pub frame: FrameResources,
     renderers: Vec<Box<dyn NodeRenderer>>,
+    /// The last [`Self::render`]'s times.
+    pub last_times: RenderTimes,
 }
 
 impl std::fmt::Debug for Scene {
@@ -102,6 +115,7 @@ impl Scene {
         Self {
             frame: FrameResources::new(&gpu.device, color_format),
             renderers: Vec::new(),
+            last_times: RenderTimes::default(),
         }
     }
 
@@ -120,8 +134,11 @@ impl Scene {
     /// Submits what the renderers' upload hooks recorded and the work they defer, within
     /// `time_left_s` of expected GPU time (also done by [`Self::render`]); returns the time left.
     pub fn finish_uploads(&mut self, gpu: &Gpu, mut time_left_s: f64) -> f64 {
+        self.last_times.deferred_ms.clear();
         for r in &mut self.renderers {
+            let t = Instant::now();
             time_left_s -= r.finish_uploads(gpu, time_left_s);
+            self.last_times.deferred_ms.push((r.name(), ms_since(t)));
         }
         time_left_s
     }
@@ -146,16 +163,20 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
-        let t0 = std::time::Instant::now();
+        let t0 = Instant::now();
         let left_s = self.finish_uploads(gpu, draws.upload_time_left_s);
         // What the deferred work took on the frame thread is not left for `prepare` either.
         let draws = &FrameDraws {
             upload_time_left_s: left_s - t0.elapsed().as_secs_f64(),
             ..*draws
         };
+        self.last_times.prepare_ms.clear();
         for r in &mut self.renderers {
+            let t = Instant::now();
             r.prepare(gpu, &mut self.frame, draws);
+            self.last_times.prepare_ms.push((r.name(), ms_since(t)));
         }
+        let t_record = Instant::now();
         let [r, g, b, a] = draws.view.clear;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("frame pass"),
@@ -185,6 +206,13 @@ impl Scene {
         for r in &self.renderers {
             r.draw(&mut pass, &self.frame, draws, &mut stats);
         }
+        drop(pass);
+        self.last_times.record_ms = ms_since(t_record);
         stats
     }
+}
+
+/// Milliseconds since `t`.
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
 }

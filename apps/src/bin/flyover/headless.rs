@@ -208,18 +208,55 @@ fn resident_breakdown(
     })
 }
 
+/// The encode's parts per renderer (in drawing order, named as in the first frame) that spent
+/// time: the deferred GPU work, then prepare.
+fn renderer_rows(all: &[FrameStats]) -> Vec<(String, Vec<f64>)> {
+    type Parts = fn(&FrameStats) -> &[(&'static str, f64)];
+    let phases: [(&str, Parts); 2] = [
+        ("deferred GPU work (finish_uploads)", |s| {
+            &s.render.deferred_ms
+        }),
+        ("prepare", |s| &s.render.prepare_ms),
+    ];
+    let mut rows = Vec::new();
+    for (phase, parts) in phases {
+        let names: Vec<&str> = all
+            .first()
+            .map(|s| parts(s).iter().map(|&(n, _)| n).collect())
+            .unwrap_or_default();
+        for (k, name) in names.iter().enumerate() {
+            let v: Vec<f64> = all
+                .iter()
+                .filter_map(|s| parts(s).get(k).map(|&(_, ms)| ms))
+                .collect();
+            if v.iter().any(|&ms| ms >= 0.01) {
+                rows.push((format!("  of which {phase}: {name}"), v));
+            }
+        }
+    }
+    rows
+}
+
 /// Prints the per-frame table (median, p95, max of every row) and the GPU ratio; returns the
 /// summary for `stats.json`.
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
-    let rows: [(&str, Vec<f64>); 26] = [
+    let mut rows: Vec<(String, Vec<f64>)> = vec![
         (
-            "streaming update (selection + bookkeeping)",
+            "streaming update (selection + bookkeeping)".into(),
             col(|s| s.update_ms),
         ),
-        ("  of which selection", col(|s| s.selection_ms)),
-        ("GPU uploads", col(|s| s.upload_ms)),
-        ("encode", col(|s| s.encode_ms)),
+        ("  of which selection".into(), col(|s| s.selection_ms)),
+        ("GPU uploads".into(), col(|s| s.upload_ms)),
+        ("encode".into(), col(|s| s.encode_ms)),
+        ("  of which the draw list".into(), col(|s| s.draw_list_ms)),
+    ];
+    rows.extend(renderer_rows(all));
+    rows.push((
+        "  of which recording the pass".into(),
+        col(|s| s.render.record_ms),
+    ));
+    let more: [(&str, Vec<f64>); 22] = [
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
             "GPU frame pass (timestamp queries, when supported)",
@@ -300,6 +337,7 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
             col(|s| s.borrowed_textures as f64),
         ),
     ];
+    rows.extend(more.into_iter().map(|(n, v)| (n.to_string(), v)));
     println!("| per frame | median | p95 | max |\n|---|---:|---:|---:|");
     let mut summary = serde_json::Map::new();
     for (name, mut v) in rows {
@@ -311,7 +349,7 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         );
         println!("| {name} | {m:.2} | {p:.2} | {max:.2} |");
         summary.insert(
-            name.to_string(),
+            name.clone(),
             serde_json::json!({"median": m, "p95": p, "max": max}),
         );
     }
