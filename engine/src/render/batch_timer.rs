@@ -1,11 +1,40 @@
-//! GPU time per item of work recorded in batches (node ground textures: several per
-//! submission), from timestamp queries around whole batches, so that the streamer's per-frame
-//! GPU budget can count what the GPU will spend, not only what recording costs the CPU.
+//! Cost per item of work done in batches (node ground textures, impostor bakes: several per
+//! submission): GPU time from timestamp queries around whole batches, and the frame thread's
+//! time from the wall time of recording and submitting a batch, so that the per-frame budget
+//! can count both before the work is done.
 
 use super::{Gpu, GpuTimer};
 
 /// Weight of a new batch's per-item time in the running estimate.
 const NEW_WEIGHT: f64 = 0.25;
+
+/// A running estimate of seconds per item from whole batches' times.
+#[derive(Debug, Clone, Copy)]
+pub struct ItemCost {
+    estimate_s: f64,
+}
+
+impl ItemCost {
+    /// Starts at `prior_s` per item.
+    pub fn new(prior_s: f64) -> Self {
+        Self {
+            estimate_s: prior_s,
+        }
+    }
+
+    /// Seconds one item is expected to take.
+    pub fn per_item_s(&self) -> f64 {
+        self.estimate_s
+    }
+
+    /// Follows a batch of `items` that took `total_s` (nothing when it held none).
+    pub fn observe(&mut self, total_s: f64, items: usize) {
+        if items > 0 {
+            let sample = total_s / items as f64;
+            self.estimate_s += NEW_WEIGHT * (sample - self.estimate_s);
+        }
+    }
+}
 
 /// A running estimate of GPU seconds per item.
 pub struct BatchTimer {
@@ -15,12 +44,12 @@ pub struct BatchTimer {
     open_timed: bool,
     /// Items of the batch whose measurement is on its way back.
     measured_items: usize,
-    estimate_s: f64,
+    cost: ItemCost,
 }
 
 impl std::fmt::Debug for BatchTimer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "BatchTimer({:.1} µs per item)", self.estimate_s * 1e6)
+        write!(f, "BatchTimer({:.1} µs per item)", self.per_item_s() * 1e6)
     }
 }
 
@@ -33,13 +62,13 @@ impl BatchTimer {
             open_items: 0,
             open_timed: false,
             measured_items: 0,
-            estimate_s: prior_s,
+            cost: ItemCost::new(prior_s),
         }
     }
 
     /// GPU seconds one item is expected to take.
     pub fn per_item_s(&self) -> f64 {
-        self.estimate_s
+        self.cost.per_item_s()
     }
 
     /// Call before recording an item into `enc`; the first item of a batch starts the timer
@@ -49,11 +78,8 @@ impl BatchTimer {
             && let Some(t) = self.timer.as_mut()
         {
             t.harvest(gpu);
-            if let Some(ms) = t.last_ms.take()
-                && self.measured_items > 0
-            {
-                let sample = ms * 1e-3 / self.measured_items as f64;
-                self.estimate_s += NEW_WEIGHT * (sample - self.estimate_s);
+            if let Some(ms) = t.last_ms.take() {
+                self.cost.observe(ms * 1e-3, self.measured_items);
             }
             self.open_timed = t.begin(enc);
         }

@@ -62,8 +62,11 @@ pub trait NodeRenderer: std::any::Any {
 
     /// Submit what the upload hooks recorded (one submission per frame instead of one per
     /// node), and record and submit the work a renderer defers to here (node ground textures)
-    /// within `time_left_s` of expected GPU time (what the nodes' GPU phases left of the frame's
-    /// budget), at least one item. Returns the expected GPU time it used. [`Scene::render`]
+    /// within `time_left_s` (what the nodes' GPU phases left of the frame's budget), counting
+    /// both the GPU time and the frame thread's time it expects the work to take, at least one
+    /// item. Returns the GPU time it expects the submitted work to take, less what upload hooks
+    /// already charged the budget (`NodeWork::gpu_estimate_s`) for work whose frame-thread time
+    /// was measured here: the caller counts this call's wall time apart. [`Scene::render`]
     /// calls it before any renderer's `prepare`, so everything a frame samples is submitted
     /// before the frame.
     fn finish_uploads(&mut self, _gpu: &Gpu, _time_left_s: f64) -> f64 {
@@ -132,12 +135,14 @@ impl Scene {
     }
 
     /// Submits what the renderers' upload hooks recorded and the work they defer, within
-    /// `time_left_s` of expected GPU time (also done by [`Self::render`]); returns the time left.
+    /// `time_left_s` of the frame's budget (also done by [`Self::render`]); returns the time
+    /// left: less the GPU time the work is expected to take and the frame-thread time it took.
     pub fn finish_uploads(&mut self, gpu: &Gpu, mut time_left_s: f64) -> f64 {
         self.last_times.deferred_ms.clear();
         for r in &mut self.renderers {
             let t = Instant::now();
             time_left_s -= r.finish_uploads(gpu, time_left_s);
+            time_left_s -= t.elapsed().as_secs_f64();
             self.last_times.deferred_ms.push((r.name(), ms_since(t)));
         }
         time_left_s
@@ -163,11 +168,9 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
-        let t0 = Instant::now();
         let left_s = self.finish_uploads(gpu, draws.upload_time_left_s);
-        // What the deferred work took on the frame thread is not left for `prepare` either.
         let draws = &FrameDraws {
-            upload_time_left_s: left_s - t0.elapsed().as_secs_f64(),
+            upload_time_left_s: left_s,
             ..*draws
         };
         self.last_times.prepare_ms.clear();

@@ -13,7 +13,7 @@
 //! the vertices (with procedural grain close up).
 
 use super::Gpu;
-use super::batch_timer::BatchTimer;
+use super::batch_timer::{BatchTimer, ItemCost};
 use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
@@ -35,6 +35,7 @@ use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 use std::sync::{Arc, OnceLock, Weak};
+use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
 
 /// Vertices and indices in one page of the mesh pool: 858 grid nodes (1,221 vertices and
@@ -164,6 +165,10 @@ type BatchKey = (bool, u32, u32);
 /// on 2 cores (`nodebench --only textures`).
 const TEXTURE_GPU_PRIOR_S: f64 = 0.5e-3;
 
+/// Frame-thread time a node texture (recording and submitting its passes) is expected to take
+/// before the first batch was timed.
+const TEXTURE_FRAME_THREAD_PRIOR_S: f64 = 0.1e-3;
+
 /// The ground page of nodes without a ground texture.
 const NO_TEXTURE: u32 = u32::MAX;
 
@@ -180,6 +185,9 @@ struct GroundTextures {
     encoder: Option<wgpu::CommandEncoder>,
     /// GPU time per node texture (timestamp queries around each submitted batch).
     timer: BatchTimer,
+    /// The frame thread's time per node texture: recording it and its share of the batch's
+    /// submission (where wgpu encodes the recorded passes).
+    frame_thread: ItemCost,
     groups: Vec<wgpu::BindGroup>,
     /// Nodes left without a texture because the pool was full.
     refused: u64,
@@ -377,6 +385,7 @@ impl TerrainRenderer {
             decals: world.map.decals.clone(),
             encoder: None,
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
+            frame_thread: ItemCost::new(TEXTURE_FRAME_THREAD_PRIOR_S),
             groups: Vec::new(),
             refused: 0,
         });
@@ -574,27 +583,29 @@ impl NodeRenderer for TerrainRenderer {
         };
         // Coarsest first (they stand in for the finer ones), in arrival order within a level;
         // textures of dropped nodes are forgotten.
+        let t0 = Instant::now();
         let mut queue = std::mem::take(&mut g.pending);
         queue.sort_by_key(|p| p.key.level);
-        let per_texture_s = g.timer.per_item_s();
-        let mut spent_s = 0.0;
+        let gpu_per_texture_s = g.timer.per_item_s();
+        let per_texture_s = gpu_per_texture_s + g.frame_thread.per_item_s();
+        let mut made = 0;
         let mut waiting = Vec::new();
         for p in queue {
             let Some(target) = p.target.upgrade() else {
                 continue;
             };
-            if spent_s > 0.0 && spent_s + per_texture_s > time_left_s {
+            if made > 0 && (made + 1) as f64 * per_texture_s > time_left_s {
                 waiting.push(p);
                 continue;
             }
-            if let Some(made) = self.render_ground(gpu, p.key, &p.pieces) {
+            if let Some(texture) = self.render_ground(gpu, p.key, &p.pieces) {
                 // Only this queue sets a node's texture, once.
-                let _ = target.set(made);
-                spent_s += per_texture_s;
+                let _ = target.set(texture);
+                made += 1;
             }
         }
         let Some(g) = self.ground.as_mut() else {
-            return spent_s;
+            return 0.0;
         };
         g.pending = waiting;
         if let Some(mut enc) = g.encoder.take() {
@@ -602,7 +613,8 @@ impl NodeRenderer for TerrainRenderer {
             g.texturer.submit(gpu, enc);
             g.timer.after_submit();
         }
-        spent_s
+        g.frame_thread.observe(t0.elapsed().as_secs_f64(), made);
+        made as f64 * gpu_per_texture_s
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {

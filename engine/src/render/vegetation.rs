@@ -7,6 +7,7 @@
 //! start-up, from the high-detail plant meshes) and each node's impostors (in its upload hook).
 
 use super::Gpu;
+use super::batch_timer::ItemCost;
 use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, bake_pass, pipeline, sampler_entry, srgb_to_linear,
@@ -29,11 +30,15 @@ use crate::vegetation::representation::{
 use crate::vegetation::{NodeVegetation, Representation};
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
+use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs, DrawIndirectArgs};
 
 /// Instances in one page of the instance pool (32 MiB) and pages at most.
 const PAGE_INSTANCES: u32 = 1 << 20;
 const MAX_INSTANCE_PAGES: usize = 16;
+/// Frame-thread time one impostor bake is expected to add to the frame's submission before the
+/// first submission was timed.
+const BAKE_SUBMIT_PRIOR_S: f64 = 0.1e-3;
 
 /// Species looks (shape and colour) the renderer holds; the atlas has one tile per look.
 pub const MAX_LOOKS: u32 = 16;
@@ -190,9 +195,30 @@ pub struct VegetationRenderer {
     /// This frame's counts (set by `prepare`).
     frame_stats: DrawStats,
     merged: bool,
-    /// Impostor bakes recorded by this frame's uploads, submitted together before the frame is
-    /// drawn (one submission per frame instead of one per node).
-    bakes: Option<wgpu::CommandEncoder>,
+    bakes: PendingBakes,
+}
+
+/// Impostor bakes recorded by this frame's uploads, submitted together before the frame is
+/// drawn (one submission per frame instead of one per node).
+struct PendingBakes {
+    encoder: Option<wgpu::CommandEncoder>,
+    /// The frame thread's time per bake at that submission (where wgpu encodes the recorded
+    /// passes): each upload that bakes charges it to the frame's budget beforehand.
+    submit: ItemCost,
+    /// Bakes recorded since the last submission, and what their uploads charged the budget.
+    recorded: usize,
+    charged_s: f64,
+}
+
+impl PendingBakes {
+    fn new() -> Self {
+        Self {
+            encoder: None,
+            submit: ItemCost::new(BAKE_SUBMIT_PRIOR_S),
+            recorded: 0,
+            charged_s: 0.0,
+        }
+    }
 }
 
 impl std::fmt::Debug for VegetationRenderer {
@@ -459,7 +485,7 @@ impl VegetationRenderer {
             batches: Batches::new(),
             frame_stats: DrawStats::default(),
             merged: false,
-            bakes: None,
+            bakes: PendingBakes::new(),
         };
         renderer.bake_atlas(gpu, frame, &bake, &looks_group, atlas_pair, atlas_size);
         renderer
@@ -695,7 +721,7 @@ impl VegetationRenderer {
             contents: bytemuck::cast_slice(members),
             usage: wgpu::BufferUsages::VERTEX,
         });
-        let enc = self.bakes.get_or_insert_with(|| {
+        let enc = self.bakes.encoder.get_or_insert_with(|| {
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("impostor bakes"),
             })
@@ -807,17 +833,29 @@ impl NodeRenderer for VegetationRenderer {
         else {
             return 0;
         };
+        if node.impostors.is_some() {
+            // Its bake's share of the deferred submission, counted in this frame's budget.
+            let charge_s = self.bakes.submit.per_item_s();
+            work.gpu_estimate_s += charge_s;
+            self.bakes.charged_s += charge_s;
+            self.bakes.recorded += 1;
+        }
         let bytes = node.bytes;
         work.gpu.put(node);
         bytes
     }
 
-    /// Submits the impostor bakes recorded since the last call.
+    /// Submits the impostor bakes recorded since the last call; gives back what their uploads
+    /// charged the budget, since the caller counts the submission's measured time instead.
     fn finish_uploads(&mut self, gpu: &Gpu, _time_left_s: f64) -> f64 {
-        if let Some(enc) = self.bakes.take() {
+        let t0 = Instant::now();
+        let b = &mut self.bakes;
+        if let Some(enc) = b.encoder.take() {
             gpu.queue.submit([enc.finish()]);
         }
-        0.0
+        b.submit.observe(t0.elapsed().as_secs_f64(), b.recorded);
+        b.recorded = 0;
+        -std::mem::take(&mut b.charged_s)
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
