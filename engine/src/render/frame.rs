@@ -33,6 +33,8 @@ pub struct ViewOptions {
     pub fog_max: f32,
     /// Draw vegetation.
     pub plants: bool,
+    /// Draw progressive-mesh objects (houses, `--object` copies).
+    pub objects: bool,
     /// Issue each renderer's draws as one multi-draw per batch where the adapter supports it
     /// (off: one draw call per node item, the fallback path; the pixels are the same).
     pub merged_draws: bool,
@@ -111,6 +113,7 @@ impl Default for ViewOptions {
             fog_per_m: 1.0 / 25_000.0,
             fog_max: 0.35,
             plants: true,
+            objects: true,
             merged_draws: true,
             ground_view: GroundView::Shaded,
             sun: Sun::default(),

@@ -498,6 +498,9 @@ impl NodeRenderer for ObjectsRenderer {
         self.frame_no += 1;
         self.items.clear();
         self.stats = ObjectStats::default();
+        if !draws.view.objects {
+            return;
+        }
         let camera = draws.camera;
         let k_px = camera.k_px();
         let settings = draws.view.pm_lod;

@@ -359,7 +359,7 @@ fn malformed_building_rows_and_meshes_are_refused() {
 /// The tiny map's town through the viewer (320 x 180): houses are drawn with their textures
 /// from the texture cache (every drawn texture resident after settling, at least 4x fewer
 /// bytes than at full resolution from 70 m), and the "colour by mip level" view turns the
-/// houses' pixels into strong tints.
+/// houses' pixels into strong tints; with objects off in the view they are not drawn.
 #[test]
 fn houses_draw_their_textures_from_the_cache() {
     use engine::render::{COLOR_FORMAT, Target};
@@ -409,6 +409,22 @@ fn houses_draw_their_textures_from_the_cache() {
         "only {house_pixels} pixels changed in the mip view"
     );
     assert!(saturated * 2 > house_pixels, "the mip tint is not visible");
+    // With objects off (the GPU reference's runs) the houses are gone: no draws, and the
+    // pixels that were houses show what is behind them.
+    v.view.texture_mip_view = false;
+    v.view.objects = false;
+    let st3 = settle(&g, &mut v, &target, &cam);
+    assert_eq!(st3.object_draw_calls, 0, "{st3:?}");
+    let bare = target.read_rgba(&g).expect("pixels");
+    let changed = shaded
+        .chunks(4)
+        .zip(bare.chunks(4))
+        .filter(|(a, b)| a[..3] != b[..3])
+        .count();
+    assert!(
+        changed > 300,
+        "only {changed} pixels changed without the houses"
+    );
 }
 
 /// A wide node's merged far mesh (HLOD) of the tiny map's houses stays within its error budget

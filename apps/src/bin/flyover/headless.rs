@@ -48,6 +48,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     viewer.view.merged_draws = !cli.per_item_draws;
     if cli.gpu_reference {
         viewer.view.plants = false;
+        viewer.view.objects = false;
         if !viewer.enable_gpu_reference(&gpu, cli.size) {
             eprintln!("--gpu-reference: this adapter has no timestamp queries; no reference");
         }

@@ -32,6 +32,8 @@ pub(crate) fn section_gpu(
             let setup = |v: &mut Viewer| {
                 v.view.plants = plants;
                 if !plants {
+                    // The reference draws the terrain alone: so does the pass (and the sky).
+                    v.view.objects = false;
                     v.enable_gpu_reference(gpu, size);
                 }
             };
@@ -42,10 +44,14 @@ pub(crate) fn section_gpu(
                 (!v.is_empty()).then(|| apps::percentile(&v, 0.5))
             };
             let params = format!(
-                "{}x{}, tau 2 px, vegetation {}, {frames} frames of the automatic flight, {adapter}",
+                "{}x{}, tau 2 px, {}, {frames} frames of the automatic flight, {adapter}",
                 size[0],
                 size[1],
-                if plants { "on" } else { "off" }
+                if plants {
+                    "vegetation on"
+                } else {
+                    "vegetation and houses off"
+                }
             );
             let rows = [
                 (
@@ -61,6 +67,20 @@ pub(crate) fn section_gpu(
                 (
                     "draw calls per frame (terrain + vegetation), median",
                     median(&|s| Some(f64::from(s.draw_calls + s.plant_draw_calls))),
+                    "draws",
+                ),
+                (
+                    "draw calls per frame (houses: one per house, not merged), median",
+                    median(&|s| Some(f64::from(s.object_draw_calls))),
+                    "draws",
+                ),
+                (
+                    "draw calls per frame (terrain + vegetation + houses), median",
+                    median(&|s| {
+                        Some(f64::from(
+                            s.draw_calls + s.plant_draw_calls + s.object_draw_calls,
+                        ))
+                    }),
                     "draws",
                 ),
                 (
