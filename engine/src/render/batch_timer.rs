@@ -107,3 +107,24 @@ impl BatchTimer {
         self.open_timed = false;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::ItemCost;
+
+    /// The estimate follows whole batches per item, a quarter of the way each time, and a
+    /// batch of no items leaves it where it was.
+    #[test]
+    fn item_cost_follows_batches_per_item() {
+        let mut c = ItemCost::new(1e-3);
+        c.observe(8e-3, 2);
+        assert!((c.per_item_s() - (1e-3 + 0.25 * 3e-3)).abs() < 1e-12);
+        let before = c.per_item_s();
+        c.observe(5.0, 0);
+        assert_eq!(c.per_item_s().to_bits(), before.to_bits());
+        for _ in 0..100 {
+            c.observe(0.3e-3 * 3.0, 3);
+        }
+        assert!((c.per_item_s() - 0.3e-3).abs() < 1e-9);
+    }
+}
