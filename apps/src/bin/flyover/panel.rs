@@ -100,6 +100,7 @@ pub(crate) fn panel(
         s.upload_ms,
         s.encode_ms
     ));
+    ui.collapsing("encode by part (ms)", |ui| encode_parts(ui, s));
     ui.label(match (gpu.timestamps, s.gpu_terrain_ms) {
         (true, Some(ms)) => format!("GPU: terrain pass {ms:.2} ms (timestamp queries)"),
         (true, None) => "GPU: waiting for the first timestamps".to_string(),
@@ -163,6 +164,27 @@ pub(crate) fn panel(
 }
 
 /// The progressive-mesh objects' controls (level of detail, debug views, HLOD).
+/// The frame's encode by part: the draw list, each renderer's deferred GPU work and prepare,
+/// recording the pass (renderers under 0.01 ms left out).
+fn encode_parts(ui: &mut egui::Ui, s: &FrameStats) {
+    ui.label(format!(
+        "draw list {:.2}, recording the pass {:.2}",
+        s.draw_list_ms, s.render.record_ms
+    ));
+    let parts = [
+        ("deferred GPU work", &s.render.deferred_ms),
+        ("prepare", &s.render.prepare_ms),
+    ];
+    for (phase, times) in parts {
+        let each: Vec<String> = times
+            .iter()
+            .filter(|&&(_, ms)| ms >= 0.01)
+            .map(|(name, ms)| format!("{name} {ms:.2}"))
+            .collect();
+        ui.label(format!("{phase}: {}", each.join(", ")));
+    }
+}
+
 fn object_controls(ui: &mut egui::Ui, view: &mut ViewOptions) {
     ui.label("progressive-mesh objects:");
     ui.checkbox(
