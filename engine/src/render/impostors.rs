@@ -7,8 +7,8 @@
 use super::frame::{sampler_entry, texture_entry};
 use super::suballoc::{Lease, Suballocator};
 
-/// Layers in one page (256 x 256 RGBA8 albedo and as much normal each: 32 MiB a page).
-pub const LAYERS_PER_PAGE: u32 = 64;
+/// Layers in one page (256 x 256 RGBA8 albedo and as much normal each: 128 MiB a page).
+pub const LAYERS_PER_PAGE: u32 = 256;
 /// Pages at most (created when needed; the cache budget, which counts every layer, is what
 /// bounds them in practice: 1024 pages would be 16 GiB).
 const MAX_PAGES: usize = 1024;
