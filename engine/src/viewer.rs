@@ -14,7 +14,7 @@ use crate::render::terrain::TerrainRenderer;
 use crate::render::{Gpu, GpuTimer};
 use crate::stream::{StreamSettings, Streamer};
 use crate::surface::World;
-use crate::terrain::quadtree::NodeKey;
+use crate::terrain::quadtree::{NodeKey, unique_ancestors};
 use glam::DVec3;
 use std::sync::Arc;
 use std::time::Instant;
@@ -238,10 +238,7 @@ impl Viewer {
             .collect();
         // Ancestors of drawn nodes draw what they keep through splits (they are resident: the
         // draw list is walked down from the root through them).
-        let mut ancestor_keys: Vec<NodeKey> =
-            drawn.iter().flat_map(|d| d.key.ancestors()).collect();
-        ancestor_keys.sort_unstable();
-        ancestor_keys.dedup();
+        let ancestor_keys = unique_ancestors(drawn.iter().map(|d| d.key));
         let ancestors: Vec<DrawnNode<'_>> = ancestor_keys
             .iter()
             .filter_map(|&key| {

@@ -91,6 +91,26 @@ impl Side {
     pub const ALL: [Self; 4] = [Self::West, Self::East, Self::South, Self::North];
 }
 
+/// Every ancestor of any of `keys`, each once, sorted. A walk up from a key stops at the first
+/// ancestor already found, whose own ancestors are in by then (a frame's drawn nodes share
+/// most of theirs).
+pub fn unique_ancestors(keys: impl IntoIterator<Item = NodeKey>) -> Vec<NodeKey> {
+    let keys = keys.into_iter();
+    let mut seen = rustc_hash::FxHashSet::default();
+    seen.reserve(keys.size_hint().0);
+    let mut out = Vec::new();
+    for k in keys {
+        for a in k.ancestors() {
+            if !seen.insert(a) {
+                break;
+            }
+            out.push(a);
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
 /// The tree over one map.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QuadTree {
@@ -177,6 +197,30 @@ impl QuadTree {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The same set as every key's ancestors collected, sorted and deduplicated, for keys
+    /// that share ancestors, nest in each other and repeat.
+    #[test]
+    fn unique_ancestors_are_every_ancestor_once() {
+        let mut keys = Vec::new();
+        let mut state = 12345u64;
+        for _ in 0..400 {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let level = (state >> 60) as u8 % 11;
+            let side = 1u32 << level;
+            let ix = ((state >> 20) as u32) % side;
+            let iy = ((state >> 40) as u32) % side;
+            keys.push(NodeKey { level, ix, iy });
+        }
+        keys.push(keys[7]);
+        let mut naive: Vec<NodeKey> = keys.iter().flat_map(|k| k.ancestors()).collect();
+        naive.sort_unstable();
+        naive.dedup();
+        assert!(naive.len() > 100);
+        assert_eq!(unique_ancestors(keys.iter().copied()), naive);
+    }
 
     #[test]
     fn default_map_has_eleven_levels_with_8m_leaves() {
