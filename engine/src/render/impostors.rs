@@ -10,8 +10,8 @@ use super::suballoc::{Lease, Suballocator};
 /// Layers in one page (256 x 256 RGBA8 albedo and as much normal each: 128 MiB a page).
 pub const LAYERS_PER_PAGE: u32 = 256;
 /// Pages at most (created when needed; the cache budget, which counts every layer, is what
-/// bounds them in practice: 1024 pages would be 16 GiB).
-const MAX_PAGES: usize = 1024;
+/// bounds them in practice: 256 pages would be 32 GiB).
+const MAX_PAGES: usize = 256;
 
 struct Page {
     /// Albedo and coverage, then normals.

@@ -498,6 +498,8 @@ impl NodeRenderer for ObjectsRenderer {
         self.frame_no += 1;
         self.items.clear();
         self.stats = ObjectStats::default();
+        // Objects off (the GPU reference's runs): nothing drawn; instances and textures stay as
+        // they are until objects are drawn again.
         if !draws.view.objects {
             return;
         }

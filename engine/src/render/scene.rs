@@ -97,6 +97,16 @@ pub struct RenderTimes {
     pub record_ms: f64,
 }
 
+impl RenderTimes {
+    /// The per-renderer phases, named: the deferred GPU work, then prepare.
+    pub fn phases(&self) -> [(&'static str, &[(&'static str, f64)]); 2] {
+        [
+            ("deferred GPU work (finish_uploads)", &self.deferred_ms),
+            ("prepare", &self.prepare_ms),
+        ]
+    }
+}
+
 /// The frame resources and the renderers, in drawing order.
 pub struct Scene {
     pub frame: FrameResources,
@@ -142,8 +152,9 @@ impl Scene {
         for r in &mut self.renderers {
             let t = Instant::now();
             time_left_s -= r.finish_uploads(gpu, time_left_s);
-            time_left_s -= t.elapsed().as_secs_f64();
-            self.last_times.deferred_ms.push((r.name(), ms_since(t)));
+            let took_s = t.elapsed().as_secs_f64();
+            time_left_s -= took_s;
+            self.last_times.deferred_ms.push((r.name(), took_s * 1e3));
         }
         time_left_s
     }

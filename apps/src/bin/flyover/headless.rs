@@ -212,23 +212,15 @@ fn resident_breakdown(
 /// The encode's parts per renderer (in drawing order, named as in the first frame) that spent
 /// time: the deferred GPU work, then prepare.
 fn renderer_rows(all: &[FrameStats]) -> Vec<(String, Vec<f64>)> {
-    type Parts = fn(&FrameStats) -> &[(&'static str, f64)];
-    let phases: [(&str, Parts); 2] = [
-        ("deferred GPU work (finish_uploads)", |s| {
-            &s.render.deferred_ms
-        }),
-        ("prepare", |s| &s.render.prepare_ms),
-    ];
     let mut rows = Vec::new();
-    for (phase, parts) in phases {
-        let names: Vec<&str> = all
-            .first()
-            .map(|s| parts(s).iter().map(|&(n, _)| n).collect())
-            .unwrap_or_default();
-        for (k, name) in names.iter().enumerate() {
+    let Some(first) = all.first() else {
+        return rows;
+    };
+    for (p, (phase, names)) in first.render.phases().into_iter().enumerate() {
+        for (k, &(name, _)) in names.iter().enumerate() {
             let v: Vec<f64> = all
                 .iter()
-                .filter_map(|s| parts(s).get(k).map(|&(_, ms)| ms))
+                .filter_map(|s| s.render.phases()[p].1.get(k).map(|&(_, ms)| ms))
                 .collect();
             if v.iter().any(|&ms| ms >= 0.01) {
                 rows.push((format!("  of which {phase}: {name}"), v));

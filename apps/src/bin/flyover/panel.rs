@@ -163,7 +163,6 @@ pub(crate) fn panel(
     ui.label(extra);
 }
 
-/// The progressive-mesh objects' controls (level of detail, debug views, HLOD).
 /// The frame's encode by part: the draw list, each renderer's deferred GPU work and prepare,
 /// recording the pass (renderers under 0.01 ms left out).
 fn encode_parts(ui: &mut egui::Ui, s: &FrameStats) {
@@ -171,11 +170,7 @@ fn encode_parts(ui: &mut egui::Ui, s: &FrameStats) {
         "draw list {:.2}, recording the pass {:.2}",
         s.draw_list_ms, s.render.record_ms
     ));
-    let parts = [
-        ("deferred GPU work", &s.render.deferred_ms),
-        ("prepare", &s.render.prepare_ms),
-    ];
-    for (phase, times) in parts {
+    for (phase, times) in s.render.phases() {
         let each: Vec<String> = times
             .iter()
             .filter(|&&(_, ms)| ms >= 0.01)
@@ -185,6 +180,7 @@ fn encode_parts(ui: &mut egui::Ui, s: &FrameStats) {
     }
 }
 
+/// The progressive-mesh objects' controls (level of detail, debug views, HLOD).
 fn object_controls(ui: &mut egui::Ui, view: &mut ViewOptions) {
     ui.label("progressive-mesh objects:");
     ui.checkbox(
