@@ -1,6 +1,7 @@
-// Progressive-mesh objects (engine::render::objects): one draw per instance, its index list at
-// the level the pixel metric chose. Positions are model units; the per-draw uniform places them
-// relative to the camera.
+// Progressive-mesh objects (engine::render::objects): per instance an index list at the level
+// the pixel metric chose, drawn from pooled pages by multi-draws; the instance index names the
+// draw's entry in `draws`. Positions are model units; the entry places them relative to the
+// camera.
 
 struct Draw {
     // Camera-relative world position from model position (affine; f64 on the CPU, then f32).
@@ -27,16 +28,19 @@ struct Draw {
     tex: vec4<f32>,
     // rgb: the roof's albedo where no roof texture level is resident.
     roof_albedo: vec4<f32>,
+    // x: the model's first vertex in the shared vertex buffer (vertex_index counts from there);
+    // y: the instance's first entry in its morph page.
+    pool: vec4<u32>,
 };
 
-@group(2) @binding(0) var<uniform> draw: Draw;
+@group(2) @binding(0) var<storage, read> draws: array<Draw>;
 // The instance's facade and roof textures as the texture cache holds them (their resident
 // level is their level 0 here; a white 1 x 1 texture when none is resident).
 @group(2) @binding(1) var facade_tex: texture_2d<f32>;
 @group(2) @binding(2) var roof_tex: texture_2d<f32>;
 @group(2) @binding(3) var tex_sampler: sampler;
-// Per instance: for each morphing vertex, the position and normal of the vertex it collapses
-// onto (two entries per vertex).
+// A morph page: per morphing instance, for each of its vertices, the position and normal of the
+// vertex it collapses onto (two entries per vertex, from the instance's `pool.y`).
 @group(3) @binding(0) var<storage, read> morph_to: array<vec4<f32>>;
 
 struct ObjectIn {
@@ -55,18 +59,28 @@ struct ObjectOut {
     @location(3) @interpolate(flat) fade: vec3<f32>,
     @location(4) light: vec4<f32>,
     @location(5) uv: vec2<f32>,
+    @location(6) @interpolate(flat) draw_index: u32,
 };
 
 @vertex
-fn vs_main(v: ObjectIn, @builtin(vertex_index) vi: u32) -> ObjectOut {
+fn vs_main(
+    v: ObjectIn,
+    @builtin(vertex_index) vertex: u32,
+    @builtin(instance_index) k: u32,
+) -> ObjectOut {
+    let draw = draws[k];
     var out: ObjectOut;
+    out.draw_index = k;
     var p = v.position;
     var n = v.normal;
+    // The wedge within the model.
+    let vi = vertex - draw.pool.x;
     if (f32(vi) >= draw.morph.x && f32(vi) < draw.morph.y) {
         // Growing out: from the parent (t = 0) to the vertex; shrinking: the other way.
         let t = select(1.0 - draw.morph.z, draw.morph.z, draw.morph.w > 0.5);
-        p = mix(morph_to[2u * vi].xyz, p, t);
-        n = mix(morph_to[2u * vi + 1u].xyz, n, t);
+        let at = draw.pool.y + 2u * vi;
+        p = mix(morph_to[at].xyz, p, t);
+        n = mix(morph_to[at + 1u].xyz, n, t);
     }
     let rel = (draw.rel_from_model * vec4<f32>(p, 1.0)).xyz;
     out.rel = rel;
@@ -109,8 +123,10 @@ struct HlodIn {
 };
 
 @vertex
-fn vs_hlod(v: HlodIn) -> ObjectOut {
+fn vs_hlod(v: HlodIn, @builtin(instance_index) k: u32) -> ObjectOut {
+    let draw = draws[k];
     var out: ObjectOut;
+    out.draw_index = k;
     let rel = (draw.rel_from_model * vec4<f32>(v.position, 1.0)).xyz;
     out.rel = rel;
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
@@ -127,6 +143,7 @@ fn vs_hlod(v: HlodIn) -> ObjectOut {
 
 @fragment
 fn fs_main(in: ObjectOut) -> @location(0) vec4<f32> {
+    let draw = draws[in.draw_index];
     // Both sampled in uniform control flow; the face's normal picks one.
     let uv = in.uv / TEXTURE_TILE_M;
     let facade = textureSample(facade_tex, tex_sampler, uv).rgb;

@@ -62,8 +62,9 @@ pub struct FrameStats {
     pub plant_draw_calls: u32,
     pub plant_items: u32,
     pub plant_triangles: u64,
-    /// Progressive-mesh objects: draw calls (one per instance), triangles drawn and the
-    /// triangles they would have at full detail.
+    /// Progressive-mesh objects: items drawn (instances and merged far meshes), their draw
+    /// calls, triangles drawn and the triangles they would have at full detail.
+    pub object_items: u32,
     pub object_draw_calls: u32,
     pub object_triangles: u64,
     pub object_full_triangles: u64,
@@ -320,6 +321,7 @@ impl Viewer {
             plant_draw_calls: stats.plant_draw_calls,
             plant_items: stats.plant_items,
             plant_triangles: stats.plant_triangles,
+            object_items: stats.object_items,
             object_draw_calls: stats.object_draw_calls,
             object_triangles: stats.object_triangles,
             object_full_triangles: stats.object_full_triangles,

@@ -144,7 +144,9 @@ pub struct DrawStats {
     pub plant_triangles: u64,
     /// Of the instances: group-billboard quads (each stands for a cluster of items).
     pub group_billboards: u64,
-    /// Progressive-mesh objects: draw calls (one per instance) and triangles.
+    /// Progressive-mesh objects: items (instances and merged far meshes), the draw calls they
+    /// take (one per item, or one multi-draw per texture pair and page), and triangles.
+    pub object_items: u32,
     pub object_draw_calls: u32,
     pub object_triangles: u64,
     /// Triangles the drawn objects would have at full detail.

@@ -8,8 +8,9 @@
 //! - [`frame`]: what all renderers share: frame uniforms (group 0), the node-table layout
 //!   (group 1), view options, draw statistics, pipeline and pass helpers.
 //! - Merged draws (seed 002): [`suballoc`] (node geometry suballocated from a few large
-//!   buffers), [`node_table`] (per-node data as one storage array per renderer), [`batches`]
-//!   (a frame's draws as one multi-draw per render state and page, a plain loop as fallback).
+//!   buffers; [`paged_buffer`] the pages of one such buffer), [`node_table`] (per-node data as
+//!   one storage array per renderer), [`batches`] (a frame's draws as one multi-draw per render
+//!   state and page, a plain loop as fallback).
 //! - One renderer per kind of thing drawn: [`sky`] (sky, node-bounds lines), [`terrain`],
 //!   [`vegetation`] (with its atlas and impostor bakes). Each owns its pipelines, its per-node
 //!   GPU objects and its `gpu_data` structs; [`gpu_data`] holds the structs of the shared prelude.
@@ -32,6 +33,7 @@ pub mod light_pool;
 pub mod lighting;
 pub mod node_table;
 pub mod objects;
+pub mod paged_buffer;
 pub mod reference;
 pub mod scene;
 pub mod shader;

@@ -1,17 +1,25 @@
-//! The objects renderer: progressive meshes (one vertex buffer per model, wedges in level order)
-//! drawn per instance with an index list kept at the level the pixel metric chooses
-//! ([`crate::objects::lod`]), edited level by level on the CPU ([`PmInstance`]) and rewritten
-//! on the GPU only when the level changes. One draw per visible instance. A model with an
-//! `MSFT_lod` chain has a vertex buffer per chain level; an instance that moves to another chain
-//! level starts a new index list there (no geomorph across chain levels: they share no vertices).
+//! The objects renderer: progressive meshes (the vertices of every model in one buffer, wedges
+//! in level order) drawn per instance with an index list kept at the level the pixel metric
+//! chooses ([`crate::objects::lod`]), edited level by level on the CPU ([`PmInstance`]) and
+//! rewritten on the GPU only when the level changes. A model with an `MSFT_lod` chain has a
+//! vertex range per chain level; an instance that moves to another chain level starts a new index
+//! list there (no geomorph across chain levels: they share no vertices).
+//!
+//! Merged draws (seed 002): index lists, geomorph targets and nodes' merged far meshes are
+//! ranges in pooled pages ([`PagedBuffer`]); per-draw data is one storage array indexed by the
+//! draw's instance index. The draws go through [`Batches`] under a key of pipeline, texture slots
+//! and pages, so the frame's houses take one multi-draw per key (a few texture pairs) instead
+//! of one draw each.
 
 use super::Gpu;
+use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, storage_entry, texture_entry,
-    uniform_entry,
 };
 use super::lighting::light_entry;
+use super::paged_buffer::PagedBuffer;
 use super::scene::{FrameDraws, NodeRenderer};
+use super::suballoc::Lease;
 use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::hlod;
@@ -23,13 +31,23 @@ use crate::texcache::pool::{PoolSettings, SlotId, TexturePool};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 use std::sync::Arc;
-use wgpu::util::DeviceExt;
+use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs, DrawIndirectArgs};
 use worldgen::pm::PmInstance;
 
-/// Bytes of one draw's uniform block, padded to the dynamic-offset alignment.
-const DRAW_STRIDE: u64 = 256;
 /// Frames an instance's index list survives without being drawn.
 const KEEP_FRAMES: u64 = 600;
+/// Indices in a page of index lists (16 MiB), and pages at most.
+const INDEX_PAGE: u32 = 1 << 22;
+const INDEX_PAGES: usize = 16;
+/// Geomorph targets (two `vec4`s per wedge) in a page (32 MiB, within the default storage
+/// binding limit of 128 MiB), and pages at most.
+const MORPH_PAGE: u32 = 1 << 21;
+const MORPH_PAGES: usize = 8;
+/// Vertices of merged far meshes in a page (36 MiB), and pages at most.
+const HLOD_PAGE: u32 = 1 << 20;
+const HLOD_PAGES: usize = 16;
+/// Bytes of a merged far mesh's vertex (position, normal, colour).
+const HLOD_VERTEX_BYTES: u64 = 36;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -44,6 +62,9 @@ struct DrawUniform {
     base_rel: [f32; 4],
     tex: [f32; 4],
     roof_albedo: [f32; 4],
+    /// x: the model's first vertex in the shared vertex buffer; y: the first geomorph target of
+    /// the instance in its morph page.
+    pool: [u32; 4],
 }
 
 /// A geomorph in progress: wedges `lo..hi` move between their own position and that of the
@@ -59,22 +80,46 @@ struct Morph {
     target: usize,
 }
 
+/// The pooled pages instances write into.
+struct Pools {
+    /// Index lists: an instance leases room for its model's full list.
+    indices: PagedBuffer,
+    /// Per wedge the position and normal it collapses onto (leased on an instance's first
+    /// geomorph, two elements per wedge).
+    morph: PagedBuffer,
+    /// One bind group per morph page.
+    morph_groups: Vec<wgpu::BindGroup>,
+    morph_layout: wgpu::BindGroupLayout,
+}
+
+impl Pools {
+    /// Makes the bind groups of morph pages opened since the last call.
+    fn morph_groups(&mut self, device: &wgpu::Device) {
+        while self.morph_groups.len() < self.morph.pages().len() {
+            let page = &self.morph.pages()[self.morph_groups.len()];
+            self.morph_groups
+                .push(morph_group(device, &self.morph_layout, page));
+        }
+    }
+}
+
 struct InstanceGpu {
     /// The chain option drawn (0: the base progressive mesh).
     option: usize,
     lod: PmInstance,
-    indices: wgpu::Buffer,
+    /// Its index list's range (room for the full list).
+    indices: Lease,
     uploaded_level: usize,
     last_frame: u64,
     morph: Option<Morph>,
-    /// Per-wedge "collapse onto" positions and their bind group (made on the first morph).
-    morph_to: Option<(wgpu::Buffer, wgpu::BindGroup)>,
+    /// Its geomorph targets' range (leased on the first morph).
+    morph_to: Option<Lease>,
 }
 
 impl InstanceGpu {
     /// Moves the instance towards `level`: at once, or by a geomorph of `morph_s` seconds
-    /// (advanced by `dt_s`); rewrites the GPU index list when the shown level changed (returns
-    /// whether it did).
+    /// (advanced by `dt_s`; at once as well when the morph pages are full); rewrites the GPU
+    /// index list when the shown level changed (returns whether it did).
     fn update_level(
         &mut self,
         gpu: &Gpu,
@@ -82,7 +127,7 @@ impl InstanceGpu {
         level: usize,
         morph_s: f64,
         dt_s: f64,
-        morph_layout: &wgpu::BindGroupLayout,
+        pools: &mut Pools,
     ) -> bool {
         let pm = &model.pm;
         // Advance a geomorph; a finished shrink switches to its coarser list.
@@ -96,21 +141,16 @@ impl InstanceGpu {
             }
         }
         if self.morph.is_none() && level != self.lod.level() {
-            if morph_s > 0.0 {
+            if self.morph_to.is_none() && morph_s > 0.0 {
+                let wedges = pm.wedge_position.len().max(1) as u32;
+                self.morph_to = pools.morph.lease(&gpu.device, 2 * wedges);
+                pools.morph_groups(&gpu.device);
+            }
+            if let (Some(targets), true) = (&self.morph_to, morph_s > 0.0) {
                 let refine = level > self.lod.level();
                 let coarse = level.min(self.lod.level());
                 let lo = pm.wedges_at(coarse) as u32;
                 let hi = pm.wedges_at(level.max(self.lod.level())) as u32;
-                let (buffer, _) = self.morph_to.get_or_insert_with(|| {
-                    let b = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some("object morph targets"),
-                        size: (pm.wedge_position.len().max(1) * 32) as u64,
-                        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                        mapped_at_creation: false,
-                    });
-                    let g = morph_group(&gpu.device, morph_layout, &b);
-                    (b, g)
-                });
                 let to: Vec<[f32; 4]> = (lo..hi)
                     .flat_map(|w0| {
                         let w = pm.live_wedge(w0, lo);
@@ -119,10 +159,9 @@ impl InstanceGpu {
                         [[q[0], q[1], q[2], 1.0], [n[0], n[1], n[2], 0.0]]
                     })
                     .collect();
-                if !to.is_empty() {
-                    gpu.queue
-                        .write_buffer(buffer, u64::from(lo) * 32, bytemuck::cast_slice(&to));
-                }
+                pools
+                    .morph
+                    .write(&gpu.queue, targets, 2 * lo, bytemuck::cast_slice(&to));
                 if refine {
                     self.lod.set_level(pm, &model.edits, level);
                 }
@@ -141,33 +180,46 @@ impl InstanceGpu {
         if self.uploaded_level == shown {
             return false;
         }
-        let indices = self.lod.indices();
-        if !indices.is_empty() {
-            gpu.queue
-                .write_buffer(&self.indices, 0, bytemuck::cast_slice(indices));
-        }
+        pools.indices.write(
+            &gpu.queue,
+            &self.indices,
+            0,
+            bytemuck::cast_slice(self.lod.indices()),
+        );
         self.uploaded_level = shown;
         true
     }
 }
 
+/// What a run of merged draws shares: pipeline, bind groups and buffers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct Key {
+    /// A node's merged far mesh (else a progressive-mesh instance).
+    hlod: bool,
+    /// The slots of the facade and roof textures (None: the white fallback).
+    slots: [Option<SlotId>; 2],
+    /// The index page (the vertex page, for a merged far mesh).
+    page: u32,
+    /// The morph page bound (0 for draws that do not morph).
+    morph_page: u32,
+}
+
 struct DrawItem {
     instance: u32,
-    model: u32,
     option: usize,
     /// Indices drawn (vertices, for a merged far mesh).
     index_count: u32,
     full_triangles: u32,
-    /// The slots of its facade and roof textures (None: the white fallback).
-    slots: [Option<SlotId>; 2],
-    /// A merged far mesh: the index of its node in the frame's drawn nodes.
-    hlod: Option<usize>,
+    /// Its key (the slots are filled once the frame's texture plan is applied).
+    key: Key,
+    /// The draw; its first instance is the item's index in the frame's draw data.
+    args: Item,
 }
 
-/// A node's merged far mesh on the GPU (three vertices a triangle, no index list).
+/// A node's merged far mesh on the GPU (three vertices a triangle, no index list): its range in
+/// the far-mesh vertex pages.
 struct HlodGpu {
-    vertices: wgpu::Buffer,
-    vertex_count: u32,
+    vertices: Lease,
 }
 
 /// Per-frame statistics of the objects.
@@ -179,6 +231,8 @@ pub struct ObjectStats {
     pub full_triangles: u64,
     /// Index lists rewritten this frame (level changes).
     pub level_changes: u32,
+    /// Instances not drawn because the index pages were full.
+    pub pool_full: u32,
 }
 
 pub struct ObjectsRenderer {
@@ -186,12 +240,15 @@ pub struct ObjectsRenderer {
     pipeline: wgpu::RenderPipeline,
     /// Merged far meshes: per-vertex colour, no morph.
     pipeline_hlod: wgpu::RenderPipeline,
-    /// Per model, per chain option (0 the base).
-    vertex_buffers: Vec<Vec<wgpu::Buffer>>,
+    /// The vertices of every model and chain option.
+    vertices: wgpu::Buffer,
+    /// Per model, per chain option (0 the base): its first vertex in `vertices`.
+    base_vertex: Vec<Vec<u32>>,
+    pools: Pools,
+    /// Vertices of the nodes' merged far meshes.
+    hlod_vertices: PagedBuffer,
     draw_layout: wgpu::BindGroupLayout,
-    morph_layout: wgpu::BindGroupLayout,
-    /// Bound for instances that are not morphing (the shader reads nothing from it).
-    no_morph: wgpu::BindGroup,
+    /// The frame's per-draw data (storage array, indexed by instance index).
     draw_buffer: wgpu::Buffer,
     /// Draw groups by the slots of their two textures (remade when slots or the draw buffer
     /// change).
@@ -206,6 +263,9 @@ pub struct ObjectsRenderer {
     tex_means: Vec<[f32; 3]>,
     instances: HashMap<u32, InstanceGpu>,
     items: Vec<DrawItem>,
+    batches: Batches<Key>,
+    /// Whether this frame's runs are recorded as multi-draws.
+    merged: bool,
     frame_no: u64,
     pub stats: ObjectStats,
 }
@@ -236,11 +296,7 @@ fn draw_group(
         entries: &[
             wgpu::BindGroupEntry {
                 binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(std::mem::size_of::<DrawUniform>() as u64),
-                }),
+                resource: buffer.as_entire_binding(),
             },
             wgpu::BindGroupEntry {
                 binding: 1,
@@ -275,9 +331,9 @@ fn morph_group(
 
 fn draw_buffer(device: &wgpu::Device, draws: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("object draw uniforms"),
-        size: draws.max(1) * DRAW_STRIDE,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        label: Some("object draw data"),
+        size: draws.max(1) * std::mem::size_of::<DrawUniform>() as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }
@@ -297,11 +353,7 @@ impl ObjectsRenderer {
         let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("object draw layout"),
             entries: &[
-                uniform_entry(
-                    0,
-                    true,
-                    wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT,
-                ),
+                storage_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT),
                 texture_entry(1, wgpu::TextureViewDimension::D2),
                 texture_entry(2, wgpu::TextureViewDimension::D2),
                 sampler_entry(3),
@@ -311,16 +363,6 @@ impl ObjectsRenderer {
             label: Some("object morph layout"),
             entries: &[storage_entry(0, wgpu::ShaderStages::VERTEX)],
         });
-        let no_morph = morph_group(
-            device,
-            &morph_layout,
-            &device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("no morph"),
-                size: 16,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            }),
-        );
         let layout = frame.pipeline_layout(
             device,
             "objects pipeline layout",
@@ -343,7 +385,7 @@ impl ObjectsRenderer {
         let pipeline_objects = pipeline(device, &module, &layout, &spec);
         let hlod_attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
         let hlod_buffers = [Some(wgpu::VertexBufferLayout {
-            array_stride: 36,
+            array_stride: HLOD_VERTEX_BYTES,
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &hlod_attrs,
         })];
@@ -355,28 +397,53 @@ impl ObjectsRenderer {
             frame.color_format,
         );
         let pipeline_hlod = pipeline(device, &module, &layout, &hlod_spec);
-        let vertex_buffers = set
+        // Every model's and chain option's wedges, one after the other.
+        let mut data: Vec<f32> = Vec::new();
+        let base_vertex = set
             .models
             .iter()
             .map(|model| {
                 (0..=model.chain.len())
                     .map(|option| {
+                        let base = (data.len() / 8) as u32;
                         let m = model.option(option);
-                        let mut data: Vec<f32> = Vec::with_capacity(m.pm.wedge_position.len() * 8);
                         for (w, &p) in m.pm.wedge_position.iter().enumerate() {
                             data.extend_from_slice(&m.pm.positions[p as usize]);
                             data.extend_from_slice(&m.normals[w]);
                             data.extend_from_slice(&m.pm.uvs.get(w).copied().unwrap_or([0.0; 2]));
                         }
-                        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                            label: Some("object vertices"),
-                            contents: bytemuck::cast_slice(&data),
-                            usage: wgpu::BufferUsages::VERTEX,
-                        })
+                        base
                     })
                     .collect()
             })
             .collect();
+        data.resize(data.len().max(8), 0.0);
+        let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("object vertices"),
+            contents: bytemuck::cast_slice(&data),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let mut pools = Pools {
+            indices: PagedBuffer::new(
+                "object index lists",
+                wgpu::BufferUsages::INDEX,
+                4,
+                INDEX_PAGE,
+                INDEX_PAGES,
+            ),
+            morph: PagedBuffer::new(
+                "object morph targets",
+                wgpu::BufferUsages::STORAGE,
+                16,
+                MORPH_PAGE,
+                MORPH_PAGES,
+            ),
+            morph_groups: Vec::new(),
+            morph_layout,
+        };
+        // Morph page 0 is bound for draws that do not morph.
+        pools.morph.open_pages(device);
+        pools.morph_groups(device);
         let draw_capacity = 64;
         let draw_buffer = draw_buffer(device, draw_capacity);
         let mut tex_pool = TexturePool::new(PoolSettings::default());
@@ -390,10 +457,17 @@ impl ObjectsRenderer {
             set,
             pipeline: pipeline_objects,
             pipeline_hlod,
-            vertex_buffers,
+            vertices,
+            base_vertex,
+            pools,
+            hlod_vertices: PagedBuffer::new(
+                "object far meshes",
+                wgpu::BufferUsages::VERTEX,
+                HLOD_VERTEX_BYTES,
+                HLOD_PAGE,
+                HLOD_PAGES,
+            ),
             draw_layout,
-            morph_layout,
-            no_morph,
             draw_buffer,
             groups: HashMap::new(),
             draw_capacity,
@@ -403,6 +477,8 @@ impl ObjectsRenderer {
             tex_means,
             instances: HashMap::new(),
             items: Vec::new(),
+            batches: Batches::new(),
+            merged: false,
             frame_no: 0,
             stats: ObjectStats::default(),
         }
@@ -412,7 +488,7 @@ impl ObjectsRenderer {
     pub fn morphs(&self) -> Vec<(u32, f32)> {
         self.items
             .iter()
-            .filter(|i| i.hlod.is_none())
+            .filter(|i| !i.key.hlod)
             .filter_map(|i| Some((i.instance, self.instances[&i.instance].morph?.t)))
             .collect()
     }
@@ -422,7 +498,7 @@ impl ObjectsRenderer {
         let mut v: Vec<(u32, usize)> = self
             .items
             .iter()
-            .filter(|i| i.hlod.is_none())
+            .filter(|i| !i.key.hlod)
             .map(|i| (i.instance, self.instances[&i.instance].lod.level()))
             .collect();
         v.sort_unstable();
@@ -434,7 +510,7 @@ impl ObjectsRenderer {
         let mut v: Vec<(u32, Choice)> = self
             .items
             .iter()
-            .filter(|i| i.hlod.is_none())
+            .filter(|i| !i.key.hlod)
             .map(|i| {
                 let inst = &self.instances[&i.instance];
                 (
@@ -478,19 +554,20 @@ impl NodeRenderer for ObjectsRenderer {
         let Some(h) = work.get::<NodeObjects>().and_then(|o| o.hlod.as_ref()) else {
             return 0;
         };
-        let vertices = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("object hlod vertices"),
-                contents: bytemuck::cast_slice(&h.vertices),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
-        let vertex_count = h.vertices.len() as u32;
+        let Some(vertices) = self
+            .hlod_vertices
+            .lease(&gpu.device, h.vertices.len() as u32)
+        else {
+            log::warn!(
+                "object far-mesh pages full: node {:?} draws its houses one by one",
+                work.key
+            );
+            return 0;
+        };
+        self.hlod_vertices
+            .write(&gpu.queue, &vertices, 0, bytemuck::cast_slice(&h.vertices));
         let bytes = std::mem::size_of_val(h.vertices.as_slice());
-        work.gpu.put(HlodGpu {
-            vertices,
-            vertex_count,
-        });
+        work.gpu.put(HlodGpu { vertices });
         bytes
     }
 
@@ -544,30 +621,42 @@ impl NodeRenderer for ObjectsRenderer {
                 let drawn_model = model.option(choice.option);
                 // A new instance starts at full detail (and geomorphs down when MORPH is on);
                 // a switch of chain level starts at the chosen level.
-                let new_entry = |level: usize| {
+                let new_entry = |pools: &mut Pools, level: usize| {
                     let pm = &drawn_model.pm;
-                    InstanceGpu {
+                    let indices = pools
+                        .indices
+                        .lease(&gpu.device, (pm.triangles.len() * 3) as u32)?;
+                    Some(InstanceGpu {
                         option: choice.option,
                         lod: PmInstance::new(pm, level),
-                        indices: gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                            label: Some("object indices"),
-                            size: (pm.triangles.len() * 12).max(4) as u64,
-                            usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_DST,
-                            mapped_at_creation: false,
-                        }),
+                        indices,
                         uploaded_level: 0,
                         last_frame: 0,
                         morph: None,
                         morph_to: None,
+                    })
+                };
+                let entry = match self.instances.entry(id) {
+                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        match new_entry(&mut self.pools, drawn_model.pm.level_count()) {
+                            Some(i) => e.insert(i),
+                            None => {
+                                self.stats.pool_full += 1;
+                                continue;
+                            }
+                        }
                     }
                 };
-                let entry = self
-                    .instances
-                    .entry(id)
-                    .or_insert_with(|| new_entry(drawn_model.pm.level_count()));
                 if entry.option != choice.option {
                     // Another chain level: its own vertices, so a new list (switched at once).
-                    *entry = new_entry(choice.level);
+                    match new_entry(&mut self.pools, choice.level) {
+                        Some(i) => *entry = i,
+                        None => {
+                            self.stats.pool_full += 1;
+                            continue;
+                        }
+                    }
                 }
                 entry.last_frame = self.frame_no;
                 let changed = entry.update_level(
@@ -576,11 +665,11 @@ impl NodeRenderer for ObjectsRenderer {
                     choice.level,
                     settings.morph_s,
                     draws.dt_s,
-                    &self.morph_layout,
+                    &mut self.pools,
                 );
                 self.stats.level_changes += u32::from(changed);
                 let shown = entry.lod.level();
-                let indices = entry.lod.indices();
+                let index_count = entry.lod.indices().len() as u32;
                 let morph = entry.morph.map_or([0.0; 4], |m| {
                     [
                         m.lo as f32,
@@ -589,9 +678,16 @@ impl NodeRenderer for ObjectsRenderer {
                         f32::from(u8::from(m.refine)),
                     ]
                 });
-                if indices.is_empty() {
+                // The morph page and first target of a morphing instance (page 0 otherwise).
+                let (morph_page, morph_base) = entry
+                    .morph_to
+                    .as_ref()
+                    .filter(|_| entry.morph.is_some())
+                    .map_or((0, 0), |l| (l.page, l.start[0]));
+                if index_count == 0 {
                     continue;
                 }
+                let base_vertex = self.base_vertex[inst.model as usize][choice.option];
                 let world = world_from_model(&self.set, id);
                 let mut rel = world;
                 rel.w_axis -= camera.position_m.extend(0.0);
@@ -605,6 +701,7 @@ impl NodeRenderer for ObjectsRenderer {
                 } else {
                     PLAIN_ALBEDO
                 };
+                let k = uniforms.len() as u32;
                 uniforms.push(DrawUniform {
                     rel_from_model: rel.as_mat4().to_cols_array_2d(),
                     normal_from_model: normal.as_mat4().to_cols_array_2d(),
@@ -630,18 +727,29 @@ impl NodeRenderer for ObjectsRenderer {
                     // Filled in once this frame's texture plan is applied.
                     tex: [-1.0, -1.0, 0.0, 0.0],
                     roof_albedo: [albedo[0], albedo[1], albedo[2], 1.0],
+                    pool: [base_vertex, morph_base, 0, 0],
                 });
                 self.items.push(DrawItem {
                     instance: id,
-                    model: inst.model,
                     option: choice.option,
-                    index_count: indices.len() as u32,
+                    index_count,
                     full_triangles: full as u32,
-                    slots: [None; 2],
-                    hlod: None,
+                    key: Key {
+                        hlod: false,
+                        slots: [None; 2],
+                        page: entry.indices.page,
+                        morph_page,
+                    },
+                    args: Item::Indexed(DrawIndexedIndirectArgs {
+                        index_count,
+                        instance_count: 1,
+                        first_index: entry.indices.start[0],
+                        base_vertex: base_vertex as i32,
+                        first_instance: k,
+                    }),
                 });
                 self.stats.instances_drawn += 1;
-                self.stats.triangles += indices.len() as u64 / 3;
+                self.stats.triangles += u64::from(index_count / 3);
                 self.stats.full_triangles += full as u64;
             }
         }
@@ -650,61 +758,56 @@ impl NodeRenderer for ObjectsRenderer {
             .retain(|_, i| frame_no.saturating_sub(i.last_frame) < KEEP_FRAMES);
         self.texture_plan(gpu, draws, &mut uniforms);
         self.write_uniforms(gpu, &uniforms);
+        self.batches.clear();
+        for item in &self.items {
+            self.batches.push(item.key, item.args);
+        }
+        self.batches.upload(gpu);
+        self.merged = draws.view.multi_draw(gpu);
     }
 
     fn draw(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         _frame: &FrameResources,
-        draws: &FrameDraws<'_>,
+        _draws: &FrameDraws<'_>,
         stats: &mut DrawStats,
     ) {
         if self.items.is_empty() {
             return;
         }
-        for (k, item) in self.items.iter().enumerate() {
-            if let Some(node_index) = item.hlod {
-                let (Some(mesh), Some(group)) = (
-                    draws.drawn[node_index].work.gpu.get::<HlodGpu>(),
-                    self.groups.get(&item.slots),
-                ) else {
-                    continue;
-                };
-                pass.set_pipeline(&self.pipeline_hlod);
-                pass.set_bind_group(2, group, &[(k as u64 * DRAW_STRIDE) as u32]);
-                pass.set_bind_group(3, &self.no_morph, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.draw(0..mesh.vertex_count, 0..1);
-                stats.object_draw_calls += 1;
-                stats.object_hlod_draws += 1;
-                stats.object_triangles += u64::from(mesh.vertex_count / 3);
-                stats.object_full_triangles += u64::from(item.full_triangles);
-                continue;
-            }
-            let Some(inst) = self.instances.get(&item.instance) else {
-                continue;
-            };
-            pass.set_pipeline(&self.pipeline);
-            let Some(group) = self.groups.get(&item.slots) else {
-                continue;
-            };
-            pass.set_bind_group(2, group, &[(k as u64 * DRAW_STRIDE) as u32]);
-            let morph = inst
-                .morph_to
-                .as_ref()
-                .filter(|_| inst.morph.is_some())
-                .map_or(&self.no_morph, |(_, g)| g);
-            pass.set_bind_group(3, morph, &[]);
-            pass.set_vertex_buffer(
-                0,
-                self.vertex_buffers[item.model as usize][item.option].slice(..),
-            );
-            pass.set_index_buffer(inst.indices.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..item.index_count, 0, 0..1);
-            stats.object_draw_calls += 1;
+        for item in &self.items {
+            stats.object_items += 1;
+            stats.object_hlod_draws += u32::from(item.key.hlod);
             stats.object_triangles += u64::from(item.index_count / 3);
             stats.object_full_triangles += u64::from(item.full_triangles);
             stats.object_chain_draws += u32::from(item.option > 0);
+        }
+        for run in self.batches.runs() {
+            let key = run.key;
+            let (Some(group), Some(morph)) = (
+                self.groups.get(&key.slots),
+                self.pools.morph_groups.get(key.morph_page as usize),
+            ) else {
+                continue;
+            };
+            if key.hlod {
+                let Some(vertices) = self.hlod_vertices.pages().get(key.page as usize) else {
+                    continue;
+                };
+                pass.set_pipeline(&self.pipeline_hlod);
+                pass.set_vertex_buffer(0, vertices.slice(..));
+            } else {
+                let Some(indices) = self.pools.indices.pages().get(key.page as usize) else {
+                    continue;
+                };
+                pass.set_pipeline(&self.pipeline);
+                pass.set_vertex_buffer(0, self.vertices.slice(..));
+                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+            }
+            pass.set_bind_group(2, group, &[]);
+            pass.set_bind_group(3, morph, &[]);
+            stats.object_draw_calls += self.batches.record(pass, run, self.merged);
         }
         let t = self.tex_pool.stats();
         stats.texture_resident_bytes += t.resident_bytes;
@@ -764,24 +867,35 @@ impl ObjectsRenderer {
             // Vertex colours (w = 1), no texture level.
             tex: [-1.0, -1.0, 0.0, 1.0],
             roof_albedo: [1.0; 4],
+            pool: [0; 4],
         });
+        let vertex_count = gpu_mesh.vertices.len[0];
         self.items.push(DrawItem {
             instance: 0,
-            model: 0,
             option: 0,
-            index_count: gpu_mesh.vertex_count,
+            index_count: vertex_count,
             full_triangles: h.full_triangles as u32,
-            slots: [None; 2],
-            hlod: Some(node_index),
+            key: Key {
+                hlod: true,
+                slots: [None; 2],
+                page: gpu_mesh.vertices.page,
+                morph_page: 0,
+            },
+            args: Item::Plain(DrawIndirectArgs {
+                vertex_count,
+                instance_count: 1,
+                first_vertex: gpu_mesh.vertices.start[0],
+                first_instance: uniforms.len() as u32 - 1,
+            }),
         });
-        self.stats.triangles += u64::from(gpu_mesh.vertex_count / 3);
+        self.stats.triangles += u64::from(vertex_count / 3);
         self.stats.full_triangles += h.full_triangles as u64;
         true
     }
 
     /// Ends the texture cache's frame (its uploads within what is left of the streamer's
-    /// per-frame upload budgets of bytes and time), applies the plan on the GPU and fills the draws' texture
-    /// levels.
+    /// per-frame upload budgets of bytes and time), applies the plan on the GPU and fills the
+    /// draws' texture levels.
     fn texture_plan(&mut self, gpu: &Gpu, draws: &FrameDraws<'_>, uniforms: &mut [DrawUniform]) {
         // Texture uploads share the streamer's per-frame upload budgets, bytes and time, with
         // the nodes'.
@@ -815,22 +929,17 @@ impl ObjectsRenderer {
             self.groups.clear();
         }
         self.make_groups(gpu);
-        let mut bytes = vec![0u8; uniforms.len() * DRAW_STRIDE as usize];
-        for (k, u) in uniforms.iter().enumerate() {
-            let at = k * DRAW_STRIDE as usize;
-            bytes[at..at + std::mem::size_of::<DrawUniform>()]
-                .copy_from_slice(bytemuck::bytes_of(u));
-        }
-        gpu.queue.write_buffer(&self.draw_buffer, 0, &bytes);
+        gpu.queue
+            .write_buffer(&self.draw_buffer, 0, bytemuck::cast_slice(uniforms));
     }
 
     /// Makes the draw groups this frame's items need (their slots' views, or the fallback).
     fn make_groups(&mut self, gpu: &Gpu) {
         for item in &self.items {
-            if self.groups.contains_key(&item.slots) {
+            if self.groups.contains_key(&item.key.slots) {
                 continue;
             }
-            let views = item.slots.map(|s| {
+            let views = item.key.slots.map(|s| {
                 s.and_then(|s| self.gpu_tex.view(s))
                     .unwrap_or(&self.gpu_tex.fallback)
             });
@@ -841,7 +950,7 @@ impl ObjectsRenderer {
                 views,
                 &self.gpu_tex.sampler,
             );
-            self.groups.insert(item.slots, group);
+            self.groups.insert(item.key.slots, group);
         }
     }
 
@@ -849,7 +958,7 @@ impl ObjectsRenderer {
     /// textures' mean colours), the debug tint flag, and its slots.
     fn texture_levels(&mut self, uniforms: &mut [DrawUniform], mip_view: bool) {
         for (item, u) in self.items.iter_mut().zip(uniforms.iter_mut()) {
-            if item.hlod.is_some() {
+            if item.key.hlod {
                 continue;
             }
             let inst = &self.set.instances[item.instance as usize];
@@ -857,7 +966,7 @@ impl ObjectsRenderer {
                 continue;
             };
             let resident = textures.map(|t| self.tex_pool.resident(t));
-            item.slots = resident.map(|r| r.map(|(slot, _)| slot));
+            item.key.slots = resident.map(|r| r.map(|(slot, _)| slot));
             let level = |k: usize| resident[k].map_or(-1.0, |(_, l)| l as f32);
             u.tex = [level(0), level(1), f32::from(u8::from(mip_view)), 0.0];
             if u.fade[3] < 0.5 {
@@ -886,8 +995,10 @@ fn lod_color(share: f32) -> [f32; 3] {
 
 #[cfg(test)]
 mod tests {
+    /// The per-draw struct as the shader's storage array lays it out: 16-byte aligned members,
+    /// no padding.
     #[test]
-    fn draw_uniform_fits_its_stride() {
-        assert!(std::mem::size_of::<super::DrawUniform>() as u64 <= super::DRAW_STRIDE);
+    fn draw_data_matches_the_shader_layout() {
+        assert_eq!(std::mem::size_of::<super::DrawUniform>(), 2 * 64 + 9 * 16);
     }
 }

@@ -230,7 +230,7 @@ fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
         .expect("objects renderer");
     let levels = renderer.levels();
     assert!(levels.len() >= 3, "only {} objects drawn", levels.len());
-    assert_eq!(st.object_draw_calls as usize, levels.len());
+    assert_eq!(st.object_items as usize, levels.len());
     let k = cam.k_px();
     let mut coarsest = 1.0f64;
     for &(id, level) in &levels {

@@ -249,7 +249,7 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         "  of which recording the pass".into(),
         col(|s| s.render.record_ms),
     ));
-    let more: [(&str, Vec<f64>); 22] = [
+    let more: [(&str, Vec<f64>); 24] = [
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
             "GPU frame pass (timestamp queries, when supported)",
@@ -295,7 +295,12 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         ),
         (
             "objects drawn (progressive meshes)",
-            col(|s| f64::from(s.object_draw_calls)),
+            col(|s| f64::from(s.object_items)),
+        ),
+        ("object draw calls", col(|s| f64::from(s.object_draw_calls))),
+        (
+            "draw calls in total (terrain + vegetation + objects)",
+            col(|s| f64::from(s.draw_calls + s.plant_draw_calls + s.object_draw_calls)),
         ),
         (
             "of those: merged far meshes of a node's houses (HLOD)",

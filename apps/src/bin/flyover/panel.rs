@@ -114,9 +114,10 @@ pub(crate) fn panel(
         "vegetation: {} instances, {} draw calls ({} groups), {} mesh triangles",
         s.plant_instances, s.plant_draw_calls, s.plant_items, s.plant_triangles
     ));
-    if s.object_draw_calls > 0 {
+    if s.object_items > 0 {
         ui.label(format!(
-            "objects: {} drawn ({} from MSFT_lod chain levels, {} merged far meshes), {} triangles ({:.1} % of {} at full detail)",
+            "objects: {} drawn in {} draw calls ({} from MSFT_lod chain levels, {} merged far meshes), {} triangles ({:.1} % of {} at full detail)",
+            s.object_items,
             s.object_draw_calls,
             s.object_chain_draws,
             s.object_hlod_draws,

@@ -70,7 +70,7 @@ pub(crate) fn section_gpu(
                     "draws",
                 ),
                 (
-                    "draw calls per frame (houses: one per house, not merged), median",
+                    "draw calls per frame (houses and merged far meshes), median",
                     median(&|s| Some(f64::from(s.object_draw_calls))),
                     "draws",
                 ),
@@ -86,6 +86,11 @@ pub(crate) fn section_gpu(
                 (
                     "items per frame (node meshes + node instance groups), median",
                     median(&|s| Some(f64::from(s.items + s.plant_items))),
+                    "items",
+                ),
+                (
+                    "house items per frame (houses + merged far meshes), median",
+                    median(&|s| Some(f64::from(s.object_items))),
                     "items",
                 ),
                 (
