@@ -1,5 +1,6 @@
 //! The pool node ground textures live in (owned by the terrain renderer): layers
-//! of a few `SIDE x SIDE` texture arrays (pages of [`LAYERS_PER_PAGE`], created as needed, at
+//! of a few `SIDE x SIDE` texture arrays (pages of [`LAYERS_PER_PAGE`], or up to
+//! [`MAX_LAYERS_PER_PAGE`] where the device allows ([`layers_per_page`]), created as needed, at
 //! most as many as the byte budget allows), one layer leased per node and given back when the
 //! lease drops (with the node's GPU objects, on eviction). A layer's views and the bind groups
 //! its mip passes read are made once, the first time the layer is leased, and kept with the
@@ -9,8 +10,25 @@ use super::ground::GROUND_TEXTURE_FORMAT;
 use super::suballoc::{Lease, Suballocator};
 use crate::ground::layout::{MIP_LEVELS, SIDE};
 
-/// Layers per texture array (wgpu's default limit on array layers).
+/// Layers per texture array by default (wgpu's default limit on array layers).
 pub const LAYERS_PER_PAGE: u32 = 256;
+/// Layers per texture array at most: the limit of most desktop adapters (lavapipe's and
+/// NVIDIA's among them). Fewer, larger pages mean fewer terrain batches: the drawn nodes'
+/// textures are spread over fewer pages, and each page a node's texture is in is one more
+/// multi-draw.
+pub const MAX_LAYERS_PER_PAGE: u32 = 2048;
+
+/// Layers per page for a pool of `budget_bytes` on `device`: as many as its array-layer limit
+/// allows, up to [`MAX_LAYERS_PER_PAGE`] and not more than the budget holds (at least one).
+pub fn layers_per_page(device: &wgpu::Device, budget_bytes: usize) -> u32 {
+    let by_budget = u32::try_from(budget_bytes / LAYER_BYTES).unwrap_or(u32::MAX);
+    device
+        .limits()
+        .max_texture_array_layers
+        .min(MAX_LAYERS_PER_PAGE)
+        .min(by_budget)
+        .max(1)
+}
 /// Bytes of one layer (RGBA8 with its mip levels).
 pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
 
@@ -55,6 +73,7 @@ impl GroundSlot {
 
 /// Texture-array pages and their layer allocator.
 pub struct GroundPool {
+    layers_per_page: u32,
     alloc: Suballocator,
     pages: Vec<wgpu::Texture>,
     /// Per page, per layer: its views and mip-source bind groups, once leased.
@@ -77,10 +96,22 @@ impl std::fmt::Debug for GroundPool {
 impl GroundPool {
     /// A pool of at most `budget_bytes` of texture pages (at least one page), whose mip passes
     /// read their source through `mip_source_layout`.
+    /// Pages of [`LAYERS_PER_PAGE`].
     pub fn new(budget_bytes: usize, mip_source_layout: &wgpu::BindGroupLayout) -> Self {
-        let page_bytes = LAYER_BYTES * LAYERS_PER_PAGE as usize;
+        Self::with_pages_of(budget_bytes, LAYERS_PER_PAGE, mip_source_layout)
+    }
+
+    /// A pool of at most `budget_bytes` of pages of `layers_per_page` layers (at least one
+    /// page; see [`layers_per_page`] for what a device allows).
+    pub fn with_pages_of(
+        budget_bytes: usize,
+        layers_per_page: u32,
+        mip_source_layout: &wgpu::BindGroupLayout,
+    ) -> Self {
+        let page_bytes = LAYER_BYTES * layers_per_page as usize;
         Self {
-            alloc: Suballocator::new(&[LAYERS_PER_PAGE], (budget_bytes / page_bytes).max(1)),
+            layers_per_page,
+            alloc: Suballocator::new(&[layers_per_page], (budget_bytes / page_bytes).max(1)),
             pages: Vec::new(),
             layers: Vec::new(),
             mip_source_layout: mip_source_layout.clone(),
@@ -98,7 +129,7 @@ impl GroundPool {
                     size: wgpu::Extent3d {
                         width: SIDE,
                         height: SIDE,
-                        depth_or_array_layers: LAYERS_PER_PAGE,
+                        depth_or_array_layers: self.layers_per_page,
                     },
                     mip_level_count: MIP_LEVELS,
                     sample_count: 1,
@@ -111,7 +142,7 @@ impl GroundPool {
                 }));
         }
         while self.layers.len() < self.pages.len() {
-            self.layers.push(vec![None; LAYERS_PER_PAGE as usize]);
+            self.layers.push(vec![None; self.layers_per_page as usize]);
         }
         let (page, layer) = (lease.page as usize, lease.start[0]);
         let views = self.layers[page][layer as usize]
@@ -145,7 +176,7 @@ impl GroundPool {
     /// Bytes of the pages made so far (never above the budget, rounded down to whole pages,
     /// and at least one page).
     pub fn bytes(&self) -> usize {
-        self.pages.len() * LAYERS_PER_PAGE as usize * LAYER_BYTES
+        self.pages.len() * self.layers_per_page as usize * LAYER_BYTES
     }
 }
 

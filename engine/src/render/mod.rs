@@ -69,6 +69,19 @@ pub enum GpuError {
     WritePng { path: String, reason: String },
 }
 
+/// The limits the device asks for: WebGPU's downlevel defaults with the adapter's texture sizes
+/// and its array-layer limit up to [`ground_pool::MAX_LAYERS_PER_PAGE`] (larger ground-texture
+/// pages, fewer terrain batches).
+fn limits(adapter: &wgpu::Adapter) -> wgpu::Limits {
+    let available = adapter.limits();
+    let mut limits = wgpu::Limits::downlevel_defaults().using_resolution(available.clone());
+    limits.max_texture_array_layers = available
+        .max_texture_array_layers
+        .min(ground_pool::MAX_LAYERS_PER_PAGE)
+        .max(limits.max_texture_array_layers);
+    limits
+}
+
 /// Whether `adapter` is a CPU rasteriser (lavapipe), whose "GPU" memory is the process's RAM.
 pub fn is_cpu_adapter(adapter: &wgpu::Adapter) -> bool {
     adapter.get_info().device_type == wgpu::DeviceType::Cpu
@@ -147,7 +160,7 @@ impl Gpu {
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("engine device"),
             required_features: features,
-            required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
+            required_limits: limits(&adapter),
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device {
