@@ -216,6 +216,20 @@ struct DrawItem {
     args: Item,
 }
 
+/// What an instance shows this frame and where its data is.
+struct Shown {
+    level: usize,
+    index_count: u32,
+    /// The draw's geomorph numbers (`DrawUniform::morph`).
+    morph: [f32; 4],
+    morph_page: u32,
+    /// The instance's first geomorph target in its morph page.
+    morph_base: u32,
+    /// Its index list's page and first index.
+    page: u32,
+    first_index: u32,
+}
+
 /// A node's merged far mesh on the GPU (three vertices a triangle, no index list): its range in
 /// the far-mesh vertex pages.
 struct HlodGpu {
@@ -619,71 +633,18 @@ impl NodeRenderer for ObjectsRenderer {
                 let choice = choose(model, &settings, draws.tau_px, distance_m, k_px, inst.scale);
                 let full = model.pm.triangles.len();
                 let drawn_model = model.option(choice.option);
-                // A new instance starts at full detail (and geomorphs down when MORPH is on);
-                // a switch of chain level starts at the chosen level.
-                let new_entry = |pools: &mut Pools, level: usize| {
-                    let pm = &drawn_model.pm;
-                    let indices = pools
-                        .indices
-                        .lease(&gpu.device, (pm.triangles.len() * 3) as u32)?;
-                    Some(InstanceGpu {
-                        option: choice.option,
-                        lod: PmInstance::new(pm, level),
-                        indices,
-                        uploaded_level: 0,
-                        last_frame: 0,
-                        morph: None,
-                        morph_to: None,
-                    })
+                let Some(shown) = self.update_instance(gpu, draws, id, drawn_model, choice) else {
+                    continue;
                 };
-                let entry = match self.instances.entry(id) {
-                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
-                    std::collections::hash_map::Entry::Vacant(e) => {
-                        match new_entry(&mut self.pools, drawn_model.pm.level_count()) {
-                            Some(i) => e.insert(i),
-                            None => {
-                                self.stats.pool_full += 1;
-                                continue;
-                            }
-                        }
-                    }
-                };
-                if entry.option != choice.option {
-                    // Another chain level: its own vertices, so a new list (switched at once).
-                    match new_entry(&mut self.pools, choice.level) {
-                        Some(i) => *entry = i,
-                        None => {
-                            self.stats.pool_full += 1;
-                            continue;
-                        }
-                    }
-                }
-                entry.last_frame = self.frame_no;
-                let changed = entry.update_level(
-                    gpu,
-                    drawn_model,
-                    choice.level,
-                    settings.morph_s,
-                    draws.dt_s,
-                    &mut self.pools,
-                );
-                self.stats.level_changes += u32::from(changed);
-                let shown = entry.lod.level();
-                let index_count = entry.lod.indices().len() as u32;
-                let morph = entry.morph.map_or([0.0; 4], |m| {
-                    [
-                        m.lo as f32,
-                        m.hi as f32,
-                        m.t.min(1.0),
-                        f32::from(u8::from(m.refine)),
-                    ]
-                });
-                // The morph page and first target of a morphing instance (page 0 otherwise).
-                let (morph_page, morph_base) = entry
-                    .morph_to
-                    .as_ref()
-                    .filter(|_| entry.morph.is_some())
-                    .map_or((0, 0), |l| (l.page, l.start[0]));
+                let Shown {
+                    level: shown,
+                    index_count,
+                    morph,
+                    morph_page,
+                    morph_base,
+                    page,
+                    first_index,
+                } = shown;
                 if index_count == 0 {
                     continue;
                 }
@@ -737,13 +698,13 @@ impl NodeRenderer for ObjectsRenderer {
                     key: Key {
                         hlod: false,
                         slots: [None; 2],
-                        page: entry.indices.page,
+                        page,
                         morph_page,
                     },
                     args: Item::Indexed(DrawIndexedIndirectArgs {
                         index_count,
                         instance_count: 1,
-                        first_index: entry.indices.start[0],
+                        first_index,
                         base_vertex: base_vertex as i32,
                         first_instance: k,
                     }),
@@ -820,6 +781,84 @@ impl NodeRenderer for ObjectsRenderer {
 }
 
 impl ObjectsRenderer {
+    /// Instance `id`'s GPU entry for this frame: made (starting at full detail, geomorphing
+    /// down when MORPH is on) or remade at the chosen level on another chain option, its level
+    /// moved towards `choice`. None when the index pages are full.
+    fn update_instance(
+        &mut self,
+        gpu: &Gpu,
+        draws: &FrameDraws<'_>,
+        id: u32,
+        drawn_model: &PmModel,
+        choice: Choice,
+    ) -> Option<Shown> {
+        let new_entry = |pools: &mut Pools, level: usize| {
+            let pm = &drawn_model.pm;
+            let indices = pools
+                .indices
+                .lease(&gpu.device, (pm.triangles.len() * 3) as u32)?;
+            Some(InstanceGpu {
+                option: choice.option,
+                lod: PmInstance::new(pm, level),
+                indices,
+                uploaded_level: 0,
+                last_frame: 0,
+                morph: None,
+                morph_to: None,
+            })
+        };
+        let entry = match self.instances.entry(id) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                let Some(i) = new_entry(&mut self.pools, drawn_model.pm.level_count()) else {
+                    self.stats.pool_full += 1;
+                    return None;
+                };
+                e.insert(i)
+            }
+        };
+        if entry.option != choice.option {
+            // Another chain level: its own vertices, so a new list (switched at once).
+            let Some(i) = new_entry(&mut self.pools, choice.level) else {
+                self.stats.pool_full += 1;
+                return None;
+            };
+            *entry = i;
+        }
+        entry.last_frame = self.frame_no;
+        let changed = entry.update_level(
+            gpu,
+            drawn_model,
+            choice.level,
+            draws.view.pm_lod.morph_s,
+            draws.dt_s,
+            &mut self.pools,
+        );
+        self.stats.level_changes += u32::from(changed);
+        // The morph page and first target of a morphing instance (page 0 otherwise).
+        let (morph_page, morph_base) = entry
+            .morph_to
+            .as_ref()
+            .filter(|_| entry.morph.is_some())
+            .map_or((0, 0), |l| (l.page, l.start[0]));
+        Some(Shown {
+            level: entry.lod.level(),
+            index_count: entry.lod.indices().len() as u32,
+            morph: entry.morph.map_or([0.0; 4], |m| {
+                [
+                    m.lo as f32,
+                    m.hi as f32,
+                    m.t.min(1.0),
+                    f32::from(u8::from(m.refine)),
+                ]
+            }),
+            morph_page,
+            morph_base,
+            page: entry.indices.page,
+            first_index: entry.indices.start[0],
+        })
+    }
+
     /// Draws node `node_index`'s merged far mesh instead of its houses when it has one on the
     /// GPU, the view allows it and the pixel metric accepts its error ([`hlod::accepts`]).
     fn hlod_item(
