@@ -211,3 +211,18 @@ fn fs_main(in: TerrainOut) -> @location(0) vec4<f32> {
 fn fs_solid(in: TerrainOut) -> @location(0) vec4<f32> {
     return terrain_color(in);
 }
+
+// The GPU-ratio diagnostic (`ViewOptions::flat_terrain`): the same draws with the reference's
+// flat colour, dithered like `fs_main` for nodes in a cross-fade.
+@fragment
+fn fs_flat(in: TerrainOut) -> @location(0) vec4<f32> {
+    if (!in_dither(in.clip.xy, in.fade)) {
+        discard;
+    }
+    return vec4<f32>(0.5, 0.5, 0.5, 1.0);
+}
+
+@fragment
+fn fs_flat_solid() -> @location(0) vec4<f32> {
+    return vec4<f32>(0.5, 0.5, 0.5, 1.0);
+}

@@ -58,6 +58,10 @@ pub struct ViewOptions {
     /// Draw a node's merged far mesh of its houses where the pixel metric accepts it (HLOD);
     /// off: every house on its own.
     pub hlod: bool,
+    /// GPU-ratio diagnostic: the terrain's draws (same batches, skirts and cross-fade dithers)
+    /// with a flat fragment shader like the one-draw reference's, so that pass / reference
+    /// splits into what the geometry costs and what the shading costs.
+    pub flat_terrain: bool,
 }
 
 /// Debug views of the ground.
@@ -123,6 +127,7 @@ impl Default for ViewOptions {
             pm_color_by_lod: false,
             texture_mip_view: false,
             hlod: true,
+            flat_terrain: false,
         }
     }
 }

@@ -203,6 +203,10 @@ pub struct TerrainRenderer {
     /// Nodes not fading: the same pixels without the dither test, so the shader has no
     /// `discard` and hidden fragments fail the depth test before shading.
     solid: wgpu::RenderPipeline,
+    /// `fill` and `solid` with a flat fragment shader (`ViewOptions::flat_terrain`: the same
+    /// draws, dithers and skirts without the shading, to split the GPU ratio).
+    flat_fill: wgpu::RenderPipeline,
+    flat_solid: wgpu::RenderPipeline,
     wire: Option<wgpu::RenderPipeline>,
     /// Group 2 for nodes without a ground texture (legend colours, a one-layer dummy page).
     colors: wgpu::BindGroup,
@@ -279,6 +283,27 @@ impl TerrainRenderer {
                 ..spec.clone()
             },
         );
+        // The GPU-ratio diagnostic's pipelines: the same draws with a flat fragment shader.
+        let flat_fill = pipeline(
+            device,
+            &module,
+            &layout,
+            &PipelineSpec {
+                label: "terrain flat fill",
+                fs: "fs_flat",
+                ..spec.clone()
+            },
+        );
+        let flat_solid = pipeline(
+            device,
+            &module,
+            &layout,
+            &PipelineSpec {
+                label: "terrain flat solid",
+                fs: "fs_flat_solid",
+                ..spec.clone()
+            },
+        );
         let wire = gpu.wireframe.then(|| {
             pipeline(
                 device,
@@ -339,6 +364,8 @@ impl TerrainRenderer {
         Self {
             fill,
             solid,
+            flat_fill,
+            flat_solid,
             wire,
             colors,
             group_layout: colors_layout,
@@ -706,6 +733,11 @@ impl NodeRenderer for TerrainRenderer {
     ) {
         stats.culled += self.culled;
         let wire = self.wire.as_ref().filter(|_| draws.view.wireframe);
+        let (fill, solid) = if draws.view.flat_terrain {
+            (&self.flat_fill, &self.flat_solid)
+        } else {
+            (&self.fill, &self.solid)
+        };
         pass.set_bind_group(1, &self.table.group, &[]);
         let mut bound: Option<bool> = None;
         let mut bound_ground = None;
@@ -723,8 +755,8 @@ impl NodeRenderer for TerrainRenderer {
             if bound != Some(fading) {
                 pass.set_pipeline(match (wire, fading) {
                     (Some(w), _) => w,
-                    (None, true) => &self.fill,
-                    (None, false) => &self.solid,
+                    (None, true) => fill,
+                    (None, false) => solid,
                 });
                 bound = Some(fading);
             }

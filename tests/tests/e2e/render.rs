@@ -359,7 +359,8 @@ fn no_leaked_pixels_from_fifty_cameras_including_fades() {
 /// The GPU-timing reference draws exactly the frame's terrain: on a settled view without sky,
 /// fog, vegetation or houses, the pixels the terrain pass covers (anything but the magenta
 /// clear colour) are the pixels the one-draw reference covers (alpha 1), so `pass / reference`
-/// compares the same triangles.
+/// compares the same triangles; and the terrain's draws with the flat diagnostic shader
+/// (`ViewOptions::flat_terrain`) cover them too, in the reference's colour.
 #[test]
 fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
     let Some(g) = device() else { return };
@@ -416,6 +417,27 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
         "the view shows too little terrain: {covered} pixels"
     );
     assert_eq!(differ, 0, "{differ} of {covered} covered pixels differ");
+    // The ratio's diagnostic: the terrain's own draws with the flat shader cover the same
+    // pixels in the reference's flat colour (dt 0: nothing fades between the two frames).
+    v.view.flat_terrain = true;
+    frame(&g, &mut v, &target, &cam, 0.0);
+    let flat = target.read_rgba(&g).expect("flat pixels");
+    let grey = reference
+        .chunks(4)
+        .find(|r| r[3] == 255)
+        .map(|r| [r[0], r[1], r[2]])
+        .expect("a covered reference pixel");
+    let mut wrong = 0usize;
+    for (f, p) in flat.chunks(4).zip(pass.chunks(4)) {
+        let by_pass = !(p[0] == 255 && p[1] == 0 && p[2] == 255);
+        let is_grey = f[..3] == grey;
+        let is_clear = f[0] == 255 && f[1] == 0 && f[2] == 255;
+        wrong += usize::from(if by_pass { !is_grey } else { !is_clear });
+    }
+    assert_eq!(
+        wrong, 0,
+        "{wrong} pixels differ from the flat pass's expected picture"
+    );
 }
 
 /// Merged draws (seed 002: node geometry suballocated from shared pages, one multi-draw per

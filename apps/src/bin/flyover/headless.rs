@@ -21,7 +21,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let gpu = Gpu::new_headless()?;
     eprintln!(
         "headless on {} ({} draws, ground textures filtered with anisotropy {}x), sun azimuth \
-         {} deg, elevation {} deg{}",
+         {} deg, elevation {} deg{}{}",
         gpu.adapter_name(),
         if cli.per_item_draws {
             "per-item"
@@ -37,6 +37,11 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
             ", no light grids"
         } else {
             ""
+        },
+        if cli.flat_terrain {
+            ", terrain with a flat fragment shader (diagnostic)"
+        } else {
+            ""
         }
     );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
@@ -46,6 +51,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
     let after_viewer_rss_mib = rss_mib_now();
     viewer.view.merged_draws = !cli.per_item_draws;
+    viewer.view.flat_terrain = cli.flat_terrain;
     if cli.gpu_reference {
         viewer.view.plants = false;
         viewer.view.objects = false;

@@ -109,6 +109,11 @@ pub(crate) struct Cli {
     /// comparing the cost of draw calls.
     #[arg(long)]
     pub(crate) per_item_draws: bool,
+    /// Headless GPU-ratio diagnostic: draw the terrain's own draws (same batches, skirts and
+    /// cross-fade dithers) with a flat fragment shader like the --gpu-reference's, so that the
+    /// pass / reference ratio splits into geometry and shading.
+    #[arg(long)]
+    pub(crate) flat_terrain: bool,
     /// How the ground is shown: lit (default), coloured by ground-texture texels per pixel
     /// (red: a texel covers several pixels, yellow: one, green: a pixel covers several texels;
     /// grey: no texture), or the ground texture alone (no light, no fog).

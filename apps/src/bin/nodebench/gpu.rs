@@ -1,7 +1,9 @@
 //! Section `gpu` (when an adapter exists): the automatic flight rendered offscreen through the
 //! viewer, the frame pass timed with timestamp queries next to a same-run reference (the
-//! frame's terrain triangles as one indexed draw with a flat shader). Absolute times only mean
-//! something per adapter, so the rows name it and the ratio is the figure to compare.
+//! frame's terrain triangles as one indexed draw with a flat shader), and again with the
+//! terrain's own draws given a flat fragment shader, which splits the ratio into geometry
+//! (draws, skirts, cross-fade dithers) and shading. Absolute times only mean something per
+//! adapter, so the rows name it and the ratio is the figure to compare.
 
 use crate::open_world;
 use crate::report::{Report, bar};
@@ -28,9 +30,12 @@ pub(crate) fn section_gpu(
     let frames = if quick { 6 } else { 24 };
     for &h in heights {
         let size = [h * 16 / 9, h];
-        for plants in [true, false] {
+        // Vegetation on; the terrain alone (the ratio); the terrain alone with a flat fragment
+        // shader (the ratio's geometry part: same draws, skirts and dithers, no shading).
+        for (plants, flat) in [(true, false), (false, false), (false, true)] {
             let setup = |v: &mut Viewer| {
                 v.view.plants = plants;
+                v.view.flat_terrain = flat;
                 if !plants {
                     // The reference draws the terrain alone: so does the pass (and the sky).
                     v.view.objects = false;
@@ -47,10 +52,11 @@ pub(crate) fn section_gpu(
                 "{}x{}, tau 2 px, {}, {frames} frames of the automatic flight, {adapter}",
                 size[0],
                 size[1],
-                if plants {
-                    "vegetation on"
-                } else {
-                    "vegetation and houses off"
+                match (plants, flat) {
+                    (true, _) => "vegetation on",
+                    (false, false) => "vegetation and houses off",
+                    (false, true) =>
+                        "vegetation and houses off, terrain with a flat fragment shader",
                 }
             );
             let rows = [
@@ -99,7 +105,8 @@ pub(crate) fn section_gpu(
                     "triangles",
                 ),
             ];
-            for (what, value, unit) in rows {
+            // The flat run adds its pass and ratio only (its draws are the shaded run's).
+            for (what, value, unit) in rows.into_iter().take(if flat { 2 } else { usize::MAX }) {
                 if let Some(v) = value {
                     r.add("gpu", what, v, unit, &params);
                 }
@@ -112,7 +119,11 @@ pub(crate) fn section_gpu(
             {
                 r.add(
                     "gpu",
-                    "frame pass / one-draw reference",
+                    if flat {
+                        "frame pass with flat terrain shading / one-draw reference"
+                    } else {
+                        "frame pass / one-draw reference"
+                    },
                     pass / reference,
                     "ratio",
                     &params,
