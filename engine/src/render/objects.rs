@@ -280,6 +280,8 @@ pub struct ObjectsRenderer {
     batches: Batches<Key>,
     /// Whether this frame's runs are recorded as multi-draws.
     merged: bool,
+    /// Whether a full index pool was reported (once a run).
+    warned_pool_full: bool,
     frame_no: u64,
     pub stats: ObjectStats,
 }
@@ -493,6 +495,7 @@ impl ObjectsRenderer {
             items: Vec::new(),
             batches: Batches::new(),
             merged: false,
+            warned_pool_full: false,
             frame_no: 0,
             stats: ObjectStats::default(),
         }
@@ -713,6 +716,14 @@ impl NodeRenderer for ObjectsRenderer {
                 self.stats.triangles += u64::from(index_count / 3);
                 self.stats.full_triangles += full as u64;
             }
+        }
+        if self.stats.pool_full > 0 && !self.warned_pool_full {
+            log::warn!(
+                "object index pages full ({INDEX_PAGES} pages of {INDEX_PAGE} indices): {} \
+                 instances not drawn this frame",
+                self.stats.pool_full
+            );
+            self.warned_pool_full = true;
         }
         let frame_no = self.frame_no;
         self.instances
