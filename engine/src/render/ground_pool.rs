@@ -18,6 +18,9 @@ pub const LAYERS_PER_PAGE: u32 = 256;
 /// multi-draw.
 pub const MAX_LAYERS_PER_PAGE: u32 = 2048;
 
+/// Bytes of one layer (RGBA8 with its mip levels).
+pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
+
 /// Layers per page for a pool of `budget_bytes` on `device`: as many as its array-layer limit
 /// allows, up to [`MAX_LAYERS_PER_PAGE`] and not more than the budget holds (at least one).
 pub fn layers_per_page(device: &wgpu::Device, budget_bytes: usize) -> u32 {
@@ -29,8 +32,6 @@ pub fn layers_per_page(device: &wgpu::Device, budget_bytes: usize) -> u32 {
         .min(by_budget)
         .max(1)
 }
-/// Bytes of one layer (RGBA8 with its mip levels).
-pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
 
 /// A node's layer: the lease (given back on drop), the view of its level 0 to render into, the
 /// views of its smaller mip levels (1, 2, ...) and, per mip level k >= 1, the bind group that
@@ -94,9 +95,8 @@ impl std::fmt::Debug for GroundPool {
 }
 
 impl GroundPool {
-    /// A pool of at most `budget_bytes` of texture pages (at least one page), whose mip passes
-    /// read their source through `mip_source_layout`.
-    /// Pages of [`LAYERS_PER_PAGE`].
+    /// A pool of at most `budget_bytes` of texture pages of [`LAYERS_PER_PAGE`] (at least one
+    /// page), whose mip passes read their source through `mip_source_layout`.
     pub fn new(budget_bytes: usize, mip_source_layout: &wgpu::BindGroupLayout) -> Self {
         Self::with_pages_of(budget_bytes, LAYERS_PER_PAGE, mip_source_layout)
     }
