@@ -1,6 +1,7 @@
 //! Same-sized GPU buffers ("pages") whose element ranges are leased through a [`Suballocator`]:
 //! the buffer side of seed 002's merged buffers for a renderer whose items each need one range
-//! in one buffer (an object's index list, its geomorph targets, a node's merged far mesh). A page
+//! in one buffer (a node's plant instances, an object's index list, its geomorph targets, a
+//! node's merged far mesh). A page
 //! is created when the allocator opens it; a range is given back when its [`Lease`] drops.
 
 use super::suballoc::{Lease, Suballocator};

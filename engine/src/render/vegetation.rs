@@ -18,8 +18,9 @@ use super::impostors::ImpostorPages;
 use super::light_pool::LightEntry;
 use super::lighting::light_entry;
 use super::node_table::NodeTable;
+use super::paged_buffer::PagedBuffer;
 use super::scene::{FrameDraws, NodeRenderer};
-use super::suballoc::{Lease, Suballocator};
+use super::suballoc::Lease;
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use crate::vegetation::content::VegetationContent;
@@ -187,8 +188,8 @@ pub struct VegetationRenderer {
     atlas_texture_group: wgpu::BindGroup,
     cluster_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
-    pool: Suballocator,
-    instance_pages: Vec<wgpu::Buffer>,
+    /// Plant instances: one range per node, in pages of [`PAGE_INSTANCES`].
+    instances: PagedBuffer,
     impostors: ImpostorPages,
     table: NodeTable,
     batches: Batches<BatchKey>,
@@ -337,6 +338,17 @@ fn looks(species_names: &[String]) -> ([[f32; 4]; MAX_LOOKS as usize], Vec<Shape
     (looks, shapes)
 }
 
+/// The pages of plant instances (a node leases one range).
+fn instance_pages() -> PagedBuffer {
+    PagedBuffer::new(
+        "plant instances",
+        wgpu::BufferUsages::VERTEX,
+        std::mem::size_of::<PlantInstance>() as u64,
+        PAGE_INSTANCES,
+        MAX_INSTANCE_PAGES,
+    )
+}
+
 impl VegetationRenderer {
     /// Pipelines, plant shapes and the species atlas, baked for `species_names` (look index =
     /// species index, at most [`MAX_LOOKS`]).
@@ -478,8 +490,7 @@ impl VegetationRenderer {
             ),
             cluster_layout,
             sampler,
-            pool: Suballocator::new(&[PAGE_INSTANCES], MAX_INSTANCE_PAGES),
-            instance_pages: Vec::new(),
+            instances: instance_pages(),
             impostors,
             table: NodeTable::new(device, frame, "vegetation node table", 2),
             batches: Batches::new(),
@@ -660,25 +671,12 @@ impl VegetationRenderer {
             impostors = Some(layer);
             texture_bytes = self.impostors.layer_bytes();
         }
-        let Some(instances) = self.pool.lease(&[data.len() as u32]) else {
+        let Some(instances) = self.instances.lease(&gpu.device, data.len() as u32) else {
             log::warn!("plant instance pool full: node {key:?} has no plants drawn");
             return None;
         };
-        while self.instance_pages.len() < self.pool.pages() {
-            let n = self.instance_pages.len();
-            self.instance_pages
-                .push(gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(&format!("plant instance page {n}")),
-                    size: u64::from(PAGE_INSTANCES) * std::mem::size_of::<PlantInstance>() as u64,
-                    usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }));
-        }
-        gpu.queue.write_buffer(
-            &self.instance_pages[instances.page as usize],
-            u64::from(instances.start[0]) * std::mem::size_of::<PlantInstance>() as u64,
-            bytemuck::cast_slice(&data),
-        );
+        self.instances
+            .write(&gpu.queue, &instances, 0, bytemuck::cast_slice(&data));
         Some(PlantsGpu {
             origin_m: o,
             instances,
@@ -920,18 +918,18 @@ impl NodeRenderer for VegetationRenderer {
                 BatchKey::Billboard { page } => {
                     pass.set_pipeline(&self.billboard);
                     pass.set_bind_group(2, &self.atlas_group, &[]);
-                    pass.set_vertex_buffer(0, self.instance_pages[page as usize].slice(..));
+                    pass.set_vertex_buffer(0, self.instances.pages()[page as usize].slice(..));
                 }
                 BatchKey::Impostor { page, layers } => {
                     pass.set_pipeline(&self.impostor);
                     pass.set_bind_group(2, self.impostors.group(layers), &[]);
-                    pass.set_vertex_buffer(0, self.instance_pages[page as usize].slice(..));
+                    pass.set_vertex_buffer(0, self.instances.pages()[page as usize].slice(..));
                 }
                 BatchKey::Mesh { page, .. } => {
                     pass.set_pipeline(&self.plant_mesh);
                     pass.set_bind_group(2, &self.atlas_group, &[]);
                     pass.set_vertex_buffer(0, self.shape_vertices.slice(..));
-                    pass.set_vertex_buffer(1, self.instance_pages[page as usize].slice(..));
+                    pass.set_vertex_buffer(1, self.instances.pages()[page as usize].slice(..));
                     pass.set_index_buffer(self.shape_indices.slice(..), wgpu::IndexFormat::Uint32);
                 }
             }
