@@ -13,7 +13,7 @@
 //! grid, as a [`SideSteps`] code the shaders read (`node_light` in the prelude).
 
 use super::grid::{COLUMNS, grid_level};
-use crate::terrain::quadtree::{NodeKey, QuadTree, Side};
+use crate::terrain::quadtree::{NodeKey, QuadTree, Side, ancestor_set};
 use rustc_hash::{FxHashMap, FxHashSet};
 
 /// Per side (west, east, south, north: bits 0-2, 3-5, 6-8, 9-11) the log2 of the step, in the
@@ -67,14 +67,7 @@ pub fn coarser_sides(tree: &QuadTree, drawn: &[NodeKey]) -> FxHashMap<NodeKey, S
     let set: FxHashSet<NodeKey> = drawn.iter().copied().collect();
     // Strict ancestors of drawn nodes: across a side where one of these lies at the node's own
     // level, the drawn neighbours are finer.
-    let mut covered: FxHashSet<NodeKey> = FxHashSet::default();
-    for k in drawn {
-        for a in k.ancestors() {
-            if !covered.insert(a) {
-                break;
-            }
-        }
-    }
+    let covered = ancestor_set(drawn.iter().copied());
     let mut out = FxHashMap::default();
     for &k in drawn {
         let own = grid_owner_level(k.level, gl);

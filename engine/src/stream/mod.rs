@@ -48,7 +48,7 @@ pub use display::DrawNode;
 use crate::camera::Camera;
 use crate::surface::World;
 use crate::terrain::bounds::NodeBounds;
-use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::terrain::quadtree::{NodeKey, QuadTree, ancestor_set};
 use crate::terrain::select::Reached;
 use crate::terrain::tiles::TileCache;
 use crossbeam_channel::Receiver;
@@ -400,22 +400,6 @@ impl Streamer {
         wanted
     }
 
-    /// Every ancestor of the nodes in `wanted`.
-    fn ancestors_of(wanted: &FxHashSet<NodeKey>) -> FxHashSet<NodeKey> {
-        // Sized once: a quad tree's inner nodes are about a third of its leaves.
-        let mut ancestors =
-            FxHashSet::with_capacity_and_hasher(wanted.len() / 2 + 16, rustc_hash::FxBuildHasher);
-        for &k in wanted {
-            // Stop at the first ancestor already in the set: its own ancestors are there too.
-            for a in k.ancestors() {
-                if !ancestors.insert(a) {
-                    break;
-                }
-            }
-        }
-        ancestors
-    }
-
     /// The nodes needed to show `wanted` given its `ancestors`: the wanted nodes, the ancestors,
     /// and every child of an ancestor (a node is only replaced by all four children, so the
     /// drawn set always covers the whole map, culled parts included).
@@ -466,7 +450,7 @@ impl Streamer {
         self.wanted = self.select_wanted(cam, tau * self.settings.split_factor);
         // Everything on the path from the root to a wanted node is needed too (ancestors are
         // what is shown until the wanted nodes are ready).
-        self.to_split = Self::ancestors_of(&self.wanted);
+        self.to_split = ancestor_set(self.wanted.iter().copied());
         self.needed = self.needed_for(&self.wanted, &self.to_split);
         let prefetch = self.prefetch_classes(cam, future);
         self.stats.last_selection_s = t_select.elapsed().as_secs_f64();

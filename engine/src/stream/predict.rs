@@ -9,7 +9,7 @@
 
 use super::Streamer;
 use crate::camera::Camera;
-use crate::terrain::quadtree::NodeKey;
+use crate::terrain::quadtree::{NodeKey, ancestor_set};
 use rustc_hash::{FxHashMap, FxHashSet};
 
 /// How far ahead the camera is predicted (s). Class `1 + i` holds what the camera needs
@@ -118,7 +118,7 @@ impl Streamer {
                 continue;
             }
             let wanted = self.select_wanted(camera, tau * factor);
-            let ancestors = Self::ancestors_of(&wanted);
+            let ancestors = ancestor_set(wanted.iter().copied());
             self.prefetch_parts[part] = PrefetchPart {
                 camera: Some(*camera),
                 nodes: self.needed_for(&wanted, &ancestors),

@@ -91,22 +91,26 @@ impl Side {
     pub const ALL: [Self; 4] = [Self::West, Self::East, Self::South, Self::North];
 }
 
-/// Every ancestor of any of `keys`, each once, sorted. A walk up from a key stops at the first
-/// ancestor already found, whose own ancestors are in by then (a frame's drawn nodes share
-/// most of theirs).
-pub fn unique_ancestors(keys: impl IntoIterator<Item = NodeKey>) -> Vec<NodeKey> {
+/// Every strict ancestor of any of `keys`. A walk up from a key stops at the first ancestor
+/// already found, whose own ancestors are in by then (a frame's nodes share most of theirs).
+pub fn ancestor_set(keys: impl IntoIterator<Item = NodeKey>) -> rustc_hash::FxHashSet<NodeKey> {
     let keys = keys.into_iter();
-    let mut seen = rustc_hash::FxHashSet::default();
-    seen.reserve(keys.size_hint().0);
-    let mut out = Vec::new();
+    let mut set = rustc_hash::FxHashSet::default();
+    // A quad tree's inner nodes are about a third of its leaves.
+    set.reserve(keys.size_hint().0 / 2 + 16);
     for k in keys {
         for a in k.ancestors() {
-            if !seen.insert(a) {
+            if !set.insert(a) {
                 break;
             }
-            out.push(a);
         }
     }
+    set
+}
+
+/// [`ancestor_set`] sorted.
+pub fn unique_ancestors(keys: impl IntoIterator<Item = NodeKey>) -> Vec<NodeKey> {
+    let mut out: Vec<NodeKey> = ancestor_set(keys).into_iter().collect();
     out.sort_unstable();
     out
 }
