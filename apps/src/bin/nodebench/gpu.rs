@@ -59,7 +59,7 @@ pub(crate) fn section_gpu(
                         "vegetation and houses off, terrain with a flat fragment shader",
                 }
             );
-            let rows = [
+            let times = [
                 (
                     "frame pass (timestamp queries), median",
                     median(&|s| s.gpu_terrain_ms),
@@ -70,6 +70,8 @@ pub(crate) fn section_gpu(
                     median(&|s| s.gpu_reference_ms),
                     "ms",
                 ),
+            ];
+            let counts = [
                 (
                     "draw calls per frame (terrain + vegetation), median",
                     median(&|s| Some(f64::from(s.draw_calls + s.plant_draw_calls))),
@@ -105,8 +107,9 @@ pub(crate) fn section_gpu(
                     "triangles",
                 ),
             ];
-            // The flat run adds its pass and ratio only (its draws are the shaded run's).
-            for (what, value, unit) in rows.into_iter().take(if flat { 2 } else { usize::MAX }) {
+            // The flat run adds its times and ratio only (its draws are the shaded run's).
+            let counts = if flat { &[][..] } else { &counts[..] };
+            for &(what, value, unit) in times.iter().chain(counts) {
                 if let Some(v) = value {
                     r.add("gpu", what, v, unit, &params);
                 }
