@@ -391,6 +391,21 @@ pub mod gpu {
         }
     }
 
+    /// A device with multi-draw indirect and a first instance (merged draws), or None after
+    /// recording why `test` skips; CI's adapter (lavapipe) has it, so CI fails instead.
+    pub fn multi_draw_device(test: &str) -> Option<Gpu> {
+        let g = device()?;
+        if !g.multi_draw {
+            assert!(
+                !super::in_ci(),
+                "CI's adapter (lavapipe) has multi-draw indirect with a first instance"
+            );
+            super::skip(test, "no multi-draw indirect on this adapter");
+            return None;
+        }
+        Some(g)
+    }
+
     /// A viewer of `world` at threshold `tau_px`, one worker.
     pub fn viewer(g: &Gpu, world: engine::surface::World, tau_px: f64) -> Viewer {
         Viewer::new(

@@ -446,15 +446,9 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
 /// billboards, from two settled cameras; and they merge: far fewer draw calls than items.
 #[test]
 fn merged_draws_draw_exactly_the_pixels_of_per_item_draws() {
-    let Some(g) = device() else { return };
-    if !g.multi_draw {
-        assert!(
-            !tests::in_ci(),
-            "CI's adapter (lavapipe) has multi-draw indirect with a first instance"
-        );
-        tests::skip("merged draws", "no multi-draw indirect on this adapter");
+    let Some(g) = tests::gpu::multi_draw_device("merged draws") else {
         return;
-    }
+    };
     let size = [320u32, 180];
     let near = golden_view(size);
     let low = Camera::look_at(

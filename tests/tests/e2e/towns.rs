@@ -537,19 +537,10 @@ fn far_houses_draw_as_merged_meshes() {
 fn merged_house_draws_draw_exactly_the_pixels_of_per_item_draws() {
     use engine::render::objects::ObjectsRenderer;
     use engine::render::{COLOR_FORMAT, Target};
-    use tests::gpu::{device, frame, settle};
-    let Some(g) = device() else { return };
-    if !g.multi_draw {
-        assert!(
-            !tests::in_ci(),
-            "CI's adapter (lavapipe) has multi-draw indirect with a first instance"
-        );
-        tests::skip(
-            "merged house draws",
-            "no multi-draw indirect on this adapter",
-        );
+    use tests::gpu::{frame, settle};
+    let Some(g) = tests::gpu::multi_draw_device("merged house draws") else {
         return;
-    }
+    };
     let town = DVec3::new(243.0, 262.0, 71.0);
     let size = [320u32, 180];
     let near = engine::camera::Camera::look_at(
