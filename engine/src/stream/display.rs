@@ -180,11 +180,29 @@ impl Streamer {
                     decimation: self.decimation(key),
                 });
             }
-            for c in key.children() {
+            // Popped nearest first, so the list is front to back in plan view.
+            for c in self.children_far_to_near(key) {
                 stack.push((c, lo, mid));
             }
         }
         out
+    }
+
+    /// The node's children, the one on the camera's side of both midlines last and the one
+    /// across both first: a depth-first walk that takes them in reverse order lists every
+    /// node before the nodes it can hide in plan view, so the depth test rejects what a
+    /// nearer node covers before it is shaded. Child order without a camera.
+    fn children_far_to_near(&self, key: NodeKey) -> [NodeKey; 4] {
+        let c = key.children();
+        let Some(cam) = self.camera else {
+            return c;
+        };
+        let r = self.shared.tree.rect(key);
+        let east = usize::from(cam.position_m.x >= 0.5 * (r.min[0] + r.max[0]));
+        let north = usize::from(cam.position_m.y >= 0.5 * (r.min[1] + r.max[1]));
+        // Children are SW, SE, NW, NE: index = east + 2 north.
+        let near = east + 2 * north;
+        [c[near ^ 3], c[near ^ 2], c[near ^ 1], c[near]]
     }
 }
 

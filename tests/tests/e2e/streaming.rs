@@ -453,6 +453,58 @@ fn the_screen_is_covered_exactly_once_in_every_frame_of_a_flight() {
     assert!(saw_fade, "no cross-fade was ever in progress");
 }
 
+/// The draw list runs front to back in plan view: along every ray from the camera's ground
+/// point, the nodes under the ray come in list order, so a nearer node is drawn before the
+/// ground it can hide (the depth test then rejects hidden pixels before they are shaded).
+#[test]
+fn the_draw_list_runs_front_to_back_along_every_ray_from_the_camera() {
+    let mut s = streamer(settings(2));
+    let tree = *s.tree();
+    for (i, cam) in [
+        cam_at(250.0, 240.0, 20.0, 0.3),
+        cam_at(30.0, 470.0, 60.0, -0.9),
+        cam_at(400.0, 90.0, 5.0, 2.4),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        assert!(s.settle(&cam, 120.0), "view {i} did not settle");
+        let list = s.draw_list();
+        assert!(list.len() > 20, "view {i} drew only {} nodes", list.len());
+        let (cx, cy) = (cam.position_m.x, cam.position_m.y);
+        let reach_m = tree.map_size_m[0].hypot(tree.map_size_m[1]);
+        for ray in 0..180 {
+            let a = f64::from(ray) * std::f64::consts::TAU / 180.0 + 0.01;
+            // (smallest, largest) list index of the nodes under the last point.
+            let mut last: Option<(usize, usize)> = None;
+            let mut t_m = 0.0;
+            while t_m < reach_m {
+                let (x, y) = (cx + a.cos() * t_m, cy + a.sin() * t_m);
+                let under: Vec<usize> = list
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, d)| {
+                        let r = tree.rect(d.key);
+                        x >= r.min[0] && x < r.max[0] && y >= r.min[1] && y < r.max[1]
+                    })
+                    .map(|(j, _)| j)
+                    .collect();
+                if let (Some(&lo), Some(&hi)) = (under.iter().min(), under.iter().max()) {
+                    if let Some((lo0, hi0)) = last {
+                        assert!(
+                            lo >= lo0 && hi >= hi0,
+                            "view {i}, ray {ray} at {t_m} m: list entries {lo}..={hi} come \
+                             before {lo0}..={hi0}, which are nearer the camera"
+                        );
+                    }
+                    last = Some((lo, hi));
+                }
+                t_m += 1.0;
+            }
+        }
+    }
+}
+
 /// Prefetch follows the camera: a camera flying east at 150 m/s gets every node that the
 /// camera one second ahead wants requested (or ready) at once, while a still camera at the same
 /// spot does not ask for all of them.
