@@ -55,6 +55,51 @@ struct LightInfo {
 @group(0) @binding(3) var<uniform> light_info: LightInfo;
 @group(1) @binding(0) var<storage, read> nodes: array<Node>;
 
+// A plant instance (engine::render::vegetation::PlantInstance; vegetation and the GPU
+// reference): position relative to the node's south-west corner (z absolute), height, crown
+// radius, yaw, look index and node-table entry (in the impostor bake: its cluster). A cluster
+// quad has its impostor tile as its look.
+struct PlantInstanceIn {
+    @location(3) position: vec3<f32>,
+    @location(4) height: f32,
+    @location(5) radius: f32,
+    @location(6) yaw: f32,
+    @location(7) look: u32,
+    @location(8) entry: u32,
+};
+
+// A unit plant shape's vertex `p` (height 1, radius 1) scaled and turned for `inst`, from the
+// instance's position.
+fn plant_offset(p: vec3<f32>, inst: PlantInstanceIn) -> vec3<f32> {
+    let c = cos(inst.yaw);
+    let s = sin(inst.yaw);
+    let local = vec3<f32>(p.xy * inst.radius, p.z * inst.height);
+    return vec3<f32>(c * local.x - s * local.y, s * local.x + c * local.y, local.z);
+}
+
+// Corner `i % 6` of a quad's two triangles: x in [-1, 1] across, y in [0, 1] up.
+fn quad_corner(i: u32) -> vec2<f32> {
+    return array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    )[i % 6u];
+}
+
+// The horizontal unit vector across a camera-facing (about the vertical axis) quad standing at
+// `base` (camera-relative).
+fn quad_right(base: vec3<f32>) -> vec3<f32> {
+    let flat_dir = vec2<f32>(base.x, base.y);
+    let len = max(length(flat_dir), 1e-3);
+    return vec3<f32>(-flat_dir.y / len, flat_dir.x / len, 0.0);
+}
+
+// Camera-relative position of `corner` of instance `inst`'s camera-facing quad (billboards
+// and cluster quads), standing at `base`: radius wide each way, height tall.
+fn quad_rel(base: vec3<f32>, corner: vec2<f32>, inst: PlantInstanceIn) -> vec3<f32> {
+    return base + quad_right(base) * (corner.x * inst.radius)
+        + vec3<f32>(0.0, 0.0, corner.y * inst.height);
+}
+
 // What the fragment stage needs of a node: x, y its dither interval, z its level.
 fn node_fade(n: Node) -> vec3<f32> {
     return vec3<f32>(n.offset_lo.w, n.hi_level.x, n.hi_level.y);

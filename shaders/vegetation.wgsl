@@ -4,19 +4,8 @@
 // (`engine::render::vegetation`), so Rust and WGSL share one definition.
 
 // Per-species looks: rgb foliage colour (linear), w: shape (0 conifer, 1 broadleaf,
-// 2 bush, 3 grass). Instances carry the position relative to the node's south-west corner (z
-// absolute), height, crown radius, yaw, look index and their node-table entry (in the
-// impostor bake: their cluster).
+// 2 bush, 3 grass). Instances (`PlantInstanceIn`, in the prelude) carry the look index.
 @group(2) @binding(2) var<uniform> plant_looks: array<vec4<f32>, MAX_LOOKS>;
-
-struct PlantInstanceIn {
-    @location(3) position: vec3<f32>,
-    @location(4) height: f32,
-    @location(5) radius: f32,
-    @location(6) yaw: f32,
-    @location(7) look: u32,
-    @location(8) entry: u32,
-};
 
 const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
 
@@ -24,10 +13,9 @@ const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
 @vertex
 fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
     let node = nodes[inst.entry];
+    let turned = plant_offset(v.position, inst);
     let c = cos(inst.yaw);
     let s = sin(inst.yaw);
-    let local = vec3<f32>(v.position.xy * inst.radius, v.position.z * inst.height);
-    let turned = vec3<f32>(c * local.x - s * local.y, s * local.x + c * local.y, local.z);
     let n = vec3<f32>(v.normal.xy / inst.radius, v.normal.z / inst.height);
     var out: VertexOut;
     let rel = inst.position + turned + node.offset_lo.xyz;
@@ -72,16 +60,13 @@ fn fs_plant(in: VertexOut) -> @location(0) vec4<f32> {
 // Camera-facing (about the vertical axis) quads: 6 vertices per instance, no vertex buffer.
 @vertex
 fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> BillboardOut {
-    let corner = array<vec2<f32>, 6>(
-        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
-        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
-    )[i % 6u];
+    let corner = quad_corner(i);
     let node = nodes[inst.entry];
     let base = inst.position + node.offset_lo.xyz;
     let flat_dir = vec2<f32>(base.x, base.y);
     let len = max(length(flat_dir), 1e-3);
-    let right = vec3<f32>(-flat_dir.y / len, flat_dir.x / len, 0.0);
-    let rel = base + right * (corner.x * inst.radius) + vec3<f32>(0.0, 0.0, corner.y * inst.height);
+    let right = quad_right(base);
+    let rel = quad_rel(base, corner, inst);
     var out: BillboardOut;
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
     out.rel = rel;
@@ -172,10 +157,7 @@ struct GroupBakeOut {
 @vertex
 fn vs_group_bake(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> GroupBakeOut {
     let cluster = inst.entry;
-    let corner = array<vec2<f32>, 6>(
-        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
-        vec2<f32>(-1.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
-    )[i % 6u];
+    let corner = quad_corner(i);
     let c = clusters[min(cluster, CLUSTER_COUNT - 1u)];
     let cb = c.centre_bottom_half;
     let u = (inst.position.x + corner.x * inst.radius - cb.x) / cb.w;

@@ -7,10 +7,11 @@ use crate::lighting::Sun;
 use crate::lighting::content::LightingContent;
 use crate::render::frame::{DrawStats, ViewOptions};
 use crate::render::lighting::LightingRenderer;
-use crate::render::reference::TerrainReference;
+use crate::render::reference::{FrameContent, GpuReference};
 use crate::render::scene::{DrawnNode, FrameDraws, RenderTimes, Scene};
 use crate::render::sky::{BoundsLines, SkyRenderer};
 use crate::render::terrain::TerrainRenderer;
+use crate::render::vegetation::VegetationRenderer;
 use crate::render::{Gpu, GpuTimer};
 use crate::stream::{StreamSettings, Streamer};
 use crate::surface::World;
@@ -119,7 +120,7 @@ pub struct Viewer {
     /// Debug: when set, selection uses this camera while rendering follows the live one.
     pub frozen: Option<Camera>,
     timer: Option<GpuTimer>,
-    reference: Option<TerrainReference>,
+    reference: Option<GpuReference>,
     reference_size: [u32; 2],
     frame: u64,
     /// When the previous frame started (its interval sets this frame's GPU budget).
@@ -278,14 +279,7 @@ impl Viewer {
             t.end(encoder);
         }
         if let Some(r) = self.reference.as_mut() {
-            record_reference(
-                r,
-                gpu,
-                &self.scene.frame,
-                encoder,
-                self.reference_size,
-                &draws,
-            );
+            record_reference(r, gpu, &self.scene, encoder, self.reference_size, &draws);
         }
         let mut per_level = vec![0usize; usize::from(self.streamer.tree().max_level) + 1];
         for d in &drawn {
@@ -309,7 +303,7 @@ impl Viewer {
             render: self.scene.last_times.clone(),
             gpu_wait_ms: 0.0,
             gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
-            gpu_reference_ms: self.reference.as_ref().and_then(TerrainReference::last_ms),
+            gpu_reference_ms: self.reference.as_ref().and_then(GpuReference::last_ms),
             reference_triangles: self.reference.as_ref().map_or(0, |r| r.triangles),
             selection_ms: st.last_selection_s * 1e3,
             cpu_frame_ms: ms(t0, t3),
@@ -399,13 +393,13 @@ impl Viewer {
     /// From now on every frame also records the same-run GPU reference (see
     /// `render::reference`) at `size`; false when the adapter has no timestamp queries.
     pub fn enable_gpu_reference(&mut self, gpu: &Gpu, size: [u32; 2]) -> bool {
-        self.reference = TerrainReference::new(gpu, &self.scene.frame);
+        self.reference = GpuReference::new(gpu, &self.scene.frame);
         self.reference_size = size;
         self.reference.is_some()
     }
 
     /// The same-run GPU reference, when enabled.
-    pub fn gpu_reference(&self) -> Option<&TerrainReference> {
+    pub fn gpu_reference(&self) -> Option<&GpuReference> {
         self.reference.as_ref()
     }
 
@@ -476,11 +470,12 @@ impl Viewer {
 }
 
 /// The GPU reference of a frame: the terrain meshes the terrain renderer draws (in the frustum,
-/// with a non-empty dither interval, each with its decimation), as one draw.
+/// with a non-empty dither interval, each with its decimation), as one draw, and the plant
+/// instances the vegetation renderer draws.
 fn record_reference(
-    reference: &mut TerrainReference,
+    reference: &mut GpuReference,
     gpu: &Gpu,
-    frame: &crate::render::frame::FrameResources,
+    scene: &Scene,
     encoder: &mut wgpu::CommandEncoder,
     size: [u32; 2],
     draws: &FrameDraws<'_>,
@@ -500,5 +495,10 @@ fn record_reference(
             draws.frustum.intersects_aabb(lo, hi)
         })
         .collect();
-    reference.record(gpu, frame, encoder, size, draws.camera, &meshes);
+    let content = FrameContent {
+        camera: draws.camera,
+        meshes: &meshes,
+        plants: scene.renderer::<VegetationRenderer>(),
+    };
+    reference.record(gpu, &scene.frame, encoder, size, &content);
 }

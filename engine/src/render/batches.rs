@@ -126,6 +126,11 @@ impl<K: Ord + Copy> Batches<K> {
         gpu.queue.write_buffer(buffer, 0, &self.staging);
     }
 
+    /// This frame's items, in key order once uploaded.
+    pub fn items(&self) -> &[(K, Item)] {
+        &self.items
+    }
+
     /// This frame's runs, in key order.
     pub fn runs(&self) -> &[Run<K>] {
         &self.runs

@@ -92,7 +92,7 @@ impl PlantInstance {
         3 => Float32x3, 4 => Float32, 5 => Float32, 6 => Float32, 7 => Uint32, 8 => Uint32
     ];
 
-    const LAYOUT: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+    pub(super) const LAYOUT: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
         array_stride: std::mem::size_of::<Self>() as u64,
         step_mode: wgpu::VertexStepMode::Instance,
         attributes: &Self::ATTRIBUTES,
@@ -342,7 +342,8 @@ fn looks(species_names: &[String]) -> ([[f32; 4]; MAX_LOOKS as usize], Vec<Shape
 fn instance_pages() -> PagedBuffer {
     PagedBuffer::new(
         "plant instances",
-        wgpu::BufferUsages::VERTEX,
+        // Copied from by the GPU reference (`render::reference`).
+        wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_SRC,
         std::mem::size_of::<PlantInstance>() as u64,
         PAGE_INSTANCES,
         MAX_INSTANCE_PAGES,
@@ -810,6 +811,59 @@ impl VegetationRenderer {
             self.frame_stats.plant_instances += u64::from(g.count);
             self.batches.push(key, item);
         }
+    }
+}
+
+/// One drawn group's instances in this frame (for the GPU reference): `count` instances from
+/// `first` in instance page `page`, each drawn as the plant-shape triangles `mesh` (first
+/// index, index count, base vertex) or, when None, as one camera-facing quad.
+#[derive(Debug, Clone, Copy)]
+pub struct InstanceRun {
+    pub page: u32,
+    pub first: u32,
+    pub count: u32,
+    pub mesh: Option<(u32, u32, i32)>,
+}
+
+impl VegetationRenderer {
+    /// What `prepare` chose to draw this frame, one entry per drawn group.
+    pub fn frame_instances(&self) -> impl Iterator<Item = InstanceRun> + '_ {
+        self.batches.items().iter().map(|&(key, item)| {
+            let page = match key {
+                BatchKey::Mesh { page, .. }
+                | BatchKey::Billboard { page }
+                | BatchKey::Impostor { page, .. } => page,
+            };
+            match item {
+                Item::Indexed(a) => InstanceRun {
+                    page,
+                    first: a.first_instance,
+                    count: a.instance_count,
+                    mesh: Some((a.first_index, a.index_count, a.base_vertex)),
+                },
+                Item::Plain(a) => InstanceRun {
+                    page,
+                    first: a.first_instance,
+                    count: a.instance_count,
+                    mesh: None,
+                },
+            }
+        })
+    }
+
+    /// The instance pages [`InstanceRun::page`] indexes.
+    pub fn instance_pages(&self) -> &[wgpu::Buffer] {
+        self.instances.pages()
+    }
+
+    /// The plant shapes' vertex and index buffers ([`InstanceRun::mesh`] ranges).
+    pub fn shape_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        (&self.shape_vertices, &self.shape_indices)
+    }
+
+    /// The node table the instances' entries index (group 1 of the frame layout).
+    pub fn node_table(&self) -> &wgpu::BindGroup {
+        &self.table.group
     }
 }
 

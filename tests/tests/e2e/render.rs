@@ -440,6 +440,100 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
     );
 }
 
+/// The GPU reference draws the frame's vegetation too: on a settled view with plants (no sky,
+/// fog or houses) it gathers exactly the plant instances the frame drew, covers every pixel
+/// the frame covers (plant meshes with their own triangles; billboards and cluster quads as
+/// whole quads, so it may cover more), and covers pixels that the terrain alone leaves open.
+#[test]
+fn the_gpu_reference_draws_the_frames_plant_instances() {
+    let Some(g) = device() else { return };
+    let size = [320u32, 180];
+    let world = tiny_world();
+    let mut kinds = engine::kinds::registered(&world);
+    kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
+    let mut v = engine::viewer::Viewer::with_kinds(
+        &g,
+        COLOR_FORMAT,
+        world,
+        engine::stream::StreamSettings {
+            workers: 1,
+            tau_px: 1.0,
+            ..engine::stream::StreamSettings::default()
+        },
+        &kinds,
+    );
+    v.view = ViewOptions {
+        sky: false,
+        fog_per_m: 0.0,
+        clear: [1.0, 0.0, 1.0, 1.0],
+        ..ViewOptions::default()
+    };
+    if !v.enable_gpu_reference(&g, size) {
+        assert!(
+            !tests::in_ci(),
+            "CI's adapter (lavapipe) has timestamp queries"
+        );
+        tests::skip("gpu reference", "no timestamp queries on this adapter");
+        return;
+    }
+    let target = Target::new(&g.device, size, COLOR_FORMAT);
+    // Low over the ground, looking a little up: plants stand against the cleared sky.
+    let eye = golden_view(size);
+    let fwd = DVec3::new(eye.forward.x, eye.forward.y, 0.05).normalize();
+    let pos = eye.position_m - DVec3::new(0.0, 0.0, 0.5 * eye.position_m.z.min(60.0));
+    let cam = Camera::look_at(pos, pos + fwd, eye.fovy_rad, size);
+    let st = settle(&g, &mut v, &target, &cam);
+    assert!(st.plant_instances > 100, "{st:?}");
+    let r = v.gpu_reference().expect("reference");
+    assert_eq!(
+        r.plant_instances, st.plant_instances,
+        "the reference gathered other instances than the frame drew"
+    );
+    let covered = |rgba: &[u8]| -> Vec<bool> { rgba.chunks(4).map(|p| p[3] == 255).collect() };
+    let pass = target.read_rgba(&g).expect("frame pixels");
+    let with_plants = covered(
+        &r.target()
+            .expect("reference target")
+            .read_rgba(&g)
+            .expect("reference pixels"),
+    );
+    let mut missed = 0usize;
+    for (p, &by_reference) in pass.chunks(4).zip(&with_plants) {
+        let by_pass = !(p[0] == 255 && p[1] == 0 && p[2] == 255);
+        missed += usize::from(by_pass && !by_reference);
+    }
+    assert_eq!(
+        missed, 0,
+        "{missed} pixels the frame covers are not in the reference"
+    );
+    // The same view without plants (dt 0: nothing fades): the reference loses the plants.
+    v.view.plants = false;
+    frame(&g, &mut v, &target, &cam, 0.0);
+    let r = v.gpu_reference().expect("reference");
+    assert_eq!(r.plant_instances, 0);
+    let terrain_only = covered(
+        &r.target()
+            .expect("reference target")
+            .read_rgba(&g)
+            .expect("reference pixels"),
+    );
+    let lost = terrain_only
+        .iter()
+        .zip(&with_plants)
+        .filter(|(t, w)| **t && !**w)
+        .count();
+    let plants_only = terrain_only
+        .iter()
+        .zip(&with_plants)
+        .filter(|(t, w)| !**t && **w)
+        .count();
+    assert_eq!(lost, 0, "{lost} terrain pixels are not covered with plants");
+    assert!(
+        plants_only > 50,
+        "plants add only {plants_only} pixels to the reference"
+    );
+}
+
 /// Merged draws (seed 002: node geometry suballocated from shared pages, one multi-draw per
 /// render state and page) draw exactly the pixels of per-item draws (one draw call per node mesh
 /// and per node instance group, the fallback path), terrain and vegetation with group

@@ -99,9 +99,10 @@ pub(crate) struct Cli {
     #[arg(long, hide = true)]
     pub(crate) debug_lose_device_after_s: Option<f64>,
     /// Headless: also time a same-run GPU reference each frame (the frame's terrain triangles as
-    /// one indexed draw with a flat shader) and report pass / reference. Turns vegetation and
-    /// objects (houses) off for the run, so the pass and the reference draw the same triangles
-    /// (the pass also draws the sky behind them).
+    /// one indexed draw with a flat shader, its plant instances gathered into one instanced draw
+    /// per plant mesh and one for all billboard and cluster quads, drawn whole) and report pass
+    /// / reference. Turns objects (houses) off for the run, so the pass and the reference draw
+    /// the same things (the pass also draws the sky behind them).
     #[arg(long)]
     pub(crate) gpu_reference: bool,
     /// Draw item by item (one draw call per node mesh and node instance group, the fallback

@@ -30,15 +30,27 @@ pub(crate) fn section_gpu(
     let frames = if quick { 6 } else { 24 };
     for &h in heights {
         let size = [h * 16 / 9, h];
-        // Vegetation on; the terrain alone (the ratio); the terrain alone with a flat fragment
-        // shader (the ratio's geometry part: same draws, skirts and dithers, no shading).
-        for (plants, flat) in [(true, false), (false, false), (false, true)] {
+        // Everything (draw counts); vegetation without houses and the terrain alone (the two
+        // ratios: the reference draws terrain and plants, not houses); the terrain alone with a
+        // flat fragment shader (the ratio's geometry part: same draws, skirts and dithers, no
+        // shading).
+        let runs = [
+            (true, true, false, "vegetation and houses on"),
+            (true, false, false, "vegetation on, houses off"),
+            (false, false, false, "vegetation and houses off"),
+            (
+                false,
+                false,
+                true,
+                "vegetation and houses off, terrain with a flat fragment shader",
+            ),
+        ];
+        for (plants, objects, flat, what) in runs {
             let setup = |v: &mut Viewer| {
                 v.view.plants = plants;
+                v.view.objects = objects;
                 v.view.flat_terrain = flat;
-                if !plants {
-                    // The reference draws the terrain alone: so does the pass (and the sky).
-                    v.view.objects = false;
+                if !objects {
                     v.enable_gpu_reference(gpu, size);
                 }
             };
@@ -49,15 +61,8 @@ pub(crate) fn section_gpu(
                 (!v.is_empty()).then(|| apps::percentile(&v, 0.5))
             };
             let params = format!(
-                "{}x{}, tau 2 px, {}, {frames} frames of the automatic flight, {adapter}",
-                size[0],
-                size[1],
-                match (plants, flat) {
-                    (true, _) => "vegetation on",
-                    (false, false) => "vegetation and houses off",
-                    (false, true) =>
-                        "vegetation and houses off, terrain with a flat fragment shader",
-                }
+                "{}x{}, tau 2 px, {what}, {frames} frames of the automatic flight, {adapter}",
+                size[0], size[1],
             );
             let times = [
                 (
@@ -66,7 +71,11 @@ pub(crate) fn section_gpu(
                     "ms",
                 ),
                 (
-                    "one-draw terrain reference, median",
+                    if plants {
+                        "reference: one terrain draw + instanced plant draws, median"
+                    } else {
+                        "one-draw terrain reference, median"
+                    },
                     median(&|s| s.gpu_reference_ms),
                     "ms",
                 ),
@@ -114,7 +123,7 @@ pub(crate) fn section_gpu(
                     r.add("gpu", what, v, unit, &params);
                 }
             }
-            if !plants
+            if !objects
                 && let (Some(pass), Some(reference)) = (
                     median(&|s| s.gpu_terrain_ms),
                     median(&|s| s.gpu_reference_ms),
@@ -122,10 +131,12 @@ pub(crate) fn section_gpu(
             {
                 r.add(
                     "gpu",
-                    if flat {
-                        "frame pass with flat terrain shading / one-draw reference"
-                    } else {
-                        "frame pass / one-draw reference"
+                    match (plants, flat) {
+                        (true, _) => "frame pass / reference, terrain and vegetation",
+                        (false, true) => {
+                            "frame pass with flat terrain shading / one-draw reference"
+                        }
+                        (false, false) => "frame pass / one-draw reference",
                     },
                     pass / reference,
                     "ratio",
