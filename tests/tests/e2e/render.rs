@@ -356,20 +356,19 @@ fn no_leaked_pixels_from_fifty_cameras_including_fades() {
     );
 }
 
-/// The GPU-timing reference draws exactly the frame's terrain: on a settled view without sky,
-/// fog, vegetation or houses, the pixels the terrain pass covers (anything but the magenta
-/// clear colour) are the pixels the one-draw reference covers (alpha 1), so `pass / reference`
-/// compares the same triangles; and the terrain's draws with the flat diagnostic shader
-/// (`ViewOptions::flat_terrain`) cover them too, in the reference's colour.
-#[test]
-fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
-    let Some(g) = device() else { return };
-    let size = [320u32, 180];
+/// A viewer of the tiny map without houses (the reference draws none), sky or fog, cleared
+/// to magenta, with plants as `plants`, recording the GPU reference at `size`; None (a
+/// recorded skip outside CI, a failure in CI) without timestamp queries.
+fn reference_viewer(
+    g: &engine::render::Gpu,
+    size: [u32; 2],
+    plants: bool,
+) -> Option<engine::viewer::Viewer> {
     let world = tiny_world();
     let mut kinds = engine::kinds::registered(&world);
     kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
     let mut v = engine::viewer::Viewer::with_kinds(
-        &g,
+        g,
         COLOR_FORMAT,
         world,
         engine::stream::StreamSettings {
@@ -382,18 +381,33 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
     v.view = ViewOptions {
         sky: false,
         fog_per_m: 0.0,
-        plants: false,
+        plants,
         clear: [1.0, 0.0, 1.0, 1.0],
         ..ViewOptions::default()
     };
-    if !v.enable_gpu_reference(&g, size) {
+    if !v.enable_gpu_reference(g, size) {
         assert!(
             !tests::in_ci(),
             "CI's adapter (lavapipe) has timestamp queries"
         );
         tests::skip("gpu reference", "no timestamp queries on this adapter");
-        return;
+        return None;
     }
+    Some(v)
+}
+
+/// The GPU-timing reference draws exactly the frame's terrain: on a settled view without sky,
+/// fog, vegetation or houses, the pixels the terrain pass covers (anything but the magenta
+/// clear colour) are the pixels the one-draw reference covers (alpha 1), so `pass / reference`
+/// compares the same triangles; and the terrain's draws with the flat diagnostic shader
+/// (`ViewOptions::flat_terrain`) cover them too, in the reference's colour.
+#[test]
+fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
+    let Some(g) = device() else { return };
+    let size = [320u32, 180];
+    let Some(mut v) = reference_viewer(&g, size, false) else {
+        return;
+    };
     let target = Target::new(&g.device, size, COLOR_FORMAT);
     let cam = golden_view(size);
     let st = settle(&g, &mut v, &target, &cam);
@@ -448,34 +462,9 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
 fn the_gpu_reference_draws_the_frames_plant_instances() {
     let Some(g) = device() else { return };
     let size = [320u32, 180];
-    let world = tiny_world();
-    let mut kinds = engine::kinds::registered(&world);
-    kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
-    let mut v = engine::viewer::Viewer::with_kinds(
-        &g,
-        COLOR_FORMAT,
-        world,
-        engine::stream::StreamSettings {
-            workers: 1,
-            tau_px: 1.0,
-            ..engine::stream::StreamSettings::default()
-        },
-        &kinds,
-    );
-    v.view = ViewOptions {
-        sky: false,
-        fog_per_m: 0.0,
-        clear: [1.0, 0.0, 1.0, 1.0],
-        ..ViewOptions::default()
-    };
-    if !v.enable_gpu_reference(&g, size) {
-        assert!(
-            !tests::in_ci(),
-            "CI's adapter (lavapipe) has timestamp queries"
-        );
-        tests::skip("gpu reference", "no timestamp queries on this adapter");
+    let Some(mut v) = reference_viewer(&g, size, true) else {
         return;
-    }
+    };
     let target = Target::new(&g.device, size, COLOR_FORMAT);
     // Low over the ground, looking a little up: plants stand against the cleared sky.
     let eye = golden_view(size);
