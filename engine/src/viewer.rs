@@ -93,7 +93,7 @@ pub struct FrameStats {
     pub tiles_bytes: usize,
     pub node_buffers_bytes: usize,
     pub cache_bytes: usize,
-    /// Wanted nodes not yet shown (a coarser ancestor stands in for them).
+    /// Nodes the display wants not yet shown (a coarser ancestor stands in for them).
     pub pop_debt_nodes: usize,
     /// Drawn nodes whose light grid has not arrived yet (drawn fully lit); 0 without light
     /// grids.
@@ -446,7 +446,8 @@ impl Viewer {
         (bytes, expected_gpu_s)
     }
 
-    /// Wanted nodes not drawn yet (a coarser ancestor stands in for them): the pop debt count.
+    /// Nodes the display wants that are not drawn yet (a coarser ancestor stands in for them):
+    /// the pop debt count.
     fn wanted_not_drawn(&self) -> usize {
         let drawn: rustc_hash::FxHashSet<NodeKey> = self
             .streamer
@@ -456,7 +457,7 @@ impl Viewer {
             .map(|d| d.key)
             .collect();
         self.streamer
-            .wanted()
+            .shown_wanted()
             .iter()
             .filter(|k| !drawn.contains(k))
             .count()

@@ -51,7 +51,7 @@ impl Streamer {
                 continue;
             }
             let drawable = self.children_drawable(key);
-            let wants_split = self.to_split.contains(&key) && drawable;
+            let wants_split = self.show_split.contains(&key) && drawable;
             let s = self.split.get(&key).copied().unwrap_or(0.0);
             // A node may only merge back once its children are no longer split themselves.
             let children_merged = key
@@ -115,7 +115,7 @@ impl Streamer {
     }
 
     /// How coarsely drawn node `key`'s grid may be drawn: its decimation at the display's split
-    /// threshold (`split_factor * tau`), from its resident ancestors' bounds; 0 when off or
+    /// threshold (`show_factor * tau`), from its resident ancestors' bounds; 0 when off or
     /// without a camera.
     fn decimation(&self, key: NodeKey) -> u8 {
         match self.camera {
@@ -126,7 +126,8 @@ impl Streamer {
                     cam.position_m,
                     cam.k_px(),
                     cam.near_m,
-                    self.settings.split_factor * self.settings.tau_px,
+                    self.settings.show_factor.max(self.settings.split_factor)
+                        * self.settings.tau_px,
                     |a| self.resident.get(&a)?.work.bounds.as_ref(),
                 )
             }

@@ -120,9 +120,14 @@ pub struct StreamSettings {
     pub fade_s: f64,
     /// The user's detail level: largest projected error (px) to show.
     pub tau_px: f64,
-    /// Nodes are split for display when their error passes `split_factor * tau`, so a fade
-    /// finishes before the error reaches tau.
+    /// Nodes whose error passes `split_factor * tau` are needed split: their children are
+    /// requested (first class), so they are ready before the error reaches tau.
     pub split_factor: f64,
+    /// A drawn node is replaced by its children (a cross-fade) once its error passes
+    /// `show_factor * tau` (at least `split_factor`); the fade speeds up to end before the
+    /// error reaches tau (`display`). Between the two factors children are ready but not yet
+    /// drawn, so the frame draws the triangles of a selection near tau.
+    pub show_factor: f64,
     /// Nodes down to `prefetch_factor * tau` are prepared ahead (lower priority, not shown
     /// until needed), so they are ready when the camera gets there.
     pub prefetch_factor: f64,
@@ -153,6 +158,7 @@ impl Default for StreamSettings {
             fade_s: 0.2,
             tau_px: 2.0,
             split_factor: 0.6,
+            show_factor: 0.8,
             prefetch_factor: 0.5,
             fixed_level: None,
             vegetation_occlusion: false,
@@ -233,6 +239,9 @@ pub struct Streamer {
     needed: FxHashSet<NodeKey>,
     /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
     to_split: FxHashSet<NodeKey>,
+    /// The part of `to_split` drawn split: nodes over the display threshold
+    /// (`show_factor * tau`) and their ancestors.
+    show_split: FxHashSet<NodeKey>,
     prefetch: FxHashSet<NodeKey>,
     /// The prefetch set's parts, each refreshed when stale (see [`predict`]).
     prefetch_parts: Vec<predict::PrefetchPart>,
@@ -325,6 +334,7 @@ impl Streamer {
             wanted: FxHashSet::default(),
             needed: FxHashSet::default(),
             to_split: FxHashSet::default(),
+            show_split: FxHashSet::default(),
             prefetch: FxHashSet::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             split: FxHashMap::default(),
@@ -354,8 +364,23 @@ impl Streamer {
         self.requests.contains_key(&key)
     }
 
+    /// The nodes selected at the request threshold (`split_factor * tau`).
     pub fn wanted(&self) -> &FxHashSet<NodeKey> {
         &self.wanted
+    }
+
+    /// The nodes the display wants drawn: the selection at the display threshold
+    /// (`show_factor * tau`), i.e. the children of nodes drawn split that are not drawn split
+    /// themselves (the root alone while nothing is).
+    pub fn shown_wanted(&self) -> Vec<NodeKey> {
+        if self.show_split.is_empty() {
+            return vec![NodeKey::ROOT];
+        }
+        self.show_split
+            .iter()
+            .flat_map(|k| k.children())
+            .filter(|c| !self.show_split.contains(c) && self.shared.tree.overlaps_map(*c))
+            .collect()
     }
 
     pub fn in_flight(&self) -> usize {
@@ -367,6 +392,17 @@ impl Streamer {
     /// so ground about to come into view (the camera turning, or passing a hill) is split
     /// before it shows, instead of appearing coarse and fading to its children on screen.
     pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
+        self.select(cam, tau_px, None)
+    }
+
+    /// [`Self::select_wanted`]; with `over` = (set, threshold), also puts each node split
+    /// whose error (as the split test sees it) passes the threshold into the set.
+    fn select(
+        &self,
+        cam: &Camera,
+        tau_px: f64,
+        mut over: Option<(&mut FxHashSet<NodeKey>, f64)>,
+    ) -> FxHashSet<NodeKey> {
         let known = self.shared.bounds.known();
         let mut wanted = FxHashSet::with_capacity_and_hasher(
             self.wanted.len() + self.wanted.len() / 4,
@@ -377,19 +413,37 @@ impl Streamer {
             cam,
             Some(cam.frustum_widened(GUARD_BAND)),
             |key| known.get(&key),
-            |key: NodeKey, b: &NodeBounds, dist, px| match self.settings.fixed_level {
-                Some(level) => key.level < level,
-                None if self.settings.vegetation_occlusion && px > tau_px => {
-                    let s = &self.shared;
-                    let rect = s.tree.rect(key);
-                    let visibility: f64 = s
-                        .kinds
-                        .iter()
-                        .map(|k| k.visibility(s, cam.position_m, rect, b.z_max_m, dist))
-                        .product();
-                    px * visibility > tau_px
+            |key: NodeKey, b: &NodeBounds, dist, px| {
+                // The error the split test compares: projected, times what vegetation lets
+                // through where that is on; any split node at a fixed level.
+                let seen_px = match self.settings.fixed_level {
+                    Some(level) => {
+                        if key.level < level {
+                            f64::INFINITY
+                        } else {
+                            0.0
+                        }
+                    }
+                    None if self.settings.vegetation_occlusion && px > tau_px => {
+                        let s = &self.shared;
+                        let rect = s.tree.rect(key);
+                        let visibility: f64 = s
+                            .kinds
+                            .iter()
+                            .map(|k| k.visibility(s, cam.position_m, rect, b.z_max_m, dist))
+                            .product();
+                        px * visibility
+                    }
+                    None => px,
+                };
+                let split = seen_px > tau_px;
+                if split
+                    && let Some((set, threshold)) = over.as_mut()
+                    && seen_px > *threshold
+                {
+                    set.insert(key);
                 }
-                None => px > tau_px,
+                split
             },
             |reached| {
                 wanted.insert(match reached {
@@ -447,10 +501,25 @@ impl Streamer {
         self.collect_results();
         let tau = self.settings.tau_px;
         let t_select = Instant::now();
-        self.wanted = self.select_wanted(cam, tau * self.settings.split_factor);
+        let mut shown = FxHashSet::with_capacity_and_hasher(
+            self.show_split.len() + 16,
+            rustc_hash::FxBuildHasher,
+        );
+        let show_px = tau * self.settings.show_factor.max(self.settings.split_factor);
+        self.wanted = self.select(
+            cam,
+            tau * self.settings.split_factor,
+            Some((&mut shown, show_px)),
+        );
         // Everything on the path from the root to a wanted node is needed too (ancestors are
         // what is shown until the wanted nodes are ready).
         self.to_split = ancestor_set(self.wanted.iter().copied());
+        // Drawn split: the nodes over the display threshold with a wanted descendant (a split
+        // whose children are all culled wants none) and their ancestors.
+        shown.retain(|k| self.to_split.contains(k));
+        let above = ancestor_set(shown.iter().copied());
+        shown.extend(above);
+        self.show_split = shown;
         self.needed = self.needed_for(&self.wanted, &self.to_split);
         let prefetch = self.prefetch_classes(cam, future);
         self.stats.last_selection_s = t_select.elapsed().as_secs_f64();

@@ -773,9 +773,10 @@ fn no_step_where_light_grids_of_two_levels_meet() {
     );
     let mut kinds = engine::kinds::registered(&world);
     kinds.retain(|k| ["terrain", "lighting"].contains(&k.kind.name()));
+    // Drawn nodes split at 2.4 px (`show_factor` x tau): 128 m nodes next to 256 m ones here.
     let settings = StreamSettings {
         workers: 1,
-        tau_px: 4.0,
+        tau_px: 2.4 / StreamSettings::default().show_factor,
         ..StreamSettings::default()
     };
     let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, &kinds);

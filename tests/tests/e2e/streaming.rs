@@ -593,6 +593,73 @@ fn turning_within_the_guard_band_needs_no_new_node() {
     }
 }
 
+/// A settled view draws the selection at the display threshold (`show_factor * tau`), not at
+/// the request threshold (`split_factor * tau`): every node that selection reaches in the
+/// guard band is drawn, and none of their descendants, though the finer nodes down to the
+/// request threshold are resident (ready for the camera to come closer).
+#[test]
+fn a_settled_view_draws_the_selection_at_the_display_threshold() {
+    let mut s = streamer(settings(2));
+    let tree = *s.tree();
+    let cam = cam_at(200.0, 250.0, 20.0, 0.5);
+    assert!(s.settle(&cam, 120.0), "the view did not settle");
+    let select = |factor: f64| {
+        let px = s.settings.tau_px * factor;
+        engine::terrain::select::traverse_in(
+            &tree,
+            &cam,
+            Some(cam.frustum_widened(engine::stream::GUARD_BAND)),
+            |k| s.shared.bounds.peek(k),
+            |_, _, _, e| e > px,
+        )
+    };
+    let shown = select(s.settings.show_factor);
+    let requested = select(s.settings.split_factor);
+    assert!(shown.unknown_bounds.is_empty() && requested.unknown_bounds.is_empty());
+    let drawn: std::collections::HashSet<NodeKey> = s.draw_list().iter().map(|d| d.key).collect();
+    for n in &shown.nodes {
+        assert!(
+            drawn.contains(&n.key),
+            "{:?} is selected but not drawn",
+            n.key
+        );
+    }
+    let finer: Vec<NodeKey> = drawn
+        .iter()
+        .filter(|k| {
+            k.ancestors()
+                .any(|a| shown.nodes.iter().any(|n| n.key == a))
+        })
+        .copied()
+        .collect();
+    assert!(
+        finer.is_empty(),
+        "drawn finer than the selection: {finer:?}"
+    );
+    // Nothing the display wants is missing (no pop debt at rest).
+    for k in s.shown_wanted() {
+        assert!(
+            drawn.contains(&k),
+            "{k:?} is wanted by the display but not drawn"
+        );
+    }
+    // The request threshold reaches finer nodes, all of them ready but not drawn.
+    let waiting: Vec<NodeKey> = requested
+        .nodes
+        .iter()
+        .map(|n| n.key)
+        .filter(|k| !drawn.contains(k))
+        .collect();
+    assert!(
+        waiting.len() > 10,
+        "only {} requested nodes are not drawn",
+        waiting.len()
+    );
+    for k in waiting {
+        assert!(s.is_ready(k), "{k:?} was requested but is not ready");
+    }
+}
+
 /// The per-frame GPU budget counts the GPU time the upload hooks expect their work to take
 /// (`NodeWork::gpu_estimate_s`, e.g. a ground texture's measured GPU time), not only the frame
 /// thread's time: at 1.5 ms a phase a 4 ms budget runs at most three phases a frame, where the

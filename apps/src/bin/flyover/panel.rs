@@ -150,7 +150,7 @@ pub(crate) fn panel(
         s.cache_bytes as f64 / 1_048_576.0
     ));
     ui.label(format!(
-        "pop debt: {} wanted nodes not shown yet",
+        "pop debt: {} nodes the display wants not shown yet",
         s.pop_debt_nodes
     ));
     ui.label(format!(
