@@ -371,10 +371,15 @@ impl Streamer {
 
     /// The nodes the display wants drawn: the selection at the display threshold
     /// (`show_factor * tau`), i.e. the children of nodes drawn split that are not drawn split
-    /// themselves (the root alone while nothing is).
+    /// themselves; the root alone while nothing is drawn split, and nothing while nothing is
+    /// wanted (the whole map out of view).
     pub fn shown_wanted(&self) -> Vec<NodeKey> {
         if self.show_split.is_empty() {
-            return vec![NodeKey::ROOT];
+            return if self.wanted.is_empty() {
+                Vec::new()
+            } else {
+                vec![NodeKey::ROOT]
+            };
         }
         self.show_split
             .iter()

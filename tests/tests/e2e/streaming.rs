@@ -660,6 +660,25 @@ fn a_settled_view_draws_the_selection_at_the_display_threshold() {
     }
 }
 
+/// With the whole map out of view nothing is wanted, and the display wants nothing drawn
+/// either, so a warm start there settles (nodebench's jet, 1,000 m over the tiny map, looks
+/// past it).
+#[test]
+fn a_view_that_sees_no_map_wants_nothing_drawn() {
+    let mut s = streamer(settings(1));
+    let tree = *s.tree();
+    let p = DVec3::new(tree.origin_m[0] - 2000.0, tree.origin_m[1] - 2000.0, 300.0);
+    let cam = Camera::look_at(
+        p,
+        p + DVec3::new(-1.0, -1.0, 0.0),
+        60f64.to_radians(),
+        [640, 360],
+    );
+    assert!(s.settle(&cam, 120.0), "the view did not settle");
+    assert!(s.wanted().is_empty(), "wanted {:?}", s.wanted());
+    assert_eq!(s.shown_wanted(), Vec::<NodeKey>::new());
+}
+
 /// The per-frame GPU budget counts the GPU time the upload hooks expect their work to take
 /// (`NodeWork::gpu_estimate_s`, e.g. a ground texture's measured GPU time), not only the frame
 /// thread's time: at 1.5 ms a phase a 4 ms budget runs at most three phases a frame, where the
