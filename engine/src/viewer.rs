@@ -20,6 +20,32 @@ use glam::DVec3;
 use std::sync::Arc;
 use std::time::Instant;
 
+/// The work a view still waits on before it is settled (all zero).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Outstanding {
+    pub requests_in_flight: usize,
+    /// Nodes the display wants that a coarser ancestor still stands in for.
+    pub wanted_not_drawn: usize,
+    /// Node ground textures queued and not made yet.
+    pub textures_pending: usize,
+}
+
+impl Outstanding {
+    pub fn is_settled(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+impl std::fmt::Display for Outstanding {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} requests in flight, {} wanted nodes not drawn, {} ground textures pending",
+            self.requests_in_flight, self.wanted_not_drawn, self.textures_pending
+        )
+    }
+}
+
 /// Timings of one frame (ms) and what it drew.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct FrameStats {
@@ -408,9 +434,16 @@ impl Viewer {
     pub fn stream_only(&mut self, gpu: &Gpu, cam: &Camera, dt_s: f64) -> bool {
         self.streamer.update(cam, dt_s);
         self.upload_and_finish(gpu);
-        self.streamer.in_flight() == 0
-            && self.wanted_not_drawn() == 0
-            && self.textures_pending() == 0
+        self.outstanding().is_settled()
+    }
+
+    /// What a warm start still waits on (see [`Self::stream_only`]).
+    pub fn outstanding(&self) -> Outstanding {
+        Outstanding {
+            requests_in_flight: self.streamer.in_flight(),
+            wanted_not_drawn: self.wanted_not_drawn(),
+            textures_pending: self.textures_pending(),
+        }
     }
 
     /// The GPU phases under the frame's budget, then the renderers' deferred work (node

@@ -389,7 +389,10 @@ fn warm_start(
     let start = Instant::now();
     while !viewer.stream_only(gpu, &cam, 1.0 / 60.0) {
         if start.elapsed().as_secs_f64() > 600.0 {
-            anyhow::bail!("--warm-start: the first view did not stream within 600 s");
+            anyhow::bail!(
+                "--warm-start: the first view did not stream within 600 s ({})",
+                viewer.outstanding()
+            );
         }
         std::thread::yield_now();
     }

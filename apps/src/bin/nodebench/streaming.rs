@@ -93,8 +93,8 @@ impl<'g> Flight<'g> {
     }
 
     /// Streams until `cam`'s view is ready (at most `timeout_s`), then waits until its light
-    /// grids are computed; false on timeout.
-    fn settle(&mut self, cam: &Camera, timeout_s: f64) -> bool {
+    /// grids are computed; on timeout, what it still waited on.
+    fn settle(&mut self, cam: &Camera, timeout_s: f64) -> Result<(), String> {
         let ready = self.settle_streaming(cam, timeout_s);
         if let Some(l) = self.streamer().shared.kind::<LightingContent>() {
             l.wait_idle();
@@ -102,18 +102,24 @@ impl<'g> Flight<'g> {
         ready
     }
 
-    fn settle_streaming(&mut self, cam: &Camera, timeout_s: f64) -> bool {
+    fn settle_streaming(&mut self, cam: &Camera, timeout_s: f64) -> Result<(), String> {
         match self {
-            Flight::Cpu(s) => s.settle(cam, timeout_s),
+            Flight::Cpu(s) => {
+                if s.settle(cam, timeout_s) {
+                    Ok(())
+                } else {
+                    Err(format!("{} requests in flight", s.in_flight()))
+                }
+            }
             Flight::Gpu(gpu, v) => {
                 let start = Instant::now();
                 while !v.stream_only(gpu, cam, 1.0 / 60.0) {
                     if start.elapsed().as_secs_f64() > timeout_s {
-                        return false;
+                        return Err(v.outstanding().to_string());
                     }
                     std::thread::yield_now();
                 }
-                true
+                Ok(())
             }
         }
     }
@@ -240,8 +246,8 @@ pub(crate) fn section_streaming(
         }
         let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
         // Warm start at the first camera, as after loading.
-        if !flight_run.settle(&cams[0], 300.0) {
-            bail!("streaming at {speed} m/s: the warm start did not settle within 300 s");
+        if let Err(left) = flight_run.settle(&cams[0], 300.0) {
+            bail!("streaming at {speed} m/s: the warm start did not settle within 300 s ({left})");
         }
         flight_run.streamer_mut().take_latencies();
         let s = flight_run.streamer();
