@@ -396,6 +396,27 @@ fn reference_viewer(
     Some(v)
 }
 
+/// Whether each pixel of `rgba` (a frame cleared to magenta) is covered by something drawn.
+fn covered_by_pass(rgba: &[u8]) -> Vec<bool> {
+    rgba.chunks(4)
+        .map(|p| !(p[0] == 255 && p[1] == 0 && p[2] == 255))
+        .collect()
+}
+
+/// The viewer's GPU-reference target, read back.
+fn reference_pixels(g: &engine::render::Gpu, v: &engine::viewer::Viewer) -> Vec<u8> {
+    v.gpu_reference()
+        .and_then(|r| r.target())
+        .expect("reference target")
+        .read_rgba(g)
+        .expect("reference pixels")
+}
+
+/// Whether each pixel of the reference target's `rgba` is covered (alpha 1).
+fn covered_by_reference(rgba: &[u8]) -> Vec<bool> {
+    rgba.chunks(4).map(|p| p[3] == 255).collect()
+}
+
 /// The GPU-timing reference draws exactly the frame's terrain: on a settled view without sky,
 /// fog, vegetation or houses, the pixels the terrain pass covers (anything but the magenta
 /// clear colour) are the pixels the one-draw reference covers (alpha 1), so `pass / reference`
@@ -412,20 +433,15 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
     let cam = golden_view(size);
     let st = settle(&g, &mut v, &target, &cam);
     assert!(st.triangles > 1000, "{st:?}");
-    let pass = target.read_rgba(&g).expect("frame pixels");
-    let reference = v
-        .gpu_reference()
-        .and_then(|r| r.target())
-        .expect("reference target")
-        .read_rgba(&g)
-        .expect("reference pixels");
-    let (mut covered, mut differ) = (0usize, 0usize);
-    for (p, r) in pass.chunks(4).zip(reference.chunks(4)) {
-        let by_pass = !(p[0] == 255 && p[1] == 0 && p[2] == 255);
-        let by_reference = r[3] == 255;
-        covered += usize::from(by_pass);
-        differ += usize::from(by_pass != by_reference);
-    }
+    let by_pass = covered_by_pass(&target.read_rgba(&g).expect("frame pixels"));
+    let reference = reference_pixels(&g, &v);
+    let by_reference = covered_by_reference(&reference);
+    let covered = by_pass.iter().filter(|&&c| c).count();
+    let differ = by_pass
+        .iter()
+        .zip(&by_reference)
+        .filter(|(p, r)| p != r)
+        .count();
     assert!(
         covered > 1000,
         "the view shows too little terrain: {covered} pixels"
@@ -442,11 +458,9 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
         .map(|r| [r[0], r[1], r[2]])
         .expect("a covered reference pixel");
     let mut wrong = 0usize;
-    for (f, p) in flat.chunks(4).zip(pass.chunks(4)) {
-        let by_pass = !(p[0] == 255 && p[1] == 0 && p[2] == 255);
-        let is_grey = f[..3] == grey;
-        let is_clear = f[0] == 255 && f[1] == 0 && f[2] == 255;
-        wrong += usize::from(if by_pass { !is_grey } else { !is_clear });
+    for ((f, &in_pass), &in_flat) in flat.chunks(4).zip(&by_pass).zip(&covered_by_pass(&flat)) {
+        // Grey where the shaded pass drew, the clear colour elsewhere.
+        wrong += usize::from(if in_pass { f[..3] != grey } else { in_flat });
     }
     assert_eq!(
         wrong, 0,
@@ -478,19 +492,13 @@ fn the_gpu_reference_draws_the_frames_plant_instances() {
         r.plant_instances, st.plant_instances,
         "the reference gathered other instances than the frame drew"
     );
-    let covered = |rgba: &[u8]| -> Vec<bool> { rgba.chunks(4).map(|p| p[3] == 255).collect() };
-    let pass = target.read_rgba(&g).expect("frame pixels");
-    let with_plants = covered(
-        &r.target()
-            .expect("reference target")
-            .read_rgba(&g)
-            .expect("reference pixels"),
-    );
-    let mut missed = 0usize;
-    for (p, &by_reference) in pass.chunks(4).zip(&with_plants) {
-        let by_pass = !(p[0] == 255 && p[1] == 0 && p[2] == 255);
-        missed += usize::from(by_pass && !by_reference);
-    }
+    let by_pass = covered_by_pass(&target.read_rgba(&g).expect("frame pixels"));
+    let with_plants = covered_by_reference(&reference_pixels(&g, &v));
+    let missed = by_pass
+        .iter()
+        .zip(&with_plants)
+        .filter(|(p, r)| **p && !**r)
+        .count();
     assert_eq!(
         missed, 0,
         "{missed} pixels the frame covers are not in the reference"
@@ -498,14 +506,8 @@ fn the_gpu_reference_draws_the_frames_plant_instances() {
     // The same view without plants (dt 0: nothing fades): the reference loses the plants.
     v.view.plants = false;
     frame(&g, &mut v, &target, &cam, 0.0);
-    let r = v.gpu_reference().expect("reference");
-    assert_eq!(r.plant_instances, 0);
-    let terrain_only = covered(
-        &r.target()
-            .expect("reference target")
-            .read_rgba(&g)
-            .expect("reference pixels"),
-    );
+    assert_eq!(v.gpu_reference().expect("reference").plant_instances, 0);
+    let terrain_only = covered_by_reference(&reference_pixels(&g, &v));
     let lost = terrain_only
         .iter()
         .zip(&with_plants)
