@@ -403,6 +403,11 @@ fn covered_by_pass(rgba: &[u8]) -> Vec<bool> {
         .collect()
 }
 
+/// Pixels covered in `a` but not in `b`.
+fn only_in(a: &[bool], b: &[bool]) -> usize {
+    a.iter().zip(b).filter(|&(&x, &y)| x && !y).count()
+}
+
 /// The viewer's GPU-reference target, read back.
 fn reference_pixels(g: &engine::render::Gpu, v: &engine::viewer::Viewer) -> Vec<u8> {
     v.gpu_reference()
@@ -494,11 +499,7 @@ fn the_gpu_reference_draws_the_frames_plant_instances() {
     );
     let by_pass = covered_by_pass(&target.read_rgba(&g).expect("frame pixels"));
     let with_plants = covered_by_reference(&reference_pixels(&g, &v));
-    let missed = by_pass
-        .iter()
-        .zip(&with_plants)
-        .filter(|(p, r)| **p && !**r)
-        .count();
+    let missed = only_in(&by_pass, &with_plants);
     assert_eq!(
         missed, 0,
         "{missed} pixels the frame covers are not in the reference"
@@ -508,16 +509,8 @@ fn the_gpu_reference_draws_the_frames_plant_instances() {
     frame(&g, &mut v, &target, &cam, 0.0);
     assert_eq!(v.gpu_reference().expect("reference").plant_instances, 0);
     let terrain_only = covered_by_reference(&reference_pixels(&g, &v));
-    let lost = terrain_only
-        .iter()
-        .zip(&with_plants)
-        .filter(|(t, w)| **t && !**w)
-        .count();
-    let plants_only = terrain_only
-        .iter()
-        .zip(&with_plants)
-        .filter(|(t, w)| !**t && **w)
-        .count();
+    let lost = only_in(&terrain_only, &with_plants);
+    let plants_only = only_in(&with_plants, &terrain_only);
     assert_eq!(lost, 0, "{lost} terrain pixels are not covered with plants");
     assert!(
         plants_only > 50,
