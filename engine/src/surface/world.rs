@@ -47,6 +47,8 @@ pub struct World {
     pub decals: DecalField,
     /// Interpolation error of F per block of the grids of spacing `hs 2^k` (computed at load).
     pub map_error: super::map_error::MapErrorPyramid,
+    /// Max-pyramid of the map's height samples.
+    pub heights_max: super::height_max::HeightMax,
 }
 
 /// How far the finest surface can stray from its linear interpolation over a small region,
@@ -123,14 +125,18 @@ impl World {
         ]
         .iter()
         .map(|p| p.bytes())
-        .sum();
+        .sum::<usize>()
+            + self.heights_max.bytes();
         vec![
             ("map layers (heights, ground, densities)", layers),
             (
                 "ground amplitude grid",
                 grid(self.amplitude_m.width(), self.amplitude_m.height(), 4),
             ),
-            ("slope, curvature and amplitude max-pyramids", pyramids),
+            (
+                "slope, curvature, amplitude and height max-pyramids",
+                pyramids,
+            ),
             ("decal field", self.decals.heap_bytes()),
             ("surface error grids", self.map_error.bytes()),
         ]
@@ -190,6 +196,7 @@ impl World {
             map.manifest.ground.spacing_m,
         ));
         let amp_max = MaxPyramid::new(cell_corner_max(&amplitude_m));
+        let heights_max = super::height_max::HeightMax::new(&map.heights);
         Self {
             map,
             amplitude_m,
@@ -201,6 +208,7 @@ impl World {
             amp_max,
             decals,
             map_error: super::map_error::MapErrorPyramid::default(),
+            heights_max,
         }
     }
 
