@@ -215,6 +215,12 @@ impl<'a> HorizonHeights<'a> {
     /// layer the highest tangent of the terrain into `tan_max`. Returns per layer the ground's
     /// bounce summed over the horizon azimuths: the cosine-weighted share of the sky hidden by
     /// terrain, each hidden band weighted by how squarely the terrain seen there faces the sun.
+    ///
+    /// Two shortcuts leave every result bit the same: a ray point is compared with the layers
+    /// only when the lowest layer's tangent there (the largest: `layers_m` ascend) passes the
+    /// smallest best so far, and beyond the lattice's reach whole stretches of
+    /// [`FAR_STRETCH`] points are skipped when the highest map sample around them
+    /// ([`HorizonHeights::far_max_m`]) could not pass it either.
     fn march_column(
         &self,
         (x, y, ground): (f64, f64, f64),
@@ -224,32 +230,100 @@ impl<'a> HorizonHeights<'a> {
         tan_max: &mut [[f64; LAYERS]],
     ) -> [f64; LAYERS] {
         let mut bounce = [0.0f64; LAYERS];
+        let first_far = distances.partition_point(|&r| r <= self.near_reach_m);
         for (d, (best, dir)) in tan_max.iter_mut().zip(dirs).enumerate() {
-            *best = [f64::NEG_INFINITY; LAYERS];
             let is_azimuth = d < HORIZON_AZIMUTHS;
-            // The previous ray point (distance, height over the ground).
-            let mut previous = (0.0, 0.0);
-            for (&r, &inv_r) in distances.iter().zip(inverse) {
-                let (px, py) = (x + dir[0] * r, y + dir[1] * r);
-                let dh = self.height_m(px, py, r) - ground;
-                // Computed when some layer first sees terrain this high.
-                let mut facing = None;
-                for ((b, lh), add) in best.iter_mut().zip(layers_m).zip(&mut bounce) {
-                    let t = (dh - lh) * inv_r;
-                    if t > *b {
-                        if is_azimuth && t > 0.0 && toward.z > 0.0 {
-                            let f = *facing.get_or_insert_with(|| {
-                                self.facing_sun((px, py), *dir, previous, (r, dh), toward)
-                            });
-                            *add += f * (sin2_of_tan(t) - sin2_of_tan(*b));
-                        }
-                        *b = t;
+            // Horizons below a floor give the same bytes: a horizon azimuth's tangent counts
+            // only above the horizontal (`sin2_of_tan`, and the bounce of terrain above it),
+            // the sun's only within the stored margin ([`SUN_MARGIN_RANGE_RAD`], clamped).
+            let low = if is_azimuth {
+                0.0
+            } else {
+                sun_horizon_floor(toward)
+            };
+            *best = [low; LAYERS];
+            // The smallest of `best`: no point whose lowest-layer tangent is at or under it
+            // raises any layer.
+            let mut floor = low;
+            let at = |r: f64| (x + dir[0] * r, y + dir[1] * r);
+            // The previous ray point (distance, height over the ground), or the index of a
+            // skipped one whose height is read only if needed.
+            let mut previous = Previous::At(0.0, 0.0);
+            let mut k = 0;
+            while k < distances.len() {
+                if k >= first_far && (k - first_far).is_multiple_of(FAR_STRETCH) {
+                    let end = (k + FAR_STRETCH).min(distances.len());
+                    let top = self.far_max_m(at(distances[k]), at(distances[end - 1]));
+                    let rise = (top - ground) - layers_m[0];
+                    // The largest tangent any point of the stretch could have.
+                    let t = rise
+                        * if rise >= 0.0 {
+                            inverse[k]
+                        } else {
+                            inverse[end - 1]
+                        };
+                    if t <= floor {
+                        previous = Previous::Skipped(end - 1);
+                        k = end;
+                        continue;
                     }
                 }
-                previous = (r, dh);
+                let (r, inv_r) = (distances[k], inverse[k]);
+                let (px, py) = at(r);
+                let dh = self.height_m(px, py, r) - ground;
+                if (dh - layers_m[0]) * inv_r > floor {
+                    // Computed when some layer first sees terrain this high.
+                    let mut facing = None;
+                    for ((b, lh), add) in best.iter_mut().zip(layers_m).zip(&mut bounce) {
+                        let t = (dh - lh) * inv_r;
+                        if t > *b {
+                            if is_azimuth && t > 0.0 && toward.z > 0.0 {
+                                let f = *facing.get_or_insert_with(|| {
+                                    let before = match previous {
+                                        Previous::At(r0, dh0) => (r0, dh0),
+                                        Previous::Skipped(i) => {
+                                            let (qx, qy) = at(distances[i]);
+                                            (
+                                                distances[i],
+                                                self.height_m(qx, qy, distances[i]) - ground,
+                                            )
+                                        }
+                                    };
+                                    self.facing_sun((px, py), *dir, before, (r, dh), toward)
+                                });
+                                *add += f * (sin2_of_tan(t) - sin2_of_tan(*b));
+                            }
+                            *b = t;
+                        }
+                    }
+                    floor = best.iter().copied().fold(f64::INFINITY, f64::min);
+                }
+                previous = Previous::At(r, dh);
+                k += 1;
             }
         }
         bounce
+    }
+
+    /// An upper bound of the heights this reads beyond the lattice's reach (bilinear on the map)
+    /// anywhere on the segment from `a` to `b`: the highest map sample in the cells around it
+    /// (one cell more on each side), plus a margin for the rounding of the interpolation.
+    fn far_max_m(&self, a: (f64, f64), b: (f64, f64)) -> f64 {
+        // As `bilinear` places a point: clamped into the grid, then the sample below.
+        let heights = &self.world.map.heights;
+        let last = [heights.width() - 1, heights.height() - 1];
+        let cell = |v: f64, axis: usize| {
+            ((v - self.map_at.origin_m[axis]) / self.map_at.spacing_m)
+                .clamp(0.0, last[axis] as f64)
+                .floor() as i64
+        };
+        let (xa, xb) = (cell(a.0, 0), cell(b.0, 0));
+        let (ya, yb) = (cell(a.1, 1), cell(b.1, 1));
+        let top = f64::from(self.world.heights_max.max_in(
+            [xa.min(xb) - 1, xa.max(xb) + 2],
+            [ya.min(yb) - 1, ya.max(yb) + 2],
+        ));
+        top + 1e-9 * (1.0 + top.abs())
     }
 
     /// The lattice of `n` points from global index `first` (from `tree_origin_m`), read within
@@ -301,6 +375,32 @@ impl<'a> HorizonHeights<'a> {
     fn point_m(&self, i: i64, j: i64) -> f64 {
         let (a, b) = ((i - self.first[0]) as usize, (j - self.first[1]) as usize);
         self.near[b * self.n[0] + a]
+    }
+}
+
+/// Points of a horizon march beyond the lattice's reach that are skipped together when the map
+/// around them cannot rise above the horizon found so far.
+const FAR_STRETCH: usize = 4;
+
+/// The ray point before the current one in a horizon march.
+#[derive(Clone, Copy)]
+enum Previous {
+    /// Its distance and its height over the column's ground.
+    At(f64, f64),
+    /// Skipped: its index in the march's distances (its height is read when needed).
+    Skipped(usize),
+}
+
+/// The tangent of a horizon toward the sun (unit `toward`) under which the stored sun margin
+/// is the same, the largest ([`margin_to_byte`] clamps margins over [`SUN_MARGIN_RANGE_RAD`]);
+/// a hundredth of a radian lower, so rounding never brings the margin back under the range.
+fn sun_horizon_floor(toward: DVec3) -> f64 {
+    let elevation = toward.z.clamp(-1.0, 1.0).asin();
+    let floor = elevation - SUN_MARGIN_RANGE_RAD - 0.01;
+    if floor > -0.5 * std::f64::consts::PI + 0.01 {
+        floor.tan()
+    } else {
+        f64::NEG_INFINITY
     }
 }
 
@@ -456,9 +556,14 @@ impl LightGrid {
                         toward,
                         &mut tan_max,
                     );
+                    // The same test around the column alone (most columns of a grid with
+                    // some canopy have none within their rays' reach).
+                    let canopy_column = canopy_near
+                        && canopy.max_extinction_in([x - reach, y - reach], [x + reach, y + reach])
+                            > 0.0;
                     for (l, &lh) in layers_m.iter().enumerate() {
                         let p0 = DVec3::new(x, y, ground + lh);
-                        let under = canopy_near && lh < canopy.top_m;
+                        let under = canopy_column && lh < canopy.top_m;
                         // Canopy transmittance per canopy azimuth and band.
                         let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
                         if under {
@@ -629,10 +734,17 @@ fn canopy_transmittance(
         return 1.0;
     }
     let dl = len / steps as f64;
+    // Rays that stay well within the lattice's reach read it at every point: no distance
+    // needed.
+    let near = len * w.truncate().length() < heights.near_reach_m - 1e-6;
     let mut depth = 0.0;
     for k in 0..steps {
         let p = p0 + w * ((k as f64 + 0.5) * dl);
-        let r = (p.x - p0.x).hypot(p.y - p0.y);
+        let r = if near {
+            0.0
+        } else {
+            (p.x - p0.x).hypot(p.y - p0.y)
+        };
         let above = p.z - heights.height_m(p.x, p.y, r);
         depth += canopy.extinction_per_m(p.x, p.y, above) * dl;
         if depth > OPAQUE_DEPTH {
@@ -656,6 +768,129 @@ mod tests {
         let canopy = Canopy::new(&world, &Placer::new(&world));
         let tree = QuadTree::new(world.origin_m(), world.size_m());
         (world, canopy, tree)
+    }
+
+    /// The horizon march without its shortcuts: every point, every layer, from minus infinity.
+    /// Returns the tangents per direction and layer, and the bounce per layer.
+    fn plain_march(
+        h: &HorizonHeights<'_>,
+        (x, y, ground): (f64, f64, f64),
+        dirs: &[[f64; 2]],
+        layers_m: &[f64; LAYERS],
+        toward: DVec3,
+    ) -> (Vec<[f64; LAYERS]>, [f64; LAYERS]) {
+        let mut bounce = [0.0; LAYERS];
+        let mut tans = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
+        for (d, (best, dir)) in tans.iter_mut().zip(dirs).enumerate() {
+            let mut previous = (0.0, 0.0);
+            for r in march_distances() {
+                let (px, py) = (x + dir[0] * r, y + dir[1] * r);
+                let dh = h.height_m(px, py, r) - ground;
+                for l in 0..LAYERS {
+                    let t = (dh - layers_m[l]) * (1.0 / r);
+                    if t > best[l] {
+                        if d < HORIZON_AZIMUTHS && t > 0.0 && toward.z > 0.0 {
+                            let f = h.facing_sun((px, py), *dir, previous, (r, dh), toward);
+                            bounce[l] += f * (sin2_of_tan(t) - sin2_of_tan(best[l]));
+                        }
+                        best[l] = t;
+                    }
+                }
+                previous = (r, dh);
+            }
+        }
+        (tans, bounce)
+    }
+
+    /// The horizon march's shortcuts (horizons floored where their bytes cannot change, points
+    /// and far stretches skipped where they cannot raise a horizon) give the bytes of the plain
+    /// march exactly: the sky's `sin^2` of every horizon, the sun's stored margin and the
+    /// bounce, at columns over a whole grid-level node of the tiny map, under a high, a low and
+    /// a grazing sun.
+    #[test]
+    fn the_march_shortcuts_change_no_stored_value() {
+        let (world, canopy, tree) = shifted_tiny();
+        let level = grid_level(&tree);
+        let key = NodeKey {
+            level,
+            ix: 1,
+            iy: 1,
+        };
+        let r = tree.rect(key);
+        let margin = (NEAR_MARGIN_M / NEAR_SPACING_M).round() as i64;
+        let per = (GRID_SIDE_M / NEAR_SPACING_M).round() as i64;
+        let first = [
+            i64::from(key.ix) * per - margin,
+            i64::from(key.iy) * per - margin,
+        ];
+        let n = (per + 2 * margin + 1) as usize;
+        let h = HorizonHeights::new(&world, tree.origin_m, first, [n, n]);
+        let layers_m = layer_heights_m(&canopy);
+        let distances = march_distances();
+        let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
+        let mut compared = 0;
+        let mut raised = 0;
+        for (azimuth_deg, elevation_deg) in [(56.0, 49.0), (250.0, 12.0), (120.0, 2.0)] {
+            let sun = Sun {
+                azimuth_deg,
+                elevation_deg,
+            };
+            let toward = sun.toward();
+            let flat = toward.truncate().length();
+            let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
+                .map(|a| {
+                    let phi = std::f64::consts::TAU * a as f64 / HORIZON_AZIMUTHS as f64;
+                    [phi.sin(), phi.cos()]
+                })
+                .collect();
+            dirs.push([toward.x / flat, toward.y / flat]);
+            let mut tans = vec![[0.0; LAYERS]; dirs.len()];
+            for row in (0..COLUMNS).step_by(3) {
+                for col in (0..COLUMNS).step_by(3) {
+                    let (x, y) = (
+                        r.min[0] + col as f64 * COLUMN_SPACING_M,
+                        r.min[1] + row as f64 * COLUMN_SPACING_M,
+                    );
+                    let ground = h.point_m(
+                        first[0] + margin + 2 * col as i64,
+                        first[1] + margin + 2 * row as i64,
+                    );
+                    let bounce = h.march_column(
+                        (x, y, ground),
+                        (&dirs, &distances, &inverse),
+                        &layers_m,
+                        toward,
+                        &mut tans,
+                    );
+                    let (plain, plain_bounce) =
+                        plain_march(&h, (x, y, ground), &dirs, &layers_m, toward);
+                    assert_eq!(bounce, plain_bounce, "bounce at column ({row}, {col})");
+                    for l in 0..LAYERS {
+                        for a in 0..HORIZON_AZIMUTHS {
+                            assert_eq!(
+                                sin2_of_tan(tans[a][l]),
+                                sin2_of_tan(plain[a][l]),
+                                "sky, column ({row}, {col}), azimuth {a}, layer {l}"
+                            );
+                            raised += usize::from(plain[a][l] > 0.0);
+                        }
+                        let margin_byte =
+                            |t: f64| margin_to_byte(elevation_deg.to_radians() - t.atan());
+                        assert_eq!(
+                            margin_byte(tans[HORIZON_AZIMUTHS][l]),
+                            margin_byte(plain[HORIZON_AZIMUTHS][l]),
+                            "sun, column ({row}, {col}), layer {l}"
+                        );
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        // Terrain rises above the horizontal somewhere (else the sky test is trivial).
+        assert!(
+            compared > 2000 && raised > 1000,
+            "{compared} compared, {raised} raised"
+        );
     }
 
     /// Neighbouring grids hold exactly the same values (ground, sky, sun, every layer) in the
