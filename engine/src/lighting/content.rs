@@ -4,11 +4,13 @@
 //! the node's [`NodeLight`]. Every node holding a grid keeps it alive; the last one evicted
 //! frees it.
 //!
-//! **Computing** a grid takes about 0.1 s, a hundred times a node's other preparation, so node
-//! jobs never wait for it: background threads at the lowest priority (as many as the node
-//! workers by default) compute the grids that are missing or were lit for another sun, each
-//! taking the one nearest to the camera next
-//! (distance to the grid's square: the coarse grids around the camera come first). Until its
+//! **Computing** a grid takes about 0.1 - 0.3 s, a hundred times a node's other preparation, so
+//! node jobs never wait for it: background threads at the lowest priority (as many as the node
+//! workers by default) compute the grids that are missing or were lit for another sun. Each
+//! takes next a grid that shades a node the last frame drew ([`ContentKind::observe_drawn`]),
+//! and among those, or when there are none, the one nearest to the camera (distance to the
+//! grid's square: the coarse grids around the camera come first). Resident nodes that are not
+//! drawn (ancestors, prefetched nodes) hold about twice as many grids as the drawn ones. Until its
 //! grid arrives a node is drawn fully lit; [`SharedGrid::version`] tells the renderer when to
 //! upload. **Relighting** after a sun change ([`LightingContent::set_sun`]) is the same work:
 //! every live grid is stale, nearest first, and no frame waits for it.
@@ -19,7 +21,7 @@ use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use crate::vegetation::canopy::Canopy;
 use glam::DVec2;
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, Weak};
 
@@ -104,6 +106,8 @@ struct Inner {
     canopy: Arc<Canopy>,
     sun: Mutex<Sun>,
     camera_xy_m: Mutex<DVec2>,
+    /// The grids that shade the nodes the last frame drew: computed before any other.
+    drawn: Mutex<FxHashSet<NodeKey>>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
     computed: AtomicU64,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
@@ -120,10 +124,12 @@ impl Inner {
         *self.sun.lock().expect("sun lock")
     }
 
-    /// The live stale grid nearest to the camera (coarser first at equal distance).
+    /// The live stale grid to compute next: one that shades a drawn node before any other,
+    /// then the nearest to the camera (coarser first at equal distance).
     fn next_stale(&self) -> Option<Arc<SharedGrid>> {
         let sun = self.sun();
         let camera = *self.camera_xy_m.lock().expect("camera lock");
+        let drawn = self.drawn.lock().expect("drawn lock");
         let mut grids = self.grids.lock().expect("grids lock");
         grids.retain(|_, g| g.strong_count() > 0);
         let distance = |key: NodeKey| {
@@ -137,8 +143,9 @@ impl Inner {
             .filter_map(Weak::upgrade)
             .filter(|g| !g.computing.load(Ordering::Acquire) && g.stale(sun))
             .min_by(|a, b| {
-                distance(a.key)
-                    .total_cmp(&distance(b.key))
+                (!drawn.contains(&a.key))
+                    .cmp(&!drawn.contains(&b.key))
+                    .then(distance(a.key).total_cmp(&distance(b.key)))
                     .then(a.key.level.cmp(&b.key.level))
                     .then(a.key.cmp(&b.key))
             })
@@ -189,9 +196,24 @@ impl Inner {
             let mut state = self.state.lock().expect("state lock");
             next.computing.store(false, Ordering::Release);
             state.busy -= 1;
-            // The others may wait for this one to decide they are idle.
+            // The others may wait for this one to decide they are idle, and
+            // [`LightingContent::wait_drawn_lit`] for this grid.
             self.wake.notify_all();
+            self.idle.notify_all();
         }
+    }
+
+    /// Whether every grid that shades a drawn node is computed for the current sun.
+    fn drawn_lit(&self) -> bool {
+        let sun = self.sun();
+        let drawn = self.drawn.lock().expect("drawn lock");
+        let grids = self.grids.lock().expect("grids lock");
+        drawn.iter().all(|k| {
+            grids
+                .get(k)
+                .and_then(Weak::upgrade)
+                .is_none_or(|g| !g.stale(sun))
+        })
     }
 
     /// Tells the thread there may be work.
@@ -245,6 +267,7 @@ impl LightingContent {
                 canopy,
                 sun: Mutex::new(sun),
                 camera_xy_m: Mutex::new(DVec2::ZERO),
+                drawn: Mutex::new(FxHashSet::default()),
                 grids: Mutex::new(FxHashMap::default()),
                 computed: AtomicU64::new(0),
                 log: Mutex::new(std::collections::VecDeque::new()),
@@ -312,6 +335,18 @@ impl LightingContent {
         }
     }
 
+    /// Waits until every grid that shades a node the last frame drew is computed for the
+    /// current sun; the other live grids (of nodes kept but not drawn) go on in the background.
+    pub fn wait_drawn_lit(&self) {
+        if !self.inner.state.lock().expect("state lock").started {
+            return;
+        }
+        let mut state = self.inner.state.lock().expect("state lock");
+        while !state.stop && !self.inner.drawn_lit() {
+            state = self.inner.idle.wait(state).expect("state lock");
+        }
+    }
+
     /// The grid of node `key` (at [`grid_level`] or coarser): the live one, or a new one the
     /// light threads will compute.
     pub fn grid_for(&self, key: NodeKey) -> Arc<SharedGrid> {
@@ -369,6 +404,13 @@ impl ContentKind for LightingContent {
         self.set_camera(camera_m.truncate());
     }
 
+    fn observe_drawn(&self, drawn: &[crate::stream::DrawNode]) {
+        let tree = &self.inner.tree;
+        let mut set = self.inner.drawn.lock().expect("drawn lock");
+        set.clear();
+        set.extend(drawn.iter().map(|d| LightGrid::owner(tree, d.key)));
+    }
+
     fn phases(self: Arc<Self>) -> Vec<Phase> {
         vec![Phase::cpu(
             "light grid",
@@ -382,5 +424,48 @@ impl ContentKind for LightingContent {
                 });
             },
         )]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stream::DrawNode;
+    use crate::vegetation::placement::Placer;
+
+    /// The next grid computed is one that shades a drawn node, even when a grid of a node that
+    /// is only kept (not drawn) is nearer to the camera; among the drawn ones, the nearest.
+    #[test]
+    fn grids_of_drawn_nodes_are_computed_first() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        let world = World::new(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let canopy = Arc::new(Canopy::new(&world, &Placer::new(&world)));
+        // No world attached: no light thread starts, so nothing is taken before the test looks.
+        let lighting = LightingContent::with_threads(&world, canopy, Sun::default(), 1);
+        let tree = QuadTree::new(world.origin_m(), world.size_m());
+        let level = grid_level(&tree);
+        let key = |ix, iy| NodeKey { level, ix, iy };
+        let grids: Vec<Arc<SharedGrid>> = [key(0, 0), key(1, 0), key(3, 3), key(2, 3)]
+            .into_iter()
+            .map(|k| lighting.grid_for(k))
+            .collect();
+        let centre = |k: NodeKey| {
+            let r = tree.rect(k);
+            DVec2::new(0.5 * (r.min[0] + r.max[0]), 0.5 * (r.min[1] + r.max[1]))
+        };
+        lighting.set_camera(centre(key(0, 0)));
+        assert_eq!(lighting.inner.next_stale().map(|g| g.key), Some(key(0, 0)));
+        // A node finer than the grid level is shaded by its ancestor's grid.
+        let drawn = |k: NodeKey| DrawNode {
+            key: k.children()[0],
+            dither_lo: 0.0,
+            dither_hi: 1.0,
+            decimation: 0,
+        };
+        lighting.observe_drawn(&[drawn(key(3, 3)), drawn(key(2, 3))]);
+        assert_eq!(lighting.inner.next_stale().map(|g| g.key), Some(key(2, 3)));
+        lighting.observe_drawn(&[]);
+        assert_eq!(lighting.inner.next_stale().map(|g| g.key), Some(key(0, 0)));
+        drop(grids);
     }
 }

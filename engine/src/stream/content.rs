@@ -93,6 +93,11 @@ pub trait ContentKind: Any + Send + Sync + std::fmt::Debug {
     /// own, such as the light grids, does the nearest first). Default: nothing.
     fn observe_camera(&self, _camera_m: DVec3) {}
 
+    /// Told the nodes the frame draws, at every streaming update once its draw list is made (a
+    /// kind with background work of its own, such as the light grids, does the drawn nodes'
+    /// work first). Default: nothing.
+    fn observe_drawn(&self, _drawn: &[super::DrawNode]) {}
+
     /// How visible (0..=1) the top of a node at `rect` (highest point `z_max_m`, at `dist_m`) is
     /// from `camera_m` through this content; selection multiplies a node's projected error by it
     /// when `StreamSettings::vegetation_occlusion` is on. 1: this content blocks nothing.

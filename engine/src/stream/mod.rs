@@ -579,6 +579,9 @@ impl Streamer {
         self.queue.wake_workers();
         self.advance_fades(dt_s);
         self.drawn = self.compute_draw_list();
+        for k in &self.shared.kinds {
+            k.observe_drawn(&self.drawn);
+        }
         self.evict();
         self.refresh_stats();
     }

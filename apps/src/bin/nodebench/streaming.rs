@@ -92,12 +92,13 @@ impl<'g> Flight<'g> {
         }
     }
 
-    /// Streams until `cam`'s view is ready (at most `timeout_s`), then waits until its light
-    /// grids are computed; on timeout, what it still waited on.
+    /// Streams until `cam`'s view is ready (at most `timeout_s`), then waits until the light
+    /// grids of the nodes it draws are computed (the other live grids, of resident nodes not
+    /// drawn, go on in the background during the flight); on timeout, what it still waited on.
     fn settle(&mut self, cam: &Camera, timeout_s: f64) -> Result<(), String> {
         let ready = self.settle_streaming(cam, timeout_s);
         if let Some(l) = self.streamer().shared.kind::<LightingContent>() {
-            l.wait_idle();
+            l.wait_drawn_lit();
         }
         ready
     }
