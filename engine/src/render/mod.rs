@@ -41,6 +41,7 @@ pub mod sky;
 pub mod suballoc;
 mod target;
 pub mod terrain;
+pub mod texture_credit;
 pub mod texture_pool;
 mod timer;
 pub mod vegetation;

@@ -3,7 +3,8 @@
 //! indirect record whose first instance is the node's slot in the node table), filled or as
 //! wireframe. The ground's colour is the node's ground texture where the ground kind is
 //! registered: its upload hook queues the texture, and `finish_uploads` renders queued textures
-//! ([`super::ground`]), coarsest first, within what the frame's GPU budget leaves, into layers
+//! ([`super::ground`]), coarsest first, within what the frame's GPU budget leaves (carried over
+//! frames while one costs more, [`super::texture_credit`]), into layers
 //! of the renderer's [`GroundPool`] (the terrain shading is the texture's only reader); a layer
 //! is given back when the node's GPU object drops, and a queued texture whose node dropped is
 //! never made. So a node is drawn as soon as its mesh is uploaded: until its own texture is
@@ -27,6 +28,7 @@ use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer};
 use super::suballoc::{Lease, Suballocator};
+use super::texture_credit::TextureCredit;
 use crate::ground::content::{GroundContent, NodeGround};
 use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{NodeWork, Shared};
@@ -193,6 +195,8 @@ struct GroundTextures {
     groups: Vec<wgpu::BindGroup>,
     /// Nodes left without a texture because the pool was full.
     refused: u64,
+    /// The textures' share of the frame budget, carried across frames.
+    credit: TextureCredit,
 }
 
 /// Terrain pipelines, the mesh pool, the node table and this frame's batches.
@@ -419,6 +423,7 @@ impl TerrainRenderer {
             encoder: None,
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
             frame_thread: ItemCost::new(TEXTURE_FRAME_THREAD_PRIOR_S),
+            credit: TextureCredit::default(),
             groups: Vec::new(),
             refused: 0,
         });
@@ -625,17 +630,20 @@ impl NodeRenderer for TerrainRenderer {
         // through the queue is not per texture and is left out of the estimate.
         let mut textures_s = 0.0;
         let mut waiting = Vec::new();
+        // This frame's share and what earlier frames carried over.
+        let mut credit_s = g.credit.start(time_left_s);
         for p in queue {
             let Some(target) = p.target.upgrade() else {
                 continue;
             };
-            if made > 0 && (made + 1) as f64 * per_texture_s > time_left_s {
+            if per_texture_s > credit_s {
                 waiting.push(p);
                 continue;
             }
             let t = Instant::now();
             let texture = self.render_ground(gpu, p.key, &p.pieces);
             textures_s += t.elapsed().as_secs_f64();
+            credit_s -= per_texture_s;
             if let Some(texture) = texture {
                 // Only this queue sets a node's texture, once.
                 let _ = target.set(texture);
@@ -645,6 +653,7 @@ impl NodeRenderer for TerrainRenderer {
         let Some(g) = self.ground.as_mut() else {
             return 0.0;
         };
+        g.credit.end(credit_s, per_texture_s, !waiting.is_empty());
         g.pending = waiting;
         let t = Instant::now();
         if let Some(mut enc) = g.encoder.take() {
