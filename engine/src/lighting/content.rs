@@ -10,7 +10,7 @@
 //! takes next a grid that shades a node the last frame drew ([`ContentKind::observe_drawn`]),
 //! and among those, or when there are none, the one nearest to the camera (distance to the
 //! grid's square: the coarse grids around the camera come first). Resident nodes that are not
-//! drawn (ancestors, prefetched nodes) hold about twice as many grids as the drawn ones. Until its
+//! drawn (ancestors, prefetched nodes) hold nearly twice as many grids as the drawn ones. Until its
 //! grid arrives a node is drawn fully lit; [`SharedGrid::version`] tells the renderer when to
 //! upload. **Relighting** after a sun change ([`LightingContent::set_sun`]) is the same work:
 //! every live grid is stale, nearest first, and no frame waits for it.
