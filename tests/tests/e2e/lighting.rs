@@ -390,10 +390,11 @@ fn the_ground_bounce_on_a_valley_floor_agrees_with_the_reference_and_the_planar_
 /// Light grids through streaming (the `lighting` kind): every resident node holds the grid of
 /// its ancestor at the grid level (or its own at that level and coarser), one shared object per
 /// grid, computed once and bit-identical to a grid computed directly; a sun change relights
-/// every live grid, nearest to the camera first, to exactly the directly computed grid for the
-/// new sun. Waits on the kind's idle event, never on time.
+/// every live grid, the drawn nodes' first and then the others, each part nearest to the
+/// camera first, to exactly the directly computed grid for the new sun. Waits on the kind's
+/// idle event, never on time.
 #[test]
-fn streamed_nodes_share_grids_and_a_sun_change_relights_them_nearest_first() {
+fn streamed_nodes_share_grids_and_a_sun_change_relights_drawn_then_nearest_first() {
     use engine::kinds::content_kinds;
     use engine::lighting::content::{LightingContent, NodeLight, SharedGrid};
     use engine::stream::{StreamSettings, Streamer};
@@ -490,22 +491,46 @@ fn streamed_nodes_share_grids_and_a_sun_change_relights_them_nearest_first() {
         );
     }
     assert!(changed > 0, "the new sun changed no grid");
-    // Nearest first: distances from the camera to the relit grids' squares never decrease.
+    // The grids of the drawn nodes first (the last update's draw list), then the others; in
+    // each part nearest first: distances from the camera to the relit grids' squares never
+    // decrease.
     let relit = &lighting.computed_keys()[before..];
     assert_eq!(relit.len(), owners.len());
+    let drawn: std::collections::HashSet<NodeKey> = s
+        .draw_list()
+        .iter()
+        .map(|d| LightGrid::owner(&tree, d.key))
+        .collect();
+    assert!(
+        !drawn.is_empty() && drawn.len() < owners.len(),
+        "{} drawn grids of {}",
+        drawn.len(),
+        owners.len()
+    );
+    let (first, rest) = relit.split_at(drawn.len());
+    assert_eq!(
+        first
+            .iter()
+            .copied()
+            .collect::<std::collections::HashSet<_>>(),
+        drawn,
+        "the drawn nodes' grids are relit first"
+    );
     let dist = |k: &NodeKey| {
         let r = tree.rect(*k);
         let dx = (r.min[0] - far.x).max(far.x - r.max[0]).max(0.0);
         let dy = (r.min[1] - far.y).max(far.y - r.max[1]).max(0.0);
         dx.hypot(dy)
     };
-    for w in relit.windows(2) {
-        assert!(
-            dist(&w[0]) <= dist(&w[1]),
-            "relit {:?} before {:?}",
-            w[0],
-            w[1]
-        );
+    for part in [first, rest] {
+        for w in part.windows(2) {
+            assert!(
+                dist(&w[0]) <= dist(&w[1]),
+                "relit {:?} before {:?}",
+                w[0],
+                w[1]
+            );
+        }
     }
 }
 
