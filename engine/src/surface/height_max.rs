@@ -82,7 +82,7 @@ mod tests {
 
     /// Against the maximum taken sample by sample, over random rectangles of an uneven grid
     /// (odd sizes, so the clamped borders are exercised), partly outside it: never below, and
-    /// equal for a single-sample rectangle inside the grid's even part.
+    /// exact for over a quarter of them (a bound that is not the global maximum).
     #[test]
     fn bounds_every_rectangle_from_above() {
         let (w, h) = (37usize, 29usize);
