@@ -404,6 +404,24 @@ fn sun_horizon_floor(toward: DVec3) -> f64 {
     }
 }
 
+/// The horizontal unit directions of a grid's horizon marches: the [`HORIZON_AZIMUTHS`]
+/// azimuths from north, then toward the sun (unit `toward`; north when it stands at the zenith).
+fn march_directions(toward: DVec3) -> Vec<[f64; 2]> {
+    let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
+        .map(|a| {
+            let phi = std::f64::consts::TAU * a as f64 / HORIZON_AZIMUTHS as f64;
+            [phi.sin(), phi.cos()]
+        })
+        .collect();
+    let flat = toward.truncate().length();
+    dirs.push(if flat > 1e-9 {
+        [toward.x / flat, toward.y / flat]
+    } else {
+        [0.0, 1.0]
+    });
+    dirs
+}
+
 /// `sin^2` of the elevation whose tangent is `t` (0 for directions at or below horizontal).
 fn sin2_of_tan(t: f64) -> f64 {
     if t <= 0.0 { 0.0 } else { t * t / (1.0 + t * t) }
@@ -503,19 +521,8 @@ impl LightGrid {
         let distances = march_distances();
         let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
         // Directions: the horizon azimuths, then the sun's.
-        let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
-            .map(|a| {
-                let phi = std::f64::consts::TAU * a as f64 / HORIZON_AZIMUTHS as f64;
-                [phi.sin(), phi.cos()]
-            })
-            .collect();
         let toward = sun.toward();
-        let flat = toward.truncate().length();
-        dirs.push(if flat > 1e-9 {
-            [toward.x / flat, toward.y / flat]
-        } else {
-            [0.0, 1.0]
-        });
+        let dirs = march_directions(toward);
         let layers_m = layer_heights_m(canopy);
         let cells = COLUMNS * COLUMNS;
         let mut out = Self {
@@ -836,14 +843,7 @@ mod tests {
                 elevation_deg,
             };
             let toward = sun.toward();
-            let flat = toward.truncate().length();
-            let mut dirs: Vec<[f64; 2]> = (0..HORIZON_AZIMUTHS)
-                .map(|a| {
-                    let phi = std::f64::consts::TAU * a as f64 / HORIZON_AZIMUTHS as f64;
-                    [phi.sin(), phi.cos()]
-                })
-                .collect();
-            dirs.push([toward.x / flat, toward.y / flat]);
+            let dirs = march_directions(toward);
             let mut tans = vec![[0.0; LAYERS]; dirs.len()];
             for row in (0..COLUMNS).step_by(3) {
                 for col in (0..COLUMNS).step_by(3) {
