@@ -437,6 +437,21 @@ impl Viewer {
         self.outstanding().is_settled()
     }
 
+    /// [`Self::stream_only`] along a known path (`future` as in
+    /// [`crate::stream::Streamer::update_along`]): settled includes what the prefetch along it
+    /// requested.
+    pub fn stream_only_along(
+        &mut self,
+        gpu: &Gpu,
+        cam: &Camera,
+        dt_s: f64,
+        future: &[(f64, Camera)],
+    ) -> bool {
+        self.streamer.update_along(cam, dt_s, future);
+        self.upload_and_finish(gpu);
+        self.outstanding().is_settled()
+    }
+
     /// What a warm start still waits on (see [`Self::stream_only`]).
     pub fn outstanding(&self) -> Outstanding {
         Outstanding {

@@ -3,6 +3,7 @@
 
 use super::Streamer;
 use super::jobs::RequestState;
+use super::predict::PREFETCH_PARTS;
 use crate::camera::Camera;
 use crate::terrain::quadtree::NodeKey;
 use rustc_hash::FxHashSet;
@@ -113,18 +114,34 @@ impl Streamer {
     }
 
     /// Waits (up to `timeout_s`) until no job is queued, running or waiting for the GPU, every
-    /// needed node is resident and no fade is in progress, running GPU phases as they arrive.
-    /// Returns false on timeout.
+    /// needed node is resident and no fade is in progress, running GPU phases as they arrive,
+    /// for a whole round of prefetch parts (so the prefetch selections use the bounds now
+    /// known). Returns false on timeout.
     pub fn settle(&mut self, cam: &Camera, timeout_s: f64) -> bool {
+        self.settle_with(timeout_s, |s| s.update(cam, 1.0 / 60.0))
+    }
+
+    /// [`Self::settle`] for a camera already in flight along a known path: `future` as in
+    /// [`Self::update_along`], so what the prefetch along it requests is resident too (the
+    /// state of a flight in progress, not of a camera at rest about to start).
+    pub fn settle_along(&mut self, cam: &Camera, future: &[(f64, Camera)], timeout_s: f64) -> bool {
+        self.settle_with(timeout_s, |s| s.update_along(cam, 1.0 / 60.0, future))
+    }
+
+    fn settle_with(&mut self, timeout_s: f64, mut update: impl FnMut(&mut Self)) -> bool {
         let t0 = Instant::now();
+        // Quiet updates in a row: settled after a whole round of prefetch parts (one part's
+        // selection is redone per update, with the bounds known by then) asked for nothing.
+        let mut quiet = 0;
         loop {
-            self.update(cam, 1.0 / 60.0);
+            update(self);
             self.run_gpu_phases();
-            if self.requests.is_empty()
+            let settled = self.requests.is_empty()
                 && self.cancelled_outstanding() == 0
                 && self.needed.iter().all(|k| self.resident.contains_key(k))
-                && self.split.values().all(|&v| v >= 1.0)
-            {
+                && self.split.values().all(|&v| v >= 1.0);
+            quiet = if settled { quiet + 1 } else { 0 };
+            if quiet >= PREFETCH_PARTS {
                 return true;
             }
             if t0.elapsed().as_secs_f64() > timeout_s {

@@ -713,3 +713,37 @@ fn the_gpu_budget_counts_the_expected_gpu_time_of_uploads() {
         waiting - ran
     );
 }
+
+/// A warm start in flight (`settle_along` with the path ahead) leaves resident, besides the
+/// view, the nodes wanted at the path's farthest predicted camera; a warm start at rest
+/// (`settle`) does not, so the comparison shows what the path adds.
+#[test]
+fn a_warm_start_along_the_path_makes_the_path_ahead_resident() {
+    use engine::stream::predict::PREDICT_HORIZONS_S;
+    let cam = flight(0);
+    let future: Vec<(f64, Camera)> = (1..)
+        .zip(PREDICT_HORIZONS_S)
+        .map(|(i, h)| (h, flight(10 * i)))
+        .collect();
+    let far = future[future.len() - 1].1;
+    let settings = settings(2);
+    let split_px = settings.tau_px * settings.split_factor;
+    let missing_at_far = |s: &Streamer| {
+        let wanted = s.select_wanted(&far, split_px);
+        assert!(!wanted.is_empty());
+        wanted.iter().filter(|k| s.resident(**k).is_none()).count()
+    };
+    let mut along = streamer(settings);
+    assert!(along.settle_along(&cam, &future, 120.0), "did not settle");
+    assert_eq!(
+        missing_at_far(&along),
+        0,
+        "nodes wanted at the path's end are not resident after a warm start along it"
+    );
+    let mut rest = streamer(settings);
+    assert!(rest.settle(&cam, 120.0), "did not settle at rest");
+    assert!(
+        missing_at_far(&rest) > 0,
+        "the path's end was resident after a warm start at rest too: this test shows nothing"
+    );
+}

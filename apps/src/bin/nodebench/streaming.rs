@@ -92,21 +92,39 @@ impl<'g> Flight<'g> {
         }
     }
 
-    /// Streams until `cam`'s view is ready (at most `timeout_s`), then waits until the light
-    /// grids of the nodes it draws are computed (the other live grids, of resident nodes not
-    /// drawn, go on in the background during the flight); on timeout, what it still waited on.
-    fn settle(&mut self, cam: &Camera, timeout_s: f64) -> Result<(), String> {
-        let ready = self.settle_streaming(cam, timeout_s);
+    /// Streams until `cam`'s view is ready (at most `timeout_s`) and, with `future` (the path
+    /// ahead, as in [`Streamer::update_along`]), what the prefetch along it requests, as for
+    /// a camera already in flight; without, as for a camera at rest. Then waits until the
+    /// light grids of the nodes it draws are computed (the other live grids, of resident nodes
+    /// not drawn, go on in the background during the flight); on timeout, what it still
+    /// waited on.
+    fn settle(
+        &mut self,
+        cam: &Camera,
+        future: Option<&[(f64, Camera)]>,
+        timeout_s: f64,
+    ) -> Result<(), String> {
+        let ready = self.settle_streaming(cam, future, timeout_s);
         if let Some(l) = self.streamer().shared.kind::<LightingContent>() {
             l.wait_drawn_lit();
         }
         ready
     }
 
-    fn settle_streaming(&mut self, cam: &Camera, timeout_s: f64) -> Result<(), String> {
+    fn settle_streaming(
+        &mut self,
+        cam: &Camera,
+        future: Option<&[(f64, Camera)]>,
+        timeout_s: f64,
+    ) -> Result<(), String> {
+        let dt_s = 1.0 / 60.0;
         match self {
             Flight::Cpu(s) => {
-                if s.settle(cam, timeout_s) {
+                let settled = match future {
+                    Some(f) => s.settle_along(cam, f, timeout_s),
+                    None => s.settle(cam, timeout_s),
+                };
+                if settled {
                     Ok(())
                 } else {
                     Err(format!("{} requests in flight", s.in_flight()))
@@ -114,7 +132,10 @@ impl<'g> Flight<'g> {
             }
             Flight::Gpu(gpu, v) => {
                 let start = Instant::now();
-                while !v.stream_only(gpu, cam, 1.0 / 60.0) {
+                while !match future {
+                    Some(f) => v.stream_only_along(gpu, cam, dt_s, f),
+                    None => v.stream_only(gpu, cam, dt_s),
+                } {
                     if start.elapsed().as_secs_f64() > timeout_s {
                         return Err(v.outstanding().to_string());
                     }
@@ -171,9 +192,134 @@ impl SpanStart {
     }
 }
 
-/// One streaming run: flight (speed m/s, height m), workers, ground textures, light grids,
-/// houses.
-type Run = ((f64, f64), usize, bool, bool, bool);
+/// How a flight's warm start leaves the streamer.
+#[derive(Clone, Copy, PartialEq)]
+enum WarmStart {
+    /// As for a camera already in flight: what the prefetch along the path's next seconds
+    /// requests is resident too.
+    InFlight,
+    /// As for a camera at rest about to start: the flight's first frames measure the
+    /// start-up, the path's prefetch all requested at once.
+    AtRest,
+}
+
+/// One streaming run.
+#[derive(Clone, Copy)]
+struct Run {
+    /// (speed m/s, height above the ground m), one of [`FLIGHTS`].
+    flight: (f64, f64),
+    workers: usize,
+    textures: bool,
+    lighting: bool,
+    towns: bool,
+    start: WarmStart,
+}
+
+impl Run {
+    /// Everything on, warm start in flight.
+    fn all_on(flight: (f64, f64), workers: usize) -> Self {
+        Run {
+            flight,
+            workers,
+            textures: true,
+            lighting: true,
+            towns: true,
+            start: WarmStart::InFlight,
+        }
+    }
+
+    /// Every flight with each of `worker_counts` and ground textures, light grids and the
+    /// map's houses on; with 1 worker, the same from rest, ground textures off with light
+    /// grids on and off, and (on a map with `houses`) the houses off.
+    fn all(worker_counts: &[usize], houses: usize) -> Vec<Run> {
+        FLIGHTS
+            .iter()
+            .flat_map(|&f| {
+                let one = Run::all_on(f, 1);
+                worker_counts
+                    .iter()
+                    .map(move |&w| Run::all_on(f, w))
+                    .chain([
+                        Run {
+                            start: WarmStart::AtRest,
+                            ..one
+                        },
+                        Run {
+                            textures: false,
+                            ..one
+                        },
+                        Run {
+                            textures: false,
+                            lighting: false,
+                            ..one
+                        },
+                    ])
+                    .chain((houses > 0).then_some(Run {
+                        towns: false,
+                        ..one
+                    }))
+            })
+            .collect()
+    }
+
+    /// The registered content kinds of `world`, less those this run turns off.
+    fn kinds(&self, world: &World) -> Vec<engine::kinds::Registration> {
+        let mut kinds = engine::kinds::registered(world);
+        if !self.textures {
+            kinds.retain(|k| k.kind.name() != engine::ground::content::GroundContent::NAME);
+        }
+        if !self.lighting {
+            kinds.retain(|k| k.kind.name() != LightingContent::NAME);
+        }
+        if !self.towns {
+            kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
+        }
+        kinds
+    }
+
+    /// The rows' parameters: the flight of `seconds` at `tau_px` on a map with `houses`,
+    /// streamed by `workers`, and the adapter that renders the ground textures.
+    fn params(
+        &self,
+        (seconds, tau_px): (f64, f64),
+        workers: usize,
+        houses: usize,
+        adapter: Option<&str>,
+    ) -> String {
+        let (speed, above) = self.flight;
+        let horizons_s = engine::stream::predict::PREDICT_HORIZONS_S;
+        format!(
+            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau_px} px, warm start {}, {} \
+             worker(s), houses {}, light grids {}, ground textures {}",
+            match self.start {
+                WarmStart::AtRest => "at rest (the start-up measured)".to_string(),
+                WarmStart::InFlight => format!(
+                    "in flight (what the prefetch along the path's next {} s requests resident)",
+                    horizons_s[horizons_s.len() - 1]
+                ),
+            },
+            workers,
+            if !self.towns {
+                "off".to_string()
+            } else if houses == 0 {
+                "none on this map".to_string()
+            } else {
+                format!("on ({houses})")
+            },
+            if self.lighting { "on" } else { "off" },
+            match (self.textures, adapter) {
+                (false, _) => "off".to_string(),
+                (true, Some(adapter)) => format!(
+                    "on (rendered on {adapter} under the per-frame GPU budget; uploads of every \
+                     kind, nothing drawn)"
+                ),
+                (true, None) => "on (no GPU adapter: CPU side only, decal pieces and texture \
+                                 bytes in the cache budget)"
+                    .to_string(),
+            }
+        )
+    }
+}
 
 pub(crate) fn section_streaming(
     world_path: &std::path::Path,
@@ -196,22 +342,16 @@ pub(crate) fn section_streaming(
     for busy in [0].into_iter().chain(worker_counts.iter().copied()) {
         scheduling_noise(r, frames, dt, busy);
     }
-    // Every flight with 1 and N workers, ground textures, light grids and the map's houses on;
-    // with 1 worker, ground textures off with light grids on and off, and (on a map with
-    // towns) the houses off.
     let houses = open_world(world_path)?.map.buildings.len();
-    let runs: Vec<Run> = FLIGHTS
-        .iter()
-        .flat_map(|&f| {
-            worker_counts
-                .iter()
-                .map(move |&w| (f, w, true, true, true))
-                .chain([(f, 1, false, true, true), (f, 1, false, false, true)])
-                .chain((houses > 0).then_some((f, 1, true, true, false)))
-        })
-        .collect();
-    for (flight, workers, textures, lighting, towns) in runs {
-        let (speed, above) = flight;
+    for run in Run::all(&worker_counts, houses) {
+        let Run {
+            flight,
+            workers,
+            lighting,
+            start: warm_start,
+            ..
+        } = run;
+        let speed = flight.0;
         let world = open_world(world_path)?;
         let cams: Vec<Camera> = (0..frames)
             .map(|f| loop_camera(&world, flight, f as f64 * dt, viewport_px))
@@ -235,20 +375,13 @@ pub(crate) fn section_streaming(
             ..StreamSettings::default()
         }
         .with_workers(workers);
-        let mut kinds = engine::kinds::registered(&world);
-        if !textures {
-            kinds.retain(|k| k.kind.name() != engine::ground::content::GroundContent::NAME);
-        }
-        if !lighting {
-            kinds.retain(|k| k.kind.name() != LightingContent::NAME);
-        }
-        if !towns {
-            kinds.retain(|k| k.kind.name() != engine::objects::content::ObjectsContent::NAME);
-        }
+        let kinds = run.kinds(&world);
         let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
-        // Warm start at the first camera, as after loading.
-        if let Err(left) = flight_run.settle(&cams[0], 300.0) {
-            bail!("streaming at {speed} m/s: the warm start did not settle within 300 s ({left})");
+        // Warm start at the first camera, as after loading: in flight along the path, or at
+        // rest.
+        let path_ahead = (warm_start == WarmStart::InFlight).then_some(future[0].as_slice());
+        if let Err(left) = flight_run.settle(&cams[0], path_ahead, 600.0) {
+            bail!("streaming at {speed} m/s: the warm start did not settle within 600 s ({left})");
         }
         flight_run.streamer_mut().take_latencies();
         let s = flight_run.streamer();
@@ -288,28 +421,11 @@ pub(crate) fn section_streaming(
         let s = flight_run.streamer_mut();
         let cancelled =
             s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
-        let params = format!(
-            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau} px, {} worker(s), houses \
-             {}, light grids {}, ground textures {}",
+        let params = run.params(
+            (seconds, tau),
             s.settings.workers,
-            if !towns {
-                "off".to_string()
-            } else if houses == 0 {
-                "none on this map".to_string()
-            } else {
-                format!("on ({houses})")
-            },
-            if lighting { "on" } else { "off" },
-            match (textures, gpu) {
-                (false, _) => "off".to_string(),
-                (true, Some((_, adapter))) => format!(
-                    "on (rendered on {adapter} under the per-frame GPU budget; uploads of every \
-                     kind, nothing drawn)"
-                ),
-                (true, None) => "on (no GPU adapter: CPU side only, decal pieces and texture \
-                                 bytes in the cache budget)"
-                    .to_string(),
-            }
+            houses,
+            gpu.map(|(_, adapter)| adapter),
         );
         let outcome = FlightOutcome {
             latencies: s.take_latencies(),
@@ -323,7 +439,7 @@ pub(crate) fn section_streaming(
                     unlit_nodes as f64 / lit_checked.max(1) as f64,
                 )
             }),
-            texture_debt: (textures && gpu.is_some()).then(|| {
+            texture_debt: (run.textures && gpu.is_some()).then(|| {
                 (
                     bare_frames as f64 / frames as f64,
                     bare_nodes as f64 / textured_checked.max(1) as f64,
