@@ -27,17 +27,27 @@ impl BoundsStore {
         self.map.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// The node's bounds, measured outside the lock when unknown (after its parent's).
+    /// The node's bounds, measured outside the lock when unknown (after its parent's; a parent
+    /// of leaves stores theirs too, see [`bounds::measure_with_leaves`]).
     pub fn get(&self, world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
         if let Some(b) = self.peek(key) {
             return b;
         }
         let parent = key.parent().map(|p| self.get(world, tree, p));
-        let b = bounds::monotone(key, bounds::measure(world, tree, key), parent);
-        self.map
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .insert(key, b);
+        // Measuring a parent of leaves stored them too (one lattice for the five nodes).
+        if let Some(b) = self.peek(key) {
+            return b;
+        }
+        let (own, leaves) = bounds::measure_with_leaves(world, tree, key);
+        let b = bounds::monotone(key, own, parent);
+        let mut map = self.map.lock().unwrap_or_else(PoisonError::into_inner);
+        map.insert(key, b);
+        for (k, leaf) in leaves
+            .into_iter()
+            .flat_map(|l| bounds::stored_leaves(key, b, l))
+        {
+            map.entry(k).or_insert(leaf);
+        }
         b
     }
 

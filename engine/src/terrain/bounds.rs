@@ -216,15 +216,63 @@ pub fn from_map_error(world: &World, tree: &QuadTree, key: NodeKey) -> Option<No
 /// node's spacing is one ([`from_map_error`], no surface evaluation), else measured
 /// ([`measure_surface`], about 17k surface evaluations; see the module docs). The blocks'
 /// `error_m` is `max(e, U)` here, before [`monotone`].
+///
+/// A leaf whose parent is measured on the surface takes its bounds from its parent's check
+/// lattice ([`measure_with_leaves`]): the same lattice, twice as coarse as the leaf's own, so
+/// they are looser, and a leaf's error only bounds how it is drawn (it is never split).
 pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     if let Some(b) = from_map_error(world, tree, key) {
         return b;
     }
-    measure_surface(world, tree, key)
+    if let Some(parent) = key.parent()
+        && key.level == tree.max_level
+        && let (_, Some(leaves)) = measure_with_leaves(world, tree, parent)
+    {
+        let q = (key.iy as usize & 1) * 2 + (key.ix as usize & 1);
+        return leaves[q];
+    }
+    measure_surface(world, tree, key, false).0
 }
 
-/// [`measure`] by evaluating the surface on the node's check lattice (the module docs).
-pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
+/// [`measure`] of `key`, and where its children are leaves and it is measured on the surface,
+/// theirs (in [`NodeKey::children`]'s order) from the same lattice, with no more surface
+/// evaluations: a stream measures the four leaves for the price of their parent.
+pub fn measure_with_leaves(
+    world: &World,
+    tree: &QuadTree,
+    key: NodeKey,
+) -> (NodeBounds, Option<[NodeBounds; 4]>) {
+    if key.level + 1 != tree.max_level {
+        return (measure(world, tree, key), None);
+    }
+    if let Some(b) = from_map_error(world, tree, key) {
+        return (b, None);
+    }
+    measure_surface(world, tree, key, true)
+}
+
+/// The stored bounds of the children that [`measure_with_leaves`] gave with `parent` (its
+/// stored bounds `parent_bounds`), each made monotone against it.
+pub fn stored_leaves(
+    parent: NodeKey,
+    parent_bounds: NodeBounds,
+    leaves: [NodeBounds; 4],
+) -> impl Iterator<Item = (NodeKey, NodeBounds)> {
+    parent
+        .children()
+        .into_iter()
+        .zip(leaves)
+        .map(move |(k, own)| (k, monotone(k, own, Some(parent_bounds))))
+}
+
+/// [`measure`] by evaluating the surface on the node's check lattice (the module docs); with
+/// `leaves`, also its children's bounds as leaves ([`leaf_children`]).
+pub fn measure_surface(
+    world: &World,
+    tree: &QuadTree,
+    key: NodeKey,
+    leaves: bool,
+) -> (NodeBounds, Option<[NodeBounds; 4]>) {
     let r = tree.rect(key);
     let sub = CHECK_SUBDIV as usize;
     let c = tree.spacing_m(key.level) / f64::from(CHECK_SUBDIV);
@@ -362,7 +410,79 @@ pub fn measure_surface(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBoun
         }
     }
     let has_vegetation = crate::vegetation::representation::has_vegetation(world, r);
-    finish(tree, key, &blocks, has_vegetation)
+    let node = finish(tree, key, &blocks, has_vegetation);
+    let leaves = (leaves && depth_below >= 1).then(|| {
+        let cells = ChildCells {
+            lattice: &lattice,
+            children: &children,
+            m,
+            regions: &regions,
+            between: &between,
+        };
+        let kids = key.children();
+        std::array::from_fn(|q| leaf_children(world, tree, kids[q], &cells, &blocks))
+    });
+    (node, leaves)
+}
+
+/// What a node's measurement knows of its children's meshes: the check lattice's heights and
+/// the children's errors at its points (`(m + 1)^2` each), and the cells' between-points bounds
+/// (whole cell, half cell) per region group.
+struct ChildCells<'a> {
+    lattice: &'a [f64],
+    children: &'a [f64],
+    m: usize,
+    regions: &'a CellRegions,
+    between: &'a [[f64; 2]],
+}
+
+/// The bounds of `child`, a leaf, from its parent's measurement (`parent_blocks`, `cells`):
+/// the module docs' children's term, taken per block of the child. The child's mesh is the
+/// grid of every `CHECK_SUBDIV / 2`-th lattice point, so per check cell of the child's square
+/// its error is at most the largest error at the cell's corners plus the cell's between-points
+/// bound, and its heights lie within the corners' range widened by the same bound; also at most
+/// the parent block's children's term (refined there where it was loose).
+fn leaf_children(
+    world: &World,
+    tree: &QuadTree,
+    child: NodeKey,
+    cells: &ChildCells,
+    parent_blocks: &[BlockMeasure; BLOCKS],
+) -> NodeBounds {
+    let (m, w) = (cells.m, cells.m + 1);
+    let half = m / 2;
+    let per_block = half / BLOCKS_PER_SIDE;
+    let (i0, j0) = (
+        (child.ix as usize & 1) * half,
+        (child.iy as usize & 1) * half,
+    );
+    let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
+    for j in 0..half {
+        for i in 0..half {
+            let (gi, gj) = (i0 + i, j0 + j);
+            let [between, _] = cells.between[cells.regions.index(gi, gj)];
+            let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+            for k in [
+                gj * w + gi,
+                gj * w + gi + 1,
+                (gj + 1) * w + gi,
+                (gj + 1) * w + gi + 1,
+            ] {
+                lo = lo.min(cells.lattice[k]);
+                hi = hi.max(cells.lattice[k]);
+                error = error.max(cells.children[k]);
+            }
+            let b = &mut blocks[(j / per_block) * BLOCKS_PER_SIDE + i / per_block];
+            b.lo = b.lo.min(lo - between);
+            b.hi = b.hi.max(hi + between);
+            b.own = b.own.max(error + between);
+        }
+    }
+    for (i, b) in blocks.iter_mut().enumerate() {
+        b.own = b.own.min(parent_blocks[parent_block(child, i)].children);
+    }
+    let has_vegetation = crate::vegetation::representation::has_vegetation(world, tree.rect(child));
+    finish(tree, child, &blocks, has_vegetation)
 }
 
 /// One block's measurement: height range, own-mesh error bound, children's-mesh error bound,
@@ -562,9 +682,17 @@ impl BoundsCache {
             return *b;
         }
         let parent = key.parent().map(|p| self.get(world, tree, p));
-        let b = monotone(key, measure(world, tree, key), parent);
+        // Measuring a parent of leaves stored them too.
+        if let Some(b) = self.map.get(&key) {
+            return *b;
+        }
+        let (own, leaves) = measure_with_leaves(world, tree, key);
+        let b = monotone(key, own, parent);
         self.computed += 1;
         self.map.insert(key, b);
+        for (k, leaf) in leaves.into_iter().flat_map(|l| stored_leaves(key, b, l)) {
+            self.map.entry(k).or_insert(leaf);
+        }
         b
     }
 

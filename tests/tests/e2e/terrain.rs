@@ -212,7 +212,7 @@ fn errors_are_monotone_and_bound_every_descendant() {
 
 /// Every node of random leaf chains on the hard maps, whether its bounds come from the
 /// precomputed map-error grids (nodes whose spacing is the height spacing times 2^k, k >= -1) or are
-/// measured at run time: the bound of each block covers the densely measured error, and the
+/// measured at run time (the leaves from their parent's lattice): the bound of each block covers the densely measured error, and the
 /// surface stays in the block's height range. The precomputed path is really taken.
 #[test]
 fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
@@ -221,7 +221,7 @@ fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
         let mut cache = BoundsCache::new();
         let mut tiles = TileCache::new();
         let (o, s) = (world.origin_m(), world.size_m());
-        let (mut precomputed, mut measured) = (0usize, 0usize);
+        let (mut precomputed, mut measured, mut derived) = (0usize, 0usize, 0usize);
         for i in 0..8i64 {
             // Half of the chains end on the cliff band (x = 160 m) of the cliff world.
             let x = if i % 2 == 0 {
@@ -236,6 +236,13 @@ fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
                     Some(_) => precomputed += 1,
                     None => measured += 1,
                 }
+                // A leaf whose parent is measured takes its bounds from the parent's lattice.
+                derived += usize::from(
+                    key.level == tree.max_level
+                        && key.parent().is_some_and(|p| {
+                            engine::terrain::bounds::from_map_error(&world, &tree, p).is_none()
+                        }),
+                );
                 let m = build_mesh(&world, &tree, &mut cache, &mut tiles, key);
                 for (b, (err, out)) in measure_true_block_errors(&world, &tree, &m)
                     .into_iter()
@@ -251,8 +258,9 @@ fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
             }
         }
         assert!(
-            precomputed >= 8 * 3 && measured >= 8 * 3,
-            "{name}: {precomputed} precomputed, {measured} measured"
+            precomputed >= 8 * 3 && measured >= 8 * 3 && derived == 8,
+            "{name}: {precomputed} precomputed, {measured} measured, {derived} leaves from \
+             their parent's lattice"
         );
     }
 }

@@ -59,12 +59,18 @@ pub(crate) fn section_terrain(
     let mut cache = BoundsCache::new();
     let mut tiles = TileCache::new();
     let (mut tri_grid, mut tri_tin) = (0usize, 0usize);
-    // Per node as in the engine (the parent's bounds are known when a node is measured).
+    // Per measurement as in the engine: a leaf's bounds come with its parent's measurement
+    // where the parent is measured on the surface, so that parent is measured (once) instead.
+    let measured: std::collections::BTreeSet<NodeKey> =
+        keys.iter().map(|&k| measured_for(world, tree, k)).collect();
+    for &k in &measured {
+        let t0 = Instant::now();
+        std::hint::black_box(bounds::measure_with_leaves(world, tree, k));
+        t_bounds.push(t0.elapsed().as_secs_f64());
+    }
     let (mut raised, mut ratio_sum) = (0usize, 0.0f64);
     for &k in &keys {
-        let t0 = Instant::now();
         let own = bounds::measure(world, tree, k);
-        t_bounds.push(t0.elapsed().as_secs_f64());
         let stored = cache.get(world, tree, k);
         if stored.error_m > own.mesh_error_m * (1.0 + 1e-12) {
             raised += 1;
@@ -94,7 +100,20 @@ pub(crate) fn section_terrain(
     }
     b.finish_and_clear();
     let params = format!("{} nodes from the flight at tau 2", keys.len());
-    r.timings("terrain", "node bounds (error + AABB)", t_bounds, &params);
+    let leaves_with_parent = keys
+        .iter()
+        .filter(|&&k| measured_for(world, tree, k) != k)
+        .count();
+    r.timings(
+        "terrain",
+        "node bounds (error + AABB)",
+        t_bounds,
+        &format!(
+            "{params}: {} measurements, {leaves_with_parent} of the nodes are leaves whose \
+             bounds come with their parent's (measured instead, with its four leaves)",
+            measured.len()
+        ),
+    );
     let precomputed = keys
         .iter()
         .filter(|&&k| bounds::from_map_error(world, tree, k).is_some())
@@ -149,7 +168,8 @@ pub(crate) fn section_terrain(
         &params,
     );
     let per = if quick { 4 } else { 24 };
-    // Cold caches per node, except the ancestors' bounds (always known first in the engine).
+    // Cold caches per node, except the ancestors' bounds (always known first in the engine),
+    // and a leaf's that came with its parent's.
     let mut ancestors = BoundsCache::new();
     for &k in &keys {
         if let Some(p) = k.parent() {
@@ -157,7 +177,9 @@ pub(crate) fn section_terrain(
         }
     }
     for &k in &keys {
-        ancestors.remove(k);
+        if measured_for(world, tree, k) == k {
+            ancestors.remove(k);
+        }
     }
     node_preparation(world, tree, &keys, &ancestors, r);
     for w in [1, workers] {
@@ -174,6 +196,19 @@ pub(crate) fn section_terrain(
             "nodes/s",
             "cold caches per node",
         );
+    }
+}
+
+/// The node whose measurement gives `key`'s bounds in the engine: its parent for a leaf whose
+/// parent is measured on the surface ([`bounds::measure_with_leaves`]), else itself.
+fn measured_for(world: &World, tree: &QuadTree, key: NodeKey) -> NodeKey {
+    match key.parent() {
+        Some(p)
+            if key.level == tree.max_level && bounds::from_map_error(world, tree, p).is_none() =>
+        {
+            p
+        }
+        _ => key,
     }
 }
 
