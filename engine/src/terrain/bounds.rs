@@ -29,6 +29,12 @@
 //! which costs 4 % more triangles at tau 2 px) and [`measure`] reads its blocks
 //! ([`from_map_error`]).
 //!
+//! Leaves. A node whose children are leaves computes their meshes' errors on its own lattice
+//! anyway (the children's term of `U(N)` below); taken per child block, with each child's height
+//! range from the same lattice, that is a proven bound of the leaf ([`measure_with_leaves`]), on
+//! a lattice half as fine as the leaf's own, so looser. A leaf is never split, so its error
+//! only bounds how it is drawn, and a stream gets five nodes' bounds from one lattice.
+//!
 //! Blocks. All of this is kept per block of `NODE_QUADS / BLOCKS_PER_SIDE` quads (height range
 //! and error), and the node's values are the blocks' extremes: the selection projects each
 //! block's error from the block's own box ([`super::select::projected_error_px`]).
@@ -266,7 +272,7 @@ pub fn stored_leaves(
 }
 
 /// [`measure`] by evaluating the surface on the node's check lattice (the module docs); with
-/// `leaves`, also its children's bounds as leaves ([`leaf_children`]).
+/// `leaves`, also its children's bounds as leaves (`leaf_children`).
 pub fn measure_surface(
     world: &World,
     tree: &QuadTree,
