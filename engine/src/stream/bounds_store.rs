@@ -38,14 +38,10 @@ impl BoundsStore {
         if let Some(b) = self.peek(key) {
             return b;
         }
-        let (own, leaves) = bounds::measure_with_leaves(world, tree, key);
-        let b = bounds::monotone(key, own, parent);
+        let (b, leaves) = bounds::measure_stored(world, tree, key, parent);
         let mut map = self.map.lock().unwrap_or_else(PoisonError::into_inner);
         map.insert(key, b);
-        for (k, leaf) in leaves
-            .into_iter()
-            .flat_map(|l| bounds::stored_leaves(key, b, l))
-        {
+        for (k, leaf) in leaves {
             map.entry(k).or_insert(leaf);
         }
         b

@@ -230,14 +230,23 @@ pub fn measure(world: &World, tree: &QuadTree, key: NodeKey) -> NodeBounds {
     if let Some(b) = from_map_error(world, tree, key) {
         return b;
     }
-    if let Some(parent) = key.parent()
-        && key.level == tree.max_level
-        && let (_, Some(leaves)) = measure_with_leaves(world, tree, parent)
+    let by = measured_with(world, tree, key);
+    if by != key
+        && let (_, Some(leaves)) = measure_surface(world, tree, by, true)
     {
         let q = (key.iy as usize & 1) * 2 + (key.ix as usize & 1);
         return leaves[q];
     }
     measure_surface(world, tree, key, false).0
+}
+
+/// The node whose measurement gives `key`'s bounds: its parent for a leaf whose parent is
+/// measured on the surface (see [`measure_with_leaves`]), else `key` itself.
+pub fn measured_with(world: &World, tree: &QuadTree, key: NodeKey) -> NodeKey {
+    match key.parent() {
+        Some(p) if key.level == tree.max_level && from_map_error(world, tree, p).is_none() => p,
+        _ => key,
+    }
 }
 
 /// [`measure`] of `key`, and where its children are leaves and it is measured on the surface,
@@ -257,18 +266,24 @@ pub fn measure_with_leaves(
     measure_surface(world, tree, key, true)
 }
 
-/// The stored bounds of the children that [`measure_with_leaves`] gave with `parent` (its
-/// stored bounds `parent_bounds`), each made monotone against it.
-pub fn stored_leaves(
-    parent: NodeKey,
-    parent_bounds: NodeBounds,
-    leaves: [NodeBounds; 4],
-) -> impl Iterator<Item = (NodeKey, NodeBounds)> {
-    parent
-        .children()
-        .into_iter()
-        .zip(leaves)
-        .map(move |(k, own)| (k, monotone(k, own, Some(parent_bounds))))
+/// What a bounds store keeps when it measures `key` after its parent's stored bounds
+/// (`parent`, `None` at the root): `key`'s stored bounds ([`monotone`]), and those of the
+/// leaves measured with it ([`measure_with_leaves`]), each made monotone against `key`'s.
+pub fn measure_stored(
+    world: &World,
+    tree: &QuadTree,
+    key: NodeKey,
+    parent: Option<NodeBounds>,
+) -> (NodeBounds, impl Iterator<Item = (NodeKey, NodeBounds)>) {
+    let (own, leaves) = measure_with_leaves(world, tree, key);
+    let stored = monotone(key, own, parent);
+    let leaves = leaves.into_iter().flat_map(move |l| {
+        key.children()
+            .into_iter()
+            .zip(l)
+            .map(move |(k, own)| (k, monotone(k, own, Some(stored))))
+    });
+    (stored, leaves)
 }
 
 /// [`measure`] by evaluating the surface on the node's check lattice (the module docs); with
@@ -692,11 +707,10 @@ impl BoundsCache {
         if let Some(b) = self.map.get(&key) {
             return *b;
         }
-        let (own, leaves) = measure_with_leaves(world, tree, key);
-        let b = monotone(key, own, parent);
+        let (b, leaves) = measure_stored(world, tree, key, parent);
         self.computed += 1;
         self.map.insert(key, b);
-        for (k, leaf) in leaves.into_iter().flat_map(|l| stored_leaves(key, b, l)) {
+        for (k, leaf) in leaves {
             self.map.entry(k).or_insert(leaf);
         }
         b

@@ -61,8 +61,10 @@ pub(crate) fn section_terrain(
     let (mut tri_grid, mut tri_tin) = (0usize, 0usize);
     // Per measurement as in the engine: a leaf's bounds come with its parent's measurement
     // where the parent is measured on the surface, so that parent is measured (once) instead.
-    let measured: std::collections::BTreeSet<NodeKey> =
-        keys.iter().map(|&k| measured_for(world, tree, k)).collect();
+    let measured: std::collections::BTreeSet<NodeKey> = keys
+        .iter()
+        .map(|&k| bounds::measured_with(world, tree, k))
+        .collect();
     for &k in &measured {
         let t0 = Instant::now();
         std::hint::black_box(bounds::measure_with_leaves(world, tree, k));
@@ -102,7 +104,7 @@ pub(crate) fn section_terrain(
     let params = format!("{} nodes from the flight at tau 2", keys.len());
     let leaves_with_parent = keys
         .iter()
-        .filter(|&&k| measured_for(world, tree, k) != k)
+        .filter(|&&k| bounds::measured_with(world, tree, k) != k)
         .count();
     r.timings(
         "terrain",
@@ -177,7 +179,7 @@ pub(crate) fn section_terrain(
         }
     }
     for &k in &keys {
-        if measured_for(world, tree, k) == k {
+        if bounds::measured_with(world, tree, k) == k {
             ancestors.remove(k);
         }
     }
@@ -196,19 +198,6 @@ pub(crate) fn section_terrain(
             "nodes/s",
             "cold caches per node",
         );
-    }
-}
-
-/// The node whose measurement gives `key`'s bounds in the engine: its parent for a leaf whose
-/// parent is measured on the surface ([`bounds::measure_with_leaves`]), else itself.
-fn measured_for(world: &World, tree: &QuadTree, key: NodeKey) -> NodeKey {
-    match key.parent() {
-        Some(p)
-            if key.level == tree.max_level && bounds::from_map_error(world, tree, p).is_none() =>
-        {
-            p
-        }
-        _ => key,
     }
 }
 
