@@ -5,15 +5,17 @@
 //! frees it.
 //!
 //! **Computing** a grid takes about 0.1 - 0.3 s, a hundred times a node's other preparation, so
-//! node jobs never wait for it: background threads at the lowest priority (as many as the node
-//! workers by default) compute the grids that are missing or were lit for another sun. Each
-//! takes next a grid that shades a node the last frame drew ([`ContentKind::observe_drawn`]),
-//! and among those, or when there are none, the one nearest to the camera (distance to the
-//! grid's square: the coarse grids around the camera come first). Resident nodes that are not
-//! drawn (ancestors, prefetched nodes) hold nearly twice as many grids as the drawn ones. Until its
-//! grid arrives a node is drawn fully lit; [`SharedGrid::version`] tells the renderer when to
-//! upload. **Relighting** after a sun change ([`LightingContent::set_sun`]) is the same work:
-//! every live grid is stale, nearest first, and no frame waits for it.
+//! node jobs never wait for it: background threads (as many as the node workers by default), on
+//! Linux under the OS's idle policy so that they never take a core from a node worker or the
+//! frame thread ([`crate::stream::idle_priority`]), compute the grids that are missing or were
+//! lit for another sun. Each takes next a grid that shades a node the last frame drew
+//! ([`ContentKind::observe_drawn`]), and among those, or when there are none, the one nearest
+//! to the camera (distance to the grid's square: the coarse grids around the camera come
+//! first). Resident nodes that are not drawn (ancestors, prefetched nodes) hold nearly twice as
+//! many grids as the drawn ones. Until its grid arrives a node is drawn fully lit;
+//! [`SharedGrid::version`] tells the renderer when to upload. **Relighting** after a sun change
+//! ([`LightingContent::set_sun`]) is the same work: every live grid is stale, nearest first, and
+//! no frame waits for it.
 
 use super::grid::{COLUMNS, LAYERS, LightGrid, Sun, grid_level};
 use crate::stream::{ContentKind, NodeWork, Payload, Phase, Shared};
@@ -152,7 +154,7 @@ impl Inner {
     }
 
     fn run(&self) {
-        crate::stream::lower_priority();
+        crate::stream::idle_priority();
         // Threads start only once a world is attached.
         let Some(world) = self.world.get() else {
             return;

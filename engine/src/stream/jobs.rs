@@ -83,6 +83,29 @@ pub fn lower_priority() {
     }
 }
 
+/// Runs the calling thread below the node workers too, for work that no frame waits for (the
+/// light grids): on Linux under the idle policy (it gets a core only while no worker or frame
+/// thread wants it; at the workers' lowest normal priority it would take half of a shared core
+/// from them), elsewhere as [`lower_priority`]. Best effort: a refusal is logged.
+pub fn idle_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        let result = thread_priority::unix::set_thread_priority_and_policy(
+            thread_priority::unix::thread_native_id(),
+            thread_priority::ThreadPriority::Min,
+            thread_priority::unix::ThreadSchedulePolicy::Normal(
+                thread_priority::unix::NormalThreadSchedulePolicy::Idle,
+            ),
+        );
+        if let Err(e) = result {
+            log::warn!("background thread keeps the workers' priority: {e:?}");
+            lower_priority();
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    lower_priority();
+}
+
 pub(super) fn worker_loop(
     shared: &Shared,
     phases: &[Phase],
@@ -342,5 +365,33 @@ impl Drop for Streamer {
         for w in self.workers.drain(..) {
             let _ = w.join();
         }
+    }
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    /// The calling thread's scheduling policy, field 41 of `/proc/thread-self/stat`
+    /// (proc(5)); fields are counted after the command name, which may hold spaces.
+    fn policy_of_this_thread() -> u32 {
+        let stat = std::fs::read_to_string("/proc/thread-self/stat").expect("proc stat");
+        let after_name = &stat[stat.rfind(')').expect("name") + 1..];
+        let fields: Vec<&str> = after_name.split_whitespace().collect();
+        fields[41 - 3].parse().expect("policy")
+    }
+
+    #[test]
+    fn light_work_runs_below_the_node_workers() {
+        const SCHED_BATCH: u32 = 3;
+        const SCHED_IDLE: u32 = 5;
+        let worker = std::thread::spawn(|| {
+            super::lower_priority();
+            policy_of_this_thread()
+        });
+        let light = std::thread::spawn(|| {
+            super::idle_priority();
+            policy_of_this_thread()
+        });
+        assert_eq!(worker.join().expect("worker"), SCHED_BATCH);
+        assert_eq!(light.join().expect("light"), SCHED_IDLE);
     }
 }

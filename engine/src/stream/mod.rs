@@ -36,7 +36,7 @@ pub mod bounds_store;
 pub mod content;
 mod display;
 mod jobs;
-pub use jobs::lower_priority;
+pub use jobs::{idle_priority, lower_priority};
 pub mod predict;
 mod queue;
 mod residency;
