@@ -417,6 +417,9 @@ impl Streamer {
             &self.shared.tree,
             cam,
             Some(cam.frustum_widened(GUARD_BAND)),
+            // Only errors over tau are looked at (the split test, what vegetation lets through
+            // of them, and the display threshold over them).
+            tau_px,
             |key| known.get(&key),
             |key: NodeKey, b: &NodeBounds, dist, px| {
                 // The error the split test compares: projected, times what vegetation lets

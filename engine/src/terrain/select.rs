@@ -48,23 +48,45 @@ pub fn projected_error_px(
     frustum: Option<&Frustum>,
     near_m: f64,
 ) -> f64 {
+    projected_error_above_px(tree, key, b, eye_m, k_px, frustum, near_m, 0.0)
+}
+
+/// [`projected_error_px`] where only whether the error passes `floor_px` matters below it:
+/// exact when the error is above `floor_px`, otherwise some value at or below `floor_px` (at
+/// least the vegetation term). Blocks whose error cannot pass the floor even at the node box's
+/// distance need no box of their own, so a node well under the threshold costs a few
+/// comparisons (a selection's split test against tau needs no more).
+#[allow(clippy::too_many_arguments)]
+pub fn projected_error_above_px(
+    tree: &QuadTree,
+    key: NodeKey,
+    b: &NodeBounds,
+    eye_m: DVec3,
+    k_px: f64,
+    frustum: Option<&Frustum>,
+    near_m: f64,
+    floor_px: f64,
+) -> f64 {
     let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
     let (lo, hi) = node_aabb(tree, key, b);
     let node_dist_m = distance_to_aabb(eye_m, lo, hi);
     let mut out = px(b.vegetation_error_m, node_dist_m);
+    // What a block must pass to change the answer: the largest error so far, or the floor.
+    let mut cut = out.max(floor_px);
     for (i, block) in b.blocks.iter().enumerate() {
         // A block's box lies inside the node's, so it is at least as far: blocks whose error
-        // over the node's distance cannot raise the result are skipped without their box.
-        if block.error_m <= 0.0 || px(block.error_m, node_dist_m) <= out {
+        // over the node's distance cannot pass the cut are skipped without their box.
+        if block.error_m <= 0.0 || px(block.error_m, node_dist_m) <= cut {
             continue;
         }
         let (lo, hi) = block_aabb(tree, key, b, i);
         let block_px = px(block.error_m, distance_to_aabb(eye_m, lo, hi));
-        // The frustum test (the costlier part) only for blocks that would raise the result.
-        if block_px <= out || frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
+        // The frustum test (the costlier part) only for blocks that would pass the cut.
+        if block_px <= cut || frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
             continue;
         }
         out = block_px;
+        cut = out;
     }
     out
 }
@@ -207,6 +229,7 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
         tree,
         cam,
         frustum,
+        0.0,
         |key| bounds(key).into(),
         split,
         |reached| match reached {
@@ -252,11 +275,14 @@ pub struct Walked {
 
 /// The traversal of [`traverse_in`], handing each node it reaches to `reached` instead of
 /// collecting them, with the bounds as `bounds` gives them: a source that lends its bounds
-/// (`&NodeBounds`) lets a per-frame selection run without copying any.
+/// (`&NodeBounds`) lets a per-frame selection run without copying any. Projected errors are
+/// exact above `floor_px` and only known to be at or below it otherwise
+/// ([`projected_error_above_px`]): a caller that splits at a threshold passes it (0: exact).
 pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
     tree: &QuadTree,
     cam: &Camera,
     frustum: Option<Frustum>,
+    floor_px: f64,
     mut bounds: impl FnMut(NodeKey) -> Option<B>,
     mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
     mut reached: impl FnMut(Reached<B>),
@@ -282,7 +308,16 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             continue;
         }
         let dist_m = distance_to_aabb(cam.position_m, min, max);
-        let error_px = projected_error_px(tree, key, b, cam.position_m, k, frustum.as_ref(), 0.0);
+        let error_px = projected_error_above_px(
+            tree,
+            key,
+            b,
+            cam.position_m,
+            k,
+            frustum.as_ref(),
+            0.0,
+            floor_px,
+        );
         if key.level < tree.max_level && split(key, b, dist_m, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order; those
             // outside the map are skipped.
@@ -392,5 +427,63 @@ mod tests {
         let (lo, hi) = (DVec3::ZERO, DVec3::ONE);
         assert_eq!(distance_to_aabb(DVec3::splat(0.5), lo, hi), 0.0);
         assert!((distance_to_aabb(DVec3::new(4.0, 5.0, 0.5), lo, hi) - 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_error_above_a_floor_is_exact_above_it_and_at_most_it_below() {
+        // Random nodes of a 4 km tree (block heights and errors from a fixed-seed generator),
+        // random eyes and floors, with and without a frustum: the floored error is the exact
+        // one whenever that passes the floor, else at most the floor.
+        let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut above, mut below) = (0, 0);
+        for _ in 0..4000 {
+            let level = (next() * f64::from(tree.max_level + 1)) as u8;
+            let side = 1u32 << level;
+            let key = NodeKey {
+                level,
+                ix: (next() * f64::from(side)) as u32,
+                iy: (next() * f64::from(side)) as u32,
+            };
+            let mut b = NodeBounds::exact(0.0, 0.0);
+            b.vegetation_error_m = if next() < 0.5 { 0.0 } else { next() * 2.0 };
+            for block in &mut b.blocks {
+                block.z_min_m = next() * 300.0;
+                block.z_max_m = block.z_min_m + next() * 100.0;
+                block.error_m = if next() < 0.2 { 0.0 } else { next() * 8.0 };
+            }
+            b.z_min_m = b
+                .blocks
+                .iter()
+                .map(|x| x.z_min_m)
+                .fold(f64::INFINITY, f64::min);
+            b.z_max_m = b.blocks.iter().map(|x| x.z_max_m).fold(0.0, f64::max);
+            let eye = DVec3::new(next() * 4096.0, next() * 4096.0, next() * 600.0);
+            let look = DVec3::new(next() * 4096.0, next() * 4096.0, 0.0);
+            let cam = Camera::look_at(eye, look, 1.0, [1280, 720]);
+            let frustum = cam.frustum();
+            let f = (next() < 0.5).then_some(&frustum);
+            let k = cam.k_px();
+            let exact = projected_error_px(&tree, key, &b, eye, k, f, 0.0);
+            let floor = next() * 2.0 * exact.min(1e3) + next();
+            let floored = projected_error_above_px(&tree, key, &b, eye, k, f, 0.0, floor);
+            if exact > floor {
+                above += 1;
+                assert_eq!(floored, exact, "{key:?} floor {floor}");
+            } else {
+                below += 1;
+                assert!(
+                    floored <= floor,
+                    "{key:?}: {floored} over the floor {floor}"
+                );
+            }
+        }
+        assert!(above > 500 && below > 500, "{above} above, {below} below");
     }
 }
