@@ -10,7 +10,7 @@
 
 use crate::camera::{Camera, Frustum, distance_to_aabb};
 use crate::surface::world::World;
-use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
+use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect, largest_error};
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
@@ -73,6 +73,12 @@ pub fn projected_error_above_px(
     let mut out = px(b.vegetation_error_m, node_dist_m);
     // What a block must pass to change the answer: the largest error so far, or the floor.
     let mut cut = out.max(floor_px);
+    // The node's error is its largest block's: a node that cannot pass at its box's distance
+    // needs no block at all.
+    debug_assert_eq!(b.error_m, largest_error(&b.blocks), "{key:?}");
+    if px(b.error_m, node_dist_m) <= cut {
+        return out;
+    }
     for (i, block) in b.blocks.iter().enumerate() {
         // A block's box lies inside the node's, so it is at least as far: blocks whose error
         // over the node's distance cannot pass the cut are skipped without their box.
@@ -458,6 +464,7 @@ mod tests {
                 block.z_max_m = block.z_min_m + next() * 100.0;
                 block.error_m = if next() < 0.2 { 0.0 } else { next() * 8.0 };
             }
+            b.error_m = largest_error(&b.blocks);
             b.z_min_m = b
                 .blocks
                 .iter()
