@@ -585,7 +585,7 @@ impl Streamer {
         for k in &self.shared.kinds {
             k.observe_drawn(&self.drawn);
         }
-        self.evict();
-        self.refresh_stats();
+        let pinned_bytes = self.evict();
+        self.refresh_stats(pinned_bytes);
     }
 }

@@ -20,43 +20,40 @@ impl Streamer {
         p
     }
 
-    /// The bytes of the resident nodes [`Self::pinned`] holds, without building that set:
-    /// the resident nodes needed, prefetched or in a fade, then the drawn ones not among them.
-    fn pinned_bytes(&self) -> usize {
-        let held = |k: &NodeKey| {
-            self.needed.contains(k) || self.prefetch.contains(k) || self.split.contains_key(k)
-        };
-        let kept: usize = self
-            .resident
+    /// The drawn nodes that are not needed, prefetched or in a fade (few: a drawn node is
+    /// almost always needed): with those three sets, what [`Self::pinned`] holds, without
+    /// building that set.
+    fn drawn_only(&self) -> FxHashSet<NodeKey> {
+        self.drawn
             .iter()
-            .filter(|(k, _)| held(k))
-            .map(|(_, r)| r.bytes)
-            .sum();
-        // The draw list names each node once.
-        let drawn_only: usize = self
-            .drawn
-            .iter()
-            .filter(|d| !held(&d.key))
-            .filter_map(|d| self.resident.get(&d.key))
-            .map(|r| r.bytes)
-            .sum();
-        kept + drawn_only
+            .map(|d| d.key)
+            .filter(|k| !self.held(k))
+            .collect()
+    }
+
+    /// Needed, prefetched or in a fade.
+    fn held(&self, k: &NodeKey) -> bool {
+        self.needed.contains(k) || self.prefetch.contains(k) || self.split.contains_key(k)
     }
 
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
-    /// budget. Pinned nodes alone may exceed it; then nothing else is kept.
-    pub(super) fn evict(&mut self) {
-        if self.resident_bytes <= self.settings.cache_budget_bytes {
-            return;
-        }
-        let pinned = self.pinned();
+    /// budget, and returns the bytes of the pinned resident nodes (the same before and after:
+    /// no pinned node goes). Pinned nodes alone may exceed the budget; then nothing else is
+    /// kept. One pass over the resident nodes.
+    pub(super) fn evict(&mut self) -> usize {
+        let drawn_only = self.drawn_only();
+        let over = self.resident_bytes > self.settings.cache_budget_bytes;
+        let mut pinned_bytes = 0;
         // Least recently used first (ties by key); a heap, as a frame evicts few of many.
-        let mut candidates: std::collections::BinaryHeap<std::cmp::Reverse<(u64, NodeKey)>> = self
-            .resident
-            .iter()
-            .filter(|(k, _)| !pinned.contains(k))
-            .map(|(k, r)| std::cmp::Reverse((r.last_used_frame, *k)))
-            .collect();
+        let mut candidates = Vec::new();
+        for (k, r) in &self.resident {
+            if self.held(k) || drawn_only.contains(k) {
+                pinned_bytes += r.bytes;
+            } else if over {
+                candidates.push(std::cmp::Reverse((r.last_used_frame, *k)));
+            }
+        }
+        let mut candidates = std::collections::BinaryHeap::from(candidates);
         while self.resident_bytes > self.settings.cache_budget_bytes {
             let Some(std::cmp::Reverse((_, k))) = candidates.pop() else {
                 break;
@@ -66,9 +63,11 @@ impl Streamer {
                 self.stats.evicted += 1;
             }
         }
+        pinned_bytes
     }
 
-    pub(super) fn refresh_stats(&mut self) {
+    /// The statistics after a frame or a GPU phase; `pinned_bytes` from [`Self::evict`].
+    pub(super) fn refresh_stats(&mut self, pinned_bytes: usize) {
         let (mut in_workers, mut g) = (0, 0);
         for req in self.requests.values() {
             match req.state {
@@ -88,7 +87,7 @@ impl Streamer {
             self.resident.values().map(|r| r.bytes).sum::<usize>()
         );
         self.stats.resident_bytes = self.resident_bytes;
-        self.stats.pinned_bytes = self.pinned_bytes();
+        self.stats.pinned_bytes = pinned_bytes;
         debug_assert_eq!(
             self.stats.pinned_bytes,
             self.pinned()
