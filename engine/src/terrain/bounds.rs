@@ -133,7 +133,7 @@ impl NodeBounds {
 }
 
 /// The largest error of a node's blocks: the node's error.
-pub(crate) fn largest_error(blocks: &[BlockBounds; BLOCKS]) -> f64 {
+fn largest_error(blocks: &[BlockBounds; BLOCKS]) -> f64 {
     blocks.iter().map(|b| b.error_m).fold(0.0, f64::max)
 }
 

@@ -10,7 +10,7 @@
 
 use crate::camera::{Camera, Frustum, distance_to_aabb};
 use crate::surface::world::World;
-use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect, largest_error};
+use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
@@ -73,12 +73,6 @@ pub fn projected_error_above_px(
     let mut out = px(b.vegetation_error_m, node_dist_m);
     // What a block must pass to change the answer: the largest error so far, or the floor.
     let mut cut = out.max(floor_px);
-    // The node's error is its largest block's: a node that cannot pass at its box's distance
-    // needs no block at all.
-    debug_assert_eq!(b.error_m, largest_error(&b.blocks), "{key:?}");
-    if px(b.error_m, node_dist_m) <= cut {
-        return out;
-    }
     for (i, block) in b.blocks.iter().enumerate() {
         // A block's box lies inside the node's, so it is at least as far: blocks whose error
         // over the node's distance cannot pass the cut are skipped without their box.
@@ -438,8 +432,9 @@ mod tests {
     #[test]
     fn the_error_above_a_floor_is_exact_above_it_and_at_most_it_below() {
         // Random nodes of a 4 km tree (block heights and errors from a fixed-seed generator),
-        // random eyes and floors, with and without a frustum: the floored error is the exact
-        // one whenever that passes the floor, else at most the floor.
+        // random eyes and floors, with and without a frustum: the error equals the largest
+        // over all counting blocks taken one by one, and the floored error is that whenever it
+        // passes the floor, else at most the floor.
         let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
         let mut state = 0x9e37_79b9_7f4a_7c15_u64;
         let mut next = move || {
@@ -464,7 +459,7 @@ mod tests {
                 block.z_max_m = block.z_min_m + next() * 100.0;
                 block.error_m = if next() < 0.2 { 0.0 } else { next() * 8.0 };
             }
-            b.error_m = largest_error(&b.blocks);
+            b.error_m = b.blocks.iter().map(|x| x.error_m).fold(0.0, f64::max);
             b.z_min_m = b
                 .blocks
                 .iter()
@@ -477,7 +472,21 @@ mod tests {
             let frustum = cam.frustum();
             let f = (next() < 0.5).then_some(&frustum);
             let k = cam.k_px();
-            let exact = projected_error_px(&tree, key, &b, eye, k, f, 0.0);
+            // The reference: every block that counts, none skipped.
+            let (lo, hi) = node_aabb(&tree, key, &b);
+            let mut exact = error_px(b.vegetation_error_m, distance_to_aabb(eye, lo, hi), k, 0.0);
+            for i in 0..b.blocks.len() {
+                let (lo, hi) = block_aabb(&tree, key, &b, i);
+                if f.is_none_or(|f| f.intersects_aabb(lo, hi)) {
+                    let d = distance_to_aabb(eye, lo, hi);
+                    exact = exact.max(error_px(b.blocks[i].error_m, d, k, 0.0));
+                }
+            }
+            assert_eq!(
+                projected_error_px(&tree, key, &b, eye, k, f, 0.0),
+                exact,
+                "{key:?}"
+            );
             let floor = next() * 2.0 * exact.min(1e3) + next();
             let floored = projected_error_above_px(&tree, key, &b, eye, k, f, 0.0, floor);
             if exact > floor {
