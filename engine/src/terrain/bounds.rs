@@ -463,6 +463,11 @@ struct ChildCells<'a> {
 /// its error is at most the largest error at the cell's corners plus the cell's between-points
 /// bound, and its heights lie within the corners' range widened by the same bound; also at most
 /// the parent block's children's term (refined there where it was loose).
+///
+/// The cells are taken in square tiles that lie in one block of the child and one region
+/// group (one `between`), so each tile's extremes over its points give exactly the per-cell
+/// results (adding or subtracting the same `between` keeps the order of rounded values), with
+/// each lattice point read once per tile instead of once per cell corner.
 fn leaf_children(
     world: &World,
     tree: &QuadTree,
@@ -473,27 +478,33 @@ fn leaf_children(
     let (m, w) = (cells.m, cells.m + 1);
     let half = m / 2;
     let per_block = half / BLOCKS_PER_SIDE;
+    let tile = cells.regions.group.min(per_block);
+    debug_assert!(
+        per_block.is_multiple_of(tile) && cells.regions.group.is_multiple_of(tile),
+        "tiles must lie in one block of the child and one region group"
+    );
     let (i0, j0) = (
         (child.ix as usize & 1) * half,
         (child.iy as usize & 1) * half,
     );
     let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
-    for j in 0..half {
-        for i in 0..half {
-            let (gi, gj) = (i0 + i, j0 + j);
+    for tj in (0..half).step_by(tile) {
+        for ti in (0..half).step_by(tile) {
+            let (gi, gj) = (i0 + ti, j0 + tj);
             let [between, _] = cells.between[cells.regions.index(gi, gj)];
             let (mut lo, mut hi, mut error) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
-            for k in [
-                gj * w + gi,
-                gj * w + gi + 1,
-                (gj + 1) * w + gi,
-                (gj + 1) * w + gi + 1,
-            ] {
-                lo = lo.min(cells.lattice[k]);
-                hi = hi.max(cells.lattice[k]);
-                error = error.max(cells.children[k]);
+            for row in gj..=gj + tile {
+                let at = row * w + gi;
+                for (&z, &e) in cells.lattice[at..=at + tile]
+                    .iter()
+                    .zip(&cells.children[at..=at + tile])
+                {
+                    lo = lo.min(z);
+                    hi = hi.max(z);
+                    error = error.max(e);
+                }
             }
-            let b = &mut blocks[(j / per_block) * BLOCKS_PER_SIDE + i / per_block];
+            let b = &mut blocks[(tj / per_block) * BLOCKS_PER_SIDE + ti / per_block];
             b.lo = b.lo.min(lo - between);
             b.hi = b.hi.max(hi + between);
             b.own = b.own.max(error + between);
