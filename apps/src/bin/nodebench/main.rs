@@ -113,6 +113,10 @@ struct Cli {
     /// Section worlds: where its maps go (gigabytes for 32 km).
     #[arg(long, default_value = "target/nodebench/worlds")]
     worlds_scratch: PathBuf,
+    /// Section streaming: only the flights at these speeds, m/s (comma-separated; default
+    /// all). For comparing one flight's rows quickly; a benchmark document has them all.
+    #[arg(long, value_delimiter = ',')]
+    speeds: Vec<f64>,
     /// Length of the soak section in minutes (--quick: a quarter of a minute).
     #[arg(long, default_value_t = 30.0)]
     soak_minutes: f64,
@@ -216,6 +220,7 @@ fn run(cli: &Cli) -> Result<()> {
             workers,
             [vh * 16 / 9, vh],
             adapter.as_ref().map(|(g, name)| (g, name.as_str())),
+            &cli.speeds,
         )?;
     }
     if want("bookkeeping") {

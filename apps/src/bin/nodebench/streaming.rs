@@ -328,6 +328,7 @@ pub(crate) fn section_streaming(
     workers: usize,
     viewport_px: [u32; 2],
     gpu: Option<(&Gpu, &str)>,
+    speeds: &[f64],
 ) -> Result<()> {
     use engine::stream::StreamSettings;
     let dt = 1.0 / 60.0;
@@ -343,7 +344,8 @@ pub(crate) fn section_streaming(
         scheduling_noise(r, frames, dt, busy);
     }
     let houses = open_world(world_path)?.map.buildings.len();
-    for run in Run::all(&worker_counts, houses) {
+    let flown = |run: &Run| speeds.is_empty() || speeds.contains(&run.flight.0);
+    for run in Run::all(&worker_counts, houses).into_iter().filter(flown) {
         let Run {
             flight,
             workers,
@@ -386,6 +388,8 @@ pub(crate) fn section_streaming(
         flight_run.streamer_mut().take_latencies();
         let s = flight_run.streamer();
         let c0 = s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu;
+        let evicted0 = s.stats.evicted;
+        let budget_bytes = s.settings.cache_budget_bytes;
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
         let (mut debt_frames, mut worst_excess, mut frame_times) =
             (0usize, 0.0f64, Vec::with_capacity(frames));
@@ -394,6 +398,10 @@ pub(crate) fn section_streaming(
         // same for nodes whose own ground texture is not made yet (they show an ancestor's).
         let (mut unlit_frames, mut unlit_nodes, mut lit_checked) = (0usize, 0usize, 0usize);
         let (mut bare_frames, mut bare_nodes, mut textured_checked) = (0usize, 0usize, 0usize);
+        // Residency: frames whose pinned nodes (needed, prefetched, drawn, in a fade) alone
+        // exceed the cache budget, where nothing else stays and a node leaving the pinned sets
+        // is evicted at once.
+        let (mut over_budget_frames, mut pinned_peak_bytes) = (0usize, 0usize);
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
             frame_times.push(flight_run.frame(cam, dt, &future[f]));
@@ -409,6 +417,8 @@ pub(crate) fn section_streaming(
             textured_checked += debts.textured_checked;
             bare_frames += usize::from(debts.without_texture > 0);
             bare_nodes += debts.without_texture;
+            over_budget_frames += usize::from(s.stats.pinned_bytes > budget_bytes);
+            pinned_peak_bytes = pinned_peak_bytes.max(s.stats.pinned_bytes);
             b.inc(1);
             // Real time: frame f ends at (f + 1) * dt.
             let due = (f + 1) as f64 * dt;
@@ -445,6 +455,12 @@ pub(crate) fn section_streaming(
                     bare_nodes as f64 / textured_checked.max(1) as f64,
                 )
             }),
+            residency: Residency {
+                budget_bytes,
+                over_budget_share: over_budget_frames as f64 / frames as f64,
+                pinned_peak_bytes,
+                evicted: s.stats.evicted - evicted0,
+            },
         };
         outcome.report(r, &params);
     }
@@ -586,6 +602,18 @@ struct FlightOutcome {
     /// With ground textures rendered: the same for nodes whose own texture is not made yet
     /// (drawn with their nearest resident ancestor's).
     texture_debt: Option<(f64, f64)>,
+    residency: Residency,
+}
+
+/// The node cache over one flight.
+struct Residency {
+    budget_bytes: usize,
+    /// Share of frames whose pinned nodes alone exceed the budget.
+    over_budget_share: f64,
+    /// The largest bytes of pinned resident nodes after a frame.
+    pinned_peak_bytes: usize,
+    /// Nodes evicted during the flight.
+    evicted: u64,
 }
 
 impl FlightOutcome {
@@ -694,6 +722,32 @@ impl FlightOutcome {
             self.worst_excess_px,
             "px",
             params,
+        );
+        let c = &self.residency;
+        let budget = format!("{params}; node-cache budget {} MiB", c.budget_bytes >> 20);
+        r.add(
+            "streaming",
+            "frames whose pinned nodes exceed the cache budget",
+            100.0 * c.over_budget_share,
+            "%",
+            &format!(
+                "{budget}; pinned: needed, prefetched, drawn or in a fade; over the budget \
+                 nothing else stays, and a node leaving those sets is evicted at once"
+            ),
+        );
+        r.add(
+            "streaming",
+            "pinned bytes, largest after a frame",
+            c.pinned_peak_bytes as f64 / f64::from(1u32 << 20),
+            "MiB",
+            &budget,
+        );
+        r.add(
+            "streaming",
+            "nodes evicted",
+            c.evicted as f64,
+            "nodes",
+            &budget,
         );
         report_frame_times(&self.frame_times, r, params);
     }
