@@ -246,7 +246,10 @@ impl Viewer {
             .gpu_budget_s
             .max(GPU_BUDGET_FRAME_SHARE * interval_s);
         let select_cam = self.frozen.unwrap_or(*cam);
+        // The textures the last frame made, in the budget before this update evicts.
+        self.charge_made_textures();
         self.streamer.update(&select_cam, dt_s);
+        self.show_textures_of_display();
         let t1 = Instant::now();
         let (uploaded, expected_gpu_s) = self.upload(gpu, budget_s);
         let t2 = Instant::now();
@@ -469,7 +472,33 @@ impl Viewer {
         let t0 = Instant::now();
         let (_, expected_gpu_s) = self.upload(gpu, budget_s);
         let left_s = budget_s - t0.elapsed().as_secs_f64() - expected_gpu_s;
+        self.show_textures_of_display();
         self.scene.finish_uploads(gpu, left_s);
+        self.charge_made_textures();
+    }
+
+    /// Tells the terrain renderer whose ground textures to make: the nodes the display needs
+    /// (needed for display, or drawn). A prefetched node's texture waits until then, so
+    /// prefetch spends no texture time and no texture memory.
+    fn show_textures_of_display(&mut self) {
+        let Some(t) = self.scene.renderer_mut::<TerrainRenderer>() else {
+            return;
+        };
+        let mut keys = self.streamer.needed().clone();
+        keys.extend(self.streamer.draw_list().iter().map(|d| d.key));
+        t.show_textures_of(Some(keys));
+    }
+
+    /// Counts the ground textures made since the last call in their nodes' bytes in the cache
+    /// budget (a node evicted meanwhile took its texture with it).
+    fn charge_made_textures(&mut self) {
+        let Some(t) = self.scene.renderer_mut::<TerrainRenderer>() else {
+            return;
+        };
+        for key in t.take_made_textures() {
+            self.streamer
+                .charge(key, crate::ground::content::TEXTURE_BYTES);
+        }
     }
 
     /// Node ground textures queued and not made yet (drawn nodes show an ancestor's meanwhile).

@@ -12,7 +12,9 @@ use crate::surface::World;
 use std::sync::Arc;
 
 /// Bytes of one node texture on the GPU (`SIDE x SIDE` RGBA8 and its [`MIP_LEVELS`] - 1
-/// smaller levels), counted in the node-cache budget.
+/// smaller levels), counted in the node-cache budget once the renderer has made it (the
+/// viewer charges it to the node, [`crate::stream::Streamer::charge`]): a node the display
+/// never needs (prefetched, then passed by) gets none.
 pub const TEXTURE_BYTES: usize = {
     let mut bytes = 0;
     let mut level = 0;
@@ -30,8 +32,11 @@ pub struct NodeGround {
 }
 
 impl Payload for NodeGround {
+    /// The pieces' bytes; the texture's are counted when it is made ([`TEXTURE_BYTES`]).
     fn bytes(&self) -> usize {
-        TEXTURE_BYTES
+        std::mem::size_of::<Self>()
+            + std::mem::size_of_val(self.decals.segments.as_slice())
+            + std::mem::size_of_val(self.decals.areas.as_slice())
     }
 }
 

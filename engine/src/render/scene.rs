@@ -144,6 +144,13 @@ impl Scene {
             .find_map(|r| (r.as_ref() as &dyn std::any::Any).downcast_ref::<T>())
     }
 
+    /// The renderer of type `T`, mutable, if the scene has one.
+    pub fn renderer_mut<T: NodeRenderer>(&mut self) -> Option<&mut T> {
+        self.renderers
+            .iter_mut()
+            .find_map(|r| (r.as_mut() as &mut dyn std::any::Any).downcast_mut::<T>())
+    }
+
     /// Submits what the renderers' upload hooks recorded and the work they defer, within
     /// `time_left_s` of the frame's budget (also done by [`Self::render`]); returns the time
     /// left: less the GPU time the work is expected to take and the frame-thread time it took.

@@ -7,7 +7,11 @@
 //! frames while one costs more, [`super::texture_credit`]), into layers
 //! of the renderer's [`GroundPool`] (the terrain shading is the texture's only reader); a layer
 //! is given back when the node's GPU object drops, and a queued texture whose node dropped is
-//! never made. So a node is drawn as soon as its mesh is uploaded: until its own texture is
+//! never made. Where the owner says which nodes the display needs ([`TerrainRenderer::show_textures_of`],
+//! the viewer: needed for display or drawn), only theirs are made; a prefetched node's waits
+//! until the display needs it, so prefetch costs no texture time and no texture memory. The
+//! owner charges each texture made to its node's bytes in the cache budget
+//! ([`TerrainRenderer::take_made_textures`]). So a node is drawn as soon as its mesh is uploaded: until its own texture is
 //! made it shows its nearest resident ancestor's (coarser, the same place), or the legend
 //! colours. Close up, the materials' own detail below the finest texel multiplies it
 //! ([`super::ground_detail`]). Without ground textures, the map's ground-type legend colours
@@ -36,6 +40,7 @@ use crate::surface::World;
 use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
+use rustc_hash::FxHashSet;
 use std::sync::{Arc, OnceLock, Weak};
 use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
@@ -50,8 +55,8 @@ const PAGE_INDICES: u32 = 24 << 20;
 const MAX_PAGES: usize = 64;
 
 /// Cap of the registered renderer's ground-texture pool. A backstop: pages are made as layers
-/// are needed, and the layers in use are bounded by the node-cache budget (every resident
-/// node's texture counts in it, `ground::content::TEXTURE_BYTES`), which the viewer can change
+/// are needed, and the layers in use are bounded by the node-cache budget (every texture made
+/// counts in its node's bytes, `ground::content::TEXTURE_BYTES`), which the viewer can change
 /// while running.
 pub const GROUND_POOL_CAP_BYTES: usize = 4 << 30;
 
@@ -197,6 +202,18 @@ struct GroundTextures {
     refused: u64,
     /// The textures' share of the frame budget, carried across frames.
     credit: TextureCredit,
+    /// The nodes whose textures are made (the display's), or every uploaded node's when
+    /// `None` (an owner without a display, e.g. tests rendering nodes directly).
+    shown: Option<FxHashSet<NodeKey>>,
+    /// Nodes whose textures were made since the owner last took them.
+    made: Vec<NodeKey>,
+}
+
+impl GroundTextures {
+    /// Whether `key`'s texture is made now (else it waits in the queue).
+    fn shown(&self, key: NodeKey) -> bool {
+        self.shown.as_ref().is_none_or(|s| s.contains(&key))
+    }
 }
 
 /// Terrain pipelines, the mesh pool, the node table and this frame's batches.
@@ -426,6 +443,8 @@ impl TerrainRenderer {
             credit: TextureCredit::default(),
             groups: Vec::new(),
             refused: 0,
+            shown: None,
+            made: Vec::new(),
         });
         self
     }
@@ -438,9 +457,29 @@ impl TerrainRenderer {
             .map_or((0, 0), |g| (g.pool.layers_in_use(), g.pool.bytes()))
     }
 
-    /// Node textures queued and not made yet (their nodes still resident or not).
+    /// Node textures queued and not made yet that the display needs (their nodes still
+    /// resident or not); prefetched nodes' textures wait, uncounted.
     pub fn textures_pending(&self) -> usize {
-        self.ground.as_ref().map_or(0, |g| g.pending.len())
+        self.ground
+            .as_ref()
+            .map_or(0, |g| g.pending.iter().filter(|p| g.shown(p.key)).count())
+    }
+
+    /// From now on makes the textures of `keys` only (the nodes the display needs: needed for
+    /// display or drawn), or of every uploaded node with `None` (the default). The others
+    /// stay queued until they are in the set or their nodes drop.
+    pub fn show_textures_of(&mut self, keys: Option<FxHashSet<NodeKey>>) {
+        if let Some(g) = self.ground.as_mut() {
+            g.shown = keys;
+        }
+    }
+
+    /// The nodes whose textures were made since the last call ([`crate::ground::content::TEXTURE_BYTES`]
+    /// each, for the owner to count in the cache budget).
+    pub fn take_made_textures(&mut self) -> Vec<NodeKey> {
+        self.ground
+            .as_mut()
+            .map_or_else(Vec::new, |g| std::mem::take(&mut g.made))
     }
 
     /// Renders node `key`'s ground texture into a new pool layer (recorded; submitted by
@@ -630,14 +669,22 @@ impl NodeRenderer for TerrainRenderer {
         // through the queue is not per texture and is left out of the estimate.
         let mut textures_s = 0.0;
         let mut waiting = Vec::new();
+        // Whether a texture the display needs waits for the budget (the credit carries over).
+        let mut shown_waiting = false;
         // This frame's share and what earlier frames carried over.
         let mut credit_s = g.credit.start(time_left_s);
-        for p in queue {
+        let shown: Vec<bool> = queue.iter().map(|p| g.shown(p.key)).collect();
+        for (p, shown) in queue.into_iter().zip(shown) {
             let Some(target) = p.target.upgrade() else {
                 continue;
             };
+            if !shown {
+                waiting.push(p);
+                continue;
+            }
             if per_texture_s > credit_s {
                 waiting.push(p);
+                shown_waiting = true;
                 continue;
             }
             let t = Instant::now();
@@ -648,12 +695,15 @@ impl NodeRenderer for TerrainRenderer {
                 // Only this queue sets a node's texture, once.
                 let _ = target.set(texture);
                 made += 1;
+                if let Some(g) = self.ground.as_mut() {
+                    g.made.push(p.key);
+                }
             }
         }
         let Some(g) = self.ground.as_mut() else {
             return 0.0;
         };
-        g.credit.end(credit_s, per_texture_s, !waiting.is_empty());
+        g.credit.end(credit_s, per_texture_s, shown_waiting);
         g.pending = waiting;
         let t = Instant::now();
         if let Some(mut enc) = g.encoder.take() {

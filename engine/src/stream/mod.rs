@@ -173,7 +173,8 @@ pub struct Resident {
     /// Boxed: the resident map moves only pointers when it grows.
     pub work: Box<NodeWork>,
     pub last_used_frame: u64,
-    /// `work.bytes()`, taken when the node became resident (payloads do not change after).
+    /// `work.bytes()`, taken when the node became resident (payloads do not change after),
+    /// plus what renderers made for it later ([`Streamer::charge`]).
     pub bytes: usize,
 }
 

@@ -36,6 +36,18 @@ impl Streamer {
         self.needed.contains(k) || self.prefetch.contains(k) || self.split.contains_key(k)
     }
 
+    /// Counts `bytes` that a renderer allocated for resident node `key` after the node became
+    /// resident (its ground texture, made when the display first needs the node) in the node's
+    /// bytes and the cache budget; false, and nothing counted, when `key` is not resident.
+    pub fn charge(&mut self, key: NodeKey, bytes: usize) -> bool {
+        let Some(r) = self.resident.get_mut(&key) else {
+            return false;
+        };
+        r.bytes += bytes;
+        self.resident_bytes += bytes;
+        true
+    }
+
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
     /// budget, and returns the bytes of the pinned resident nodes (the same before and after:
     /// no pinned node goes). Pinned nodes alone may exceed the budget; then nothing else is

@@ -464,6 +464,73 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
     );
 }
 
+/// Ground textures are made for the nodes the display needs, not for prefetched ones, and
+/// each counts in its node's cache bytes once made: after a view settles with prefetch along a
+/// path to the far side of the map, the prefetched nodes (resident, neither needed for display
+/// nor drawn) hold no texture, every displayed one holds its own, and every resident node's
+/// bytes are its payloads' plus a texture's exactly when it holds one.
+#[test]
+fn prefetched_nodes_get_no_ground_texture_and_textures_count_once_made() {
+    let Some(g) = device() else { return };
+    let mut v = engine::viewer::Viewer::new(
+        &g,
+        engine::render::COLOR_FORMAT,
+        tiny_world(),
+        StreamSettings {
+            workers: 2,
+            tau_px: 2.0,
+            ..StreamSettings::default()
+        },
+    );
+    let cam = |x: f64, y: f64| {
+        let p = DVec3::new(x, y, v_world().height_m(x, y) + 10.0);
+        Camera::look_at(
+            p,
+            p + DVec3::new(1.0, 0.0, -0.3),
+            60f64.to_radians(),
+            [320, 180],
+        )
+    };
+    let here = cam(60.0, 100.0);
+    let future: Vec<(f64, Camera)> = engine::stream::predict::PREDICT_HORIZONS_S
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| (h, cam(60.0 + 130.0 * (i + 1) as f64, 420.0)))
+        .collect();
+    let start = std::time::Instant::now();
+    while !v.stream_only_along(&g, &here, 0.1, &future) {
+        assert!(start.elapsed().as_secs() < 180, "the view did not settle");
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let s = &v.streamer;
+    let mut displayed = s.needed().clone();
+    displayed.extend(s.draw_list().iter().map(|d| d.key));
+    let (mut prefetched, mut textured) = (0, 0);
+    for k in s.resident_keys() {
+        let r = s.resident(k).expect("resident");
+        let Some(node) = r.work.gpu.get::<TerrainNodeGpu>() else {
+            continue;
+        };
+        let has_texture = node.ground_slot().is_some();
+        assert_eq!(
+            r.bytes,
+            r.work.bytes() + if has_texture { TEXTURE_BYTES } else { 0 },
+            "{k:?}: cache bytes against payloads and texture"
+        );
+        if displayed.contains(&k) {
+            assert!(has_texture, "{k:?} is displayed without its own texture");
+            textured += 1;
+        } else {
+            assert!(!has_texture, "{k:?} is only prefetched but has a texture");
+            prefetched += 1;
+        }
+    }
+    assert!(
+        prefetched >= 10 && textured >= 10,
+        "{prefetched} prefetched and {textured} displayed nodes: the test sees too few"
+    );
+}
+
 fn v_world() -> &'static engine::surface::World {
     static WORLD: std::sync::OnceLock<engine::surface::World> = std::sync::OnceLock::new();
     WORLD.get_or_init(tiny_world)

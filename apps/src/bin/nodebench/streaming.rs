@@ -313,8 +313,8 @@ impl Run {
                     "on (rendered on {adapter} under the per-frame GPU budget; uploads of every \
                      kind, nothing drawn)"
                 ),
-                (true, None) => "on (no GPU adapter: CPU side only, decal pieces and texture \
-                                 bytes in the cache budget)"
+                (true, None) => "on (no GPU adapter: CPU side only, the decal pieces; no \
+                                 texture is made or counted in the cache budget)"
                     .to_string(),
             }
         )
