@@ -7,13 +7,13 @@
 //! frames while one costs more, [`super::texture_credit`]), into layers
 //! of the renderer's [`GroundPool`] (the terrain shading is the texture's only reader); a layer
 //! is given back when the node's GPU object drops, and a queued texture whose node dropped is
-//! never made. Where the owner says which nodes the display needs ([`TerrainRenderer::show_textures_of`],
-//! the viewer: needed for display or drawn), only theirs are made; a prefetched node's waits
-//! until the display needs it, so prefetch costs no texture time and no texture memory. The
-//! owner charges each texture made to its node's bytes in the cache budget
-//! ([`TerrainRenderer::take_made_textures`]). So a node is drawn as soon as its mesh is uploaded: until its own texture is
-//! made it shows its nearest resident ancestor's (coarser, the same place), or the legend
-//! colours. Close up, the materials' own detail below the finest texel multiplies it
+//! never made. Where the owner says which nodes the display needs
+//! ([`TerrainRenderer::show_textures_of`]; the viewer: needed for display or drawn), only
+//! theirs are made; a prefetched node's waits until the display needs it, so prefetch costs no
+//! texture time and no texture memory. The owner charges each texture made to its node's bytes
+//! in the cache budget ([`TerrainRenderer::take_made_textures`]). So a node is drawn as soon as
+//! its mesh is uploaded: until its own texture is made it shows its nearest resident
+//! ancestor's (coarser, the same place), or the legend colours. Close up, the materials' own detail below the finest texel multiplies it
 //! ([`super::ground_detail`]). Without ground textures, the map's ground-type legend colours
 //! the vertices (with procedural grain close up).
 
@@ -474,8 +474,9 @@ impl TerrainRenderer {
         }
     }
 
-    /// The nodes whose textures were made since the last call ([`crate::ground::content::TEXTURE_BYTES`]
-    /// each, for the owner to count in the cache budget).
+    /// The nodes whose textures were made since the last call
+    /// ([`crate::ground::content::TEXTURE_BYTES`] each, for the owner to count in the cache
+    /// budget).
     pub fn take_made_textures(&mut self) -> Vec<NodeKey> {
         self.ground
             .as_mut()
@@ -673,12 +674,13 @@ impl NodeRenderer for TerrainRenderer {
         let mut shown_waiting = false;
         // This frame's share and what earlier frames carried over.
         let mut credit_s = g.credit.start(time_left_s);
-        let shown: Vec<bool> = queue.iter().map(|p| g.shown(p.key)).collect();
-        for (p, shown) in queue.into_iter().zip(shown) {
+        // Taken out for the loop (which renders through `self`), put back after it.
+        let shown = g.shown.take();
+        for p in queue {
             let Some(target) = p.target.upgrade() else {
                 continue;
             };
-            if !shown {
+            if shown.as_ref().is_some_and(|s| !s.contains(&p.key)) {
                 waiting.push(p);
                 continue;
             }
@@ -703,6 +705,7 @@ impl NodeRenderer for TerrainRenderer {
         let Some(g) = self.ground.as_mut() else {
             return 0.0;
         };
+        g.shown = shown;
         g.credit.end(credit_s, per_texture_s, shown_waiting);
         g.pending = waiting;
         let t = Instant::now();

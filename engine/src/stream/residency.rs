@@ -38,14 +38,13 @@ impl Streamer {
 
     /// Counts `bytes` that a renderer allocated for resident node `key` after the node became
     /// resident (its ground texture, made when the display first needs the node) in the node's
-    /// bytes and the cache budget; false, and nothing counted, when `key` is not resident.
-    pub fn charge(&mut self, key: NodeKey, bytes: usize) -> bool {
-        let Some(r) = self.resident.get_mut(&key) else {
-            return false;
-        };
-        r.bytes += bytes;
-        self.resident_bytes += bytes;
-        true
+    /// bytes and the cache budget; nothing when `key` is not resident (its GPU objects, the
+    /// texture with them, went when it did).
+    pub fn charge(&mut self, key: NodeKey, bytes: usize) {
+        if let Some(r) = self.resident.get_mut(&key) {
+            r.bytes += bytes;
+            self.resident_bytes += bytes;
+        }
     }
 
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
