@@ -378,21 +378,6 @@ fn layers_and_holders(v: &engine::viewer::Viewer) -> (usize, usize) {
     (terrain.ground_pool_use().0, holders)
 }
 
-/// A viewer of the tiny map streaming with two workers at tau 2 px under `cache_budget_bytes`.
-fn tiny_viewer(g: &engine::render::Gpu, cache_budget_bytes: usize) -> engine::viewer::Viewer {
-    engine::viewer::Viewer::new(
-        g,
-        engine::render::COLOR_FORMAT,
-        tiny_world(),
-        StreamSettings {
-            workers: 2,
-            cache_budget_bytes,
-            tau_px: 2.0,
-            ..StreamSettings::default()
-        },
-    )
-}
-
 /// A 10,000-frame storm of teleports and fast flights through the viewer (streaming and GPU
 /// phases; ground textures rendered and submitted) leaves no pool layer leaked: at every
 /// checkpoint and after settling, the layers in use are exactly those held by resident nodes,
@@ -401,7 +386,17 @@ fn tiny_viewer(g: &engine::render::Gpu, cache_budget_bytes: usize) -> engine::vi
 fn a_teleport_storm_leaks_no_ground_texture_layer() {
     let Some(g) = device() else { return };
     let budget = 96 << 20;
-    let mut v = tiny_viewer(&g, budget);
+    let mut v = engine::viewer::Viewer::new(
+        &g,
+        engine::render::COLOR_FORMAT,
+        tiny_world(),
+        StreamSettings {
+            workers: 2,
+            cache_budget_bytes: budget,
+            tau_px: 2.0,
+            ..StreamSettings::default()
+        },
+    );
     let cam = |x: f64, y: f64, above: f64, yaw: f64| {
         let w = &v_world();
         let p = DVec3::new(x, y, w.height_m(x, y) + above);
@@ -477,7 +472,7 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
 #[test]
 fn prefetched_nodes_get_no_ground_texture_and_textures_count_once_made() {
     let Some(g) = device() else { return };
-    let mut v = tiny_viewer(&g, StreamSettings::default().cache_budget_bytes);
+    let mut v = tests::gpu::tiny_viewer(&g, 2.0);
     let cam = |x: f64, y: f64| {
         let p = DVec3::new(x, y, v_world().height_m(x, y) + 10.0);
         Camera::look_at(
