@@ -73,10 +73,28 @@ pub fn projected_error_above_px(
     let mut out = px(b.vegetation_error_m, node_dist_m);
     // What a block must pass to change the answer: the largest error so far, or the floor.
     let mut cut = out.max(floor_px);
+    // A block's box lies inside the node's, so it is at least as far: a block whose error is
+    // at most `skip_m` cannot pass the cut and is skipped without its box (no division per
+    // block). `skip_m` is a little below `cut` over the node's distance in metres, so a block
+    // skipped is one whose error at the node's distance is at most the cut; near the boundary
+    // the block is taken and measured exactly, so the answer is the same as without skipping.
+    let node_d_m = node_dist_m.max(near_m);
+    let skip_below = |cut: f64| {
+        if node_d_m > 0.0 {
+            cut * node_d_m / k_px * (1.0 - 8.0 * f64::EPSILON)
+        } else {
+            -1.0
+        }
+    };
+    let mut skip_m = skip_below(cut);
+    // The node's error is its largest block's: a node that cannot pass at its box's distance
+    // needs no block at all.
+    debug_assert!(b.blocks.iter().all(|x| x.error_m <= b.error_m), "{key:?}");
+    if b.error_m <= skip_m {
+        return out;
+    }
     for (i, block) in b.blocks.iter().enumerate() {
-        // A block's box lies inside the node's, so it is at least as far: blocks whose error
-        // over the node's distance cannot pass the cut are skipped without their box.
-        if block.error_m <= 0.0 || px(block.error_m, node_dist_m) <= cut {
+        if block.error_m <= 0.0 || block.error_m <= skip_m {
             continue;
         }
         let (lo, hi) = block_aabb(tree, key, b, i);
@@ -87,6 +105,7 @@ pub fn projected_error_above_px(
         }
         out = block_px;
         cut = out;
+        skip_m = skip_below(cut);
     }
     out
 }
