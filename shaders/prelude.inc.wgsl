@@ -152,24 +152,14 @@ fn light_fetch(slot: f32, g: vec2<f32>, w: f32) -> vec4<f32> {
 }
 
 // `light_fetch` reading only every `k.x`-th column along x and every `k.y`-th along y (linear
-// between them; 1: every column): what a grid `k` times coarser holds there. One fetch per
-// corner that differs: along an axis that is not coarse both corners are the same point and
-// its weight is 0, so skipping the second fetch gives the same value (`mix(a, a, 0) = a`).
+// between them; 1: every column): what a grid `k` times coarser holds there.
 fn light_decimated(slot: f32, g: vec2<f32>, w: f32, k: vec2<f32>) -> vec4<f32> {
     let coarse = k > vec2<f32>(1.0);
     let lo = select(g, floor(g / k) * k, coarse);
     let t = select(vec2<f32>(0.0), (g - lo) / k, coarse);
-    var south = light_fetch(slot, lo, w);
-    if (coarse.x) {
-        south = mix(south, light_fetch(slot, lo + vec2<f32>(k.x, 0.0), w), t.x);
-    }
-    if (!coarse.y) {
-        return south;
-    }
-    var north = light_fetch(slot, lo + vec2<f32>(0.0, k.y), w);
-    if (coarse.x) {
-        north = mix(north, light_fetch(slot, lo + k, w), t.x);
-    }
+    let step = select(vec2<f32>(0.0), k, coarse);
+    let south = mix(light_fetch(slot, lo, w), light_fetch(slot, lo + vec2<f32>(step.x, 0.0), w), t.x);
+    let north = mix(light_fetch(slot, lo + vec2<f32>(0.0, step.y), w), light_fetch(slot, lo + step, w), t.x);
     return mix(south, north, t.y);
 }
 
