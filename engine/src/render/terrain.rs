@@ -13,9 +13,10 @@
 //! texture time and no texture memory. The owner charges each texture made to its node's bytes
 //! in the cache budget ([`TerrainRenderer::take_made_textures`]). So a node is drawn as soon as
 //! its mesh is uploaded: until its own texture is made it shows its nearest resident
-//! ancestor's (coarser, the same place), or the legend colours. Close up, the materials' own detail below the finest texel multiplies it
-//! ([`super::ground_detail`]). Without ground textures, the map's ground-type legend colours
-//! the vertices (with procedural grain close up).
+//! ancestor's (coarser, the same place), or the legend colours. Close up, the materials' own
+//! detail below the finest texel multiplies it ([`super::ground_detail`]). Without ground
+//! textures, the map's ground-type legend colours the vertices (with procedural grain close
+//! up).
 
 use super::Gpu;
 use super::batch_timer::{BatchTimer, ItemCost};

@@ -94,7 +94,7 @@ pub fn projected_error_above_px(
         return out;
     }
     for (i, block) in b.blocks.iter().enumerate() {
-        if block.error_m <= 0.0 || block.error_m <= skip_m {
+        if block.error_m <= skip_m.max(0.0) {
             continue;
         }
         let (lo, hi) = block_aabb(tree, key, b, i);
