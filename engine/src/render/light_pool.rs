@@ -7,7 +7,7 @@
 //! the prelude). The hardware filters trilinearly inside a tile: coordinates are clamped to the
 //! tile's sample centres, so neighbouring tiles never bleed in.
 //!
-//! A grid's tile is leased by the first node that needs it ([`LightPool::lease`]) and shared
+//! A grid's tile is leased by the first node drawn with it ([`LightPool::lease`]) and shared
 //! by every node the grid shades; it returns to the pool when the last [`LightLease`] drops
 //! (with the nodes' GPU objects). A relit grid is written again into the same tile.
 
@@ -20,9 +20,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 
 /// Tiles along each side of the pool texture: 2,304 grids resident at once (80 MB), those of
-/// as many resident nodes at the grid level or coarser (finer nodes share their ancestor's). A
-/// grid that finds the pool full is drawn fully lit (logged once, counted in
-/// `LightPool::refused`).
+/// as many drawn-since-loaded nodes at the grid level or coarser (finer nodes share their
+/// ancestor's; prefetched nodes hold none until drawn). A grid that finds the pool full is
+/// drawn fully lit until a tile frees (logged once, each try counted in `LightPool::refused`).
 pub const POOL_TILES: u32 = 48;
 /// Texels of one tile along x and y.
 const TILE: u32 = COLUMNS as u32;
@@ -115,7 +115,8 @@ pub struct LightPool {
     pub info: wgpu::Buffer,
     free: Arc<Mutex<Vec<u32>>>,
     leases: Mutex<FxHashMap<NodeKey, Weak<LightLease>>>,
-    /// Grids that found no free tile (drawn fully lit), for statistics.
+    /// Lease tries that found no free tile (the node drawn fully lit that frame), for
+    /// statistics.
     pub refused: AtomicU64,
     /// This frame's drawn nodes that blend toward a coarser neighbour's grid
     /// (`lighting::seams::coarser_sides`, found by the lighting renderer's `prepare`).
@@ -197,7 +198,7 @@ impl LightPool {
         let Some(tile) = tile else {
             if self.refused.fetch_add(1, Ordering::Relaxed) == 0 {
                 log::warn!(
-                    "light-grid pool full ({} grids): further grids are drawn fully lit",
+                    "light-grid pool full ({} grids): grids without a tile are drawn fully lit until one frees",
                     POOL_TILES * POOL_TILES
                 );
             }

@@ -1,10 +1,13 @@
-//! The light-grid kind's renderer: it draws nothing itself. Its upload hook gives a node the
-//! pool tile of the grid that shades it ([`super::light_pool::LightPool::lease`]) and stores
-//! the lease as the node's [`NodeLightGpu`]; the terrain, vegetation and object renderers put
-//! [`light_entry`] into their node-table entries (fully lit until the grid arrives). Each
-//! frame `prepare` writes the tiles of drawn grids that arrived or were relit since (a sun
-//! change), nearest first as the light thread makes them, and finds the drawn nodes that blend
-//! toward a coarser neighbour's grid (`lighting::seams`); it runs before the other renderers'.
+//! The light-grid kind's renderer: it draws nothing itself. Its upload hook gives a node with a
+//! grid an empty [`NodeLightGpu`]; the first frame the node is drawn (or drawn through, as an
+//! ancestor) `prepare` leases the pool tile of the grid that shades it
+//! ([`super::light_pool::LightPool::lease`]), so nodes that are only prefetched hold no tile,
+//! and a drawn node that found the pool full tries again each frame. The terrain, vegetation and
+//! object renderers put [`light_entry`] into their node-table entries (fully lit until the grid
+//! arrives). Each frame `prepare` also writes the tiles of drawn grids that arrived or were
+//! relit since (a sun change), nearest first as the light thread makes them, and finds the drawn
+//! nodes that blend toward a coarser neighbour's grid (`lighting::seams`); it runs before the
+//! other renderers'.
 
 use super::Gpu;
 use super::frame::{DrawStats, FrameResources};
@@ -18,18 +21,31 @@ use crate::lighting::seams::{coarser_sides, node_columns};
 use crate::stream::{NodeWork, Shared};
 use crate::surface::World;
 use crate::terrain::quadtree::QuadTree;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
-/// A node's lease on its grid's pool tile (in the node's `GpuSlots`).
-#[derive(Debug, Clone)]
-pub struct NodeLightGpu(pub Arc<LightLease>);
+/// A node's lease on its grid's pool tile (in the node's `GpuSlots`): empty until the node is
+/// first drawn with a free tile in the pool.
+#[derive(Debug, Default)]
+pub struct NodeLightGpu(OnceLock<Arc<LightLease>>);
+
+impl NodeLightGpu {
+    /// The node's lease, once taken.
+    pub fn lease(&self) -> Option<&Arc<LightLease>> {
+        self.0.get()
+    }
+}
+
+/// The node's lease on its grid's tile, once taken.
+fn lease_of(work: &NodeWork) -> Option<&Arc<LightLease>> {
+    work.gpu.get::<NodeLightGpu>().and_then(NodeLightGpu::lease)
+}
 
 /// The node-table numbers of `work`'s light grid this frame, [`NO_LIGHT`] without one.
 pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> LightEntry {
-    let Some(l) = work.gpu.get::<NodeLightGpu>() else {
+    let Some(l) = lease_of(work) else {
         return NO_LIGHT;
     };
-    let grid = l.0.entry(tree, work.key);
+    let grid = l.entry(tree, work.key);
     if grid == NO_LIGHT.grid {
         return NO_LIGHT;
     }
@@ -92,18 +108,17 @@ impl NodeRenderer for LightingRenderer {
     fn upload(
         &mut self,
         _gpu: &Gpu,
-        frame: &FrameResources,
+        _frame: &FrameResources,
         _tree: &QuadTree,
         work: &mut NodeWork,
     ) -> usize {
         let Some(light) = work.get::<NodeLight>() else {
             return 0;
         };
+        // The tile is leased when the node is first drawn (`prepare`); the grid's bytes count
+        // here, in the frame that made the node ready.
         let owns = light.owns;
-        let Some(lease) = frame.light.lease(&light.grid) else {
-            return 0;
-        };
-        work.gpu.put(NodeLightGpu(lease));
+        work.gpu.put(NodeLightGpu::default());
         if owns {
             crate::lighting::content::GRID_GPU_BYTES
         } else {
@@ -113,24 +128,31 @@ impl NodeRenderer for LightingRenderer {
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.unlit_drawn = 0;
+        // Leases for the nodes drawn (or drawn through) without one yet: the first frame they
+        // are drawn, or again each frame while the pool is full.
+        for d in draws.drawn.iter().chain(draws.ancestors) {
+            if let (Some(slot), Some(light)) =
+                (d.work.gpu.get::<NodeLightGpu>(), d.work.get::<NodeLight>())
+                && slot.lease().is_none()
+                && let Some(lease) = frame.light.lease(&light.grid)
+            {
+                let _ = slot.0.set(lease);
+            }
+        }
         let lit: Vec<_> = draws
             .drawn
             .iter()
-            .filter(|d| d.work.gpu.get::<NodeLightGpu>().is_some())
+            .filter(|d| lease_of(d.work).is_some())
             .map(|d| d.key)
             .collect();
         frame.light.seams = coarser_sides(draws.tree, &lit);
         for d in draws.drawn.iter().chain(draws.ancestors) {
-            if let Some(l) = d.work.gpu.get::<NodeLightGpu>() {
-                frame.light.refresh(&gpu.queue, &l.0);
+            if let Some(l) = lease_of(d.work) {
+                frame.light.refresh(&gpu.queue, l);
             }
         }
         for d in draws.drawn {
-            if d.work
-                .gpu
-                .get::<NodeLightGpu>()
-                .is_none_or(|l| !l.0.written())
-            {
+            if lease_of(d.work).is_none_or(|l| !l.written()) {
                 self.unlit_drawn += 1;
             }
         }

@@ -534,6 +534,82 @@ fn streamed_nodes_share_grids_and_a_sun_change_relights_drawn_then_nearest_first
     }
 }
 
+/// Only nodes that are drawn (or drawn through, as ancestors of drawn nodes) hold a tile of the
+/// light-grid pool (lavapipe): after a view settles, every leased grid shades a node of the
+/// draw list or one of their ancestors, the pool holds exactly the grids the resident nodes
+/// lease, and some resident nodes (prefetched around the camera at a finer threshold) hold
+/// none, so a fast flight's prefetching cannot fill the pool while drawn nodes go unlit.
+#[test]
+fn only_drawn_nodes_lease_light_grid_tiles() {
+    use engine::camera::Camera;
+    use engine::lighting::content::NodeLight;
+    use engine::render::lighting::NodeLightGpu;
+    use engine::render::{COLOR_FORMAT, Target};
+    use glam::DVec3;
+    use std::collections::HashSet;
+
+    let Some(g) = tests::gpu::device() else {
+        return;
+    };
+    let mut v = tests::gpu::tiny_viewer(&g, 2.0);
+    let tree = *v.streamer.tree();
+    let (o, size) = (tree.origin_m, tree.map_size_m);
+    let (x, y) = (o[0] + 0.3 * size[0], o[1] + 0.4 * size[1]);
+    let eye = DVec3::new(x, y, v.streamer.shared.world.height_m(x, y) + 30.0);
+    let cam = Camera::look_at(
+        eye,
+        eye + DVec3::new(0.8, 0.3, -0.5),
+        60f64.to_radians(),
+        [320, 180],
+    );
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let st = tests::gpu::settle(&g, &mut v, &target, &cam);
+    assert_eq!(
+        st.unlit_nodes, 0,
+        "drawn nodes without their grid after settling"
+    );
+    // Grids that may be leased: those of the drawn nodes and of all their ancestors.
+    let mut allowed = HashSet::new();
+    for d in v.streamer.draw_list() {
+        let mut k = Some(d.key);
+        while let Some(key) = k {
+            allowed.insert(LightGrid::owner(&tree, key));
+            k = key.parent();
+        }
+    }
+    let (mut held, mut unleased) = (HashSet::new(), 0usize);
+    for k in v.streamer.resident_keys() {
+        let work = &v.streamer.resident(k).expect("resident").work;
+        if work.get::<NodeLight>().is_none() {
+            continue;
+        }
+        let slot = work
+            .gpu
+            .get::<NodeLightGpu>()
+            .expect("a light slot after upload");
+        match slot.lease() {
+            Some(l) => {
+                assert!(
+                    allowed.contains(&l.grid.key),
+                    "node {k:?} leases grid {:?}, which shades no drawn node nor an ancestor",
+                    l.grid.key
+                );
+                held.insert(l.grid.key);
+            }
+            None => unleased += 1,
+        }
+    }
+    assert_eq!(
+        v.scene.frame.light.leased(),
+        held.len(),
+        "tiles in the pool"
+    );
+    assert!(
+        unleased > 0,
+        "every resident node was drawn: the view prefetched nothing, so this shows nothing"
+    );
+}
+
 /// The renderer samples the grids where they belong (lavapipe, the "lighting only" view: grey
 /// albedo, no fog): looking down on the lowland west of a 100 m cliff under a sun 45 degrees
 /// high in the east, ground pixels 15 to 85 m from the cliff's foot (in its shadow, 100 m long)
