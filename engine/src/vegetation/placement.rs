@@ -3,7 +3,8 @@
 //!
 //! Each species repeats the unit tile with side `tile_side_m = min_distance_m * (1 + 2 J) /
 //! tile_min_distance` (J = [`JITTER_FRACTION`]) from a per-species offset, and moves every point by
-//! a deterministic jitter of at most `J * min_distance_m`; so any two items of one species are at
+//! a deterministic jitter of at most `J * min_distance_m` (uniform over the disc, in one of
+//! [`JITTER_DIRECTIONS`] directions); so any two items of one species are at
 //! least `min_distance_m` apart, across tile periods, 16 m tiles and node borders alike. A point
 //! of rank `k` (of `N`) is kept where `(k + 1/2) / N < scale * density(p) / tile_density`, with
 //! `tile_density = N / tile_side_m^2` (every point kept): the expected count over a region is the
@@ -19,6 +20,11 @@ use worldgen::noise::{hash3, unit3};
 
 /// Largest jitter of a point, as a fraction of the species' minimum distance.
 pub const JITTER_FRACTION: f64 = 0.05;
+
+/// Directions a point's jitter takes, evenly spaced (a table: a sine and cosine per point were
+/// about a tenth of the vegetation phase). At the largest jitter of the default map's sparsest
+/// species (0.2 m) neighbouring directions are 1.2 mm apart.
+pub const JITTER_DIRECTIONS: usize = 1024;
 
 /// What an item is drawn as (the size classes of the representation ladder).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -109,6 +115,8 @@ pub struct Placer {
     trees: TreeIndex,
     /// Index of the first large-tree species in `species` (one per map tree species).
     large_tree_base: usize,
+    /// The jitter directions (cos, sin), [`JITTER_DIRECTIONS`] of them.
+    directions: Vec<[f64; 2]>,
     water_type: Option<u8>,
 }
 
@@ -177,11 +185,18 @@ impl Placer {
             .iter()
             .position(|g| g.name == "water")
             .and_then(|i| u8::try_from(i).ok());
+        let directions = (0..JITTER_DIRECTIONS)
+            .map(|i| {
+                let a = std::f64::consts::TAU * i as f64 / JITTER_DIRECTIONS as f64;
+                [a.cos(), a.sin()]
+            })
+            .collect();
         Self {
             species,
             tile,
             trees: Self::index_trees(world),
             large_tree_base,
+            directions,
             water_type,
         }
     }
@@ -330,10 +345,11 @@ impl Placer {
                                 continue;
                             }
                             let kk = i64::from(k);
-                            let angle = std::f64::consts::TAU * unit3(period, kk, 0);
+                            let turn = hash3(period, kk, 0) >> (64 - JITTER_DIRECTIONS.ilog2());
+                            let [cos, sin] = self.directions[turn as usize];
                             let radius = jitter * unit3(period, kk, 1).sqrt();
-                            let x = base[0] + u[0] * t + radius * angle.cos();
-                            let y = base[1] + u[1] * t + radius * angle.sin();
+                            let x = base[0] + u[0] * t + radius * cos;
+                            let y = base[1] + u[1] * t + radius * sin;
                             if x >= rect.min[0]
                                 && x < rect.max[0]
                                 && y >= rect.min[1]
@@ -404,8 +420,29 @@ impl Placer {
         let k_end = k_end_for(dmax);
         // The same bound per tile cell, from the density samples around it (most points of a
         // large node fail the density test; this skips them before their jitter and density
-        // are computed).
-        let cell_k_end = |area: Rect| k_end_for(self.density_max(world, s, area) * scale);
+        // are computed): from the largest density sample around the cell's area (that of
+        // `density_max`, or a column more; see `RowMax`), and the bound per sample value
+        // computed once.
+        let layer = sp
+            .layer
+            .expect("a species placed from the tile has a density layer");
+        let max_density = world.map.densities[layer].spec.max_density_per_m2;
+        let margin =
+            sp.tile_side_m / self.tile.cells as f64 + 2.0 * JITTER_FRACTION * sp.min_distance_m;
+        let window = Rect {
+            min: [rect.min[0] - margin, rect.min[1] - margin],
+            max: [rect.max[0] + margin, rect.max[1] + margin],
+        };
+        let mut row_max = RowMax::new(world, layer, window);
+        let mut k_end_of_sample = [u32::MAX; 256];
+        let cell_k_end = |area: Rect| {
+            let m = row_max.max(area);
+            let e = &mut k_end_of_sample[usize::from(m)];
+            if *e == u32::MAX {
+                *e = k_end_for(f64::from(m) / 255.0 * max_density * scale);
+            }
+            *e
+        };
         // Size factor (+-25%) of the item of rank k in a period, and its height.
         let size_of = |k: u32, period: u64| 0.75 + 0.5 * unit3(period, i64::from(k), 2);
         let height_of = |size: f64| (sp.height_m * size) as f32;
@@ -492,28 +529,184 @@ impl Placer {
     }
 }
 
+/// The samples of density layer `layer` at the corners of the cells that the span `lo..=hi`
+/// along axis `axis` (0: x, 1: y) touches: `[first, last]`.
+#[inline]
+fn sample_span(world: &World, layer: usize, axis: usize, lo: f64, hi: f64) -> [usize; 2] {
+    let l = &world.map.densities[layer];
+    let o = world.origin_m()[axis];
+    let n = if axis == 0 {
+        l.density.width()
+    } else {
+        l.density.height()
+    };
+    let idx = |v: f64, f: fn(f64) -> f64| {
+        f((v - o) / l.spec.spacing_m).clamp(0.0, (n - 1) as f64) as usize
+    };
+    [idx(lo, f64::floor), idx(hi, f64::ceil)]
+}
+
+/// The samples of density layer `layer` at the corners of the cells `rect` touches: columns
+/// `x0..=x1` and rows `y0..=y1` as `([x0, x1], [y0, y1])`.
+fn sample_range(world: &World, layer: usize, rect: Rect) -> ([usize; 2], [usize; 2]) {
+    (
+        sample_span(world, layer, 0, rect.min[0], rect.max[0]),
+        sample_span(world, layer, 1, rect.min[1], rect.max[1]),
+    )
+}
+
 /// Largest sample of density layer `layer` over the cells `rect` touches (bilinear
 /// interpolation never exceeds it).
 pub(super) fn layer_max(world: &World, layer: usize, rect: Rect) -> u8 {
-    let l = &world.map.densities[layer];
-    let o = world.origin_m();
-    let (w, h) = (l.density.width(), l.density.height());
-    let idx = |v: f64, o: f64, n: usize, f: fn(f64) -> f64| {
-        f((v - o) / l.spec.spacing_m).clamp(0.0, (n - 1) as f64) as usize
-    };
-    let (x0, x1) = (
-        idx(rect.min[0], o[0], w, f64::floor),
-        idx(rect.max[0], o[0], w, f64::ceil),
-    );
-    let (y0, y1) = (
-        idx(rect.min[1], o[1], h, f64::floor),
-        idx(rect.max[1], o[1], h, f64::ceil),
-    );
+    let density = &world.map.densities[layer].density;
+    let ([x0, x1], [y0, y1]) = sample_range(world, layer, rect);
     let mut m = 0u8;
     for y in y0..=y1 {
         for x in x0..=x1 {
-            m = m.max(l.density.get(x, y));
+            m = m.max(density.get(x, y));
         }
     }
     m
+}
+
+/// A bound of [`layer_max`] for the tile cells of one [`Placer::visit`], row after row: the
+/// cells of a row touch the same rows of samples, so each column's largest sample over those
+/// rows is found once per row and kept, for the columns of a window around the visited
+/// rectangle (a rectangle reaching outside it is measured by `layer_max`). The columns a cell
+/// touches are found with a multiplication where `layer_max` divides, and widened by
+/// [`Self::MARGIN`] columns so that they include every column `layer_max` takes: the result is
+/// never below it (at most a column wider, where a cell's side lies within the margin of a
+/// sample column).
+struct RowMax<'a> {
+    world: &'a World,
+    layer: usize,
+    /// The map's west edge, the inverse sample spacing and the last column (m, 1/m, -).
+    origin_x_m: f64,
+    per_m: f64,
+    last_column: f64,
+    /// The y span of the current row of cells, its sample rows and its number.
+    span_m: [f64; 2],
+    rows: [usize; 2],
+    row_id: u32,
+    /// The window's first column.
+    base: usize,
+    /// Per column of the window: the row number it was found for and its largest sample.
+    cols: Vec<(u32, u8)>,
+}
+
+impl<'a> RowMax<'a> {
+    /// Far above the rounding of `(x - origin) * per_m` against `(x - origin) / spacing`
+    /// (a few ulp of at most the layer's width).
+    const MARGIN: f64 = 1e-9;
+
+    fn new(world: &'a World, layer: usize, window: Rect) -> Self {
+        let ([x0, x1], _) = sample_range(world, layer, window);
+        let l = &world.map.densities[layer];
+        Self {
+            world,
+            layer,
+            origin_x_m: world.origin_m()[0],
+            per_m: 1.0 / l.spec.spacing_m,
+            last_column: (l.density.width() - 1) as f64,
+            span_m: [f64::NAN; 2],
+            rows: [0; 2],
+            row_id: 0,
+            base: x0,
+            cols: vec![(0, 0); x1 - x0 + 1],
+        }
+    }
+
+    /// At least `layer_max(world, layer, rect)`.
+    #[inline]
+    fn max(&mut self, rect: Rect) -> u8 {
+        let column = |v: f64, f: fn(f64) -> f64, margin: f64| {
+            f((v - self.origin_x_m) * self.per_m + margin).clamp(0.0, self.last_column) as usize
+        };
+        let x0 = column(rect.min[0], f64::floor, -Self::MARGIN);
+        let x1 = column(rect.max[0], f64::ceil, Self::MARGIN);
+        if x0 < self.base || x1 >= self.base + self.cols.len() {
+            return layer_max(self.world, self.layer, rect);
+        }
+        if [rect.min[1], rect.max[1]] != self.span_m {
+            self.span_m = [rect.min[1], rect.max[1]];
+            self.rows = sample_span(self.world, self.layer, 1, rect.min[1], rect.max[1]);
+            self.row_id += 1;
+        }
+        let [y0, y1] = self.rows;
+        let density = &self.world.map.densities[self.layer].density;
+        let mut m = 0u8;
+        for x in x0..=x1 {
+            let c = &mut self.cols[x - self.base];
+            if c.0 != self.row_id {
+                *c = (
+                    self.row_id,
+                    (y0..=y1).map(|y| density.get(x, y)).max().unwrap_or(0),
+                );
+            }
+            m = m.max(c.1);
+        }
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use worldgen::noise::unit3;
+
+    /// The row-by-row bound is never below `layer_max` and at most one column wider: over rows
+    /// of cells like a visit's (cells of uneven width, a side exactly on a sample column, cells
+    /// past the map's edges and outside the window).
+    #[test]
+    fn row_max_bounds_layer_max() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        let w = World::without_error_grids(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let (o, size) = (w.origin_m(), w.size_m());
+        for layer in 0..w.map.densities.len() {
+            let spacing = w.map.densities[layer].spec.spacing_m;
+            let window = Rect {
+                min: [o[0] + 0.2 * size[0], o[1] - 30.0],
+                max: [o[0] + 0.9 * size[0], o[1] + size[1] + 30.0],
+            };
+            let mut rows = RowMax::new(&w, layer, window);
+            let (mut equal, mut wider) = (0usize, 0usize);
+            for row in 0..40i64 {
+                let y = o[1] - 20.0 + unit3(3, row, 0) * (size[1] + 40.0);
+                let h = 0.5 + 30.0 * unit3(3, row, 1);
+                let mut x = o[0] + 0.1 * size[0];
+                for cell in 0..200i64 {
+                    let wide = if cell % 7 == 0 {
+                        // A side on a sample column.
+                        let next = ((x - o[0]) / spacing).ceil() * spacing + o[0] - x;
+                        if next > 0.0 { next } else { spacing }
+                    } else {
+                        0.3 + 20.0 * unit3(4, row, cell)
+                    };
+                    let rect = Rect {
+                        min: [x, y],
+                        max: [x + wide, y + h],
+                    };
+                    let exact = layer_max(&w, layer, rect);
+                    let bound = rows.max(rect);
+                    assert!(bound >= exact, "{rect:?}: {bound} < {exact}");
+                    // At most a column more on each side.
+                    let wide_rect = Rect {
+                        min: [x - spacing, y],
+                        max: [x + wide + spacing, y + h],
+                    };
+                    assert!(bound <= layer_max(&w, layer, wide_rect), "{rect:?}");
+                    if bound == exact {
+                        equal += 1;
+                    } else {
+                        wider += 1;
+                    }
+                    x += wide;
+                }
+            }
+            assert!(
+                equal > 10 * wider,
+                "layer {layer}: {equal} equal, {wider} wider"
+            );
+        }
+    }
 }

@@ -246,7 +246,6 @@ pub fn node_vegetation(
     let finest = key.level == tree.max_level;
     let s_finest = tree.spacing_m(tree.max_level);
     let mut groups: Vec<InstanceGroup> = Vec::new();
-    let mut items = Vec::new();
     for sp in 0..placer.species.len() {
         let kind = placer.species[sp].kind;
         // Skip species that are left out at this level whatever their size (+-25% variation).
@@ -270,7 +269,7 @@ pub fn node_vegetation(
             }
             Some((here, !fin))
         };
-        items.clear();
+        let mut items = Vec::new();
         placer.place_where(
             world,
             sp,
@@ -279,26 +278,25 @@ pub fn node_vegetation(
             |h| drawn_here(f64::from(h)).is_some(),
             &mut items,
         );
-        for it in &items {
-            let Some((here, replaced)) = drawn_here(f64::from(it.height_m)) else {
-                continue;
+        // The species' items by how this node draws them: most often all one way, and then
+        // the list becomes that group's as it is (no copy).
+        let class = |it: &Item| drawn_here(f64::from(it.height_m)).expect("kept by this filter");
+        while let Some(&first) = items.first() {
+            let (here, replaced) = class(&first);
+            let (same, rest) = if items.iter().all(|it| class(it) == (here, replaced)) {
+                (items, Vec::new())
+            } else {
+                items
+                    .into_iter()
+                    .partition(|it| class(it) == (here, replaced))
             };
-            let at = groups.iter().position(|g| {
-                g.species == it.species
-                    && g.representation == here
-                    && g.replaced_on_split == replaced
+            groups.push(InstanceGroup {
+                species: first.species,
+                representation: here,
+                replaced_on_split: replaced,
+                items: same,
             });
-            let i = at.unwrap_or_else(|| {
-                groups.push(InstanceGroup {
-                    species: it.species,
-                    representation: here,
-                    replaced_on_split: replaced,
-                    items: Vec::new(),
-                });
-                groups.len() - 1
-            });
-            let g = &mut groups[i];
-            g.items.push(*it);
+            items = rest;
         }
     }
     groups.sort_by_key(|g| (g.species, g.representation, g.replaced_on_split));
