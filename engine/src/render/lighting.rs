@@ -128,15 +128,22 @@ impl NodeRenderer for LightingRenderer {
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         self.unlit_drawn = 0;
-        // Leases for the nodes drawn (or drawn through) without one yet: the first frame they
-        // are drawn, or again each frame while the pool is full.
+        // The nodes drawn (or drawn through): a lease for those without one yet (the first
+        // frame they are drawn, or again each frame while the pool is full), then their tiles
+        // written where the grid arrived or was relit.
         for d in draws.drawn.iter().chain(draws.ancestors) {
-            if let (Some(slot), Some(light)) =
-                (d.work.gpu.get::<NodeLightGpu>(), d.work.get::<NodeLight>())
-                && slot.lease().is_none()
+            let Some(slot) = d.work.gpu.get::<NodeLightGpu>() else {
+                continue;
+            };
+            if slot.lease().is_none()
+                && let Some(light) = d.work.get::<NodeLight>()
                 && let Some(lease) = frame.light.lease(&light.grid)
             {
+                // `prepare` is the only writer, so the slot is still empty.
                 let _ = slot.0.set(lease);
+            }
+            if let Some(l) = slot.lease() {
+                frame.light.refresh(&gpu.queue, l);
             }
         }
         let lit: Vec<_> = draws
@@ -146,11 +153,6 @@ impl NodeRenderer for LightingRenderer {
             .map(|d| d.key)
             .collect();
         frame.light.seams = coarser_sides(draws.tree, &lit);
-        for d in draws.drawn.iter().chain(draws.ancestors) {
-            if let Some(l) = lease_of(d.work) {
-                frame.light.refresh(&gpu.queue, l);
-            }
-        }
         for d in draws.drawn {
             if lease_of(d.work).is_none_or(|l| !l.written()) {
                 self.unlit_drawn += 1;

@@ -599,6 +599,7 @@ fn only_drawn_nodes_lease_light_grid_tiles() {
             None => unleased += 1,
         }
     }
+    assert!(!held.is_empty(), "no node leased a tile");
     assert_eq!(
         v.scene.frame.light.leased(),
         held.len(),
