@@ -121,9 +121,12 @@ pub struct FrameStats {
     pub cache_bytes: usize,
     /// Nodes the display wants not yet shown (a coarser ancestor stands in for them).
     pub pop_debt_nodes: usize,
-    /// Drawn nodes whose light grid has not arrived yet (drawn fully lit); 0 without light
-    /// grids.
+    /// Drawn nodes whose light grid has not arrived yet and that no ancestor's grid shades
+    /// (drawn fully lit); 0 without light grids.
     pub unlit_nodes: usize,
+    /// Drawn nodes whose own light grid has not arrived yet, shaded by an ancestor's coarser
+    /// grid.
+    pub coarse_lit_nodes: usize,
     /// Drawn nodes whose own ground texture is not made yet, showing an ancestor's; and those
     /// showing none (legend colours). 0 without ground textures.
     pub borrowed_textures: usize,
@@ -371,6 +374,10 @@ impl Viewer {
                 .scene
                 .renderer::<LightingRenderer>()
                 .map_or(0, |r| r.unlit_drawn),
+            coarse_lit_nodes: self
+                .scene
+                .renderer::<LightingRenderer>()
+                .map_or(0, |r| r.coarse_lit_drawn),
             borrowed_textures: terrain.map_or(0, |t| t.borrowed_textures),
             untextured_nodes: terrain.map_or(0, |t| t.untextured),
         }

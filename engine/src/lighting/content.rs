@@ -9,10 +9,12 @@
 //! Linux under the OS's idle policy so that they never take a core from a node worker or the
 //! frame thread ([`crate::stream::idle_priority`]), compute the grids that are missing or were
 //! lit for another sun. Each takes next a grid that shades a node the last frame drew
-//! ([`ContentKind::observe_drawn`]), and among those, or when there are none, the one nearest
-//! to the camera (distance to the grid's square: the coarse grids around the camera come
-//! first). Resident nodes that are not drawn (ancestors, prefetched nodes) hold nearly twice as
-//! many grids as the drawn ones. Until its grid arrives a node is drawn fully lit;
+//! ([`ContentKind::observe_drawn`]) or one of their coarser ancestors (it shades them until
+//! theirs arrive), and among those, or when there are none, the one nearest to the camera
+//! (distance to the grid's square; coarser first at equal distance: the coarse grids around the
+//! camera come first). Resident nodes that are not drawn (ancestors, prefetched nodes) hold
+//! nearly twice as many grids as the drawn ones. Until its grid arrives a node is shaded by its
+//! nearest drawn-through ancestor's computed grid (`render::lighting`), fully lit without one;
 //! [`SharedGrid::version`] tells the renderer when to upload. **Relighting** after a sun change
 //! ([`LightingContent::set_sun`]) is the same work: every live grid is stale, nearest first, and
 //! no frame waits for it.
@@ -108,8 +110,10 @@ struct Inner {
     canopy: Arc<Canopy>,
     sun: Mutex<Sun>,
     camera_xy_m: Mutex<DVec2>,
-    /// The grids that shade the nodes the last frame drew: computed before any other.
-    drawn: Mutex<FxHashSet<NodeKey>>,
+    /// The grids that shade the nodes the last frame drew, and those of their coarser
+    /// ancestors (`drawn.1`, which shade them until their own arrive): computed before any
+    /// other.
+    drawn: Mutex<(FxHashSet<NodeKey>, FxHashSet<NodeKey>)>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
     computed: AtomicU64,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
@@ -126,8 +130,10 @@ impl Inner {
         *self.sun.lock().expect("sun lock")
     }
 
-    /// The live stale grid to compute next: one that shades a drawn node before any other,
-    /// then the nearest to the camera (coarser first at equal distance).
+    /// The live stale grid to compute next: one that shades a drawn node, or would while the
+    /// node's own is missing (a coarser ancestor's), before any other; then the nearest to the
+    /// camera, coarser first at equal distance (so the coarse grids around the camera come
+    /// first and shade everything under them at their columns until the finer grids arrive).
     fn next_stale(&self) -> Option<Arc<SharedGrid>> {
         let sun = self.sun();
         let camera = *self.camera_xy_m.lock().expect("camera lock");
@@ -145,8 +151,9 @@ impl Inner {
             .filter_map(Weak::upgrade)
             .filter(|g| !g.computing.load(Ordering::Acquire) && g.stale(sun))
             .min_by(|a, b| {
-                (!drawn.contains(&a.key))
-                    .cmp(&!drawn.contains(&b.key))
+                let first = |k: &NodeKey| drawn.0.contains(k) || drawn.1.contains(k);
+                (!first(&a.key))
+                    .cmp(&!first(&b.key))
                     .then(distance(a.key).total_cmp(&distance(b.key)))
                     .then(a.key.level.cmp(&b.key.level))
                     .then(a.key.cmp(&b.key))
@@ -210,7 +217,7 @@ impl Inner {
         let sun = self.sun();
         let drawn = self.drawn.lock().expect("drawn lock");
         let grids = self.grids.lock().expect("grids lock");
-        drawn.iter().all(|k| {
+        drawn.0.iter().all(|k| {
             grids
                 .get(k)
                 .and_then(Weak::upgrade)
@@ -269,7 +276,7 @@ impl LightingContent {
                 canopy,
                 sun: Mutex::new(sun),
                 camera_xy_m: Mutex::new(DVec2::ZERO),
-                drawn: Mutex::new(FxHashSet::default()),
+                drawn: Mutex::new((FxHashSet::default(), FxHashSet::default())),
                 grids: Mutex::new(FxHashMap::default()),
                 computed: AtomicU64::new(0),
                 log: Mutex::new(std::collections::VecDeque::new()),
@@ -408,9 +415,18 @@ impl ContentKind for LightingContent {
 
     fn observe_drawn(&self, drawn: &[crate::stream::DrawNode]) {
         let tree = &self.inner.tree;
-        let mut set = self.inner.drawn.lock().expect("drawn lock");
-        set.clear();
-        set.extend(drawn.iter().map(|d| LightGrid::owner(tree, d.key)));
+        let mut sets = self.inner.drawn.lock().expect("drawn lock");
+        let (owners, coarser) = &mut *sets;
+        owners.clear();
+        coarser.clear();
+        owners.extend(drawn.iter().map(|d| LightGrid::owner(tree, d.key)));
+        for &k in owners.iter() {
+            for a in k.ancestors() {
+                if !coarser.insert(a) {
+                    break; // the rest of the chain is in already
+                }
+            }
+        }
     }
 
     fn phases(self: Arc<Self>) -> Vec<Phase> {
@@ -466,8 +482,13 @@ mod tests {
         };
         lighting.observe_drawn(&[drawn(key(3, 3)), drawn(key(2, 3))]);
         assert_eq!(lighting.inner.next_stale().map(|g| g.key), Some(key(2, 3)));
+        // A coarser ancestor's grid (it shades them until theirs arrive) counts as theirs:
+        // the parent of (3, 3) and (2, 3) is nearer than (2, 3), so it comes first; while
+        // nothing is drawn it is farther than (0, 0).
+        let coarse = lighting.grid_for(key(3, 3).parent().expect("the grid level is not the root"));
+        assert_eq!(lighting.inner.next_stale().map(|g| g.key), Some(coarse.key));
         lighting.observe_drawn(&[]);
         assert_eq!(lighting.inner.next_stale().map(|g| g.key), Some(key(0, 0)));
-        drop(grids);
+        drop((grids, coarse));
     }
 }

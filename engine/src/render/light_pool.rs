@@ -121,6 +121,9 @@ pub struct LightPool {
     /// This frame's drawn nodes that blend toward a coarser neighbour's grid
     /// (`lighting::seams::coarser_sides`, found by the lighting renderer's `prepare`).
     pub seams: FxHashMap<NodeKey, SideSteps>,
+    /// This frame, the written grid of the nearest ancestor of each drawn (or drawn-through)
+    /// node whose own grid is not written yet (found by the lighting renderer's `prepare`).
+    pub fallback: FxHashMap<NodeKey, Arc<LightLease>>,
 }
 
 impl std::fmt::Debug for LightPool {
@@ -167,6 +170,7 @@ impl LightPool {
             leases: Mutex::new(FxHashMap::default()),
             refused: AtomicU64::new(0),
             seams: FxHashMap::default(),
+            fallback: FxHashMap::default(),
         }
     }
 

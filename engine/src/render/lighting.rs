@@ -3,8 +3,9 @@
 //! ancestor) `prepare` leases the pool tile of the grid that shades it
 //! ([`super::light_pool::LightPool::lease`]), so nodes that are only prefetched hold no tile,
 //! and a drawn node that found the pool full tries again each frame. The terrain, vegetation and
-//! object renderers put [`light_entry`] into their node-table entries (fully lit until the grid
-//! arrives). Each frame `prepare` also writes the tiles of drawn grids that arrived or were
+//! object renderers put [`light_entry`] into their node-table entries: until a node's grid
+//! arrives, the nearest drawn-through ancestor's written grid (coarser columns, the same values
+//! at them), fully lit without one. Each frame `prepare` also writes the tiles of drawn grids that arrived or were
 //! relit since (a sun change), nearest first as the light thread makes them, and finds the drawn
 //! nodes that blend toward a coarser neighbour's grid (`lighting::seams`); it runs before the
 //! other renderers'.
@@ -20,7 +21,8 @@ use crate::lighting::grid::{grid_level, layer_heights_m};
 use crate::lighting::seams::{coarser_sides, node_columns};
 use crate::stream::{NodeWork, Shared};
 use crate::surface::World;
-use crate::terrain::quadtree::QuadTree;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use rustc_hash::FxHashMap;
 use std::sync::{Arc, OnceLock};
 
 /// A node's lease on its grid's pool tile (in the node's `GpuSlots`): empty until the node is
@@ -40,15 +42,26 @@ fn lease_of(work: &NodeWork) -> Option<&Arc<LightLease>> {
     work.gpu.get::<NodeLightGpu>().and_then(NodeLightGpu::lease)
 }
 
-/// The node-table numbers of `work`'s light grid this frame, [`NO_LIGHT`] without one.
+/// The node-table numbers of `work`'s light grid this frame: its own grid's once written, else
+/// the nearest ancestor's written grid that `prepare` found for it (read at that grid's
+/// columns, which are every 2nd, 4th ... of its own: the same values there), else
+/// [`NO_LIGHT`].
 pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> LightEntry {
-    let Some(l) = lease_of(work) else {
-        return NO_LIGHT;
+    let own = lease_of(work).filter(|l| l.written());
+    let Some(l) = own else {
+        return frame.light.fallback.get(&work.key).map_or(NO_LIGHT, |l| {
+            let grid = l.entry(tree, work.key);
+            LightEntry {
+                grid,
+                // No seam blending: the node's width in the ancestor grid's columns.
+                seam: [
+                    0.0,
+                    (tree.node_size_m(work.key.level) * f64::from(grid[1])) as f32,
+                ],
+            }
+        });
     };
     let grid = l.entry(tree, work.key);
-    if grid == NO_LIGHT.grid {
-        return NO_LIGHT;
-    }
     let steps = frame.light.seams.get(&work.key).map_or(0, |s| s.0);
     LightEntry {
         grid,
@@ -57,6 +70,11 @@ pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> 
             node_columns(work.key.level, grid_level(tree)) as f32,
         ],
     }
+}
+
+/// The value of `key`'s nearest ancestor in `by_key`.
+fn nearest_ancestor<T>(key: NodeKey, by_key: &FxHashMap<NodeKey, T>) -> Option<&T> {
+    key.ancestors().find_map(|a| by_key.get(&a))
 }
 
 /// The map's mean ground albedo (linear RGB): its legend colours weighted by the cells of each
@@ -81,8 +99,11 @@ pub fn mean_ground_albedo(world: &World) -> [f32; 3] {
 
 #[derive(Debug, Default)]
 pub struct LightingRenderer {
-    /// Drawn nodes still without their grid this frame (drawn fully lit).
+    /// Drawn nodes without their own grid and without an ancestor's this frame (drawn fully
+    /// lit).
     pub unlit_drawn: usize,
+    /// Drawn nodes without their own grid this frame, shaded by an ancestor's coarser one.
+    pub coarse_lit_drawn: usize,
 }
 
 impl LightingRenderer {
@@ -153,9 +174,30 @@ impl NodeRenderer for LightingRenderer {
             .map(|d| d.key)
             .collect();
         frame.light.seams = coarser_sides(draws.tree, &lit);
-        for d in draws.drawn {
-            if lease_of(d.work).is_none_or(|l| !l.written()) {
-                self.unlit_drawn += 1;
+        // Nodes whose own grid is not written yet: shaded by the nearest drawn-through
+        // ancestor's written grid, if any (drawn fully lit otherwise).
+        let written: FxHashMap<NodeKey, &Arc<LightLease>> = draws
+            .ancestors
+            .iter()
+            .filter_map(|a| lease_of(a.work).filter(|l| l.written()).map(|l| (a.key, l)))
+            .collect();
+        frame.light.fallback.clear();
+        self.coarse_lit_drawn = 0;
+        for (d, is_drawn) in draws
+            .drawn
+            .iter()
+            .map(|d| (d, true))
+            .chain(draws.ancestors.iter().map(|a| (a, false)))
+        {
+            if lease_of(d.work).is_some_and(|l| l.written()) {
+                continue;
+            }
+            match nearest_ancestor(d.key, &written) {
+                Some(l) => {
+                    frame.light.fallback.insert(d.key, Arc::clone(l));
+                    self.coarse_lit_drawn += usize::from(is_drawn);
+                }
+                None => self.unlit_drawn += usize::from(is_drawn),
             }
         }
     }

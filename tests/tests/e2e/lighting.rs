@@ -491,9 +491,9 @@ fn streamed_nodes_share_grids_and_a_sun_change_relights_drawn_then_nearest_first
         );
     }
     assert!(changed > 0, "the new sun changed no grid");
-    // The grids of the drawn nodes first (the last update's draw list), then the others; in
-    // each part nearest first: distances from the camera to the relit grids' squares never
-    // decrease.
+    // The grids of the drawn nodes (the last update's draw list) and of their coarser ancestors
+    // (which shade them until theirs arrive) first, then the others; in each part nearest
+    // first: distances from the camera to the relit grids' squares never decrease.
     let relit = &lighting.computed_keys()[before..];
     assert_eq!(relit.len(), owners.len());
     let drawn: std::collections::HashSet<NodeKey> = s
@@ -507,14 +507,25 @@ fn streamed_nodes_share_grids_and_a_sun_change_relights_drawn_then_nearest_first
         drawn.len(),
         owners.len()
     );
-    let (first, rest) = relit.split_at(drawn.len());
+    let drawn_and_coarser: std::collections::HashSet<NodeKey> = drawn
+        .iter()
+        .flat_map(|&k| std::iter::once(k).chain(k.ancestors()))
+        .filter(|k| owners.contains_key(k))
+        .collect();
+    assert!(
+        drawn_and_coarser.len() > drawn.len(),
+        "{} drawn grids and their coarser ancestors' of {}",
+        drawn_and_coarser.len(),
+        owners.len()
+    );
+    let (first, rest) = relit.split_at(drawn_and_coarser.len());
     assert_eq!(
         first
             .iter()
             .copied()
             .collect::<std::collections::HashSet<_>>(),
-        drawn,
-        "the drawn nodes' grids are relit first"
+        drawn_and_coarser,
+        "the drawn nodes' grids and their coarser ancestors' are relit first"
     );
     let dist = |k: &NodeKey| {
         let r = tree.rect(*k);

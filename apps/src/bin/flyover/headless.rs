@@ -255,7 +255,7 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         "  of which recording the pass".into(),
         col(|s| s.render.record_ms),
     ));
-    let more: [(&str, Vec<f64>); 24] = [
+    let more: [(&str, Vec<f64>); 25] = [
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
             "GPU frame pass (timestamp queries, when supported)",
@@ -333,7 +333,11 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
             col(|s| f64::from(s.texture_coarser)),
         ),
         (
-            "drawn nodes still without their light grid (drawn fully lit)",
+            "drawn nodes shaded by an ancestor's coarser light grid (their own not made yet)",
+            col(|s| s.coarse_lit_nodes as f64),
+        ),
+        (
+            "drawn nodes without their light grid or an ancestor's (drawn fully lit)",
             col(|s| s.unlit_nodes as f64),
         ),
         (

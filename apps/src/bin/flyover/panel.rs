@@ -154,8 +154,9 @@ pub(crate) fn panel(
         s.pop_debt_nodes
     ));
     ui.label(format!(
-        "light grids: {} drawn nodes still without their grid (drawn fully lit)",
-        s.unlit_nodes
+        "light grids: {} drawn nodes shaded by an ancestor's coarser grid (their own not made \
+         yet), {} without any (drawn fully lit)",
+        s.coarse_lit_nodes, s.unlit_nodes
     ));
     ui.label(format!(
         "ground textures: {} drawn nodes show an ancestor's (their own not made yet), {} none",

@@ -397,6 +397,8 @@ pub(crate) fn section_streaming(
         // (drawn fully lit), and the share of such nodes over all frames; texture debt: the
         // same for nodes whose own ground texture is not made yet (they show an ancestor's).
         let (mut unlit_frames, mut unlit_nodes, mut lit_checked) = (0usize, 0usize, 0usize);
+        // Of those, the ones no computed ancestor's grid shades either (drawn fully lit).
+        let (mut dark_frames, mut dark_nodes) = (0usize, 0usize);
         let (mut bare_frames, mut bare_nodes, mut textured_checked) = (0usize, 0usize, 0usize);
         // Residency: frames whose pinned nodes (needed, prefetched, drawn, in a fade) alone
         // exceed the cache budget, where nothing else stays and a node leaving the pinned sets
@@ -414,6 +416,8 @@ pub(crate) fn section_streaming(
             }
             unlit_frames += usize::from(debts.unlit > 0);
             unlit_nodes += debts.unlit;
+            dark_frames += usize::from(debts.fully_lit > 0);
+            dark_nodes += debts.fully_lit;
             textured_checked += debts.textured_checked;
             bare_frames += usize::from(debts.without_texture > 0);
             bare_nodes += debts.without_texture;
@@ -444,10 +448,12 @@ pub(crate) fn section_streaming(
             worst_excess_px: worst_excess,
             frame_times,
             light_debt: lighting.then(|| {
-                (
+                [
                     unlit_frames as f64 / frames as f64,
                     unlit_nodes as f64 / lit_checked.max(1) as f64,
-                )
+                    dark_frames as f64 / frames as f64,
+                    dark_nodes as f64 / lit_checked.max(1) as f64,
+                ]
             }),
             texture_debt: (run.textures && gpu.is_some()).then(|| {
                 (
@@ -472,9 +478,11 @@ pub(crate) fn section_streaming(
 struct FrameDebts {
     /// The largest excess over tau (pop debt when above 0).
     excess_px: f64,
-    /// Nodes with a light grid, and how many of them still lack it.
+    /// Nodes with a light grid, how many of them still lack it, and how many of those no
+    /// resident ancestor's computed grid shades (drawn fully lit).
     lit_checked: usize,
     unlit: usize,
+    fully_lit: usize,
     /// Nodes with a ground texture, and how many of them do not have their own made yet.
     textured_checked: usize,
     without_texture: usize,
@@ -515,7 +523,15 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> FrameDebts {
         }
         if let Some(l) = res.work.get::<NodeLight>() {
             out.lit_checked += 1;
-            out.unlit += usize::from(l.grid.grid().is_none());
+            if l.grid.grid().is_none() {
+                out.unlit += 1;
+                let ancestor_lit = d.key.ancestors().any(|a| {
+                    s.resident(a)
+                        .and_then(|r| r.work.get::<NodeLight>())
+                        .is_some_and(|l| l.grid.grid().is_some())
+                });
+                out.fully_lit += usize::from(!ancestor_lit);
+            }
         }
         if res.work.get::<NodeGround>().is_some() {
             out.textured_checked += 1;
@@ -597,8 +613,9 @@ struct FlightOutcome {
     /// Per frame: the streamer's update (the bookkeeping) and the GPU phases.
     frame_times: Vec<[Span; 2]>,
     /// With light grids: the share of frames with a visible drawn node still without its grid,
-    /// and the share of visible drawn nodes (over all frames) without it.
-    light_debt: Option<(f64, f64)>,
+    /// and the share of visible drawn nodes (over all frames) without it; then the same for
+    /// nodes that no resident ancestor's computed grid shades either (drawn fully lit).
+    light_debt: Option<[f64; 4]>,
     /// With ground textures rendered: the same for nodes whose own texture is not made yet
     /// (drawn with their nearest resident ancestor's).
     texture_debt: Option<(f64, f64)>,
@@ -683,7 +700,7 @@ impl FlightOutcome {
             "%",
             params,
         );
-        if let Some((frames, nodes)) = self.light_debt {
+        if let Some([frames, nodes, dark_frames, dark_nodes]) = self.light_debt {
             r.add(
                 "streaming",
                 "light debt (frames with a drawn node still without its light grid)",
@@ -697,6 +714,24 @@ impl FlightOutcome {
                 100.0 * nodes,
                 "%",
                 params,
+            );
+            let params = format!(
+                "{params}; a node without its own grid is shaded by its nearest resident \
+                 ancestor's computed grid, if any"
+            );
+            r.add(
+                "streaming",
+                "frames with a drawn node fully lit (neither its grid nor an ancestor's computed)",
+                100.0 * dark_frames,
+                "%",
+                &params,
+            );
+            r.add(
+                "streaming",
+                "drawn nodes fully lit (share over all frames)",
+                100.0 * dark_nodes,
+                "%",
+                &params,
             );
         }
         if let Some((frames, nodes)) = self.texture_debt {
