@@ -110,10 +110,8 @@ struct Inner {
     canopy: Arc<Canopy>,
     sun: Mutex<Sun>,
     camera_xy_m: Mutex<DVec2>,
-    /// The grids that shade the nodes the last frame drew, and those of their coarser
-    /// ancestors (`drawn.1`, which shade them until their own arrive): computed before any
-    /// other.
-    drawn: Mutex<(FxHashSet<NodeKey>, FxHashSet<NodeKey>)>,
+    /// The grids of the nodes the last frame drew, and those computed before any other.
+    drawn: Mutex<DrawnGrids>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
     computed: AtomicU64,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
@@ -123,6 +121,16 @@ struct Inner {
     wake: Condvar,
     /// Wakes [`LightingContent::wait_idle`].
     idle: Condvar,
+}
+
+/// The grids the last frame's drawn nodes need ([`ContentKind::observe_drawn`]).
+#[derive(Debug, Default)]
+struct DrawnGrids {
+    /// The grids that shade the drawn nodes ([`LightGrid::owner`]).
+    owners: FxHashSet<NodeKey>,
+    /// Those and their coarser ancestors' grids (which shade the drawn nodes until their own
+    /// arrive): computed before any other.
+    first: FxHashSet<NodeKey>,
 }
 
 impl Inner {
@@ -151,9 +159,8 @@ impl Inner {
             .filter_map(Weak::upgrade)
             .filter(|g| !g.computing.load(Ordering::Acquire) && g.stale(sun))
             .min_by(|a, b| {
-                let first = |k: &NodeKey| drawn.0.contains(k) || drawn.1.contains(k);
-                (!first(&a.key))
-                    .cmp(&!first(&b.key))
+                (!drawn.first.contains(&a.key))
+                    .cmp(&!drawn.first.contains(&b.key))
                     .then(distance(a.key).total_cmp(&distance(b.key)))
                     .then(a.key.level.cmp(&b.key.level))
                     .then(a.key.cmp(&b.key))
@@ -217,7 +224,7 @@ impl Inner {
         let sun = self.sun();
         let drawn = self.drawn.lock().expect("drawn lock");
         let grids = self.grids.lock().expect("grids lock");
-        drawn.0.iter().all(|k| {
+        drawn.owners.iter().all(|k| {
             grids
                 .get(k)
                 .and_then(Weak::upgrade)
@@ -276,7 +283,7 @@ impl LightingContent {
                 canopy,
                 sun: Mutex::new(sun),
                 camera_xy_m: Mutex::new(DVec2::ZERO),
-                drawn: Mutex::new((FxHashSet::default(), FxHashSet::default())),
+                drawn: Mutex::new(DrawnGrids::default()),
                 grids: Mutex::new(FxHashMap::default()),
                 computed: AtomicU64::new(0),
                 log: Mutex::new(std::collections::VecDeque::new()),
@@ -416,14 +423,14 @@ impl ContentKind for LightingContent {
     fn observe_drawn(&self, drawn: &[crate::stream::DrawNode]) {
         let tree = &self.inner.tree;
         let mut sets = self.inner.drawn.lock().expect("drawn lock");
-        let (owners, coarser) = &mut *sets;
+        let DrawnGrids { owners, first } = &mut *sets;
         owners.clear();
-        coarser.clear();
         owners.extend(drawn.iter().map(|d| LightGrid::owner(tree, d.key)));
+        first.clear();
         for &k in owners.iter() {
-            for a in k.ancestors() {
-                if !coarser.insert(a) {
-                    break; // the rest of the chain is in already
+            for a in std::iter::once(k).chain(k.ancestors()) {
+                if !first.insert(a) {
+                    break; // so is the rest of its chain
                 }
             }
         }

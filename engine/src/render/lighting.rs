@@ -148,7 +148,6 @@ impl NodeRenderer for LightingRenderer {
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        self.unlit_drawn = 0;
         // The nodes drawn (or drawn through): a lease for those without one yet (the first
         // frame they are drawn, or again each frame while the pool is full), then their tiles
         // written where the grid arrived or was relit.
@@ -182,7 +181,7 @@ impl NodeRenderer for LightingRenderer {
             .filter_map(|a| lease_of(a.work).filter(|l| l.written()).map(|l| (a.key, l)))
             .collect();
         frame.light.fallback.clear();
-        self.coarse_lit_drawn = 0;
+        (self.unlit_drawn, self.coarse_lit_drawn) = (0, 0);
         for (d, is_drawn) in draws
             .drawn
             .iter()

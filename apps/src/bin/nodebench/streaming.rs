@@ -398,7 +398,7 @@ pub(crate) fn section_streaming(
         // same for nodes whose own ground texture is not made yet (they show an ancestor's).
         let (mut unlit_frames, mut unlit_nodes, mut lit_checked) = (0usize, 0usize, 0usize);
         // Of those, the ones no computed ancestor's grid shades either (drawn fully lit).
-        let (mut dark_frames, mut dark_nodes) = (0usize, 0usize);
+        let (mut fully_lit_frames, mut fully_lit_nodes) = (0usize, 0usize);
         let (mut bare_frames, mut bare_nodes, mut textured_checked) = (0usize, 0usize, 0usize);
         // Residency: frames whose pinned nodes (needed, prefetched, drawn, in a fade) alone
         // exceed the cache budget, where nothing else stays and a node leaving the pinned sets
@@ -416,8 +416,8 @@ pub(crate) fn section_streaming(
             }
             unlit_frames += usize::from(debts.unlit > 0);
             unlit_nodes += debts.unlit;
-            dark_frames += usize::from(debts.fully_lit > 0);
-            dark_nodes += debts.fully_lit;
+            fully_lit_frames += usize::from(debts.fully_lit > 0);
+            fully_lit_nodes += debts.fully_lit;
             textured_checked += debts.textured_checked;
             bare_frames += usize::from(debts.without_texture > 0);
             bare_nodes += debts.without_texture;
@@ -451,8 +451,8 @@ pub(crate) fn section_streaming(
                 [
                     unlit_frames as f64 / frames as f64,
                     unlit_nodes as f64 / lit_checked.max(1) as f64,
-                    dark_frames as f64 / frames as f64,
-                    dark_nodes as f64 / lit_checked.max(1) as f64,
+                    fully_lit_frames as f64 / frames as f64,
+                    fully_lit_nodes as f64 / lit_checked.max(1) as f64,
                 ]
             }),
             texture_debt: (run.textures && gpu.is_some()).then(|| {
@@ -700,7 +700,7 @@ impl FlightOutcome {
             "%",
             params,
         );
-        if let Some([frames, nodes, dark_frames, dark_nodes]) = self.light_debt {
+        if let Some([frames, nodes, fully_lit_frames, fully_lit_nodes]) = self.light_debt {
             r.add(
                 "streaming",
                 "light debt (frames with a drawn node still without its light grid)",
@@ -722,14 +722,14 @@ impl FlightOutcome {
             r.add(
                 "streaming",
                 "frames with a drawn node fully lit (neither its grid nor an ancestor's computed)",
-                100.0 * dark_frames,
+                100.0 * fully_lit_frames,
                 "%",
                 &params,
             );
             r.add(
                 "streaming",
                 "drawn nodes fully lit (share over all frames)",
-                100.0 * dark_nodes,
+                100.0 * fully_lit_nodes,
                 "%",
                 &params,
             );
