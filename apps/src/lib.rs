@@ -45,9 +45,9 @@ pub fn open_world(
             found, supported, ..
         }) if is_default && found < i64::from(supported) => {
             generate("is from an older map format")?;
-            Ok(world_of(worldgen::Map::load(dir)?, dir))
+            Ok(world_of(worldgen::Map::load(dir)?, dir, progress))
         }
-        r => Ok(world_of(r?, dir)),
+        r => Ok(world_of(r?, dir, progress)),
     }
 }
 
@@ -55,18 +55,17 @@ pub fn open_world(
 /// checked against the map on every load, rewritten when it does not match).
 pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 
-/// Maps with at least this many height cells keep their surface error grids in
-/// [`SURFACE_ERROR_CACHE`] (the 8 km default map has 4 M and computes them in seconds; small
-/// maps compute them in milliseconds and are left untouched).
-pub const CACHE_MIN_CELLS: usize = 1 << 20;
+/// Maps with at least this many height cells (a 2 km map at 4 m) keep their surface error
+/// grids in [`SURFACE_ERROR_CACHE`]: the 8 km default map has 4 M and computes them in about a
+/// minute on two cores (most of it the 32 m nodes' bounds,
+/// [`engine::terrain::precomputed`]), a 2 km map in seconds; smaller maps compute them in
+/// a fraction of a second and are left untouched.
+pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
-fn world_of(map: worldgen::Map, dir: &Path) -> World {
+fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::Progress) -> World {
     let cells = (map.heights.width() - 1) * (map.heights.height() - 1);
-    if cells >= CACHE_MIN_CELLS {
-        World::with_error_cache(map, &dir.join(SURFACE_ERROR_CACHE))
-    } else {
-        World::new(map)
-    }
+    let cache = (cells >= CACHE_MIN_CELLS).then(|| dir.join(SURFACE_ERROR_CACHE));
+    engine::terrain::precomputed::open(map, cache.as_deref(), progress)
 }
 
 /// The `p`-quantile (0..=1) of `sorted` (ascending): the element at index `round((n - 1) p)`,

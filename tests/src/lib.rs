@@ -185,15 +185,21 @@ pub mod terrain {
         engine::camera::Camera::look_at(p, p + dir, 60f64.to_radians(), viewport)
     }
 
+    /// `map` opened as the stream opens it: the map-error grids and the 32 m nodes' bounds
+    /// measured once ([`engine::terrain::precomputed`]), no cache file.
+    pub fn world_of(map: Map) -> World {
+        engine::terrain::precomputed::open(map, None, &worldgen::progress::Silent)
+    }
+
     /// The committed tiny map as a world.
     pub fn tiny_world() -> World {
-        World::new(Map::load(&super::tiny_map_dir()).expect("tiny map loads"))
+        world_of(Map::load(&super::tiny_map_dir()).expect("tiny map loads"))
     }
 
     /// A generated 2 km map (seed 16, 4 m spacing), large enough to hold every kind of
     /// worldgen's ground patches (fields, dirt, rock outcrops), as a world.
     pub fn patches_world() -> World {
-        World::new(super::generated(&super::patches_map_params()))
+        world_of(super::generated(&super::patches_map_params()))
     }
 
     /// The tiny map with hard cases burned into its heights: a 100 m vertical cliff (between
@@ -217,7 +223,7 @@ pub mod terrain {
         }
         map.heights.set(20, 90, map.heights.get(20, 90) + 50.0);
         map.heights.set(100, 100, map.heights.get(100, 100) - 30.0);
-        World::new(map)
+        world_of(map)
     }
 
     /// A world with its origin moved by (dx, dy) metres.
@@ -238,7 +244,7 @@ pub mod terrain {
             b.x_m += dx;
             b.y_m += dy;
         }
-        World::new(map)
+        world_of(map)
     }
 
     pub fn tree_of(world: &World) -> QuadTree {

@@ -21,6 +21,65 @@ impl Progress for Silent {
     fn end(&self) {}
 }
 
+/// indicatif bars on stderr for the library's long steps (the CLIs'); hidden ones report
+/// nothing, and indicatif draws nothing where stderr is not a terminal.
+pub struct Bars {
+    bar: std::sync::Mutex<Option<indicatif::ProgressBar>>,
+    hidden: bool,
+}
+
+impl Bars {
+    pub fn new(hidden: bool) -> Self {
+        Self {
+            bar: std::sync::Mutex::new(None),
+            hidden,
+        }
+    }
+
+    /// Moves the current step's bar to `done` units (for steps that report positions).
+    pub fn set_position(&self, done: u64) {
+        if let Ok(slot) = self.bar.lock()
+            && let Some(b) = slot.as_ref()
+        {
+            b.set_position(done);
+        }
+    }
+}
+
+impl Progress for Bars {
+    fn begin(&self, step: &str, total: u64) {
+        if self.hidden {
+            return;
+        }
+        let bar = indicatif::ProgressBar::new(total);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{msg:28} [{bar:36}] {percent:>3}% {elapsed_precise} ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        bar.set_message(step.to_string());
+        if let Ok(mut slot) = self.bar.lock() {
+            *slot = Some(bar);
+        }
+    }
+    fn advance(&self, n: u64) {
+        if let Ok(slot) = self.bar.lock()
+            && let Some(b) = slot.as_ref()
+        {
+            b.inc(n);
+        }
+    }
+    fn end(&self) {
+        if let Ok(mut slot) = self.bar.lock()
+            && let Some(b) = slot.take()
+        {
+            b.finish_and_clear();
+        }
+    }
+}
+
 /// Wall time of one named step.
 #[derive(Debug, Clone)]
 pub struct StepTime {

@@ -9,7 +9,8 @@
 //! Terrain nodes whose vertex spacing is one of these grids take their bounds from here
 //! ([`crate::terrain::bounds::from_map_error`]) instead of measuring the surface at run time: the
 //! blocks of a node of spacing `hs 2^k` are exactly these blocks. On the default map that is
-//! every node of 64 m and more.
+//! every node of 64 m and more; the 32 m nodes' grid (`k = -2`) is added by the terrain
+//! ([`crate::terrain::precomputed`], [`MapErrorPyramid::insert_finer`]).
 //!
 //! Why it is a proof: the argument of [`crate::terrain::bounds`]. `F` is evaluated on a check
 //! lattice of [`CHECK_PER_CELL`] points per height-cell side (spacing `c`); every grid's vertices
@@ -51,7 +52,8 @@ struct Level {
 }
 
 /// The per-block bounds of `F` for the grids of spacing `hs 2^k`, `k >= -1`: grid index
-/// `k + 1`, so grid 0 has spacing `hs / 2`.
+/// `k + 1`, so grid 0 has spacing `hs / 2`; with [`Self::insert_finer`], also `k = -2` (grid
+/// index `k + 2`).
 #[derive(Debug, Clone, Default)]
 pub struct MapErrorPyramid {
     origin_m: [f64; 2],
@@ -155,6 +157,35 @@ impl MapErrorPyramid {
         };
         p.spread_finer_errors();
         p
+    }
+
+    /// Adds a grid of half the finest grid's spacing, whose blocks (`per_row` x `rows`,
+    /// row-major from the map's south-west corner, `[z_min, z_max, error, finer error]` each)
+    /// were bounded by the caller: the terrain's 32 m nodes on a 4 m map, measured by the node
+    /// bounds' own argument ([`crate::terrain::precomputed`]). Stored rounded outwards like the
+    /// others. The coarser grids' finer-grid bounds already cover it (they bound every grid of
+    /// spacing at most `hs / 2`), so they are not changed.
+    pub fn insert_finer(&mut self, per_row: usize, rows: usize, blocks: &[[f64; 4]]) {
+        assert_eq!(blocks.len(), per_row * rows, "one value per block");
+        assert!(
+            !self.levels.is_empty(),
+            "the map's own grids are computed first"
+        );
+        self.spacing_m *= 0.5;
+        self.levels.insert(
+            0,
+            Level {
+                per_row,
+                rows,
+                blocks: blocks.iter().map(|b| round_outwards(*b)).collect(),
+            },
+        );
+    }
+
+    /// The vertex spacing of the finest grid kept (`hs / 2`, or `hs / 4` with
+    /// [`Self::insert_finer`]'s grid).
+    pub fn finest_spacing_m(&self) -> f64 {
+        self.spacing_m
     }
 
     /// Heap bytes of the blocks.

@@ -9,8 +9,9 @@
 //! map or a changed surface definition in the engine both invalidate the file.
 //!
 //! Layout (little-endian): magic `TVS-SERR`, format version u32, key u64, payload checksum u64,
-//! then the payload: origin (2 f64), the finest grid's spacing (f64, half the height spacing; version
-//! 1 had no such grid), grid count (u32), and per grid its
+//! then the payload: origin (2 f64), the finest grid's spacing (f64: half the height spacing, or a
+//! quarter with the terrain's measured grid, [`crate::terrain::precomputed`]; version 1 had
+//! neither), grid count (u32), and per grid its
 //! blocks per row and rows (2 u32) and its blocks (4 f32 each).
 
 use super::map_error::MapErrorPyramid;
@@ -19,7 +20,7 @@ use std::hash::{Hash, Hasher};
 use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"TVS-SERR";
-const FORMAT_VERSION: u32 = 2;
+const FORMAT_VERSION: u32 = 3;
 
 /// Why a cache file was not used.
 #[derive(Debug, thiserror::Error)]
@@ -36,10 +37,13 @@ pub enum CacheMiss {
     Damaged,
 }
 
-/// The key of `world`'s surface: see the module docs.
-pub fn surface_key(world: &World) -> u64 {
+/// The key of `world`'s surface and of the version of the caller's computation (`method`: how
+/// grids finer than the map's own are measured, see [`World::with_error_cache`]): see the module
+/// docs.
+pub fn surface_key(world: &World, method: u64) -> u64 {
     let mut h = std::hash::DefaultHasher::new();
     FORMAT_VERSION.hash(&mut h);
+    method.hash(&mut h);
     let map = &world.map;
     for v in map.heights.data() {
         v.to_bits().hash(&mut h);
@@ -120,11 +124,17 @@ pub fn write(path: &Path, key: u64, pyramid: &MapErrorPyramid) -> std::io::Resul
 }
 
 impl World {
-    /// [`World::new`], with the map-error grids read from `cache_file` when it holds them for
-    /// this surface, else computed and written there (a write failure is logged, not fatal).
-    pub fn with_error_cache(map: worldgen::Map, cache_file: &Path) -> Self {
+    /// The world with the map-error grids read from `cache_file` when it holds them for this
+    /// surface and this `method` (the version of `compute`), else computed by `compute` and
+    /// written there (a write failure is logged, not fatal).
+    pub fn with_error_cache(
+        map: worldgen::Map,
+        cache_file: &Path,
+        method: u64,
+        compute: impl FnOnce(&mut World),
+    ) -> Self {
         let mut world = Self::without_error_grids(map);
-        let key = surface_key(&world);
+        let key = surface_key(&world, method);
         match read(cache_file, key) {
             Ok(p) => world.map_error = p,
             Err(why) => {
@@ -134,7 +144,7 @@ impl World {
                         cache_file.display()
                     );
                 }
-                world.compute_error_grids();
+                compute(&mut world);
                 if let Err(e) = write(cache_file, key, &world.map_error) {
                     log::warn!("{}: cannot write ({e})", cache_file.display());
                 }
@@ -147,6 +157,14 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::terrain::precomputed::{self, MEASUREMENT_VERSION};
+    use worldgen::progress::Silent;
+
+    /// The world as the stream opens it (the map's grids and the terrain's measured finest grid),
+    /// with `cache` when given.
+    fn opened(map: worldgen::Map, cache: Option<&Path>) -> World {
+        precomputed::open(map, cache, &Silent)
+    }
 
     fn tiny_map() -> worldgen::Map {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
@@ -162,12 +180,20 @@ mod tests {
     #[test]
     fn the_cache_is_written_read_back_and_equals_a_fresh_computation() {
         let path = temp_file("roundtrip");
-        let fresh = World::new(tiny_map());
-        let first = World::with_error_cache(tiny_map(), &path);
+        let fresh = opened(tiny_map(), None);
+        let first = opened(tiny_map(), Some(&path));
         assert_eq!(first.map_error.to_bytes(), fresh.map_error.to_bytes());
-        let read_back = read(&path, surface_key(&fresh)).expect("valid cache file");
+        let key = surface_key(&fresh, MEASUREMENT_VERSION);
+        let read_back = read(&path, key).expect("valid cache file");
         assert_eq!(read_back.to_bytes(), fresh.map_error.to_bytes());
-        assert!(read_back.level_count() > 0);
+        // The map's own grids and the terrain's measured grid of a quarter height spacing.
+        assert!(read_back.level_count() > World::new(tiny_map()).map_error.level_count());
+        assert_eq!(read_back.finest_spacing_m(), 1.0);
+        // Another measurement version does not use the file.
+        assert!(matches!(
+            read(&path, surface_key(&fresh, MEASUREMENT_VERSION + 1)),
+            Err(CacheMiss::Stale)
+        ));
         let _ = std::fs::remove_dir_all(path.parent().expect("dir"));
     }
 
@@ -176,8 +202,8 @@ mod tests {
     #[test]
     fn tampered_or_stale_cache_files_are_refused_and_recomputed() {
         let path = temp_file("tamper");
-        let fresh = World::new(tiny_map());
-        let key = surface_key(&fresh);
+        let fresh = opened(tiny_map(), None);
+        let key = surface_key(&fresh, MEASUREMENT_VERSION);
         write(&path, key, &fresh.map_error).expect("write");
         // Lower one stored error bound (the last f32 of the file, a finer-grid error).
         let mut bytes = std::fs::read(&path).expect("read");
@@ -187,7 +213,7 @@ mod tests {
         bytes[n - 4..].copy_from_slice(&(v * 0.5).to_le_bytes());
         std::fs::write(&path, &bytes).expect("write tampered");
         assert!(matches!(read(&path, key), Err(CacheMiss::Damaged)));
-        let reopened = World::with_error_cache(tiny_map(), &path);
+        let reopened = opened(tiny_map(), Some(&path));
         assert_eq!(reopened.map_error.to_bytes(), fresh.map_error.to_bytes());
         assert!(read(&path, key).is_ok(), "the file was rewritten");
         // Other heights: the key differs, the file is stale for that map.
@@ -195,13 +221,11 @@ mod tests {
         changed
             .heights
             .set(10, 10, changed.heights.get(10, 10) + 1.0);
-        let changed_world = World::new(changed.clone());
-        assert_ne!(surface_key(&changed_world), key);
-        assert!(matches!(
-            read(&path, surface_key(&changed_world)),
-            Err(CacheMiss::Stale)
-        ));
-        let reopened = World::with_error_cache(changed, &path);
+        let changed_world = opened(changed.clone(), None);
+        let changed_key = surface_key(&changed_world, MEASUREMENT_VERSION);
+        assert_ne!(changed_key, key);
+        assert!(matches!(read(&path, changed_key), Err(CacheMiss::Stale)));
+        let reopened = opened(changed, Some(&path));
         assert_eq!(
             reopened.map_error.to_bytes(),
             changed_world.map_error.to_bytes()

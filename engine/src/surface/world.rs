@@ -143,7 +143,8 @@ impl World {
     }
 
     /// Opens `map`, computing the map-error grids ([`super::map_error`]) on all cores (seconds
-    /// on an 8 km map; [`World::with_error_cache`] keeps them in a file).
+    /// on an 8 km map; [`World::with_error_cache`] keeps them in a file). The stream opens maps
+    /// with [`crate::terrain::precomputed::open`], which adds the 32 m nodes' grid.
     pub fn new(map: Map) -> Self {
         let mut world = Self::without_error_grids(map);
         world.compute_error_grids();

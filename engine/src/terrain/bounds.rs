@@ -27,7 +27,9 @@
 //! ([`crate::surface::map_error`]; for `k = -1` that is two check cells per quad, not four, so
 //! those bounds are looser: 1.4x the measured ones on average on the default map's flight,
 //! which costs 4 % more triangles at tau 2 px) and [`measure`] reads its blocks
-//! ([`from_map_error`]).
+//! ([`from_map_error`]). Nodes of spacing a quarter of the height spacing (32 m on the default
+//! map) are measured by [`measured_blocks`], the run-time measurement itself, once per map into
+//! the finest map-error grid ([`super::precomputed`]), and read the same way.
 //!
 //! Leaves. A node whose children are leaves computes their meshes' errors on its own lattice
 //! anyway (the children's term of `U(N)` below); taken per child block, with each child's height
@@ -294,6 +296,53 @@ pub fn measure_surface(
     key: NodeKey,
     leaves: bool,
 ) -> (NodeBounds, Option<[NodeBounds; 4]>) {
+    let measured = measure_lattice(world, tree, key);
+    let has_vegetation = crate::vegetation::representation::has_vegetation(world, tree.rect(key));
+    let node = finish(tree, key, &measured.blocks, has_vegetation);
+    let leaves = (leaves && measured.depth_below >= 1).then(|| {
+        let cells = ChildCells {
+            lattice: &measured.lattice,
+            children: &measured.children,
+            m: measured.m,
+            regions: &measured.regions,
+            between: &measured.between,
+        };
+        let kids = key.children();
+        std::array::from_fn(|q| leaf_children(world, tree, kids[q], &cells, &measured.blocks))
+    });
+    (node, leaves)
+}
+
+/// What a map-error grid keeps of `key`'s measurement on its check lattice
+/// ([`measure_surface`]), per block: `[z_min, z_max, e(N), U(N)]` before the f32 rounding of
+/// vertices that [`from_map_error`] adds, as for the grids computed in
+/// [`crate::surface::map_error`] (see [`super::precomputed`]).
+pub fn measured_blocks(world: &World, tree: &QuadTree, key: NodeKey) -> [[f64; 4]; BLOCKS] {
+    let blocks = measure_lattice(world, tree, key).blocks;
+    std::array::from_fn(|i| {
+        let b = &blocks[i];
+        let descendants = if key.level >= tree.max_level {
+            0.0
+        } else {
+            b.children.max(b.deeper)
+        };
+        [b.lo, b.hi, b.own, descendants]
+    })
+}
+
+/// A node's blocks measured on its check lattice, with what its leaves' bounds need.
+struct LatticeMeasure {
+    blocks: [BlockMeasure; BLOCKS],
+    lattice: Vec<f64>,
+    children: Vec<f64>,
+    m: usize,
+    regions: CellRegions,
+    between: Vec<[f64; 2]>,
+    depth_below: u8,
+}
+
+/// The module docs' measurement of `key` on its check lattice, refined where loose.
+fn measure_lattice(world: &World, tree: &QuadTree, key: NodeKey) -> LatticeMeasure {
     let r = tree.rect(key);
     let sub = CHECK_SUBDIV as usize;
     let c = tree.spacing_m(key.level) / f64::from(CHECK_SUBDIV);
@@ -430,20 +479,15 @@ pub fn measure_surface(
             take(&mut blocks[b], e);
         }
     }
-    let has_vegetation = crate::vegetation::representation::has_vegetation(world, r);
-    let node = finish(tree, key, &blocks, has_vegetation);
-    let leaves = (leaves && depth_below >= 1).then(|| {
-        let cells = ChildCells {
-            lattice: &lattice,
-            children: &children,
-            m,
-            regions: &regions,
-            between: &between,
-        };
-        let kids = key.children();
-        std::array::from_fn(|q| leaf_children(world, tree, kids[q], &cells, &blocks))
-    });
-    (node, leaves)
+    LatticeMeasure {
+        blocks,
+        lattice,
+        children,
+        m,
+        regions,
+        between,
+        depth_below,
+    }
 }
 
 /// What a node's measurement knows of its children's meshes: the check lattice's heights and

@@ -2,7 +2,8 @@
 //! 16 m tiles of the finest surface, and crack-free skirted node meshes.
 //!
 //! - [`quadtree`]: node keys and geometry (root over the map, 8 m leaves, 32 x 32 quads a node).
-//! - [`bounds`]: proven, monotone per-node errors and height ranges.
+//! - [`bounds`]: proven, monotone per-node errors and height ranges; [`precomputed`]: the 32 m
+//!   nodes' bounds measured once per map and kept with the map-error grids.
 //! - [`select`]: split while the projected error exceeds tau; frustum culling.
 //! - [`tiles`]: 16 m tiles of the finest surface at 0.25 m, refcounted.
 //! - [`mesh`]: node meshes with skirts of proven depth; [`mesh_surface`]: a mesh's drawn
@@ -14,6 +15,7 @@ pub mod bounds;
 pub mod content;
 pub mod mesh;
 pub mod mesh_surface;
+pub mod precomputed;
 pub mod quadtree;
 pub mod refine;
 pub mod select;

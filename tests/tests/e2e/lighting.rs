@@ -118,7 +118,7 @@ pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
     }
     map.trees.clear();
     map.decals.clear();
-    World::new(map)
+    tests::terrain::world_of(map)
 }
 
 /// On 300 random points of the hard tiny map (`cliff_world`: a 100 m cliff, spikes, a flat sea,

@@ -211,9 +211,11 @@ fn errors_are_monotone_and_bound_every_descendant() {
 }
 
 /// Every node of random leaf chains on the hard maps, whether its bounds come from the
-/// precomputed map-error grids (nodes whose spacing is the height spacing times 2^k, k >= -1) or are
-/// measured at run time (the leaves from their parent's lattice): the bound of each block covers the densely measured error, and the
-/// surface stays in the block's height range. The precomputed path is really taken.
+/// precomputed map-error grids (nodes whose spacing is the height spacing times 2^k, k >= -1,
+/// and the 32 m nodes of spacing a quarter of it, measured once per map) or are measured at run
+/// time (the 16 m nodes, and the leaves from their parent's lattice): the bound of each block
+/// covers the densely measured error, and the surface stays in the block's height range. The
+/// precomputed path is really taken, for the 32 m nodes too.
 #[test]
 fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
     for (name, world) in [("tiny", tiny_world()), ("cliff", cliff_world())] {
@@ -257,8 +259,9 @@ fn precomputed_and_measured_bounds_cover_the_dense_error_on_leaf_chains() {
                 }
             }
         }
+        // Per chain, levels 0 - 4 (512 m to 32 m) precomputed, the 16 m node and the leaf not.
         assert!(
-            precomputed >= 8 * 3 && measured >= 8 * 3 && derived == 8,
+            precomputed == 8 * 5 && measured == 8 * 2 && derived == 8,
             "{name}: {precomputed} precomputed, {measured} measured, {derived} leaves from \
              their parent's lattice"
         );
@@ -814,7 +817,7 @@ fn imported_srtm_sea_is_exact_and_the_coast_is_watertight() {
     };
     let params = worldgen::dem::ImportParams::new(path);
     let (map, _) = worldgen::dem::import(&params, &mut Vec::new()).expect("import");
-    let world = World::new(map);
+    let world = tests::terrain::world_of(map);
     let tree = tree_of(&world);
     let mut cache = BoundsCache::new();
     let mut tiles = TileCache::new();

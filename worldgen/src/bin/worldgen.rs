@@ -2,13 +2,11 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
-use std::sync::Mutex;
 use std::time::Instant;
 use worldgen::Map;
 use worldgen::generate::GenerateParams;
-use worldgen::progress::{Progress, StepTime};
+use worldgen::progress::{Bars, Progress, StepTime};
 
 /// Map tools for the terrain streaming engine.
 ///
@@ -144,46 +142,6 @@ enum Command {
     },
 }
 
-/// indicatif bars for the library's long steps.
-struct Bars {
-    bar: Mutex<Option<ProgressBar>>,
-    hidden: bool,
-}
-
-impl Progress for Bars {
-    fn begin(&self, step: &str, total: u64) {
-        if self.hidden {
-            return;
-        }
-        let bar = ProgressBar::new(total);
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{msg:28} [{bar:36}] {percent:>3}% {elapsed_precise} ETA {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        bar.set_message(step.to_string());
-        if let Ok(mut slot) = self.bar.lock() {
-            *slot = Some(bar);
-        }
-    }
-    fn advance(&self, n: u64) {
-        if let Ok(slot) = self.bar.lock()
-            && let Some(b) = slot.as_ref()
-        {
-            b.inc(n);
-        }
-    }
-    fn end(&self) {
-        if let Ok(mut slot) = self.bar.lock()
-            && let Some(b) = slot.take()
-        {
-            b.finish_and_clear();
-        }
-    }
-}
-
 /// Prints to stdout, ignoring a closed pipe (`worldgen ... | head` must not panic).
 macro_rules! say {
     ($($arg:tt)*) => {{
@@ -237,11 +195,7 @@ fn build_pm(
             bars.begin(part, total as u64);
             current = part.to_string();
         }
-        if let Ok(slot) = bars.bar.lock()
-            && let Some(b) = slot.as_ref()
-        {
-            b.set_position(done as u64);
-        }
+        bars.set_position(done as u64);
     });
     bars.end();
     file::write(&pm, out)?;
@@ -308,10 +262,7 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
-    let bars = Bars {
-        bar: Mutex::new(None),
-        hidden: cli.quiet,
-    };
+    let bars = Bars::new(cli.quiet);
     match cli.command {
         Command::Generate {
             seed,

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let load = Instant::now();
-    let world = open_world(&cli.map, &worldgen::progress::Silent)
+    let world = open_world(&cli.map, &worldgen::progress::Bars::new(false))
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let map_load_s = load.elapsed().as_secs_f64();
     let world_memory: Vec<(&str, usize)> = world.memory_bytes();

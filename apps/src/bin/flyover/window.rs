@@ -19,7 +19,7 @@ use winit::window::{Window, WindowId};
 
 pub fn run(cli: &Cli) -> Result<()> {
     // Open the map before the window, so a map error is reported plainly.
-    let world = open_world(&cli.map, &worldgen::progress::Silent)
+    let world = open_world(&cli.map, &worldgen::progress::Bars::new(false))
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let event_loop = EventLoop::new().context("creating the window event loop")?;

@@ -127,7 +127,7 @@ struct Cli {
 
 pub(crate) fn open_world(path: &std::path::Path) -> Result<World> {
     // The viewer's: generates the default map when missing or from an older map format.
-    apps::open_world(path, &worldgen::progress::Silent)
+    apps::open_world(path, &worldgen::progress::Bars::new(false))
         .with_context(|| format!("opening map {}", path.display()))
 }
 

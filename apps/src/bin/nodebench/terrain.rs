@@ -127,15 +127,7 @@ pub(crate) fn section_terrain(
         "%",
         &format!("{params}; the rest are measured on their check lattice"),
     );
-    let t0 = Instant::now();
-    let grids = engine::surface::map_error::MapErrorPyramid::new(world);
-    r.add(
-        "terrain",
-        "map-error grids computed at load",
-        t0.elapsed().as_secs_f64() * 1e3,
-        "ms",
-        &format!("{} grids, on all cores, once per map", grids.level_count()),
-    );
+    load_rows(world, r);
     r.add(
         "terrain",
         "monotone step: nodes whose stored error exceeds their own mesh bound",
@@ -197,6 +189,38 @@ pub(crate) fn section_terrain(
             nps,
             "nodes/s",
             "cold caches per node",
+        );
+    }
+}
+
+/// What opening the map costs once per map: the map-error grids and the 32 m nodes' bounds (both
+/// kept in the map's surface-error cache file afterwards).
+fn load_rows(world: &World, r: &mut Report) {
+    let t0 = Instant::now();
+    let grids = engine::surface::map_error::MapErrorPyramid::new(world);
+    r.add(
+        "terrain",
+        "map-error grids computed at load",
+        t0.elapsed().as_secs_f64() * 1e3,
+        "ms",
+        &format!(
+            "the map's own {} grids, on all cores, once per map",
+            grids.level_count()
+        ),
+    );
+    let t0 = Instant::now();
+    if let Some(g) = engine::terrain::precomputed::measure(world, &worldgen::progress::Silent) {
+        r.add(
+            "terrain",
+            "32 m nodes' bounds measured at load",
+            t0.elapsed().as_secs_f64() * 1e3,
+            "ms",
+            &format!(
+                "{} nodes (the finest map-error grid, {:.1} MiB), on all cores, once per map \
+                 (kept in the map's surface-error cache file)",
+                g.nodes,
+                (g.blocks.len() * 16) as f64 / f64::from(1 << 20)
+            ),
         );
     }
 }
