@@ -17,7 +17,7 @@ use super::scene::{FrameDraws, NodeRenderer};
 use super::terrain::legend_srgb;
 use crate::color::srgb_to_linear;
 use crate::lighting::content::{LightingContent, NodeLight};
-use crate::lighting::grid::{grid_level, layer_heights_m};
+use crate::lighting::grid::layer_heights_m;
 use crate::lighting::seams::{coarser_sides, node_columns};
 use crate::stream::{NodeWork, Shared};
 use crate::surface::World;
@@ -47,27 +47,19 @@ fn lease_of(work: &NodeWork) -> Option<&Arc<LightLease>> {
 /// columns, which are every 2nd, 4th ... of its own: the same values there), else
 /// [`NO_LIGHT`].
 pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> LightEntry {
-    let own = lease_of(work).filter(|l| l.written());
-    let Some(l) = own else {
-        return frame.light.fallback.get(&work.key).map_or(NO_LIGHT, |l| {
-            let grid = l.entry(tree, work.key);
-            LightEntry {
-                grid,
-                // No seam blending: the node's width in the ancestor grid's columns.
-                seam: [
-                    0.0,
-                    (tree.node_size_m(work.key.level) * f64::from(grid[1])) as f32,
-                ],
-            }
-        });
+    // An ancestor's grid blends no seams (its sides' steps are for its own nodes).
+    let (l, steps) = match lease_of(work).filter(|l| l.written()) {
+        Some(l) => (l, frame.light.seams.get(&work.key).map_or(0, |s| s.0)),
+        None => match frame.light.fallback.get(&work.key) {
+            Some(l) => (l, 0),
+            None => return NO_LIGHT,
+        },
     };
-    let grid = l.entry(tree, work.key);
-    let steps = frame.light.seams.get(&work.key).map_or(0, |s| s.0);
     LightEntry {
-        grid,
+        grid: l.entry(tree, work.key),
         seam: [
             f32::from(steps),
-            node_columns(work.key.level, grid_level(tree)) as f32,
+            node_columns(work.key.level, l.grid.key.level) as f32,
         ],
     }
 }

@@ -319,15 +319,8 @@ pub fn measure_surface(
 /// [`crate::surface::map_error`] (see [`super::precomputed`]).
 pub fn measured_blocks(world: &World, tree: &QuadTree, key: NodeKey) -> [[f64; 4]; BLOCKS] {
     let blocks = measure_lattice(world, tree, key).blocks;
-    std::array::from_fn(|i| {
-        let b = &blocks[i];
-        let descendants = if key.level >= tree.max_level {
-            0.0
-        } else {
-            b.children.max(b.deeper)
-        };
-        [b.lo, b.hi, b.own, descendants]
-    })
+    let leaf = key.level >= tree.max_level;
+    blocks.map(|b| [b.lo, b.hi, b.own, b.descendants_m(leaf)])
 }
 
 /// A node's blocks measured on its check lattice, with what its leaves' bounds need.
@@ -583,6 +576,15 @@ impl BlockMeasure {
         deeper: 0.0,
         measured: 0.0,
     };
+
+    /// The bound `U` of every descendant's mesh in the block (none for a leaf's).
+    fn descendants_m(&self, leaf: bool) -> f64 {
+        if leaf {
+            0.0
+        } else {
+            self.children.max(self.deeper)
+        }
+    }
 }
 
 /// Node bounds from the blocks' measurements: f32 vertex rounding added (relative 2^-24 of the
@@ -602,7 +604,7 @@ fn finish(
         if leaf {
             0.0
         } else {
-            b.children.max(b.deeper) + rounding
+            b.descendants_m(leaf) + rounding
         }
     };
     let blocks: [BlockBounds; BLOCKS] = std::array::from_fn(|i| BlockBounds {

@@ -93,7 +93,7 @@ pub fn measure(world: &World, progress: &dyn Progress) -> Option<NodeGrid> {
 
 /// [`measure`]s the nodes and adds their blocks to `world`'s map-error grids as the finest grid
 /// (after the map's own grids are computed).
-pub fn add_to(world: &mut World, progress: &dyn Progress) {
+fn add_to(world: &mut World, progress: &dyn Progress) {
     let t0 = std::time::Instant::now();
     if let Some(grid) = measure(world, progress) {
         world
