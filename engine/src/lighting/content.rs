@@ -109,9 +109,14 @@ struct Inner {
     tree: QuadTree,
     canopy: Arc<Canopy>,
     sun: Mutex<Sun>,
-    camera_xy_m: Mutex<DVec2>,
-    /// The grids of the nodes the last frame drew, and those computed before any other.
-    drawn: Mutex<DrawnGrids>,
+    /// The camera's x and y (m) as `f64` bits: written by the frame thread without waiting
+    /// on a light thread (a torn pair between two frames only orders one pick differently).
+    camera_xy_m: [AtomicU64; 2],
+    /// The grids of the nodes the last frame drew, and those computed before any other. The
+    /// frame thread swaps in a new set and the light threads take the current one, each
+    /// holding the lock only for that: the frame never waits on a light thread (idle
+    /// priority) scanning its grids.
+    drawn: Mutex<Arc<DrawnGrids>>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
     computed: AtomicU64,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
@@ -144,8 +149,12 @@ impl Inner {
     /// first and shade everything under them at their columns until the finer grids arrive).
     fn next_stale(&self) -> Option<Arc<SharedGrid>> {
         let sun = self.sun();
-        let camera = *self.camera_xy_m.lock().expect("camera lock");
-        let drawn = self.drawn.lock().expect("drawn lock");
+        let [x, y] = &self.camera_xy_m;
+        let camera = DVec2::new(
+            f64::from_bits(x.load(Ordering::Relaxed)),
+            f64::from_bits(y.load(Ordering::Relaxed)),
+        );
+        let drawn = Arc::clone(&self.drawn.lock().expect("drawn lock"));
         let mut grids = self.grids.lock().expect("grids lock");
         grids.retain(|_, g| g.strong_count() > 0);
         let distance = |key: NodeKey| {
@@ -222,7 +231,7 @@ impl Inner {
     /// Whether every grid that shades a drawn node is computed for the current sun.
     fn drawn_lit(&self) -> bool {
         let sun = self.sun();
-        let drawn = self.drawn.lock().expect("drawn lock");
+        let drawn = Arc::clone(&self.drawn.lock().expect("drawn lock"));
         let grids = self.grids.lock().expect("grids lock");
         drawn.owners.iter().all(|k| {
             grids
@@ -282,8 +291,8 @@ impl LightingContent {
                 tree: QuadTree::new(world.origin_m(), world.size_m()),
                 canopy,
                 sun: Mutex::new(sun),
-                camera_xy_m: Mutex::new(DVec2::ZERO),
-                drawn: Mutex::new(DrawnGrids::default()),
+                camera_xy_m: [AtomicU64::new(0), AtomicU64::new(0)],
+                drawn: Mutex::new(Arc::new(DrawnGrids::default())),
                 grids: Mutex::new(FxHashMap::default()),
                 computed: AtomicU64::new(0),
                 log: Mutex::new(std::collections::VecDeque::new()),
@@ -329,7 +338,9 @@ impl LightingContent {
 
     /// Where the camera is (the light threads compute the nearest stale grid next).
     pub fn set_camera(&self, camera_xy_m: DVec2) {
-        *self.inner.camera_xy_m.lock().expect("camera lock") = camera_xy_m;
+        let [x, y] = &self.inner.camera_xy_m;
+        x.store(camera_xy_m.x.to_bits(), Ordering::Relaxed);
+        y.store(camera_xy_m.y.to_bits(), Ordering::Relaxed);
     }
 
     /// Sets a new sun: every live grid is relit in the background, nearest to the camera first,
@@ -422,18 +433,23 @@ impl ContentKind for LightingContent {
 
     fn observe_drawn(&self, drawn: &[crate::stream::DrawNode]) {
         let tree = &self.inner.tree;
-        let mut sets = self.inner.drawn.lock().expect("drawn lock");
-        let DrawnGrids { owners, first } = &mut *sets;
-        owners.clear();
-        owners.extend(drawn.iter().map(|d| LightGrid::owner(tree, d.key)));
-        first.clear();
-        for &k in owners.iter() {
+        let owners: FxHashSet<NodeKey> = drawn
+            .iter()
+            .map(|d| LightGrid::owner(tree, d.key))
+            .collect();
+        let mut first =
+            FxHashSet::with_capacity_and_hasher(2 * owners.len(), rustc_hash::FxBuildHasher);
+        for &k in &owners {
             for a in std::iter::once(k).chain(k.ancestors()) {
                 if !first.insert(a) {
                     break; // so is the rest of its chain
                 }
             }
         }
+        let sets = Arc::new(DrawnGrids { owners, first });
+        // The old sets go after the lock (a light thread may still hold them).
+        let old = std::mem::replace(&mut *self.inner.drawn.lock().expect("drawn lock"), sets);
+        drop(old);
     }
 
     fn phases(self: Arc<Self>) -> Vec<Phase> {

@@ -1,30 +1,45 @@
-//! Node bounds known so far, shared by selection (reads) and jobs (writes).
+//! Node bounds known so far, shared by the jobs (which measure and add them) and handed on to
+//! the streamer's own copy for selection.
 
 use crate::surface::World;
 use crate::terrain::bounds::{self, NodeBounds};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use rustc_hash::FxHashMap;
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::{Mutex, MutexGuard, PoisonError, TryLockError};
 
-/// Node bounds known so far, shared by selection (reads) and jobs (writes).
+/// Node bounds known so far, shared by all threads. The frame thread never walks this map:
+/// it takes the bounds added since its last look ([`Self::take_fresh`]) without waiting, so a
+/// job adding bounds (or growing the map) never holds up a frame's selection.
 #[derive(Debug, Default)]
 pub struct BoundsStore {
-    map: Mutex<FxHashMap<NodeKey, NodeBounds>>,
+    known: Mutex<Known>,
+}
+
+#[derive(Debug, Default)]
+struct Known {
+    map: FxHashMap<NodeKey, NodeBounds>,
+    /// Added since the last [`BoundsStore::take_fresh`].
+    fresh: Vec<(NodeKey, NodeBounds)>,
 }
 
 impl BoundsStore {
-    pub fn peek(&self, key: NodeKey) -> Option<NodeBounds> {
-        self.map
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .get(&key)
-            .copied()
+    fn lock(&self) -> MutexGuard<'_, Known> {
+        self.known.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Every bound known now, locked for as long as the guard lives (one lock for a whole
-    /// selection instead of one per node; jobs wait to add theirs meanwhile).
-    pub fn known(&self) -> MutexGuard<'_, FxHashMap<NodeKey, NodeBounds>> {
-        self.map.lock().unwrap_or_else(PoisonError::into_inner)
+    pub fn peek(&self, key: NodeKey) -> Option<NodeBounds> {
+        self.lock().map.get(&key).copied()
+    }
+
+    /// The bounds added since the last call; `None` (nothing taken, they wait for the next
+    /// call) when a job holds the store just now: never waits.
+    pub fn take_fresh(&self) -> Option<Vec<(NodeKey, NodeBounds)>> {
+        let mut known = match self.known.try_lock() {
+            Ok(k) => k,
+            Err(TryLockError::Poisoned(p)) => p.into_inner(),
+            Err(TryLockError::WouldBlock) => return None,
+        };
+        Some(std::mem::take(&mut known.fresh))
     }
 
     /// The node's bounds, measured outside the lock when unknown (after its parent's; a parent
@@ -39,19 +54,19 @@ impl BoundsStore {
             return b;
         }
         let (b, leaves) = bounds::measure_stored(world, tree, key, parent);
-        let mut map = self.map.lock().unwrap_or_else(PoisonError::into_inner);
-        map.insert(key, b);
-        for (k, leaf) in leaves {
-            map.entry(k).or_insert(leaf);
+        let mut known = self.lock();
+        let Known { map, fresh } = &mut *known;
+        for (k, b) in std::iter::once((key, b)).chain(leaves) {
+            if let std::collections::hash_map::Entry::Vacant(e) = map.entry(k) {
+                e.insert(b);
+                fresh.push((k, b));
+            }
         }
         b
     }
 
     pub fn len(&self) -> usize {
-        self.map
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .len()
+        self.lock().map.len()
     }
 
     pub fn is_empty(&self) -> bool {

@@ -50,15 +50,20 @@ impl Streamer {
             if !self.resident.contains_key(&key) {
                 continue;
             }
-            let drawable = self.children_drawable(key);
-            let wants_split = self.show_split.contains(&key) && drawable;
+            // Whether all its children can be shown: looked up only where it matters (most
+            // nodes reached are drawn whole and stay so).
+            let mut drawable = None;
+            let mut children_drawable =
+                || *drawable.get_or_insert_with(|| self.children_drawable(key));
+            let wants_split = self.show_split.contains(&key) && children_drawable();
             let s = self.split.get(&key).copied().unwrap_or(0.0);
             // A node may only merge back once its children are no longer split themselves.
-            let children_merged = key
-                .children()
-                .iter()
-                .all(|c| self.split.get(c).copied().unwrap_or(0.0) == 0.0);
-            let target = if wants_split || !children_merged {
+            let children_merged = || {
+                key.children()
+                    .iter()
+                    .all(|c| self.split.get(c).copied().unwrap_or(0.0) == 0.0)
+            };
+            let target = if wants_split || !children_merged() {
                 1.0
             } else {
                 0.0
@@ -86,7 +91,7 @@ impl Streamer {
                 (s - step).max(target)
             };
             // Children must be resident to show them at all.
-            if ns > 0.0 && drawable {
+            if ns > 0.0 && children_drawable() {
                 split.insert(key, ns);
                 stack.extend(key.children());
             }

@@ -337,8 +337,8 @@ impl Streamer {
         }
         // Finished nodes add bytes: keep the cache within its budget here too, not only in
         // `update` (otherwise the budget holds only until the next GPU phase).
-        let pinned_bytes = self.evict();
-        self.refresh_stats(pinned_bytes);
+        self.evict();
+        self.refresh_stats();
         ran
     }
 

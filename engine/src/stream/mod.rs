@@ -62,6 +62,10 @@ use std::time::Instant;
 /// [`Streamer::select_wanted`]).
 pub const GUARD_BAND: f64 = 1.15;
 
+/// Node bounds the streamer's copy has room for from the start (about 7 MiB): a flight's
+/// first seconds add thousands, and growing the table copies it whole within one frame.
+const KNOWN_CAPACITY: usize = 1 << 14;
+
 /// Everything phases may read, shared by all threads.
 #[derive(Debug)]
 pub struct Shared {
@@ -195,8 +199,6 @@ pub struct StreamStats {
     pub waiting_gpu: usize,
     pub resident: usize,
     pub resident_bytes: usize,
-    /// Bytes of resident nodes that cannot be evicted now (needed, drawn or fading).
-    pub pinned_bytes: usize,
     pub wanted: usize,
     pub drawn: usize,
     /// Latencies of the jobs completed since the last `take_latencies` (at most
@@ -205,6 +207,54 @@ pub struct StreamStats {
     pub latencies: Vec<JobLatency>,
     /// Time of the last update's two selections (display and prefetch sets).
     pub last_selection_s: f64,
+    /// Where the last update's time went.
+    pub last_update: UpdateStages,
+}
+
+/// The parts of one [`Streamer::update_along`], in seconds of wall-clock time, in order.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UpdateStages {
+    /// The content kinds' camera and draw-list hooks.
+    pub kinds_s: f64,
+    /// Taking the workers' results (finished nodes become resident) and the bounds they
+    /// measured.
+    pub results_s: f64,
+    /// The display selection, its ancestors and the needed set.
+    pub selection_s: f64,
+    /// The prefetch selections along the predicted path and their classes.
+    pub prefetch_s: f64,
+    /// Cancelling stale requests, making and promoting requests.
+    pub requests_s: f64,
+    /// Advancing the fades and making the draw list.
+    pub display_s: f64,
+    /// Eviction under the cache budget and the statistics.
+    pub residency_s: f64,
+}
+
+impl UpdateStages {
+    /// Names of the stages, in the order of [`Self::seconds`].
+    pub const NAMES: [&'static str; 7] = [
+        "kinds' hooks",
+        "worker results",
+        "display selection",
+        "prefetch selections",
+        "requests",
+        "fades and draw list",
+        "eviction and statistics",
+    ];
+
+    /// The stages' times, in the order of [`Self::NAMES`].
+    pub fn seconds(&self) -> [f64; 7] {
+        [
+            self.kinds_s,
+            self.results_s,
+            self.selection_s,
+            self.prefetch_s,
+            self.requests_s,
+            self.display_s,
+            self.residency_s,
+        ]
+    }
 }
 
 /// Most job latencies [`StreamStats::latencies`] keeps unread (about 1.5 MiB).
@@ -236,6 +286,10 @@ pub struct Streamer {
     /// The sum of `bytes` over `resident` (kept as nodes enter and leave).
     resident_bytes: usize,
     wanted: FxHashSet<NodeKey>,
+    /// The bounds known to the selections: the store's, taken as jobs add them
+    /// ([`BoundsStore::take_fresh`]). Stored in place (a walk reads them in table order, not
+    /// through pointers), sized for a flight's first [`KNOWN_CAPACITY`] nodes.
+    known: FxHashMap<NodeKey, NodeBounds>,
     /// Nodes needed for display (wanted, ancestors, children of ancestors) and for prefetch.
     needed: FxHashSet<NodeKey>,
     /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
@@ -243,7 +297,9 @@ pub struct Streamer {
     /// The part of `to_split` drawn split: nodes over the display threshold
     /// (`show_factor * tau`) and their ancestors.
     show_split: FxHashSet<NodeKey>,
-    prefetch: FxHashSet<NodeKey>,
+    /// Nodes prefetched (not needed now), each with its priority class; refilled in place
+    /// every frame.
+    prefetch: FxHashMap<NodeKey, usize>,
     /// The prefetch set's parts, each refreshed when stale (see [`predict`]).
     prefetch_parts: Vec<predict::PrefetchPart>,
     /// This frame's draw list, computed once after the fades advance.
@@ -333,10 +389,11 @@ impl Streamer {
             resident: FxHashMap::default(),
             resident_bytes: 0,
             wanted: FxHashSet::default(),
+            known: FxHashMap::with_capacity_and_hasher(KNOWN_CAPACITY, rustc_hash::FxBuildHasher),
             needed: FxHashSet::default(),
             to_split: FxHashSet::default(),
             show_split: FxHashSet::default(),
-            prefetch: FxHashSet::default(),
+            prefetch: FxHashMap::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             split: FxHashMap::default(),
             fade_px: FxHashMap::default(),
@@ -409,19 +466,27 @@ impl Streamer {
         tau_px: f64,
         mut over: Option<(&mut FxHashSet<NodeKey>, f64)>,
     ) -> FxHashSet<NodeKey> {
-        let known = self.shared.bounds.known();
         let mut wanted = FxHashSet::with_capacity_and_hasher(
             self.wanted.len() + self.wanted.len() / 4,
             rustc_hash::FxBuildHasher,
         );
+        // Only errors over tau are looked at (the split test, what vegetation lets through
+        // of them, and the display threshold over them); without vegetation's share, none
+        // over the larger of the two thresholds.
+        let ceiling_px = match (self.settings.vegetation_occlusion, &over) {
+            (true, _) => f64::INFINITY,
+            (false, Some((_, threshold))) => threshold.max(tau_px),
+            (false, None) => tau_px,
+        };
         crate::terrain::select::walk(
             &self.shared.tree,
             cam,
             Some(cam.frustum_widened(GUARD_BAND)),
-            // Only errors over tau are looked at (the split test, what vegetation lets through
-            // of them, and the display threshold over them).
-            tau_px,
-            |key| known.get(&key),
+            crate::terrain::select::PxWindow {
+                floor_px: tau_px,
+                ceiling_px,
+            },
+            |key| self.known.get(&key),
             |key: NodeKey, b: &NodeBounds, dist, px| {
                 // The error the split test compares: projected, times what vegetation lets
                 // through where that is on; any split node at a fixed level.
@@ -502,14 +567,20 @@ impl Streamer {
     /// (seconds ahead, camera), sorted by time, at most [`predict::PREDICT_HORIZONS_S`]'s
     /// length (e.g. the automatic flight or a replayed path at those times).
     pub fn update_along(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
+        let mut lap = Lap::start();
+        let mut stages = UpdateStages::default();
         self.frame += 1;
         self.camera = Some(*cam);
         for k in &self.shared.kinds {
             k.observe_camera(cam.position_m);
         }
+        stages.kinds_s = lap.next();
         self.collect_results();
+        if let Some(fresh) = self.shared.bounds.take_fresh() {
+            self.known.extend(fresh);
+        }
+        stages.results_s = lap.next();
         let tau = self.settings.tau_px;
-        let t_select = Instant::now();
         let mut shown = FxHashSet::with_capacity_and_hasher(
             self.show_split.len() + 16,
             rustc_hash::FxBuildHasher,
@@ -530,14 +601,14 @@ impl Streamer {
         shown.extend(above);
         self.show_split = shown;
         self.needed = self.needed_for(&self.wanted, &self.to_split);
-        let prefetch = self.prefetch_classes(cam, future);
-        self.stats.last_selection_s = t_select.elapsed().as_secs_f64();
-        self.prefetch = prefetch.keys().copied().collect();
+        stages.selection_s = lap.next();
+        self.refresh_prefetch(cam, future);
+        stages.prefetch_s = lap.next();
         // Cancel requests no longer needed or prefetched.
         let stale: Vec<NodeKey> = self
             .requests
             .keys()
-            .filter(|k| !self.needed.contains(k) && !self.prefetch.contains(k))
+            .filter(|k| !self.needed.contains(k) && !self.prefetch.contains_key(k))
             .copied()
             .collect();
         let queue = Arc::clone(&self.queue);
@@ -555,7 +626,7 @@ impl Streamer {
             .needed
             .iter()
             .map(|&k| (0, k))
-            .chain(prefetch.iter().map(|(&k, &c)| (c, k)))
+            .chain(self.prefetch.iter().map(|(&k, &c)| (c, k)))
         {
             match self.resident.get_mut(&k) {
                 Some(r) => r.last_used_frame = frame,
@@ -581,12 +652,35 @@ impl Streamer {
         }
         drop(pending);
         self.queue.wake_workers();
+        stages.requests_s = lap.next();
         self.advance_fades(dt_s);
         self.drawn = self.compute_draw_list();
+        stages.display_s = lap.next();
         for k in &self.shared.kinds {
             k.observe_drawn(&self.drawn);
         }
-        let pinned_bytes = self.evict();
-        self.refresh_stats(pinned_bytes);
+        stages.kinds_s += lap.next();
+        self.evict();
+        self.refresh_stats();
+        stages.residency_s = lap.next();
+        self.stats.last_selection_s = stages.selection_s + stages.prefetch_s;
+        self.stats.last_update = stages;
+    }
+}
+
+/// Consecutive spans of wall-clock time.
+struct Lap(Instant);
+
+impl Lap {
+    fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    /// Seconds since the start or the previous call.
+    fn next(&mut self) -> f64 {
+        let now = Instant::now();
+        let s = now.duration_since(self.0).as_secs_f64();
+        self.0 = now;
+        s
     }
 }

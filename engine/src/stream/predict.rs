@@ -10,7 +10,7 @@
 use super::Streamer;
 use crate::camera::Camera;
 use crate::terrain::quadtree::{NodeKey, ancestor_set};
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashSet;
 
 /// How far ahead the camera is predicted (s). Class `1 + i` holds what the camera needs
 /// `PREDICT_HORIZONS_S[i]` from now and not sooner.
@@ -78,18 +78,14 @@ impl PrefetchPart {
 }
 
 impl Streamer {
-    /// The prefetch classes for this frame: every node not needed now, mapped to the class of
-    /// the earliest predicted camera (`future`, sorted by time) that needs it, else to the
-    /// lower-tau class around `cam`. The parts' selections are the costliest bookkeeping of a
+    /// Refills the prefetch classes for this frame: every node not needed now, mapped to the
+    /// class of the earliest predicted camera (`future`, sorted by time) that needs it, else
+    /// to the lower-tau class around `cam`. The parts' selections are the costliest bookkeeping of a
     /// frame, so one part is computed again per frame (the first stale one in turn, else the
     /// next in turn): a part is at most `PREFETCH_PARTS` frames old; a part with no selection
     /// yet (the camera starts moving) or whose camera jumped is computed at once. The display
     /// set is computed every frame, so a stale part delays prefetch only.
-    pub(super) fn prefetch_classes(
-        &mut self,
-        cam: &Camera,
-        future: &[(f64, Camera)],
-    ) -> FxHashMap<NodeKey, usize> {
+    pub(super) fn refresh_prefetch(&mut self, cam: &Camera, future: &[(f64, Camera)]) {
         let tau = self.settings.tau_px;
         let turn = (self.frame % PREFETCH_PARTS as u64) as usize;
         let part_camera = |part: usize| {
@@ -124,8 +120,9 @@ impl Streamer {
                 nodes: self.needed_for(&wanted, &ancestors),
             };
         }
-        let mut out =
-            FxHashMap::with_capacity_and_hasher(self.prefetch.len(), rustc_hash::FxBuildHasher);
+        // In place: the map keeps its capacity from frame to frame.
+        let out = &mut self.prefetch;
+        out.clear();
         for (part, p) in self.prefetch_parts.iter().enumerate() {
             let class = if part + 1 == PREFETCH_PARTS {
                 CLASSES - 1
@@ -138,7 +135,6 @@ impl Streamer {
                 }
             }
         }
-        out
     }
 }
 

@@ -10,7 +10,8 @@
 use super::jobs::JobMsg;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
-use std::sync::{Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
 /// Pending jobs and the camera position that orders them.
 pub(super) struct Pending {
@@ -18,13 +19,20 @@ pub(super) struct Pending {
     buckets: Vec<Vec<Vec<JobMsg>>>,
     camera_m: Option<DVec3>,
     len: usize,
+    /// `len`, readable without the lock ([`JobQueue::queued`]).
+    len_shared: Arc<AtomicUsize>,
     closed: bool,
 }
 
 impl Pending {
     pub(super) fn push(&mut self, class: usize, job: JobMsg) {
         self.buckets[class][usize::from(job.key.level)].push(job);
-        self.len += 1;
+        self.set_len(self.len + 1);
+    }
+
+    fn set_len(&mut self, len: usize) {
+        self.len = len;
+        self.len_shared.store(len, Ordering::Relaxed);
     }
 
     /// Removes `key`'s job from class `class`; `None` when it is not queued there (a worker
@@ -32,8 +40,9 @@ impl Pending {
     pub(super) fn remove(&mut self, class: usize, key: NodeKey) -> Option<JobMsg> {
         let bucket = &mut self.buckets[class][usize::from(key.level)];
         let i = bucket.iter().position(|j| j.key == key)?;
-        self.len -= 1;
-        Some(bucket.swap_remove(i))
+        let job = bucket.swap_remove(i);
+        self.set_len(self.len - 1);
+        Some(job)
     }
 
     /// Moves `key`'s job from class `from` to class `to` if it is still queued.
@@ -45,10 +54,6 @@ impl Pending {
 
     pub(super) fn set_camera(&mut self, position_m: DVec3) {
         self.camera_m = Some(position_m);
-    }
-
-    pub(super) fn len(&self) -> usize {
-        self.len
     }
 
     /// Takes the best job: first non-empty bucket in (class, level) order, the job nearest to
@@ -78,19 +83,23 @@ impl Pending {
                 .min_by_key(|&i| bucket[i].key)
                 .unwrap_or(0),
         };
-        self.len -= 1;
-        Some(bucket.swap_remove(i))
+        let job = bucket.swap_remove(i);
+        self.set_len(self.len - 1);
+        Some(job)
     }
 }
 
 /// [`Pending`] behind a lock, with a condition variable that wakes idle workers.
 pub(super) struct JobQueue {
     pending: Mutex<Pending>,
+    /// The number of pending jobs, kept by [`Pending`].
+    queued: Arc<AtomicUsize>,
     wake: Condvar,
 }
 
 impl JobQueue {
     pub(super) fn new(classes: usize, levels: usize) -> Self {
+        let queued = Arc::new(AtomicUsize::new(0));
         Self {
             pending: Mutex::new(Pending {
                 buckets: (0..classes)
@@ -98,10 +107,17 @@ impl JobQueue {
                     .collect(),
                 camera_m: None,
                 len: 0,
+                len_shared: Arc::clone(&queued),
                 closed: false,
             }),
+            queued,
             wake: Condvar::new(),
         }
+    }
+
+    /// The number of pending jobs, without taking the lock (statistics).
+    pub(super) fn queued(&self) -> usize {
+        self.queued.load(Ordering::Relaxed)
     }
 
     /// The pending jobs, locked (the owner batches its changes under one lock; call
@@ -172,7 +188,7 @@ mod tests {
             p.push(1, job(d));
             p.push(1, job(b));
             p.push(2, job(c));
-            assert_eq!(p.len(), 6);
+            assert_eq!(q.queued(), 6);
             // `c` moves up to class 0; `b` is cancelled while queued.
             p.promote(c, 2, 0);
             assert!(p.remove(1, b).is_some());
@@ -180,7 +196,7 @@ mod tests {
         }
         let order: Vec<NodeKey> = (0..5).map(|_| q.take(&tree).unwrap().key).collect();
         assert_eq!(order, vec![c, d, a, near_grandchild, root]);
-        assert_eq!(q.lock().len(), 0);
+        assert_eq!(q.queued(), 0);
         q.lock().push(0, job(a));
         q.close();
         assert!(q.take(&tree).is_none());

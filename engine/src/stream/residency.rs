@@ -14,10 +14,20 @@ impl Streamer {
     /// Resident nodes that must stay: needed, prefetched, drawn, or in a fade.
     pub(super) fn pinned(&self) -> FxHashSet<NodeKey> {
         let mut p = self.needed.clone();
-        p.extend(self.prefetch.iter().copied());
+        p.extend(self.prefetch.keys().copied());
         p.extend(self.drawn.iter().map(|d| d.key));
         p.extend(self.split.keys().copied());
         p
+    }
+
+    /// Bytes of the resident nodes that cannot be evicted now (needed, prefetched, drawn or
+    /// in a fade): counted when asked, not every frame.
+    pub fn pinned_bytes(&self) -> usize {
+        self.pinned()
+            .iter()
+            .filter_map(|k| self.resident.get(k))
+            .map(|r| r.bytes)
+            .sum()
     }
 
     /// The drawn nodes that are not needed, prefetched or in a fade (few: a drawn node is
@@ -33,7 +43,7 @@ impl Streamer {
 
     /// Needed, prefetched or in a fade.
     fn held(&self, k: &NodeKey) -> bool {
-        self.needed.contains(k) || self.prefetch.contains(k) || self.split.contains_key(k)
+        self.needed.contains(k) || self.prefetch.contains_key(k) || self.split.contains_key(k)
     }
 
     /// Counts `bytes` that a renderer allocated for resident node `key` after the node became
@@ -48,23 +58,21 @@ impl Streamer {
     }
 
     /// Drops the least recently used prepared nodes that are not pinned while over the memory
-    /// budget, and returns the bytes of the pinned resident nodes (the same before and after:
-    /// no pinned node goes). Pinned nodes alone may exceed the budget; then nothing else is
-    /// kept. One pass over the resident nodes.
-    pub(super) fn evict(&mut self) -> usize {
-        let drawn_only = self.drawn_only();
-        let over = self.resident_bytes > self.settings.cache_budget_bytes;
-        let mut pinned_bytes = 0;
-        // Least recently used first (ties by key); a heap, as a frame evicts few of many.
-        let mut candidates = Vec::new();
-        for (k, r) in &self.resident {
-            if self.held(k) || drawn_only.contains(k) {
-                pinned_bytes += r.bytes;
-            } else if over {
-                candidates.push(std::cmp::Reverse((r.last_used_frame, *k)));
-            }
+    /// budget (no pinned node goes). Pinned nodes alone may exceed the budget; then nothing
+    /// else is kept. Within the budget it costs nothing; over it, one pass over the resident
+    /// nodes.
+    pub(super) fn evict(&mut self) {
+        if self.resident_bytes <= self.settings.cache_budget_bytes {
+            return;
         }
-        let mut candidates = std::collections::BinaryHeap::from(candidates);
+        let drawn_only = self.drawn_only();
+        // Least recently used first (ties by key); a heap, as a frame evicts few of many.
+        let mut candidates: std::collections::BinaryHeap<_> = self
+            .resident
+            .iter()
+            .filter(|(k, _)| !self.held(k) && !drawn_only.contains(k))
+            .map(|(k, r)| std::cmp::Reverse((r.last_used_frame, *k)))
+            .collect();
         while self.resident_bytes > self.settings.cache_budget_bytes {
             let Some(std::cmp::Reverse((_, k))) = candidates.pop() else {
                 break;
@@ -74,11 +82,10 @@ impl Streamer {
                 self.stats.evicted += 1;
             }
         }
-        pinned_bytes
     }
 
-    /// The statistics after a frame or a GPU phase; `pinned_bytes` from [`Self::evict`].
-    pub(super) fn refresh_stats(&mut self, pinned_bytes: usize) {
+    /// The statistics after a frame or a GPU phase.
+    pub(super) fn refresh_stats(&mut self) {
         let (mut in_workers, mut g) = (0, 0);
         for req in self.requests.values() {
             match req.state {
@@ -88,7 +95,7 @@ impl Streamer {
         }
         // Jobs a worker took and has not reported yet count as running (cancelled ones are no
         // longer requests).
-        let q = self.queue.lock().len().min(in_workers);
+        let q = self.queue.queued().min(in_workers);
         self.stats.queued = q;
         self.stats.running = in_workers - q;
         self.stats.waiting_gpu = g;
@@ -98,15 +105,6 @@ impl Streamer {
             self.resident.values().map(|r| r.bytes).sum::<usize>()
         );
         self.stats.resident_bytes = self.resident_bytes;
-        self.stats.pinned_bytes = pinned_bytes;
-        debug_assert_eq!(
-            self.stats.pinned_bytes,
-            self.pinned()
-                .iter()
-                .filter_map(|k| self.resident.get(k))
-                .map(|r| r.bytes)
-                .sum::<usize>()
-        );
         self.stats.wanted = self.wanted.len();
         self.stats.drawn = self.drawn.len();
     }

@@ -48,16 +48,33 @@ pub fn projected_error_px(
     frustum: Option<&Frustum>,
     near_m: f64,
 ) -> f64 {
-    projected_error_above_px(tree, key, b, eye_m, k_px, frustum, near_m, 0.0)
+    projected_error_in_px(tree, key, b, eye_m, k_px, frustum, near_m, PxWindow::EXACT)
 }
 
-/// [`projected_error_px`] where only whether the error passes `floor_px` matters below it:
-/// exact when the error is above `floor_px`, otherwise some value at or below `floor_px` (at
-/// least the vegetation term). Blocks whose error cannot pass the floor even at the node box's
-/// distance need no box of their own, so a node well under the threshold costs a few
-/// comparisons (a selection's split test against tau needs no more).
-#[allow(clippy::too_many_arguments)]
-pub fn projected_error_above_px(
+/// Where a caller needs a projected error exactly: below `floor_px` only that it is at or
+/// below the floor, above `ceiling_px` only that it is above the ceiling (a split test against
+/// a threshold needs the threshold as both).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PxWindow {
+    pub floor_px: f64,
+    pub ceiling_px: f64,
+}
+
+impl PxWindow {
+    /// Exact everywhere.
+    pub const EXACT: Self = Self {
+        floor_px: 0.0,
+        ceiling_px: f64::INFINITY,
+    };
+}
+
+/// [`projected_error_px`] exact only inside `window`: exact when the error is in
+/// (`floor_px`, `ceiling_px`]; at or below the floor some value at or below it (at least the
+/// vegetation term); above the ceiling some value above it (at most the error). Blocks whose
+/// error cannot pass the floor even at the node box's distance need no box of their own, so
+/// a node well under the threshold costs a few comparisons; the first block over the ceiling
+/// ends the search, so a node well over it costs little more.
+pub fn projected_error_in_px(
     tree: &QuadTree,
     key: NodeKey,
     b: &NodeBounds,
@@ -65,14 +82,17 @@ pub fn projected_error_above_px(
     k_px: f64,
     frustum: Option<&Frustum>,
     near_m: f64,
-    floor_px: f64,
+    window: PxWindow,
 ) -> f64 {
     let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
     let (lo, hi) = node_aabb(tree, key, b);
     let node_dist_m = distance_to_aabb(eye_m, lo, hi);
     let mut out = px(b.vegetation_error_m, node_dist_m);
+    if out > window.ceiling_px {
+        return out;
+    }
     // What a block must pass to change the answer: the largest error so far, or the floor.
-    let mut cut = out.max(floor_px);
+    let mut cut = out.max(window.floor_px);
     // A block's box lies inside the node's, so it is at least as far: a block whose error is
     // at most `skip_m` cannot pass the cut and is skipped without its box (no division per
     // block). `skip_m` is a little below `cut` over the node's distance in metres, so a block
@@ -104,6 +124,9 @@ pub fn projected_error_above_px(
             continue;
         }
         out = block_px;
+        if out > window.ceiling_px {
+            return out;
+        }
         cut = out;
         skip_m = skip_below(cut);
     }
@@ -248,7 +271,7 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
         tree,
         cam,
         frustum,
-        0.0,
+        PxWindow::EXACT,
         |key| bounds(key).into(),
         split,
         |reached| match reached {
@@ -295,13 +318,13 @@ pub struct Walked {
 /// The traversal of [`traverse_in`], handing each node it reaches to `reached` instead of
 /// collecting them, with the bounds as `bounds` gives them: a source that lends its bounds
 /// (`&NodeBounds`) lets a per-frame selection run without copying any. Projected errors are
-/// exact above `floor_px` and only known to be at or below it otherwise
-/// ([`projected_error_above_px`]): a caller that splits at a threshold passes it (0: exact).
+/// exact inside `window` only ([`projected_error_in_px`]): a caller that splits at a threshold
+/// passes it as the floor, and as the ceiling when no larger error matters to it.
 pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
     tree: &QuadTree,
     cam: &Camera,
     frustum: Option<Frustum>,
-    floor_px: f64,
+    window: PxWindow,
     mut bounds: impl FnMut(NodeKey) -> Option<B>,
     mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
     mut reached: impl FnMut(Reached<B>),
@@ -327,7 +350,7 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             continue;
         }
         let dist_m = distance_to_aabb(cam.position_m, min, max);
-        let error_px = projected_error_above_px(
+        let error_px = projected_error_in_px(
             tree,
             key,
             b,
@@ -335,7 +358,7 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             k,
             frustum.as_ref(),
             0.0,
-            floor_px,
+            window,
         );
         if key.level < tree.max_level && split(key, b, dist_m, error_px) {
             // Children pushed in reverse so the output is in SW, SE, NW, NE order; those
@@ -449,11 +472,12 @@ mod tests {
     }
 
     #[test]
-    fn the_error_above_a_floor_is_exact_above_it_and_at_most_it_below() {
+    fn the_error_in_a_window_is_exact_inside_it_and_on_the_right_side_outside() {
         // Random nodes of a 4 km tree (block heights and errors from a fixed-seed generator),
-        // random eyes and floors, with and without a frustum: the error equals the largest
-        // over all counting blocks taken one by one, and the floored error is that whenever it
-        // passes the floor, else at most the floor.
+        // random eyes and windows, with and without a frustum: the error equals the largest
+        // over all counting blocks taken one by one, and the windowed error is that whenever it
+        // is inside the window, else at most the floor below it and over the ceiling (and not
+        // over the error) above it.
         let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
         let mut state = 0x9e37_79b9_7f4a_7c15_u64;
         let mut next = move || {
@@ -462,8 +486,8 @@ mod tests {
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        let (mut above, mut below) = (0, 0);
-        for _ in 0..4000 {
+        let (mut over, mut inside, mut below) = (0, 0, 0);
+        for _ in 0..6000 {
             let level = (next() * f64::from(tree.max_level + 1)) as u8;
             let side = 1u32 << level;
             let key = NodeKey {
@@ -507,18 +531,36 @@ mod tests {
                 "{key:?}"
             );
             let floor = next() * 2.0 * exact.min(1e3) + next();
-            let floored = projected_error_above_px(&tree, key, &b, eye, k, f, 0.0, floor);
-            if exact > floor {
-                above += 1;
-                assert_eq!(floored, exact, "{key:?} floor {floor}");
+            let ceiling = if next() < 0.3 {
+                f64::INFINITY
+            } else {
+                floor + next() * exact.min(1e3)
+            };
+            let window = PxWindow {
+                floor_px: floor,
+                ceiling_px: ceiling,
+            };
+            let windowed = projected_error_in_px(&tree, key, &b, eye, k, f, 0.0, window);
+            if exact > ceiling {
+                over += 1;
+                assert!(
+                    windowed > ceiling && windowed <= exact,
+                    "{key:?}: {windowed} for {exact} over the ceiling {ceiling}"
+                );
+            } else if exact > floor {
+                inside += 1;
+                assert_eq!(windowed, exact, "{key:?} window {window:?}");
             } else {
                 below += 1;
                 assert!(
-                    floored <= floor,
-                    "{key:?}: {floored} over the floor {floor}"
+                    windowed <= floor,
+                    "{key:?}: {windowed} over the floor {floor}"
                 );
             }
         }
-        assert!(above > 500 && below > 500, "{above} above, {below} below");
+        assert!(
+            over > 500 && inside > 500 && below > 500,
+            "{over} over, {inside} inside, {below} below"
+        );
     }
 }

@@ -459,7 +459,7 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
     assert!(layers > 0, "the settled view has no textured node");
     let resident: usize = v.streamer.stats.resident_bytes;
     assert!(
-        layers * TEXTURE_BYTES <= resident && resident <= budget.max(v.streamer.stats.pinned_bytes),
+        layers * TEXTURE_BYTES <= resident && resident <= budget.max(v.streamer.pinned_bytes()),
         "{layers} layers of {TEXTURE_BYTES} bytes, {resident} resident bytes, budget {budget}"
     );
 }

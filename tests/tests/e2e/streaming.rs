@@ -299,9 +299,9 @@ fn a_burst_of_teleports_settles_with_nothing_leaked() {
     );
     // Within budget, except for nodes that cannot go (needed, drawn, fading).
     assert!(
-        s.stats.pinned_bytes <= budget,
+        s.pinned_bytes() <= budget,
         "this view alone needs {} bytes; pick a larger budget",
-        s.stats.pinned_bytes
+        s.pinned_bytes()
     );
     assert!(
         s.stats.resident_bytes <= budget,

@@ -393,6 +393,7 @@ pub(crate) fn section_streaming(
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
         let (mut debt_frames, mut worst_excess, mut frame_times) =
             (0usize, 0.0f64, Vec::with_capacity(frames));
+        let mut stages = Vec::with_capacity(frames);
         // Light debt: frames with a visible drawn node whose light grid is not computed yet
         // (drawn fully lit), and the share of such nodes over all frames; texture debt: the
         // same for nodes whose own ground texture is not made yet (they show an ancestor's).
@@ -408,6 +409,7 @@ pub(crate) fn section_streaming(
         for (f, cam) in cams.iter().enumerate() {
             frame_times.push(flight_run.frame(cam, dt, &future[f]));
             let s = flight_run.streamer();
+            stages.push(s.stats.last_update);
             let debts = frame_debts(s, cam, tau);
             lit_checked += debts.lit_checked;
             if debts.excess_px > 0.0 {
@@ -421,8 +423,9 @@ pub(crate) fn section_streaming(
             textured_checked += debts.textured_checked;
             bare_frames += usize::from(debts.without_texture > 0);
             bare_nodes += debts.without_texture;
-            over_budget_frames += usize::from(s.stats.pinned_bytes > budget_bytes);
-            pinned_peak_bytes = pinned_peak_bytes.max(s.stats.pinned_bytes);
+            let pinned_bytes = s.pinned_bytes();
+            over_budget_frames += usize::from(pinned_bytes > budget_bytes);
+            pinned_peak_bytes = pinned_peak_bytes.max(pinned_bytes);
             b.inc(1);
             // Real time: frame f ends at (f + 1) * dt.
             let due = (f + 1) as f64 * dt;
@@ -447,6 +450,7 @@ pub(crate) fn section_streaming(
             debt_share: debt_frames as f64 / frames as f64,
             worst_excess_px: worst_excess,
             frame_times,
+            stages,
             light_debt: lighting.then(|| {
                 [
                     unlit_frames as f64 / frames as f64,
@@ -612,6 +616,8 @@ struct FlightOutcome {
     worst_excess_px: f64,
     /// Per frame: the streamer's update (the bookkeeping) and the GPU phases.
     frame_times: Vec<[Span; 2]>,
+    /// Per frame: where the update's time went.
+    stages: Vec<engine::stream::UpdateStages>,
     /// With light grids: the share of frames with a visible drawn node still without its grid,
     /// and the share of visible drawn nodes (over all frames) without it; then the same for
     /// nodes that no resident ancestor's computed grid shades either (drawn fully lit).
@@ -784,12 +790,48 @@ impl FlightOutcome {
             "nodes",
             &budget,
         );
-        report_frame_times(&self.frame_times, r, params);
+        report_frame_times(&self.frame_times, &self.stages, r, params);
     }
 }
 
-/// The rows of a flight's per-frame times: the update (bookkeeping), the GPU phases and both.
-fn report_frame_times(frame_times: &[[Span; 2]], r: &mut Report, params: &str) {
+/// The rows of where the update's time goes: each stage's p99, and its mean over the slowest
+/// 1 % of updates (what the bookkeeping p99 is made of).
+fn report_stages(stages: &[engine::stream::UpdateStages], r: &mut Report, params: &str) {
+    if stages.is_empty() {
+        return;
+    }
+    let total = |s: &engine::stream::UpdateStages| s.seconds().iter().sum::<f64>();
+    let mut slowest: Vec<_> = stages.iter().collect();
+    slowest.sort_by(|a, b| total(b).total_cmp(&total(a)));
+    slowest.truncate(stages.len().div_ceil(100));
+    let slow_params = format!(
+        "{params}; mean over the slowest 1 % of updates ({} frames), wall clock",
+        slowest.len()
+    );
+    for (i, name) in engine::stream::UpdateStages::NAMES.iter().enumerate() {
+        let times = stages.iter().map(|s| s.seconds()[i]).collect();
+        r.quantiles("streaming", times, &[0.99], params, |q| {
+            format!("update stage {name} {q}")
+        });
+        let mean = slowest.iter().map(|s| s.seconds()[i]).sum::<f64>() / slowest.len() as f64;
+        r.add(
+            "streaming",
+            &format!("update stage {name} in the slowest updates"),
+            mean * 1e6,
+            "µs",
+            &slow_params,
+        );
+    }
+}
+
+/// The rows of a flight's per-frame times: the update (bookkeeping), the GPU phases and both,
+/// then where the update's time went (`stages`).
+fn report_frame_times(
+    frame_times: &[[Span; 2]],
+    stages: &[engine::stream::UpdateStages],
+    r: &mut Report,
+    params: &str,
+) {
     let spans = [
         (
             "bookkeeping per frame (the streamer's update)",
@@ -824,6 +866,7 @@ fn report_frame_times(frame_times: &[[Span; 2]], r: &mut Report, params: &str) {
             format!("{name} {q}, on-CPU time of the frame thread")
         });
     }
+    report_stages(stages, r, params);
 }
 
 /// The quantiles of the per-frame rows.
