@@ -337,7 +337,7 @@ impl Viewer {
             gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
             gpu_reference_ms: self.reference.as_ref().and_then(GpuReference::last_ms),
             reference_triangles: self.reference.as_ref().map_or(0, |r| r.triangles),
-            selection_ms: st.last_selection_s * 1e3,
+            selection_ms: st.last_update.selections_s() * 1e3,
             cpu_frame_ms: ms(t0, t3),
             cpu_frame_on_cpu_ms: on_cpu.map(|d| d.as_secs_f64() * 1e3),
             draw_calls: stats.draw_calls,

@@ -205,8 +205,6 @@ pub struct StreamStats {
     /// [`MAX_LATENCIES_KEPT`]: the oldest half goes when it is full, so a viewer that never
     /// reads them does not grow).
     pub latencies: Vec<JobLatency>,
-    /// Time of the last update's two selections (display and prefetch sets).
-    pub last_selection_s: f64,
     /// Where the last update's time went.
     pub last_update: UpdateStages,
 }
@@ -242,6 +240,11 @@ impl UpdateStages {
         "fades and draw list",
         "eviction and statistics",
     ];
+
+    /// The time of the update's selections (the display set and the prefetch parts).
+    pub fn selections_s(&self) -> f64 {
+        self.selection_s + self.prefetch_s
+    }
 
     /// The stages' times, in the order of [`Self::NAMES`].
     pub fn seconds(&self) -> [f64; 7] {
@@ -663,7 +666,6 @@ impl Streamer {
         self.evict();
         self.refresh_stats();
         stages.residency_s = lap.next();
-        self.stats.last_selection_s = stages.selection_s + stages.prefetch_s;
         self.stats.last_update = stages;
     }
 }

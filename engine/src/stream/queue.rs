@@ -18,21 +18,16 @@ pub(super) struct Pending {
     /// `buckets[class][level]`.
     buckets: Vec<Vec<Vec<JobMsg>>>,
     camera_m: Option<DVec3>,
-    len: usize,
-    /// `len`, readable without the lock ([`JobQueue::queued`]).
-    len_shared: Arc<AtomicUsize>,
+    /// The number of jobs in the buckets: changed under the lock, readable without it
+    /// ([`JobQueue::queued`]).
+    len: Arc<AtomicUsize>,
     closed: bool,
 }
 
 impl Pending {
     pub(super) fn push(&mut self, class: usize, job: JobMsg) {
         self.buckets[class][usize::from(job.key.level)].push(job);
-        self.set_len(self.len + 1);
-    }
-
-    fn set_len(&mut self, len: usize) {
-        self.len = len;
-        self.len_shared.store(len, Ordering::Relaxed);
+        self.len.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Removes `key`'s job from class `class`; `None` when it is not queued there (a worker
@@ -40,9 +35,8 @@ impl Pending {
     pub(super) fn remove(&mut self, class: usize, key: NodeKey) -> Option<JobMsg> {
         let bucket = &mut self.buckets[class][usize::from(key.level)];
         let i = bucket.iter().position(|j| j.key == key)?;
-        let job = bucket.swap_remove(i);
-        self.set_len(self.len - 1);
-        Some(job)
+        self.len.fetch_sub(1, Ordering::Relaxed);
+        Some(bucket.swap_remove(i))
     }
 
     /// Moves `key`'s job from class `from` to class `to` if it is still queued.
@@ -83,16 +77,15 @@ impl Pending {
                 .min_by_key(|&i| bucket[i].key)
                 .unwrap_or(0),
         };
-        let job = bucket.swap_remove(i);
-        self.set_len(self.len - 1);
-        Some(job)
+        self.len.fetch_sub(1, Ordering::Relaxed);
+        Some(bucket.swap_remove(i))
     }
 }
 
 /// [`Pending`] behind a lock, with a condition variable that wakes idle workers.
 pub(super) struct JobQueue {
     pending: Mutex<Pending>,
-    /// The number of pending jobs, kept by [`Pending`].
+    /// [`Pending`]'s count of its jobs.
     queued: Arc<AtomicUsize>,
     wake: Condvar,
 }
@@ -106,8 +99,7 @@ impl JobQueue {
                     .map(|_| (0..levels).map(|_| Vec::new()).collect())
                     .collect(),
                 camera_m: None,
-                len: 0,
-                len_shared: Arc::clone(&queued),
+                len: Arc::clone(&queued),
                 closed: false,
             }),
             queued,

@@ -91,13 +91,13 @@ pub(crate) fn section_bookkeeping(
                 let span = t.stop();
                 if after_sweep {
                     cold.push(span.wall_s);
-                    cold_selection.push(s.stats.last_selection_s);
+                    cold_selection.push(s.stats.last_update.selections_s());
                     b.inc(1);
                     continue;
                 }
                 wall.push(span.wall_s);
                 on_cpu.extend(span.on_cpu_s);
-                selection.push(s.stats.last_selection_s);
+                selection.push(s.stats.last_update.selections_s());
                 b.inc(1);
             }
         }
