@@ -191,6 +191,7 @@ impl Streamer {
             }
             RequestState::WaitingGpu { mut work, .. } => {
                 release_tiles(&self.shared, &mut work);
+                self.dropper.drop_node(work);
                 self.stats.cancelled_gpu += 1;
             }
         }
@@ -213,6 +214,7 @@ impl Streamer {
                     if !current {
                         // A cancelled (or superseded) job's late result: never shown.
                         release_tiles(&self.shared, &mut work);
+                        self.dropper.drop_node(work);
                         self.stats.late_results_discarded += 1;
                         continue;
                     }
@@ -248,10 +250,12 @@ impl Streamer {
                 bytes,
                 work,
                 last_used_frame: self.frame,
+                ready_frame: self.frame,
             },
         );
         if let Some(old) = old {
             self.resident_bytes -= old.bytes;
+            self.dropper.drop_node(old.work);
         }
     }
 

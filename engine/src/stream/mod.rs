@@ -9,8 +9,9 @@
 //!   ([`Streamer::run_gpu_phases`]). New content is a new kind, not a new scheduler.
 //!
 //! Files: [`content`] (kinds, payloads, node work), `bounds_store` (bounds known so far),
-//! `jobs` (requests, workers, cancellation, GPU phases), `queue` (pending jobs by priority), `display` (fades and the draw list),
-//! `residency` (LRU eviction under the budget, statistics).
+//! `jobs` (requests, workers, cancellation, GPU phases), `queue` (pending jobs by priority),
+//! `display` (fades and the draw list), `residency` (LRU eviction under the budget,
+//! statistics), `dropper` (frees evicted nodes off the frame thread).
 //! - **Priority** is time to need first ([`predict`]: needed now, then needed by the predicted
 //!   camera 0.4, 1 and 2 s ahead, then the lower-tau prefetch around the camera), then larger
 //!   nodes first, then nearer to the camera. Pending jobs sit in a queue shared with the
@@ -35,6 +36,7 @@
 pub mod bounds_store;
 pub mod content;
 mod display;
+mod dropper;
 mod jobs;
 pub use jobs::{idle_priority, lower_priority};
 pub mod predict;
@@ -176,7 +178,10 @@ impl Default for StreamSettings {
 pub struct Resident {
     /// Boxed: the resident map moves only pointers when it grows.
     pub work: Box<NodeWork>,
+    /// The last frame that needed or prefetched the node, or the frame it became resident.
     pub last_used_frame: u64,
+    /// The frame it became resident.
+    pub ready_frame: u64,
     /// `work.bytes()`, taken when the node became resident (payloads do not change after),
     /// plus what renderers made for it later ([`Streamer::charge`]).
     pub bytes: usize,
@@ -283,6 +288,8 @@ pub struct Streamer {
     queue: Arc<JobQueue>,
     from_workers: Receiver<JobResult>,
     workers: Vec<std::thread::JoinHandle<()>>,
+    /// Frees evicted and discarded nodes off the frame thread (their GPU objects on it).
+    dropper: dropper::Dropper,
     requests: FxHashMap<NodeKey, Request>,
     next_generation: u64,
     resident: FxHashMap<NodeKey, Resident>,
@@ -387,6 +394,7 @@ impl Streamer {
             queue,
             from_workers,
             workers,
+            dropper: dropper::Dropper::start(),
             requests: FxHashMap::default(),
             next_generation: 1,
             resident: FxHashMap::default(),

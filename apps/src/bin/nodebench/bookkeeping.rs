@@ -5,7 +5,8 @@
 
 use crate::open_world;
 use crate::report::{Report, bar};
-use crate::streaming::{FLIGHTS, P50_P99, Span, loop_camera};
+use crate::span::Span;
+use crate::streaming::{FLIGHTS, P50_P99, loop_camera};
 use anyhow::{Result, bail};
 use engine::lighting::content::LightingContent;
 use engine::stream::{StreamSettings, Streamer};

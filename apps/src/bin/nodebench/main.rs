@@ -11,6 +11,7 @@ mod pm;
 mod report;
 mod selection;
 mod soak;
+mod span;
 mod streaming;
 mod terrain;
 mod textures;

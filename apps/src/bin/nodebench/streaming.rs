@@ -3,6 +3,7 @@
 
 use crate::open_world;
 use crate::report::{Report, bar};
+use crate::span::Span;
 use anyhow::{Result, bail};
 use engine::camera::Camera;
 use engine::ground::content::NodeGround;
@@ -160,35 +161,6 @@ impl<'g> Flight<'g> {
             Flight::Gpu(gpu, v) => v.upload_and_finish(gpu),
         }
         [update, t.stop()]
-    }
-}
-
-/// A span of the frame thread's time: wall clock and, where the platform reports it, on-CPU
-/// time (the wall clock less the time the OS gave other threads).
-#[derive(Clone, Copy)]
-pub(crate) struct Span {
-    pub(crate) wall_s: f64,
-    pub(crate) on_cpu_s: Option<f64>,
-}
-
-/// A span being timed.
-pub(crate) struct SpanStart(Instant, Option<cpu_time::ThreadTime>);
-
-impl Span {
-    pub(crate) fn start() -> SpanStart {
-        SpanStart(Instant::now(), cpu_time::ThreadTime::try_now().ok())
-    }
-}
-
-impl SpanStart {
-    pub(crate) fn stop(self) -> Span {
-        Span {
-            wall_s: self.0.elapsed().as_secs_f64(),
-            on_cpu_s: self
-                .1
-                .and_then(|t| t.try_elapsed().ok())
-                .map(|d| d.as_secs_f64()),
-        }
     }
 }
 
@@ -848,6 +820,7 @@ fn report_frame_times(
                 .map(|[u, g]| Span {
                     wall_s: u.wall_s + g.wall_s,
                     on_cpu_s: u.on_cpu_s.zip(g.on_cpu_s).map(|(a, b)| a + b),
+                    run_queue_s: u.run_queue_s.zip(g.run_queue_s).map(|(a, b)| a + b),
                 })
                 .collect(),
         ),
@@ -856,7 +829,11 @@ fn report_frame_times(
         "{params}; the wall-clock row less the time the OS gave other threads (with as many \
          workers as cores, a worker can hold the frame thread's core for a scheduler tick)"
     );
-    for (name, spans) in spans {
+    let run_queue_params = format!(
+        "{params}; the time in the span the frame thread was ready to run but another thread \
+         had its core (Linux run-queue delay)"
+    );
+    for (i, (name, spans)) in spans.into_iter().enumerate() {
         let wall = spans.iter().map(|s| s.wall_s).collect();
         r.quantiles("streaming", wall, &P50_P99, params, |q| {
             format!("{name} {q}")
@@ -865,8 +842,54 @@ fn report_frame_times(
         r.quantiles("streaming", on_cpu, &P50_P99, &on_cpu_params, |q| {
             format!("{name} {q}, on-CPU time of the frame thread")
         });
+        if i == 0 {
+            let waits: Vec<f64> = spans.iter().filter_map(|s| s.run_queue_s).collect();
+            r.quantiles("streaming", waits, &P50_P99, &run_queue_params, |q| {
+                format!("{name} {q}, waiting for a core")
+            });
+            report_slowest_spans(&spans, name, r, params);
+        }
     }
     report_stages(stages, r, params);
+}
+
+/// Where the slowest 1 % of `spans` (by wall clock) went, on average: on the CPU, waiting for
+/// a core, and the rest (asleep on a lock or a page, or the virtual CPU not running).
+fn report_slowest_spans(spans: &[Span], name: &str, r: &mut Report, params: &str) {
+    let mut slowest: Vec<&Span> = spans
+        .iter()
+        .filter(|s| s.on_cpu_s.is_some() && s.run_queue_s.is_some())
+        .collect();
+    if slowest.is_empty() {
+        return;
+    }
+    slowest.sort_by(|a, b| b.wall_s.total_cmp(&a.wall_s));
+    slowest.truncate(slowest.len().div_ceil(100));
+    let n = slowest.len() as f64;
+    let mean = |f: &dyn Fn(&Span) -> f64| slowest.iter().map(|s| f(s)).sum::<f64>() / n;
+    let on_cpu = mean(&|s| s.on_cpu_s.unwrap_or(0.0));
+    let waiting = mean(&|s| s.run_queue_s.unwrap_or(0.0));
+    let wall = mean(&|s| s.wall_s);
+    let slow_params = format!(
+        "{params}; mean over the slowest 1 % of frames by wall clock ({} frames); the rest is \
+         the wall clock less the other two (asleep: a lock, a page fault; or the virtual CPU \
+         not running)",
+        slowest.len()
+    );
+    for (part, value) in [
+        ("wall clock", wall),
+        ("on the CPU", on_cpu),
+        ("waiting for a core", waiting),
+        ("the rest", (wall - on_cpu - waiting).max(0.0)),
+    ] {
+        r.add(
+            "streaming",
+            &format!("{name} in the slowest frames: {part}"),
+            value * 1e6,
+            "µs",
+            &slow_params,
+        );
+    }
 }
 
 /// The quantiles of the per-frame rows.
