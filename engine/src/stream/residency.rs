@@ -75,9 +75,9 @@ impl Streamer {
         }
         let low_water = budget - budget / EVICTION_SLACK;
         let drawn_only = self.drawn_only();
-        // A node used in this frame and resident before it was needed or prefetched in this
-        // frame's update, so it is held: skipped without looking it up (most of the resident
-        // nodes in a flight).
+        // `last_used_frame == frame` means this frame's update marked the node (needed or
+        // prefetched, so held) unless it only became resident this frame: such nodes are
+        // skipped without the lookups (most of the resident nodes in a flight).
         let frame = self.frame;
         let maybe_free = |r: &super::Resident| r.last_used_frame < frame || r.ready_frame == frame;
         // Least recently used first (ties by key); a heap, as a pass evicts few of many.

@@ -766,16 +766,21 @@ impl FlightOutcome {
     }
 }
 
+/// The slowest 1 % of `items` (at least one of a non-empty list) by `seconds`, slowest first.
+fn slowest_percent<T>(items: &[T], seconds: impl Fn(&T) -> f64) -> Vec<&T> {
+    let mut slowest: Vec<&T> = items.iter().collect();
+    slowest.sort_by(|a, b| seconds(b).total_cmp(&seconds(a)));
+    slowest.truncate(items.len().div_ceil(100));
+    slowest
+}
+
 /// The rows of where the update's time goes: each stage's p99, and its mean over the slowest
 /// 1 % of updates (what the bookkeeping p99 is made of).
 fn report_stages(stages: &[engine::stream::UpdateStages], r: &mut Report, params: &str) {
     if stages.is_empty() {
         return;
     }
-    let total = |s: &engine::stream::UpdateStages| s.seconds().iter().sum::<f64>();
-    let mut slowest: Vec<_> = stages.iter().collect();
-    slowest.sort_by(|a, b| total(b).total_cmp(&total(a)));
-    slowest.truncate(stages.len().div_ceil(100));
+    let slowest = slowest_percent(stages, |s| s.seconds().iter().sum::<f64>());
     let slow_params = format!(
         "{params}; mean over the slowest 1 % of updates ({} frames), wall clock",
         slowest.len()
@@ -856,15 +861,16 @@ fn report_frame_times(
 /// Where the slowest 1 % of `spans` (by wall clock) went, on average: on the CPU, waiting for
 /// a core, and the rest (asleep on a lock or a page, or the virtual CPU not running).
 fn report_slowest_spans(spans: &[Span], name: &str, r: &mut Report, params: &str) {
-    let mut slowest: Vec<&Span> = spans
+    if spans
         .iter()
-        .filter(|s| s.on_cpu_s.is_some() && s.run_queue_s.is_some())
-        .collect();
+        .any(|s| s.on_cpu_s.is_none() || s.run_queue_s.is_none())
+    {
+        return;
+    }
+    let slowest = slowest_percent(spans, |s| s.wall_s);
     if slowest.is_empty() {
         return;
     }
-    slowest.sort_by(|a, b| b.wall_s.total_cmp(&a.wall_s));
-    slowest.truncate(slowest.len().div_ceil(100));
     let n = slowest.len() as f64;
     let mean = |f: &dyn Fn(&Span) -> f64| slowest.iter().map(|s| f(s)).sum::<f64>() / n;
     let on_cpu = mean(&|s| s.on_cpu_s.unwrap_or(0.0));
