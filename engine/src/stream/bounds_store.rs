@@ -73,3 +73,76 @@ impl BoundsStore {
         self.len() == 0
     }
 }
+
+/// The frame thread's copy of the known bounds, for the selections: bounds in the order they
+/// arrived (a node's siblings and children are measured together, so a walk reading a split
+/// node's four children reads neighbouring records) behind a small index (about 16 bytes a
+/// node, so the part a walk probes stays in cache where a table of whole records, 440 bytes a
+/// node, would not). Bounds are only added: a node's bounds never change.
+#[derive(Debug, Default)]
+pub(super) struct KnownBounds {
+    index: FxHashMap<NodeKey, u32>,
+    bounds: Vec<NodeBounds>,
+}
+
+impl KnownBounds {
+    /// Room for `nodes` from the start (growing copies the records within one frame).
+    pub(super) fn with_capacity(nodes: usize) -> Self {
+        Self {
+            index: FxHashMap::with_capacity_and_hasher(nodes, rustc_hash::FxBuildHasher),
+            bounds: Vec::with_capacity(nodes),
+        }
+    }
+
+    pub(super) fn get(&self, key: &NodeKey) -> Option<&NodeBounds> {
+        self.index.get(key).map(|&i| &self.bounds[i as usize])
+    }
+
+    /// Adds bounds not known yet (the first bounds given for a node stay).
+    pub(super) fn extend(&mut self, fresh: impl IntoIterator<Item = (NodeKey, NodeBounds)>) {
+        for (key, b) in fresh {
+            if let std::collections::hash_map::Entry::Vacant(e) = self.index.entry(key) {
+                let i = u32::try_from(self.bounds.len()).expect("fewer than 2^32 known nodes");
+                e.insert(i);
+                self.bounds.push(b);
+            }
+        }
+    }
+
+    #[cfg(test)]
+    pub(super) fn len(&self) -> usize {
+        self.bounds.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn known_bounds_keep_the_first_given_and_find_each_node() {
+        let key = |ix| NodeKey {
+            level: 3,
+            ix,
+            iy: 1,
+        };
+        let mut known = KnownBounds::with_capacity(2);
+        known.extend([
+            (key(0), NodeBounds::exact(0.0, 1.0)),
+            (key(1), NodeBounds::exact(2.0, 3.0)),
+        ]);
+        known.extend([
+            (key(1), NodeBounds::exact(5.0, 6.0)),
+            (key(2), NodeBounds::exact(7.0, 9.0)),
+        ]);
+        assert_eq!(known.len(), 3);
+        assert_eq!(known.get(&key(0)).map(|b| b.z_max_m), Some(1.0));
+        assert_eq!(
+            known.get(&key(1)).map(|b| b.z_min_m),
+            Some(2.0),
+            "the first bounds stay"
+        );
+        assert_eq!(known.get(&key(2)).map(|b| b.z_min_m), Some(7.0));
+        assert!(known.get(&key(3)).is_none());
+    }
+}

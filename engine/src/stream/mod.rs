@@ -65,7 +65,7 @@ use std::time::Instant;
 pub const GUARD_BAND: f64 = 1.15;
 
 /// Node bounds the streamer's copy has room for from the start (about 7 MiB): a flight's
-/// first seconds add thousands, and growing the table copies it whole within one frame.
+/// first seconds add thousands, and growing copies them all within one frame.
 const KNOWN_CAPACITY: usize = 1 << 14;
 
 /// Everything phases may read, shared by all threads.
@@ -297,9 +297,8 @@ pub struct Streamer {
     resident_bytes: usize,
     wanted: FxHashSet<NodeKey>,
     /// The bounds known to the selections: the store's, taken as jobs add them
-    /// ([`BoundsStore::take_fresh`]). Stored in place (a walk reads them in table order, not
-    /// through pointers), sized for a flight's first [`KNOWN_CAPACITY`] nodes.
-    known: FxHashMap<NodeKey, NodeBounds>,
+    /// ([`BoundsStore::take_fresh`]), with room for a flight's first [`KNOWN_CAPACITY`] nodes.
+    known: bounds_store::KnownBounds,
     /// Nodes needed for display (wanted, ancestors, children of ancestors) and for prefetch.
     needed: FxHashSet<NodeKey>,
     /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
@@ -400,7 +399,7 @@ impl Streamer {
             resident: FxHashMap::default(),
             resident_bytes: 0,
             wanted: FxHashSet::default(),
-            known: FxHashMap::with_capacity_and_hasher(KNOWN_CAPACITY, rustc_hash::FxBuildHasher),
+            known: bounds_store::KnownBounds::with_capacity(KNOWN_CAPACITY),
             needed: FxHashSet::default(),
             to_split: FxHashSet::default(),
             show_split: FxHashSet::default(),

@@ -84,9 +84,35 @@ pub fn projected_error_in_px(
     near_m: f64,
     window: PxWindow,
 ) -> f64 {
-    let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
     let (lo, hi) = node_aabb(tree, key, b);
     let node_dist_m = distance_to_aabb(eye_m, lo, hi);
+    projected_error_at(
+        tree,
+        key,
+        b,
+        node_dist_m,
+        eye_m,
+        k_px,
+        frustum,
+        near_m,
+        window,
+    )
+}
+
+/// [`projected_error_in_px`] with the distance from `eye_m` to the node's box given
+/// (`node_dist_m`, as [`distance_to_aabb`] finds it), for a caller that has it already.
+fn projected_error_at(
+    tree: &QuadTree,
+    key: NodeKey,
+    b: &NodeBounds,
+    node_dist_m: f64,
+    eye_m: DVec3,
+    k_px: f64,
+    frustum: Option<&Frustum>,
+    near_m: f64,
+    window: PxWindow,
+) -> f64 {
+    let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
     let mut out = px(b.vegetation_error_m, node_dist_m);
     if out > window.ceiling_px {
         return out;
@@ -350,10 +376,11 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             continue;
         }
         let dist_m = distance_to_aabb(cam.position_m, min, max);
-        let error_px = projected_error_in_px(
+        let error_px = projected_error_at(
             tree,
             key,
             b,
+            dist_m,
             cam.position_m,
             k,
             frustum.as_ref(),

@@ -787,7 +787,7 @@ fn report_stages(stages: &[engine::stream::UpdateStages], r: &mut Report, params
     );
     for (i, name) in engine::stream::UpdateStages::NAMES.iter().enumerate() {
         let times = stages.iter().map(|s| s.seconds()[i]).collect();
-        r.quantiles("streaming", times, &[0.99], params, |q| {
+        r.quantiles("streaming", times, &[0.5, 0.99], params, |q| {
             format!("update stage {name} {q}")
         });
         let mean = slowest.iter().map(|s| s.seconds()[i]).sum::<f64>() / slowest.len() as f64;
