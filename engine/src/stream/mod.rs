@@ -198,6 +198,9 @@ pub struct StreamStats {
     pub late_results_discarded: u64,
     /// Running jobs that stopped at a phase boundary after being cancelled.
     pub cancels_acknowledged: u64,
+    /// Updates that left their cancels and requests to the next update because a worker held
+    /// the job queue (the frame thread never waits on a worker).
+    pub requests_deferred: u64,
     pub evicted: u64,
     pub queued: usize,
     pub running: usize,
@@ -614,22 +617,8 @@ impl Streamer {
         stages.selection_s = lap.next();
         self.refresh_prefetch(cam, future);
         stages.prefetch_s = lap.next();
-        // Cancel requests no longer needed or prefetched.
-        let stale: Vec<NodeKey> = self
-            .requests
-            .keys()
-            .filter(|k| !self.needed.contains(k) && !self.prefetch.contains_key(k))
-            .copied()
-            .collect();
-        let queue = Arc::clone(&self.queue);
-        let mut pending = queue.lock();
-        pending.set_camera(cam.position_m);
-        for k in stale {
-            self.cancel(&mut pending, k);
-        }
-        // Request what is missing, each node in its class; promote requests whose time to
-        // need came closer. Resident nodes needed or prefetched are marked used this frame
-        // in the same pass.
+        // Resident nodes needed or prefetched are marked used this frame (eviction keeps
+        // them); the others are missing, each in its class.
         let frame = self.frame;
         let mut missing: Vec<(usize, NodeKey)> = Vec::new();
         for (class, k) in self
@@ -643,25 +632,44 @@ impl Streamer {
                 None => missing.push((class, k)),
             }
         }
-        missing.sort_unstable();
-        for (class, k) in missing {
-            match self.requests.get_mut(&k) {
-                None => self.request(&mut pending, k, class),
-                Some(r) if r.class > class => {
-                    let old = r.class;
-                    r.class = class;
-                    if class == 0 {
-                        r.needed_at = Some(Instant::now());
-                    }
-                    if matches!(r.state, RequestState::InWorkers { .. }) {
-                        pending.promote(k, old, class);
-                    }
-                }
-                Some(_) => {}
+        // Cancel requests no longer needed or prefetched, request what is missing, promote
+        // requests whose time to need came closer: all under the job queue's lock, and only
+        // when no worker holds it. Otherwise the next update does it (it finds the same
+        // changes, or newer ones).
+        let queue = Arc::clone(&self.queue);
+        if let Some(mut pending) = queue.try_lock() {
+            let stale: Vec<NodeKey> = self
+                .requests
+                .keys()
+                .filter(|k| !self.needed.contains(k) && !self.prefetch.contains_key(k))
+                .copied()
+                .collect();
+            pending.set_camera(cam.position_m);
+            for k in stale {
+                self.cancel(&mut pending, k);
             }
+            missing.sort_unstable();
+            for (class, k) in missing {
+                match self.requests.get_mut(&k) {
+                    None => self.request(&mut pending, k, class),
+                    Some(r) if r.class > class => {
+                        let old = r.class;
+                        r.class = class;
+                        if class == 0 {
+                            r.needed_at = Some(Instant::now());
+                        }
+                        if matches!(r.state, RequestState::InWorkers { .. }) {
+                            pending.promote(k, old, class);
+                        }
+                    }
+                    Some(_) => {}
+                }
+            }
+            drop(pending);
+            self.queue.wake_workers();
+        } else {
+            self.stats.requests_deferred += 1;
         }
-        drop(pending);
-        self.queue.wake_workers();
         stages.requests_s = lap.next();
         self.advance_fades(dt_s);
         self.drawn = self.compute_draw_list();
@@ -691,5 +699,59 @@ impl Lap {
         let s = now.duration_since(self.0).as_secs_f64();
         self.0 = now;
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    /// While a worker holds the job queue, an update does not wait for it: it leaves its
+    /// requests to a later update, which makes them.
+    #[test]
+    fn an_update_does_not_wait_for_a_worker_holding_the_job_queue() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
+        let world = World::new(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let [x0, y0] = world.origin_m();
+        let [w, h] = world.size_m();
+        let (x, y) = (x0 + 0.5 * w, y0 + 0.5 * h);
+        let ground = world.height_m(x, y);
+        let cam = Camera::look_at(
+            DVec3::new(x, y, ground + 50.0),
+            DVec3::new(x + 100.0, y, ground),
+            1.0,
+            [640, 360],
+        );
+        let mut s = Streamer::new(world, StreamSettings::default().with_workers(1), Vec::new());
+        let queue = Arc::clone(&s.queue);
+        std::thread::scope(|scope| {
+            // The test thread stands for a worker holding the lock while off its core.
+            let held = queue.lock();
+            let (done_tx, done_rx) = std::sync::mpsc::channel();
+            let streamer = &mut s;
+            scope.spawn(move || {
+                streamer.update(&cam, 1.0 / 60.0);
+                done_tx.send(()).expect("the test waits");
+            });
+            let done = done_rx.recv_timeout(std::time::Duration::from_mins(1));
+            drop(held);
+            assert!(done.is_ok(), "the update waited for the job queue's lock");
+        });
+        assert_eq!(s.stats.requests_deferred, 1);
+        assert_eq!(
+            s.in_flight(),
+            0,
+            "nothing requested while the queue was held"
+        );
+        // A later update makes the requests (the idle worker takes the lock only when woken,
+        // so at most a few are deferred while it settles).
+        for _ in 0..100 {
+            s.update(&cam, 1.0 / 60.0);
+            if s.stats.requested > 0 {
+                break;
+            }
+        }
+        assert!(s.stats.requested > 0, "no later update requested anything");
     }
 }

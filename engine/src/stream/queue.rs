@@ -11,7 +11,7 @@ use super::jobs::JobMsg;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError, TryLockError};
 
 /// Pending jobs and the camera position that orders them.
 pub(super) struct Pending {
@@ -116,6 +116,17 @@ impl JobQueue {
     /// [`Self::wake_workers`] after pushing).
     pub(super) fn lock(&self) -> MutexGuard<'_, Pending> {
         self.pending.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The pending jobs, or None while another thread holds them. For the frame thread: a
+    /// worker runs at the lowest priority, and one holding the lock can be off its core for a
+    /// scheduler tick or more while higher-priority threads run.
+    pub(super) fn try_lock(&self) -> Option<MutexGuard<'_, Pending>> {
+        match self.pending.try_lock() {
+            Ok(p) => Some(p),
+            Err(TryLockError::Poisoned(p)) => Some(p.into_inner()),
+            Err(TryLockError::WouldBlock) => None,
+        }
     }
 
     pub(super) fn wake_workers(&self) {

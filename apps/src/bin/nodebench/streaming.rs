@@ -361,6 +361,7 @@ pub(crate) fn section_streaming(
         let s = flight_run.streamer();
         let c0 = s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu;
         let evicted0 = s.stats.evicted;
+        let deferred0 = s.stats.requests_deferred;
         let budget_bytes = s.settings.cache_budget_bytes;
         let b = bar(frames as u64, &format!("streaming {speed} m/s"));
         let (mut debt_frames, mut worst_excess, mut frame_times) =
@@ -417,6 +418,7 @@ pub(crate) fn section_streaming(
             gpu.map(|(_, adapter)| adapter),
         );
         let outcome = FlightOutcome {
+            requests_deferred: s.stats.requests_deferred - deferred0,
             latencies: s.take_latencies(),
             cancelled,
             debt_share: debt_frames as f64 / frames as f64,
@@ -583,6 +585,8 @@ fn scheduling_noise(r: &mut Report, frames: usize, dt: f64, busy: usize) {
 struct FlightOutcome {
     latencies: Vec<engine::stream::JobLatency>,
     cancelled: u64,
+    /// Updates that left their requests to the next one (a worker held the job queue).
+    requests_deferred: u64,
     /// Share of frames with pop debt.
     debt_share: f64,
     worst_excess_px: f64,
@@ -612,6 +616,41 @@ struct Residency {
 }
 
 impl FlightOutcome {
+    /// The job and update counts of the flight: `completed` jobs, `needed` of them for
+    /// display before they were ready.
+    fn report_counts(&self, completed: usize, needed: usize, r: &mut Report, params: &str) {
+        r.add(
+            "streaming",
+            "jobs completed",
+            completed as f64,
+            "jobs",
+            params,
+        );
+        r.add(
+            "streaming",
+            "jobs needed for display before they were ready",
+            needed as f64,
+            "jobs",
+            params,
+        );
+        r.add(
+            "streaming",
+            "jobs cancelled",
+            self.cancelled as f64,
+            "jobs",
+            params,
+        );
+        r.add(
+            "streaming",
+            "updates that left their requests to the next update",
+            self.requests_deferred as f64,
+            "updates",
+            &format!(
+                "{params}; a worker held the job queue, and the frame thread does not wait for it"
+            ),
+        );
+    }
+
     fn report(self, r: &mut Report, params: &str) {
         let mut request: Vec<f64> = self
             .latencies
@@ -650,27 +689,7 @@ impl FlightOutcome {
                 ),
             );
         }
-        r.add(
-            "streaming",
-            "jobs completed",
-            request.len() as f64,
-            "jobs",
-            params,
-        );
-        r.add(
-            "streaming",
-            "jobs needed for display before they were ready",
-            need.len() as f64,
-            "jobs",
-            params,
-        );
-        r.add(
-            "streaming",
-            "jobs cancelled",
-            self.cancelled as f64,
-            "jobs",
-            params,
-        );
+        self.report_counts(request.len(), need.len(), r, params);
         r.add(
             "streaming",
             "pop debt (frames with a drawn node over tau)",
