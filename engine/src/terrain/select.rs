@@ -8,7 +8,7 @@
 //! [`projected_error_px`]. When culling, blocks outside the view frustum show nothing and do not
 //! count.
 
-use crate::camera::{Camera, Frustum, distance_to_aabb};
+use crate::camera::{ALL_PLANES, Camera, Frustum, Planes, distance_to_aabb};
 use crate::surface::world::World;
 use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
 use crate::terrain::mesh::MAX_DECIMATION;
@@ -93,14 +93,16 @@ pub fn projected_error_in_px(
         node_dist_m,
         eye_m,
         k_px,
-        frustum,
+        frustum.map(|f| (f, ALL_PLANES)),
         near_m,
         window,
     )
 }
 
 /// [`projected_error_in_px`] with the distance from `eye_m` to the node's box given
-/// (`node_dist_m`, as [`distance_to_aabb`] finds it), for a caller that has it already.
+/// (`node_dist_m`, as [`distance_to_aabb`] finds it), for a caller that has it already, and
+/// the frustum with the planes the node's box crosses (as [`Frustum::classify_aabb`] found
+/// them): a block within the node's box is tested against those planes only.
 fn projected_error_at(
     tree: &QuadTree,
     key: NodeKey,
@@ -108,7 +110,7 @@ fn projected_error_at(
     node_dist_m: f64,
     eye_m: DVec3,
     k_px: f64,
-    frustum: Option<&Frustum>,
+    frustum: Option<(&Frustum, Planes)>,
     near_m: f64,
     window: PxWindow,
 ) -> f64 {
@@ -145,8 +147,17 @@ fn projected_error_at(
         }
         let (lo, hi) = block_aabb(tree, key, b, i);
         let block_px = px(block.error_m, distance_to_aabb(eye_m, lo, hi));
-        // The frustum test (the costlier part) only for blocks that would pass the cut.
-        if block_px <= cut || frustum.is_some_and(|f| !f.intersects_aabb(lo, hi)) {
+        // The frustum test (the costlier part) only for blocks that would pass the cut, and
+        // only against the planes the node's box crosses when the block's box is within it.
+        let outside = |(f, crossed): (&Frustum, Planes)| {
+            let planes = if block.z_min_m >= b.z_min_m && block.z_max_m <= b.z_max_m {
+                crossed
+            } else {
+                ALL_PLANES
+            };
+            planes != 0 && f.classify_aabb(lo, hi, planes).is_none()
+        };
+        if block_px <= cut || frustum.is_some_and(outside) {
             continue;
         }
         out = block_px;
@@ -358,12 +369,14 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
     let mut out = Walked::default();
     let k = cam.k_px();
     // Each node's bounds are looked up when it is pushed, a split node's children one after
-    // another: no lookup waits for another's result, so their cache misses can overlap.
+    // another: no lookup waits for another's result, so their cache misses can overlap. Each
+    // entry carries the frustum planes its box may cross: those its parent's box crossed when
+    // its box lies within the parent's (a box inside a plane has every box within it inside).
     let mut stack = Vec::new();
     if tree.overlaps_map(NodeKey::ROOT) {
-        stack.push((NodeKey::ROOT, bounds(NodeKey::ROOT)));
+        stack.push((NodeKey::ROOT, bounds(NodeKey::ROOT), ALL_PLANES));
     }
-    while let Some((key, found)) = stack.pop() {
+    while let Some((key, found, planes)) = stack.pop() {
         out.visited += 1;
         let Some(owned) = found else {
             reached(Reached::Unknown(key));
@@ -371,10 +384,14 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
         };
         let b = owned.borrow();
         let (min, max) = node_aabb(tree, key, b);
-        if frustum.is_some_and(|f| !f.intersects_aabb(min, max)) {
+        let crossed = match &frustum {
+            Some(f) if planes != 0 => f.classify_aabb(min, max, planes),
+            _ => Some(planes),
+        };
+        let Some(crossed) = crossed else {
             out.culled += 1;
             continue;
-        }
+        };
         let dist_m = distance_to_aabb(cam.position_m, min, max);
         let error_px = projected_error_at(
             tree,
@@ -383,7 +400,7 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             dist_m,
             cam.position_m,
             k,
-            frustum.as_ref(),
+            frustum.as_ref().map(|f| (f, crossed)),
             0.0,
             window,
         );
@@ -393,7 +410,16 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             for c in key.children().into_iter().rev() {
                 if tree.overlaps_map(c) {
                     let found = bounds(c);
-                    stack.push((c, found));
+                    let planes = match &found {
+                        Some(cb)
+                            if cb.borrow().z_min_m >= b.z_min_m
+                                && cb.borrow().z_max_m <= b.z_max_m =>
+                        {
+                            crossed
+                        }
+                        _ => ALL_PLANES,
+                    };
+                    stack.push((c, found, planes));
                 }
             }
         } else {
