@@ -309,10 +309,8 @@ pub struct Streamer {
     /// The part of `to_split` drawn split: nodes over the display threshold
     /// (`show_factor * tau`) and their ancestors.
     show_split: FxHashSet<NodeKey>,
-    /// Nodes prefetched (not needed now), each with its priority class; refilled in place
-    /// every frame.
-    prefetch: FxHashMap<NodeKey, usize>,
-    /// The prefetch set's parts, each refreshed when stale (see [`predict`]).
+    /// The prefetch set's parts, each refreshed when stale (see [`predict`]); a node is
+    /// prefetched when a part holds it and it is not needed now.
     prefetch_parts: Vec<predict::PrefetchPart>,
     /// This frame's draw list, computed once after the fades advance.
     drawn: Vec<DrawNode>,
@@ -406,7 +404,6 @@ impl Streamer {
             needed: FxHashSet::default(),
             to_split: FxHashSet::default(),
             show_split: FxHashSet::default(),
-            prefetch: FxHashMap::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             split: FxHashMap::default(),
             fade_px: FxHashMap::default(),
@@ -618,15 +615,12 @@ impl Streamer {
         self.refresh_prefetch(cam, future);
         stages.prefetch_s = lap.next();
         // Resident nodes needed or prefetched are marked used this frame (eviction keeps
-        // them); the others are missing, each in its class.
+        // them); the others are missing, each in its class (once per part holding it: sorted,
+        // the smallest class comes first and is the one requested).
         let frame = self.frame;
         let mut missing: Vec<(usize, NodeKey)> = Vec::new();
-        for (class, k) in self
-            .needed
-            .iter()
-            .map(|&k| (0, k))
-            .chain(self.prefetch.iter().map(|(&k, &c)| (c, k)))
-        {
+        let entries = self.needed.iter().map(|&k| (0, k));
+        for (class, k) in entries.chain(predict::entries(&self.prefetch_parts)) {
             match self.resident.get_mut(&k) {
                 Some(r) => r.last_used_frame = frame,
                 None => missing.push((class, k)),
@@ -641,7 +635,7 @@ impl Streamer {
             let stale: Vec<NodeKey> = self
                 .requests
                 .keys()
-                .filter(|k| !self.needed.contains(k) && !self.prefetch.contains_key(k))
+                .filter(|k| !self.needed.contains(k) && !self.prefetched(k))
                 .copied()
                 .collect();
             pending.set_camera(cam.position_m);
@@ -649,6 +643,7 @@ impl Streamer {
                 self.cancel(&mut pending, k);
             }
             missing.sort_unstable();
+            let requested_before = self.stats.requested;
             for (class, k) in missing {
                 match self.requests.get_mut(&k) {
                     None => self.request(&mut pending, k, class),
@@ -666,7 +661,12 @@ impl Streamer {
                 }
             }
             drop(pending);
-            self.queue.wake_workers();
+            // Only new jobs need a worker woken: a waiting worker found the queue empty, so a
+            // promotion has nothing to offer it (a wake-up each frame would cost the frame a
+            // system call and an idle worker a trip through the lock).
+            if self.stats.requested > requested_before {
+                self.queue.wake_workers();
+            }
         } else {
             self.stats.requests_deferred += 1;
         }

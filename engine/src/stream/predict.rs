@@ -78,9 +78,10 @@ impl PrefetchPart {
 }
 
 impl Streamer {
-    /// Refills the prefetch classes for this frame: every node not needed now, mapped to the
-    /// class of the earliest predicted camera (`future`, sorted by time) that needs it, else
-    /// to the lower-tau class around `cam`. The parts' selections are the costliest bookkeeping of a
+    /// Refreshes the prefetch parts for this frame: the nodes each predicted camera (`future`,
+    /// sorted by time) needs, in the class of its horizon, and the lower-tau ring around `cam`
+    /// in the last class (a node's class is the smallest of the parts holding it, see
+    /// [`entries`]). The parts' selections are the costliest bookkeeping of a
     /// frame, so one part is computed again per frame (the first stale one in turn, else the
     /// next in turn): a part is at most `PREFETCH_PARTS` frames old; a part with no selection
     /// yet (the camera starts moving) or whose camera jumped is computed at once. The display
@@ -120,21 +121,32 @@ impl Streamer {
                 nodes: self.needed_for(&wanted, &ancestors),
             };
         }
-        // In place: the map keeps its capacity from frame to frame.
-        let out = &mut self.prefetch;
-        out.clear();
-        for (part, p) in self.prefetch_parts.iter().enumerate() {
-            let class = if part + 1 == PREFETCH_PARTS {
-                CLASSES - 1
-            } else {
-                1 + part
-            };
-            for &k in &p.nodes {
-                if !self.needed.contains(&k) {
-                    out.entry(k).or_insert(class);
-                }
-            }
-        }
+    }
+
+    /// Whether a prefetch part holds `key`.
+    pub(super) fn prefetched(&self, key: &NodeKey) -> bool {
+        self.prefetch_parts.iter().any(|p| p.nodes.contains(key))
+    }
+}
+
+/// Every prefetch part's nodes, each with the part's priority class: a node in several parts
+/// (or needed now) comes once per part, and the caller takes its smallest class. No merged set
+/// is built: that took two hash operations per node of every part in every frame, more than
+/// the frame's part selection.
+pub(super) fn entries(parts: &[PrefetchPart]) -> impl Iterator<Item = (usize, NodeKey)> + '_ {
+    parts
+        .iter()
+        .enumerate()
+        .flat_map(|(part, p)| p.nodes.iter().map(move |&k| (part_class(part), k)))
+}
+
+/// The priority class of prefetch part `part`: one class per horizon, the last (lower-tau
+/// ring) part in the last class.
+fn part_class(part: usize) -> usize {
+    if part + 1 == PREFETCH_PARTS {
+        CLASSES - 1
+    } else {
+        1 + part
     }
 }
 

@@ -20,7 +20,7 @@ impl Streamer {
     /// Resident nodes that must stay: needed, prefetched, drawn, or in a fade.
     pub(super) fn pinned(&self) -> FxHashSet<NodeKey> {
         let mut p = self.needed.clone();
-        p.extend(self.prefetch.keys().copied());
+        p.extend(super::predict::entries(&self.prefetch_parts).map(|(_, k)| k));
         p.extend(self.drawn.iter().map(|d| d.key));
         p.extend(self.split.keys().copied());
         p
@@ -49,7 +49,7 @@ impl Streamer {
 
     /// Needed, prefetched or in a fade.
     fn held(&self, k: &NodeKey) -> bool {
-        self.needed.contains(k) || self.prefetch.contains_key(k) || self.split.contains_key(k)
+        self.needed.contains(k) || self.prefetched(k) || self.split.contains_key(k)
     }
 
     /// Counts `bytes` that a renderer allocated for resident node `key` after the node became
