@@ -40,6 +40,8 @@ pub mod soak;
 pub mod stream;
 pub mod surface;
 pub mod terrain;
+#[cfg(test)]
+mod test_maps;
 pub mod texcache;
 pub mod vegetation;
 pub mod viewer;

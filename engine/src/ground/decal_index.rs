@@ -129,8 +129,7 @@ mod tests {
     /// box misses the rectangle; on random rectangles from tile to map size, some off the map.
     #[test]
     fn queries_equal_a_scan_of_all_decals() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let map = worldgen::Map::load(&dir).expect("tiny map loads");
+        let map = crate::test_maps::tiny_map();
         let (o, s) = (map.manifest.origin_m, map.manifest.size_m);
         let decals = &map.decals;
         assert!(decals.len() >= 3, "the tiny map has decals");
@@ -163,8 +162,7 @@ mod tests {
     /// rectangle is missing from the query.
     #[test]
     fn no_decal_that_shapes_a_rectangle_is_missing() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let map = worldgen::Map::load(&dir).expect("tiny map loads");
+        let map = crate::test_maps::tiny_map();
         let (o, s) = (map.manifest.origin_m, map.manifest.size_m);
         let index = DecalIndex::new(&map.decals, o, s);
         let world = crate::surface::World::new(map);

@@ -201,12 +201,7 @@ mod tests {
     use super::*;
 
     fn legend() -> Vec<GroundType> {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        worldgen::Map::load(&dir)
-            .expect("tiny map loads")
-            .manifest
-            .ground
-            .legend
+        crate::test_maps::tiny_map().manifest.ground.legend
     }
 
     /// The same legend and seed give the same bytes; another seed or type gives others.

@@ -80,8 +80,7 @@ mod tests {
     /// texture rectangle, in file and segment order.
     #[test]
     fn pieces_equal_a_scan_of_every_segment() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let map = worldgen::Map::load(&dir).expect("tiny map loads");
+        let map = crate::test_maps::tiny_map();
         let (o, s) = (map.manifest.origin_m, map.manifest.size_m);
         let tree = QuadTree::new(o, s);
         let index = DecalIndex::new(&map.decals, o, s);

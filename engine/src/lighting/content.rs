@@ -478,8 +478,7 @@ mod tests {
     /// is only kept (not drawn) is nearer to the camera; among the drawn ones, the nearest.
     #[test]
     fn grids_of_drawn_nodes_are_computed_first() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let world = World::new(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let world = World::new(crate::test_maps::tiny_map());
         let canopy = Arc::new(Canopy::new(&world, &Placer::new(&world)));
         // No world attached: no light thread starts, so nothing is taken before the test looks.
         let lighting = LightingContent::with_threads(&world, canopy, Sun::default(), 1);

@@ -768,8 +768,7 @@ mod tests {
 
     /// The tiny map moved to an origin with a fraction of a metre, its canopy and its tree.
     fn shifted_tiny() -> (World, Canopy, QuadTree) {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let mut map = worldgen::Map::load(&dir).expect("tiny map loads");
+        let mut map = crate::test_maps::tiny_map();
         map.manifest.origin_m = [1234.567, -89.0123];
         let world = World::new(map);
         let canopy = Canopy::new(&world, &Placer::new(&world));

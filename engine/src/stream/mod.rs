@@ -711,8 +711,7 @@ mod tests {
     /// requests to a later update, which makes them.
     #[test]
     fn an_update_does_not_wait_for_a_worker_holding_the_job_queue() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let world = World::new(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let world = World::new(crate::test_maps::tiny_map());
         let [x0, y0] = world.origin_m();
         let [w, h] = world.size_m();
         let (x, y) = (x0 + 0.5 * w, y0 + 0.5 * h);

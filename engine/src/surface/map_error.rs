@@ -454,8 +454,7 @@ mod tests {
     /// The committed tiny map (512 m, roads, detail) moved off the origin, with a 60 m cliff
     /// between two sample columns and two single-sample spikes burned into its heights.
     fn hard_world() -> World {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let mut map = worldgen::Map::load(&dir).expect("tiny map loads");
+        let mut map = crate::test_maps::tiny_map();
         let (w, h) = (map.heights.width(), map.heights.height());
         for y in 0..h {
             for x in 70..w {

@@ -158,17 +158,13 @@ impl World {
 mod tests {
     use super::*;
     use crate::terrain::precomputed::{self, MEASUREMENT_VERSION};
+    use crate::test_maps::tiny_map;
     use worldgen::progress::Silent;
 
     /// The world as the stream opens it (the map's grids and the terrain's measured finest grid),
     /// with `cache` when given.
     fn opened(map: worldgen::Map, cache: Option<&Path>) -> World {
         precomputed::open(map, cache, &Silent)
-    }
-
-    fn tiny_map() -> worldgen::Map {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        worldgen::Map::load(&dir).expect("tiny map loads")
     }
 
     fn temp_file(name: &str) -> std::path::PathBuf {

@@ -598,8 +598,7 @@ mod tests {
     /// just dense enough to take the lattice path with steps of several noise and decal cells.
     #[test]
     fn heights_on_lattice_equal_height_m_point_by_point() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let w = World::without_error_grids(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let w = World::without_error_grids(crate::test_maps::tiny_map());
         let (o, size) = (w.origin_m(), w.size_m());
         let road = (0..256 * 256)
             .map(|k| {

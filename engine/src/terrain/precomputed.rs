@@ -133,8 +133,7 @@ mod tests {
     /// run-time measurement's, rounded outwards to f32 (never below, within f32 rounding above).
     #[test]
     fn stored_node_bounds_are_the_run_time_measurement_rounded_outwards() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let map = worldgen::Map::load(&dir).expect("tiny map loads");
+        let map = crate::test_maps::tiny_map();
         let world = open(map, None, &Silent);
         let tree = QuadTree::new(world.origin_m(), world.size_m());
         let level = level(&world, &tree).expect("the tiny map has 32 m nodes");

@@ -659,8 +659,7 @@ mod tests {
     /// past the map's edges and outside the window).
     #[test]
     fn row_max_bounds_layer_max() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../maps/tiny");
-        let w = World::without_error_grids(worldgen::Map::load(&dir).expect("tiny map loads"));
+        let w = World::without_error_grids(crate::test_maps::tiny_map());
         let (o, size) = (w.origin_m(), w.size_m());
         for layer in 0..w.map.densities.len() {
             let spacing = w.map.densities[layer].spec.spacing_m;
