@@ -2,8 +2,14 @@
 //! list with dither intervals that partition [0, 1) at every point.
 
 use super::Streamer;
+use crate::terrain::bounds::NodeBounds;
+use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::NodeKey;
 use rustc_hash::FxHashMap;
+
+/// The bounds of a node's parent, grandparent, ... as far as a decimation looks (`None` where
+/// not known).
+type Ancestors<'a> = [Option<&'a NodeBounds>; MAX_DECIMATION as usize];
 
 /// One node to draw this frame, with its dither interval (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -120,9 +126,9 @@ impl Streamer {
     }
 
     /// How coarsely drawn node `key`'s grid may be drawn: its decimation at the display's split
-    /// threshold (`show_factor * tau`), from its resident ancestors' bounds; 0 when off or
-    /// without a camera.
-    fn decimation(&self, key: NodeKey) -> u8 {
+    /// threshold (`show_factor * tau`), from its ancestors' bounds (`up`: the parent's, the
+    /// grandparent's, ... as far as known); 0 when off or without a camera.
+    fn decimation(&self, key: NodeKey, up: &Ancestors<'_>) -> u8 {
         match self.camera {
             Some(cam) if self.settings.decimate && self.settings.fixed_level.is_none() => {
                 crate::terrain::select::decimation(
@@ -133,7 +139,11 @@ impl Streamer {
                     cam.near_m,
                     self.settings.show_factor.max(self.settings.split_factor)
                         * self.settings.tau_px,
-                    |a| self.resident.get(&a)?.work.bounds.as_ref(),
+                    |a| {
+                        up.get(usize::from(key.level - a.level) - 1)
+                            .copied()
+                            .flatten()
+                    },
                 )
             }
             _ => 0,
@@ -161,18 +171,24 @@ impl Streamer {
         if !self.resident.contains_key(&NodeKey::ROOT) {
             return out;
         }
-        let mut stack = vec![(NodeKey::ROOT, 0.0f32, 1.0f32)];
-        while let Some((key, lo, hi)) = stack.pop() {
-            if !self.shared.tree.overlaps_map(key) || !self.resident.contains_key(&key) {
+        // Each entry carries its ancestors' bounds for the decimation (the walk came through
+        // them), so a drawn node needs no lookup of its ancestors.
+        let mut stack: Vec<(NodeKey, f32, f32, Ancestors)> =
+            vec![(NodeKey::ROOT, 0.0, 1.0, [None; MAX_DECIMATION as usize])];
+        while let Some((key, lo, hi, up)) = stack.pop() {
+            if !self.shared.tree.overlaps_map(key) {
                 continue;
             }
+            let Some(r) = self.resident.get(&key) else {
+                continue;
+            };
             let s = self.split.get(&key).copied().unwrap_or(0.0);
             if s <= 0.0 {
                 out.push(DrawNode {
                     key,
                     dither_lo: lo,
                     dither_hi: hi,
-                    decimation: self.decimation(key),
+                    decimation: self.decimation(key, &up),
                 });
                 continue;
             }
@@ -183,12 +199,15 @@ impl Streamer {
                     key,
                     dither_lo: mid,
                     dither_hi: hi,
-                    decimation: self.decimation(key),
+                    decimation: self.decimation(key, &up),
                 });
             }
             // Popped nearest first, so the list is front to back in plan view.
+            let mut below = [None; MAX_DECIMATION as usize];
+            below[0] = r.work.bounds.as_ref();
+            below[1..].copy_from_slice(&up[..up.len() - 1]);
             for c in self.children_far_to_near(key) {
-                stack.push((c, lo, mid));
+                stack.push((c, lo, mid, below));
             }
         }
         out
