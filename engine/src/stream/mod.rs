@@ -9,6 +9,7 @@
 //!   ([`Streamer::run_gpu_phases`]). New content is a new kind, not a new scheduler.
 //!
 //! Files: [`content`] (kinds, payloads, node work), `bounds_store` (bounds known so far),
+//! `needed` (the nodes a selection needs, held as its split nodes),
 //! `jobs` (requests, workers, cancellation, GPU phases), `queue` (pending jobs by priority),
 //! `display` (fades and the draw list), `residency` (LRU eviction under the budget,
 //! statistics), `dropper` (frees evicted nodes off the frame thread).
@@ -38,7 +39,9 @@ pub mod content;
 mod display;
 mod dropper;
 mod jobs;
+mod needed;
 pub use jobs::{idle_priority, lower_priority};
+pub use needed::NeededSet;
 pub mod predict;
 mod queue;
 mod residency;
@@ -302,11 +305,10 @@ pub struct Streamer {
     /// The bounds known to the selections: the store's, taken as jobs add them
     /// ([`BoundsStore::take_fresh`]), with room for a flight's first [`KNOWN_CAPACITY`] nodes.
     known: bounds_store::KnownBounds,
-    /// Nodes needed for display (wanted, ancestors, children of ancestors) and for prefetch.
-    needed: FxHashSet<NodeKey>,
-    /// Ancestors of wanted nodes: the nodes that are to be replaced by their children.
-    to_split: FxHashSet<NodeKey>,
-    /// The part of `to_split` drawn split: nodes over the display threshold
+    /// Nodes needed for display: the ancestors of wanted nodes (the nodes to be replaced by
+    /// their children, [`NeededSet::split`]) and their children.
+    needed: NeededSet,
+    /// The part of the needed set's split nodes drawn split: nodes over the display threshold
     /// (`show_factor * tau`) and their ancestors.
     show_split: FxHashSet<NodeKey>,
     /// The prefetch set's parts, each refreshed when stale (see [`predict`]); a node is
@@ -401,8 +403,7 @@ impl Streamer {
             resident_bytes: 0,
             wanted: FxHashSet::default(),
             known: bounds_store::KnownBounds::with_capacity(KNOWN_CAPACITY),
-            needed: FxHashSet::default(),
-            to_split: FxHashSet::default(),
+            needed: NeededSet::empty(tree),
             show_split: FxHashSet::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             split: FxHashMap::default(),
@@ -538,26 +539,14 @@ impl Streamer {
         wanted
     }
 
-    /// The nodes needed to show `wanted` given its `ancestors`: the wanted nodes, the ancestors,
-    /// and every child of an ancestor (a node is only replaced by all four children, so the
-    /// drawn set always covers the whole map, culled parts included).
-    fn needed_for(
-        &self,
-        wanted: &FxHashSet<NodeKey>,
-        ancestors: &FxHashSet<NodeKey>,
-    ) -> FxHashSet<NodeKey> {
-        let mut out: FxHashSet<NodeKey> = wanted.clone();
-        // Each ancestor and its children not wanted: sized once instead of grown.
-        out.reserve(2 * ancestors.len());
-        for &a in ancestors {
-            out.insert(a);
-            out.extend(
-                a.children()
-                    .into_iter()
-                    .filter(|c| self.shared.tree.overlaps_map(*c)),
-            );
-        }
-        out
+    /// The nodes needed to show the selection `wanted`: its ancestors and their children (see
+    /// [`NeededSet`]).
+    fn needed_for(&self, wanted: &FxHashSet<NodeKey>) -> NeededSet {
+        NeededSet::new(
+            self.shared.tree,
+            ancestor_set(wanted.iter().copied()),
+            !wanted.is_empty(),
+        )
     }
 
     /// One frame: new wanted set from the camera, cancel what is no longer needed, request what
@@ -603,14 +592,13 @@ impl Streamer {
         );
         // Everything on the path from the root to a wanted node is needed too (ancestors are
         // what is shown until the wanted nodes are ready).
-        self.to_split = ancestor_set(self.wanted.iter().copied());
+        self.needed = self.needed_for(&self.wanted);
         // Drawn split: the nodes over the display threshold with a wanted descendant (a split
         // whose children are all culled wants none) and their ancestors.
-        shown.retain(|k| self.to_split.contains(k));
+        shown.retain(|k| self.needed.split().contains(k));
         let above = ancestor_set(shown.iter().copied());
         shown.extend(above);
         self.show_split = shown;
-        self.needed = self.needed_for(&self.wanted, &self.to_split);
         stages.selection_s = lap.next();
         self.refresh_prefetch(cam, future);
         stages.prefetch_s = lap.next();
@@ -619,7 +607,7 @@ impl Streamer {
         // the smallest class comes first and is the one requested).
         let frame = self.frame;
         let mut missing: Vec<(usize, NodeKey)> = Vec::new();
-        let entries = self.needed.iter().map(|&k| (0, k));
+        let entries = self.needed.iter().map(|k| (0, k));
         for (class, k) in entries.chain(predict::entries(&self.prefetch_parts)) {
             match self.resident.get_mut(&k) {
                 Some(r) => r.last_used_frame = frame,

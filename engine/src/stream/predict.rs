@@ -9,7 +9,7 @@
 
 use super::Streamer;
 use crate::camera::Camera;
-use crate::terrain::quadtree::{NodeKey, ancestor_set};
+use crate::terrain::quadtree::NodeKey;
 use rustc_hash::FxHashSet;
 
 /// How far ahead the camera is predicted (s). Class `1 + i` holds what the camera needs
@@ -57,6 +57,7 @@ pub(super) const PREFETCH_PARTS: usize = PREDICT_HORIZONS_S.len() + 1;
 #[derive(Debug, Clone, Default)]
 pub(super) struct PrefetchPart {
     camera: Option<Camera>,
+    /// Built out in full: a part is computed once in several frames and read in every one.
     nodes: FxHashSet<NodeKey>,
 }
 
@@ -115,10 +116,9 @@ impl Streamer {
                 continue;
             }
             let wanted = self.select_wanted(camera, tau * factor);
-            let ancestors = ancestor_set(wanted.iter().copied());
             self.prefetch_parts[part] = PrefetchPart {
                 camera: Some(*camera),
-                nodes: self.needed_for(&wanted, &ancestors),
+                nodes: self.needed_for(&wanted).to_set(),
             };
         }
     }

@@ -19,7 +19,7 @@ const EVICTION_SLACK: usize = 32;
 impl Streamer {
     /// Resident nodes that must stay: needed, prefetched, drawn, or in a fade.
     pub(super) fn pinned(&self) -> FxHashSet<NodeKey> {
-        let mut p = self.needed.clone();
+        let mut p = self.needed.to_set();
         p.extend(super::predict::entries(&self.prefetch_parts).map(|(_, k)| k));
         p.extend(self.drawn.iter().map(|d| d.key));
         p.extend(self.split.keys().copied());
@@ -161,7 +161,7 @@ impl Streamer {
             self.run_gpu_phases();
             let settled = self.requests.is_empty()
                 && self.cancelled_outstanding() == 0
-                && self.needed.iter().all(|k| self.resident.contains_key(k))
+                && self.needed.iter().all(|k| self.resident.contains_key(&k))
                 && self.split.values().all(|&v| v >= 1.0);
             quiet = if settled { quiet + 1 } else { 0 };
             if quiet >= PREFETCH_PARTS {
@@ -175,7 +175,7 @@ impl Streamer {
     }
 
     /// Nodes needed for display (wanted, ancestors, and children of split ancestors).
-    pub fn needed(&self) -> &FxHashSet<NodeKey> {
+    pub fn needed(&self) -> &super::NeededSet {
         &self.needed
     }
 

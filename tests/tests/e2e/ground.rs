@@ -494,7 +494,7 @@ fn prefetched_nodes_get_no_ground_texture_and_textures_count_once_made() {
         std::thread::sleep(std::time::Duration::from_millis(1));
     }
     let s = &v.streamer;
-    let mut displayed = s.needed().clone();
+    let mut displayed = s.needed().to_set();
     displayed.extend(s.draw_list().iter().map(|d| d.key));
     let (mut prefetched, mut textured) = (0, 0);
     for k in s.resident_keys() {

@@ -70,7 +70,7 @@ pub(crate) fn section_bookkeeping(
             loop {
                 s.update_along(&cam, dt, &future);
                 s.run_gpu_phases();
-                if s.in_flight() == 0 && s.needed().iter().all(|&k| s.is_ready(k)) {
+                if s.in_flight() == 0 && s.needed().iter().all(|k| s.is_ready(k)) {
                     break;
                 }
                 if t0.elapsed().as_secs_f64() > 300.0 {
