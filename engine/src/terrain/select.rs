@@ -150,11 +150,11 @@ fn projected_error_at(
         // The frustum test (the costlier part) only for blocks that would pass the cut, and
         // only against the planes the node's box crosses when the block's box is within it.
         let outside = |(f, crossed): (&Frustum, Planes)| {
-            let planes = if block.z_min_m >= b.z_min_m && block.z_max_m <= b.z_max_m {
-                crossed
-            } else {
-                ALL_PLANES
-            };
+            let planes = planes_within(
+                crossed,
+                (b.z_min_m, b.z_max_m),
+                (block.z_min_m, block.z_max_m),
+            );
             planes != 0 && f.classify_aabb(lo, hi, planes).is_none()
         };
         if block_px <= cut || frustum.is_some_and(outside) {
@@ -168,6 +168,17 @@ fn projected_error_at(
         skip_m = skip_below(cut);
     }
     out
+}
+
+/// The frustum planes a box may cross whose plan lies within an outer box's, given the planes
+/// `crossed` by the outer box: those when its height range (`inner_z_m`) lies within the
+/// outer's (`outer_z_m`), else all (a box inside a plane has every box within it inside).
+fn planes_within(crossed: Planes, outer_z_m: (f64, f64), inner_z_m: (f64, f64)) -> Planes {
+    if inner_z_m.0 >= outer_z_m.0 && inner_z_m.1 <= outer_z_m.1 {
+        crossed
+    } else {
+        ALL_PLANES
+    }
 }
 
 /// An error of `error_m` seen `dist_m` away (at least `near_m`) in pixels: 0 without error,
@@ -410,15 +421,10 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             for c in key.children().into_iter().rev() {
                 if tree.overlaps_map(c) {
                     let found = bounds(c);
-                    let planes = match &found {
-                        Some(cb)
-                            if cb.borrow().z_min_m >= b.z_min_m
-                                && cb.borrow().z_max_m <= b.z_max_m =>
-                        {
-                            crossed
-                        }
-                        _ => ALL_PLANES,
-                    };
+                    let planes = found.as_ref().map_or(ALL_PLANES, |cb| {
+                        let cb = cb.borrow();
+                        planes_within(crossed, (b.z_min_m, b.z_max_m), (cb.z_min_m, cb.z_max_m))
+                    });
                     stack.push((c, found, planes));
                 }
             }
