@@ -491,9 +491,7 @@ impl Viewer {
         let Some(t) = self.scene.renderer_mut::<TerrainRenderer>() else {
             return;
         };
-        let mut keys = self.streamer.needed().to_set();
-        keys.extend(self.streamer.draw_list().iter().map(|d| d.key));
-        t.show_textures_of(Some(keys));
+        t.show_textures_of(Some(self.streamer.display_nodes()));
     }
 
     /// Counts the ground textures made since the last call in their nodes' bytes in the cache

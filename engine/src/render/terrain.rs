@@ -36,12 +36,11 @@ use super::suballoc::{Lease, Suballocator};
 use super::texture_credit::TextureCredit;
 use crate::ground::content::{GroundContent, NodeGround};
 use crate::ground::layout::{BORDER, SIDE, texel_m};
-use crate::stream::{NodeWork, Shared};
+use crate::stream::{DisplayNodes, NodeWork, Shared};
 use crate::surface::World;
 use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
-use rustc_hash::FxHashSet;
 use std::sync::{Arc, OnceLock, Weak};
 use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
@@ -205,7 +204,7 @@ struct GroundTextures {
     credit: TextureCredit,
     /// The nodes whose textures are made (the display's), or every uploaded node's when
     /// `None` (an owner without a display, e.g. tests rendering nodes directly).
-    shown: Option<FxHashSet<NodeKey>>,
+    shown: Option<DisplayNodes>,
     /// Nodes whose textures were made since the owner last took them.
     made: Vec<NodeKey>,
 }
@@ -469,7 +468,7 @@ impl TerrainRenderer {
     /// From now on makes the textures of `keys` only (the nodes the display needs: needed for
     /// display or drawn), or of every uploaded node with `None` (the default). The others
     /// stay queued until they are in the set or their nodes drop.
-    pub fn show_textures_of(&mut self, keys: Option<FxHashSet<NodeKey>>) {
+    pub fn show_textures_of(&mut self, keys: Option<DisplayNodes>) {
         if let Some(g) = self.ground.as_mut() {
             g.shown = keys;
         }

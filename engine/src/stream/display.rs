@@ -158,6 +158,15 @@ impl Streamer {
                 .all(|c| !self.shared.tree.overlaps_map(*c) || self.resident.contains_key(c))
     }
 
+    /// The nodes the display needs or draws, for asking about nodes one by one (no set of
+    /// every needed node is built).
+    pub fn display_nodes(&self) -> super::DisplayNodes {
+        super::DisplayNodes {
+            needed: self.needed.clone(),
+            drawn: self.drawn.iter().map(|d| d.key).collect(),
+        }
+    }
+
     /// The nodes to draw and their dither intervals. Nothing is missing: the root (once ready)
     /// covers everything not covered by ready descendants.
     pub fn draw_list(&self) -> &[DrawNode] {

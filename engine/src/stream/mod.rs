@@ -41,7 +41,7 @@ mod dropper;
 mod jobs;
 mod needed;
 pub use jobs::{idle_priority, lower_priority};
-pub use needed::NeededSet;
+pub use needed::{DisplayNodes, NeededSet};
 pub mod predict;
 mod queue;
 mod residency;
