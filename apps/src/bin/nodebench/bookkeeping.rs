@@ -1,7 +1,9 @@
 //! Section `bookkeeping`: the streamer's per-frame update on settled views, with the workers
-//! idle, so the rows show the update's own cost without the noise of a flight. They are a
-//! floor: in a flight (the `streaming` section's bookkeeping rows) the workers compete with the
-//! update for caches and memory, and the same update costs more.
+//! idle, so the rows show the update's own cost without the noise of a flight. Three rows per
+//! flight: back to back (caches warm, a floor), after writing 32 MiB (the data caches cold),
+//! and after sleeping a 60 Hz frame's gap (the frame thread idle, as in a flight: on a virtual
+//! machine the core may run other guests meanwhile, and the same update costs about twice to
+//! three times as much; the `streaming` section's bookkeeping rows are of that kind).
 
 use crate::open_world;
 use crate::report::{Report, bar};
@@ -16,6 +18,9 @@ use std::time::Instant;
 /// (L2 2 MiB per core, L3 32 MiB shared).
 const SWEEP_BYTES: usize = 32 << 20;
 
+/// The frame thread's sleep before the after-idle rows: a 60 Hz frame less the update.
+const IDLE: std::time::Duration = std::time::Duration::from_millis(15);
+
 /// Views per flight (evenly spaced in time over the first `VIEW_SPAN_S` seconds).
 const VIEWS: usize = 4;
 const VIEW_SPAN_S: f64 = 12.0;
@@ -28,7 +33,7 @@ pub(crate) fn section_bookkeeping(
     viewport_px: [u32; 2],
 ) -> Result<()> {
     let dt = 1.0 / 60.0;
-    let frames = if quick { 20 } else { 240 };
+    let frames = if quick { 21 } else { 360 };
     let tau = 2.0;
     let flights: Vec<(f64, f64)> = if quick {
         vec![FLIGHTS[2]]
@@ -53,6 +58,7 @@ pub(crate) fn section_bookkeeping(
         let mut s = Streamer::new(world, settings, kinds);
         let (mut wall, mut on_cpu, mut selection) = (Vec::new(), Vec::new(), Vec::new());
         let (mut cold, mut cold_selection) = (Vec::new(), Vec::new());
+        let (mut idle, mut idle_selection) = (Vec::new(), Vec::new());
         // Written between updates to evict the caches, as a frame's uploads and drawing do.
         let mut sweep = vec![0u8; SWEEP_BYTES];
         let b = bar((VIEWS * frames) as u64, &format!("bookkeeping {speed} m/s"));
@@ -79,26 +85,35 @@ pub(crate) fn section_bookkeeping(
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }
             for f in 0..frames {
-                // Every other update after a sweep of the caches.
-                let after_sweep = f % 2 == 1;
-                if after_sweep {
+                // In turn: back to back, after a sweep of the caches, after an idle gap.
+                let case = f % 3;
+                if case == 1 {
                     for (i, v) in sweep.iter_mut().enumerate().step_by(64) {
                         *v = v.wrapping_add(i as u8);
                     }
                     std::hint::black_box(&mut sweep);
+                } else if case == 2 {
+                    std::thread::sleep(IDLE);
                 }
                 let t = Span::start();
                 s.update_along(&cam, dt, &future);
                 let span = t.stop();
-                if after_sweep {
-                    cold.push(span.wall_s);
-                    cold_selection.push(s.stats.last_update.selections_s());
-                    b.inc(1);
-                    continue;
+                let selections_s = s.stats.last_update.selections_s();
+                match case {
+                    0 => {
+                        wall.push(span.wall_s);
+                        on_cpu.extend(span.on_cpu_s);
+                        selection.push(selections_s);
+                    }
+                    1 => {
+                        cold.push(span.wall_s);
+                        cold_selection.push(selections_s);
+                    }
+                    _ => {
+                        idle.push(span.wall_s);
+                        idle_selection.push(selections_s);
+                    }
                 }
-                wall.push(span.wall_s);
-                on_cpu.extend(span.on_cpu_s);
-                selection.push(s.stats.last_update.selections_s());
                 b.inc(1);
             }
         }
@@ -106,7 +121,9 @@ pub(crate) fn section_bookkeeping(
         let params = format!(
             "{speed} m/s at {above} m: {VIEWS} settled views of the streaming flight, \
              {frames} updates each with its predicted path (one prefetch part computed again \
-             per update; every other one after writing 32 MiB, the cold rows), tau {tau} px, light grids off, workers idle"
+             per update; in turn back to back, after writing 32 MiB (the cold rows) and after \
+             sleeping {idle_ms} ms (the idle rows)), tau {tau} px, light grids off, workers idle",
+            idle_ms = IDLE.as_millis()
         );
         for (name, times) in [
             ("streaming update per frame, caches warm", wall),
@@ -120,6 +137,11 @@ pub(crate) fn section_bookkeeping(
                 cold,
             ),
             ("  of which the selections", cold_selection),
+            (
+                "streaming update per frame, after the frame thread slept (idle)",
+                idle,
+            ),
+            ("  of which the selections", idle_selection),
         ] {
             r.quantiles("bookkeeping", times, &P50_P99, &params, |q| {
                 format!("{name} {q}")
