@@ -4,6 +4,7 @@
 use crate::surface::World;
 use crate::terrain::bounds::{self, NodeBounds};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::terrain::select::WalkBounds;
 use rustc_hash::FxHashMap;
 use std::sync::{Mutex, MutexGuard, PoisonError, TryLockError};
 
@@ -77,12 +78,49 @@ impl BoundsStore {
 /// The frame thread's copy of the known bounds, for the selections: bounds in the order they
 /// arrived (a node's siblings and children are measured together, so a walk reading a split
 /// node's four children reads neighbouring records) behind a small index (about 16 bytes a
-/// node, so the part a walk probes stays in cache where a table of whole records, 440 bytes a
-/// node, would not). Bounds are only added: a node's bounds never change.
+/// node), and each node's links to its children's records, so a selection walk finds a
+/// node's children without probing the index (four scattered reads a split node; after the
+/// frame thread was idle they are cache misses). Bounds are only added: a node's bounds never
+/// change.
 #[derive(Debug, Default)]
 pub(super) struct KnownBounds {
     index: FxHashMap<NodeKey, u32>,
     bounds: Vec<NodeBounds>,
+    /// Per record, its children's records in [`NodeKey::children`] order ([`NO_RECORD`]
+    /// where not known).
+    children: Vec<[u32; 4]>,
+}
+
+/// A child link to a node whose bounds are not known.
+const NO_RECORD: u32 = u32::MAX;
+
+/// A node's bounds as [`KnownBounds`] lends them to a selection walk, with their record (the
+/// walk takes its children from there).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct KnownRef<'a> {
+    record: u32,
+    bounds: &'a NodeBounds,
+}
+
+impl std::borrow::Borrow<NodeBounds> for KnownRef<'_> {
+    fn borrow(&self) -> &NodeBounds {
+        self.bounds
+    }
+}
+
+impl<'a> WalkBounds for &'a KnownBounds {
+    type Found = KnownRef<'a>;
+
+    fn get(&mut self, key: NodeKey) -> Option<KnownRef<'a>> {
+        let known: &'a KnownBounds = self;
+        known.index.get(&key).map(|&record| known.lend(record))
+    }
+
+    fn child(&mut self, parent: &KnownRef<'a>, child: NodeKey) -> Option<KnownRef<'a>> {
+        let known: &'a KnownBounds = self;
+        let record = known.children[parent.record as usize][child.child_slot()];
+        (record != NO_RECORD).then(|| known.lend(record))
+    }
 }
 
 impl KnownBounds {
@@ -91,20 +129,41 @@ impl KnownBounds {
         Self {
             index: FxHashMap::with_capacity_and_hasher(nodes, rustc_hash::FxBuildHasher),
             bounds: Vec::with_capacity(nodes),
+            children: Vec::with_capacity(nodes),
         }
     }
 
+    fn lend(&self, record: u32) -> KnownRef<'_> {
+        KnownRef {
+            record,
+            bounds: &self.bounds[record as usize],
+        }
+    }
+
+    #[cfg(test)]
     pub(super) fn get(&self, key: &NodeKey) -> Option<&NodeBounds> {
         self.index.get(key).map(|&i| &self.bounds[i as usize])
     }
 
-    /// Adds bounds not known yet (the first bounds given for a node stay).
+    /// Adds bounds not known yet (the first bounds given for a node stay), linked to the
+    /// known records of its parent and children.
     pub(super) fn extend(&mut self, fresh: impl IntoIterator<Item = (NodeKey, NodeBounds)>) {
         for (key, b) in fresh {
-            if let std::collections::hash_map::Entry::Vacant(e) = self.index.entry(key) {
-                let i = u32::try_from(self.bounds.len()).expect("fewer than 2^32 known nodes");
-                e.insert(i);
-                self.bounds.push(b);
+            let std::collections::hash_map::Entry::Vacant(e) = self.index.entry(key) else {
+                continue;
+            };
+            let record = u32::try_from(self.bounds.len())
+                .ok()
+                .filter(|&r| r != NO_RECORD)
+                .expect("fewer than 2^32 - 1 known nodes");
+            e.insert(record);
+            self.bounds.push(b);
+            let children = key
+                .children()
+                .map(|c| self.index.get(&c).copied().unwrap_or(NO_RECORD));
+            self.children.push(children);
+            if let Some(parent) = key.parent().and_then(|p| self.index.get(&p)) {
+                self.children[*parent as usize][key.child_slot()] = record;
             }
         }
     }
@@ -144,5 +203,51 @@ mod tests {
         );
         assert_eq!(known.get(&key(2)).map(|b| b.z_min_m), Some(7.0));
         assert!(known.get(&key(3)).is_none());
+    }
+
+    /// A walk following the child links reaches the same records as lookups by key, whatever
+    /// order the nodes arrived in (parents first, children first, or mixed), and no record
+    /// where a child is not known.
+    #[test]
+    fn child_links_find_what_the_index_finds_in_any_arrival_order() {
+        let root = NodeKey::ROOT;
+        let mut keys = vec![root];
+        keys.extend(root.children());
+        keys.extend(root.children()[1].children());
+        // Two of the last child's children: the others stay unknown.
+        keys.extend(&root.children()[3].children()[..2]);
+        let orders = [
+            keys.clone(),
+            keys.iter().rev().copied().collect(),
+            keys[5..]
+                .iter()
+                .chain(&keys[..5])
+                .copied()
+                .collect::<Vec<_>>(),
+        ];
+        for order in orders {
+            let mut known = KnownBounds::with_capacity(4);
+            for (n, &k) in order.iter().enumerate() {
+                let z = n as f64;
+                known.extend([(k, NodeBounds::exact(z, z + 1.0))]);
+            }
+            let mut source = &known;
+            let mut linked = 0;
+            for &k in &keys {
+                let parent = WalkBounds::get(&mut source, k).expect("every key was added");
+                assert_eq!(parent.record, known.index[&k]);
+                assert_eq!(*parent.bounds, known.bounds[parent.record as usize]);
+                for c in k.children() {
+                    let found = source.child(&parent, c).map(|r| r.record);
+                    assert_eq!(found, known.index.get(&c).copied(), "{k:?} -> {c:?}");
+                    linked += usize::from(found.is_some());
+                }
+            }
+            assert_eq!(
+                linked,
+                keys.len() - 1,
+                "every key but the root is a linked child"
+            );
+        }
     }
 }

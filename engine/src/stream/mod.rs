@@ -497,7 +497,7 @@ impl Streamer {
                 floor_px: tau_px,
                 ceiling_px,
             },
-            |key| self.known.get(&key),
+            &self.known,
             |key: NodeKey, b: &NodeBounds, dist, px| {
                 // The error the split test compares: projected, times what vegetation lets
                 // through where that is on; any split node at a fixed level.

@@ -53,6 +53,11 @@ impl NodeKey {
         ]
     }
 
+    /// Which of its parent's [`Self::children`] the node is (0 - 3; 0 for the root).
+    pub fn child_slot(self) -> usize {
+        (self.ix & 1) as usize + 2 * (self.iy & 1) as usize
+    }
+
     pub fn parent(self) -> Option<Self> {
         (self.level > 0).then(|| Self {
             level: self.level - 1,

@@ -14,6 +14,7 @@ use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rec
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
+use std::borrow::Borrow;
 
 /// The world-space box of a node.
 pub fn node_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds) -> (DVec3, DVec3) {
@@ -203,7 +204,7 @@ fn error_px(error_m: f64, dist_m: f64, k_px: f64, near_m: f64) -> f64 {
 /// [`projected_error_px`], without frustum culling). `bounds` gives the ancestors' bounds; an
 /// unknown one stops the search. The node's own vegetation is drawn as before, so its term
 /// does not change.
-pub fn decimation<B: std::borrow::Borrow<NodeBounds>>(
+pub fn decimation<B: Borrow<NodeBounds>>(
     tree: &QuadTree,
     key: NodeKey,
     eye_m: DVec3,
@@ -320,7 +321,7 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
         cam,
         frustum,
         PxWindow::EXACT,
-        |key| bounds(key).into(),
+        ByKey(|key| bounds(key).into()),
         split,
         |reached| match reached {
             Reached::Selected {
@@ -341,6 +342,33 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
     out.visited = walked.visited;
     out.culled = walked.culled;
     out
+}
+
+/// Where a [`walk`] finds the bounds of the nodes it visits.
+pub trait WalkBounds {
+    /// What the source gives for a node: its bounds, owned or lent.
+    type Found: Borrow<NodeBounds>;
+
+    /// The bounds of node `key`; `None` when not known.
+    fn get(&mut self, key: NodeKey) -> Option<Self::Found>;
+
+    /// The bounds of `child`, a child of the node whose bounds this source gave as `parent`:
+    /// looked up by key, unless the source keeps links from a node to its children.
+    fn child(&mut self, parent: &Self::Found, child: NodeKey) -> Option<Self::Found> {
+        let _ = parent;
+        self.get(child)
+    }
+}
+
+/// A [`WalkBounds`] that looks every node up by key with a function.
+pub struct ByKey<F>(pub F);
+
+impl<B: Borrow<NodeBounds>, F: FnMut(NodeKey) -> Option<B>> WalkBounds for ByKey<F> {
+    type Found = B;
+
+    fn get(&mut self, key: NodeKey) -> Option<B> {
+        (self.0)(key)
+    }
 }
 
 /// What [`walk`] reached: a selected node with its bounds (as the bounds source gave them),
@@ -365,17 +393,18 @@ pub struct Walked {
 
 /// The traversal of [`traverse_in`], handing each node it reaches to `reached` instead of
 /// collecting them, with the bounds as `bounds` gives them: a source that lends its bounds
-/// (`&NodeBounds`) lets a per-frame selection run without copying any. Projected errors are
+/// (`&NodeBounds`) lets a per-frame selection run without copying any, and one that links a
+/// node to its children finds them without a lookup by key. Projected errors are
 /// exact inside `window` only ([`projected_error_in_px`]): a caller that splits at a threshold
 /// passes it as the floor, and as the ceiling when no larger error matters to it.
-pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
+pub fn walk<S: WalkBounds>(
     tree: &QuadTree,
     cam: &Camera,
     frustum: Option<Frustum>,
     window: PxWindow,
-    mut bounds: impl FnMut(NodeKey) -> Option<B>,
+    mut bounds: S,
     mut split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
-    mut reached: impl FnMut(Reached<B>),
+    mut reached: impl FnMut(Reached<S::Found>),
 ) -> Walked {
     let mut out = Walked::default();
     let k = cam.k_px();
@@ -385,7 +414,7 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
     // its box lies within the parent's (a box inside a plane has every box within it inside).
     let mut stack = Vec::new();
     if tree.overlaps_map(NodeKey::ROOT) {
-        stack.push((NodeKey::ROOT, bounds(NodeKey::ROOT), ALL_PLANES));
+        stack.push((NodeKey::ROOT, bounds.get(NodeKey::ROOT), ALL_PLANES));
     }
     while let Some((key, found, planes)) = stack.pop() {
         out.visited += 1;
@@ -420,7 +449,7 @@ pub fn walk<B: std::borrow::Borrow<NodeBounds>>(
             // outside the map are skipped.
             for c in key.children().into_iter().rev() {
                 if tree.overlaps_map(c) {
-                    let found = bounds(c);
+                    let found = bounds.child(&owned, c);
                     let planes = found.as_ref().map_or(ALL_PLANES, |cb| {
                         let cb = cb.borrow();
                         planes_within(crossed, (b.z_min_m, b.z_max_m), (cb.z_min_m, cb.z_max_m))
