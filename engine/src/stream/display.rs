@@ -28,82 +28,126 @@ pub struct DrawNode {
 const FADE_MARGIN: f64 = 0.75;
 
 impl Streamer {
-    /// Moves every node's split state towards its target: split when it is an ancestor of
-    /// wanted nodes and all its children are ready, merged otherwise (a node merges only once
-    /// its children have merged).
+    /// Moves every node's split state towards its target (with `dt_s`, the time since the
+    /// last frame; without, the states stay) and makes the draw list, in one walk of the
+    /// resident tree from the root.
     ///
-    /// A fade to the children normally takes [`super::StreamSettings::fade_s`], but never
-    /// shows the parent over tau: a fading parent whose projected error grew since the last
-    /// frame fades fast enough to finish before it reaches tau at that growth, and one already
-    /// at tau (a fast camera, or ground coming into view) is replaced at once.
-    pub(super) fn advance_fades(&mut self, dt_s: f64) {
-        let step = if self.settings.fade_s > 0.0 {
-            (dt_s / self.settings.fade_s) as f32
-        } else {
-            1.0
+    /// Target: split when it is an ancestor of wanted nodes and all its children are ready,
+    /// merged otherwise (a node merges only once its children have merged). A fade to the
+    /// children normally takes [`super::StreamSettings::fade_s`], but never shows the parent
+    /// over tau: a fading parent whose projected error grew since the last frame fades fast
+    /// enough to finish before it reaches tau at that growth, and one already at tau (a fast
+    /// camera, or ground coming into view) is replaced at once.
+    ///
+    /// Draw list: children take the lower part of their parent's dither interval in
+    /// proportion to its split state; the list is front to back in plan view.
+    pub(super) fn advance_fades_and_draw(&mut self, dt_s: Option<f64>) {
+        let step = match dt_s {
+            Some(dt) if self.settings.fade_s > 0.0 => (dt / self.settings.fade_s) as f32,
+            Some(_) => 1.0,
+            None => 0.0,
         };
         // Sized like last frame's, so they are not grown node by node.
         let mut fade_px =
             FxHashMap::with_capacity_and_hasher(self.fade_px.len(), rustc_hash::FxBuildHasher);
+        let mut drawn = Vec::with_capacity(self.drawn.len());
         let view = self.camera.map(|cam| (cam, cam.frustum()));
-        let mut stack = vec![NodeKey::ROOT];
         // The new split states: a node the walk does not reach, or whose state reaches 0,
         // has none. (Each node is reached once, after its parent and before its children, so
         // the old states read below are all from the last frame.)
         let mut split: FxHashMap<NodeKey, f32> =
             FxHashMap::with_capacity_and_hasher(self.split.len() + 64, rustc_hash::FxBuildHasher);
-        while let Some(key) = stack.pop() {
-            if !self.resident.contains_key(&key) {
+        // Each entry carries its dither interval and its ancestors' bounds for the decimation
+        // (the walk came through them), so a drawn node needs no lookup of its ancestors.
+        let mut stack: Vec<(NodeKey, f32, f32, Ancestors)> =
+            vec![(NodeKey::ROOT, 0.0, 1.0, [None; MAX_DECIMATION as usize])];
+        while let Some((key, lo, hi, up)) = stack.pop() {
+            if !self.shared.tree.overlaps_map(key) {
                 continue;
             }
+            let Some(r) = self.resident.get(&key) else {
+                continue;
+            };
             // Whether all its children can be shown: looked up only where it matters (most
             // nodes reached are drawn whole and stay so).
             let mut drawable = None;
             let mut children_drawable =
                 || *drawable.get_or_insert_with(|| self.children_drawable(key));
-            let wants_split = self.show_split.contains(&key) && children_drawable();
             let s = self.split.get(&key).copied().unwrap_or(0.0);
-            // A node may only merge back once its children are no longer split themselves.
-            let children_merged = || {
-                key.children()
-                    .iter()
-                    .all(|c| self.split.get(c).copied().unwrap_or(0.0) == 0.0)
-            };
-            let target = if wants_split || !children_merged() {
-                1.0
-            } else {
-                0.0
-            };
-            // Step towards the target (and stay there once reached).
-            let ns = if target > s {
-                let step = match view
-                    .as_ref()
-                    .and_then(|(cam, f)| self.error_px(key, cam, f))
-                {
-                    Some(px) => {
-                        fade_px.insert(key, px);
-                        split_step(
-                            step,
-                            s,
-                            px,
-                            self.fade_px.get(&key).copied(),
-                            self.settings.tau_px,
-                        )
-                    }
-                    None => step,
+            let ns = if dt_s.is_some() {
+                let wants_split = self.show_split.contains(&key) && children_drawable();
+                // A node may only merge back once its children are no longer split
+                // themselves.
+                let children_merged = || {
+                    key.children()
+                        .iter()
+                        .all(|c| self.split.get(c).copied().unwrap_or(0.0) == 0.0)
                 };
-                (s + step).min(target)
+                let target = if wants_split || !children_merged() {
+                    1.0
+                } else {
+                    0.0
+                };
+                // Step towards the target (and stay there once reached).
+                if target > s {
+                    let step = match view
+                        .as_ref()
+                        .and_then(|(cam, f)| self.error_px(key, cam, f))
+                    {
+                        Some(px) => {
+                            fade_px.insert(key, px);
+                            split_step(
+                                step,
+                                s,
+                                px,
+                                self.fade_px.get(&key).copied(),
+                                self.settings.tau_px,
+                            )
+                        }
+                        None => step,
+                    };
+                    (s + step).min(target)
+                } else {
+                    (s - step).max(target)
+                }
             } else {
-                (s - step).max(target)
+                s
             };
             // Children must be resident to show them at all.
-            if ns > 0.0 && children_drawable() {
-                split.insert(key, ns);
-                stack.extend(key.children());
+            if ns <= 0.0 || !children_drawable() {
+                drawn.push(DrawNode {
+                    key,
+                    dither_lo: lo,
+                    dither_hi: hi,
+                    decimation: self.decimation(key, &up),
+                });
+                continue;
+            }
+            split.insert(key, ns);
+            // Children take [lo, lo + ns (hi - lo)); the node keeps the rest.
+            let mid = lo + ns * (hi - lo);
+            if mid < hi {
+                drawn.push(DrawNode {
+                    key,
+                    dither_lo: mid,
+                    dither_hi: hi,
+                    decimation: self.decimation(key, &up),
+                });
+            }
+            // Popped nearest first, so the list is front to back in plan view.
+            let mut below = [None; MAX_DECIMATION as usize];
+            below[0] = r.work.bounds.as_ref();
+            below[1..].copy_from_slice(&up[..up.len() - 1]);
+            for c in self.children_far_to_near(key) {
+                stack.push((c, lo, mid, below));
             }
         }
+        drop(stack);
         self.split = split;
-        self.fade_px = fade_px;
+        if dt_s.is_some() {
+            self.fade_px = fade_px;
+        }
+        self.drawn = drawn;
     }
 
     /// A resident node's projected error (px) for camera `cam`, inside its view `frustum`.
@@ -171,55 +215,6 @@ impl Streamer {
     /// covers everything not covered by ready descendants.
     pub fn draw_list(&self) -> &[DrawNode] {
         &self.drawn
-    }
-
-    /// Walks the resident tree from the root, giving children the lower part of their parent's
-    /// dither interval in proportion to its split state.
-    pub(super) fn compute_draw_list(&self) -> Vec<DrawNode> {
-        let mut out = Vec::new();
-        if !self.resident.contains_key(&NodeKey::ROOT) {
-            return out;
-        }
-        // Each entry carries its ancestors' bounds for the decimation (the walk came through
-        // them), so a drawn node needs no lookup of its ancestors.
-        let mut stack: Vec<(NodeKey, f32, f32, Ancestors)> =
-            vec![(NodeKey::ROOT, 0.0, 1.0, [None; MAX_DECIMATION as usize])];
-        while let Some((key, lo, hi, up)) = stack.pop() {
-            if !self.shared.tree.overlaps_map(key) {
-                continue;
-            }
-            let Some(r) = self.resident.get(&key) else {
-                continue;
-            };
-            let s = self.split.get(&key).copied().unwrap_or(0.0);
-            if s <= 0.0 {
-                out.push(DrawNode {
-                    key,
-                    dither_lo: lo,
-                    dither_hi: hi,
-                    decimation: self.decimation(key, &up),
-                });
-                continue;
-            }
-            // Children take [lo, lo + s (hi - lo)); the node keeps the rest.
-            let mid = lo + s * (hi - lo);
-            if mid < hi {
-                out.push(DrawNode {
-                    key,
-                    dither_lo: mid,
-                    dither_hi: hi,
-                    decimation: self.decimation(key, &up),
-                });
-            }
-            // Popped nearest first, so the list is front to back in plan view.
-            let mut below = [None; MAX_DECIMATION as usize];
-            below[0] = r.work.bounds.as_ref();
-            below[1..].copy_from_slice(&up[..up.len() - 1]);
-            for c in self.children_far_to_near(key) {
-                stack.push((c, lo, mid, below));
-            }
-        }
-        out
     }
 
     /// The node's children, the one on the camera's side of both midlines last and the one

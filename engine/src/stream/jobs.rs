@@ -337,7 +337,7 @@ impl Streamer {
         // Finished nodes change the draw list only when the root first becomes ready (splits
         // wait for fades, which advance in `update`).
         if self.drawn.is_empty() && self.resident.contains_key(&NodeKey::ROOT) {
-            self.drawn = self.compute_draw_list();
+            self.advance_fades_and_draw(None);
         }
         // Finished nodes add bytes: keep the cache within its budget here too, not only in
         // `update` (otherwise the budget holds only until the next GPU phase).

@@ -659,8 +659,7 @@ impl Streamer {
             self.stats.requests_deferred += 1;
         }
         stages.requests_s = lap.next();
-        self.advance_fades(dt_s);
-        self.drawn = self.compute_draw_list();
+        self.advance_fades_and_draw(Some(dt_s));
         stages.display_s = lap.next();
         for k in &self.shared.kinds {
             k.observe_drawn(&self.drawn);
