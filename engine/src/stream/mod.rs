@@ -314,6 +314,9 @@ pub struct Streamer {
     /// The prefetch set's parts, each refreshed when stale (see [`predict`]); a node is
     /// prefetched when a part holds it and it is not needed now.
     prefetch_parts: Vec<predict::PrefetchPart>,
+    /// The prefetch parts computed since the last update that made its requests (bit `i` for
+    /// part `i`): only their nodes can be missing (see [`Self::refresh_prefetch`]).
+    parts_to_request: u8,
     /// This frame's draw list, computed once after the fades advance.
     drawn: Vec<DrawNode>,
     /// Split state per node: 0 = the node is drawn, 1 = its children are; in between, fading.
@@ -406,6 +409,7 @@ impl Streamer {
             needed: NeededSet::empty(tree),
             show_split: FxHashSet::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
+            parts_to_request: 0,
             split: FxHashMap::default(),
             fade_px: FxHashMap::default(),
             drawn: Vec::new(),
@@ -600,15 +604,18 @@ impl Streamer {
         shown.extend(above);
         self.show_split = shown;
         stages.selection_s = lap.next();
-        self.refresh_prefetch(cam, future);
+        self.parts_to_request |= self.refresh_prefetch(cam, future);
         stages.prefetch_s = lap.next();
-        // Resident nodes needed or prefetched are marked used this frame (eviction keeps
-        // them); the others are missing, each in its class (once per part holding it: sorted,
-        // the smallest class comes first and is the one requested).
+        // Resident nodes needed, or in a part computed again, are marked used this frame (a
+        // prefetched node is marked when its part is computed: eviction keeps every held
+        // node, and orders the others by that mark); the others are missing, each in its
+        // class (once per part holding it: sorted, the smallest class comes first and is the
+        // one requested).
         let frame = self.frame;
         let mut missing: Vec<(usize, NodeKey)> = Vec::new();
         let entries = self.needed.iter().map(|k| (0, k));
-        for (class, k) in entries.chain(predict::entries(&self.prefetch_parts)) {
+        let parts = predict::entries_of(&self.prefetch_parts, self.parts_to_request);
+        for (class, k) in entries.chain(parts) {
             match self.resident.get_mut(&k) {
                 Some(r) => r.last_used_frame = frame,
                 None => missing.push((class, k)),
@@ -649,6 +656,7 @@ impl Streamer {
                 }
             }
             drop(pending);
+            self.parts_to_request = 0;
             // Only new jobs need a worker woken: a waiting worker found the queue empty, so a
             // promotion has nothing to offer it (a wake-up each frame would cost the frame a
             // system call and an idle worker a trip through the lock).
@@ -693,6 +701,64 @@ impl Lap {
 mod tests {
     use super::*;
     use glam::DVec3;
+
+    /// Every node of every prefetch part is ready or requested after each update that made its
+    /// requests, although an update only looks at the parts computed since the last such
+    /// update, under a cache budget small enough that eviction runs.
+    #[test]
+    fn every_prefetched_node_is_ready_or_requested_after_each_update() {
+        let world = World::new(crate::test_maps::tiny_map());
+        let [x0, y0] = world.origin_m();
+        let [w, h] = world.size_m();
+        let y = y0 + 0.5 * h;
+        let settings = StreamSettings {
+            cache_budget_bytes: 1 << 20,
+            ..StreamSettings::default()
+        }
+        .with_workers(1);
+        let terrain: Arc<dyn ContentKind> = Arc::new(crate::terrain::content::TerrainContent);
+        let mut s = Streamer::new(world, settings, vec![terrain]);
+        let (positions, speed_m_per_s) = (24, 100.0);
+        let mut checked = 0;
+        for f in 0..positions {
+            // Across the map at 40 m above the ground, looking ahead and down.
+            let x = x0 + 0.1 * w + 0.8 * w * f64::from(f) / f64::from(positions);
+            let ground = s.shared.world.height_m(x, y);
+            let cam = Camera::look_at(
+                DVec3::new(x, y, ground + 40.0),
+                DVec3::new(x + 200.0, y, ground),
+                1.0,
+                [640, 360],
+            );
+            let future = predict::extrapolate(&cam, DVec3::new(speed_m_per_s, 0.0, 0.0));
+            // Updates at this camera until its jobs are done.
+            let start = Instant::now();
+            loop {
+                s.update_along(&cam, 1.0 / 60.0, &future);
+                s.run_gpu_phases();
+                // (When a worker held the queue, the requests wait for the next update.)
+                if s.parts_to_request == 0 {
+                    for (_, k) in predict::entries(&s.prefetch_parts) {
+                        assert!(
+                            s.is_ready(k) || s.is_requested(k),
+                            "position {f}: prefetched {k:?} neither ready nor requested"
+                        );
+                        checked += 1;
+                    }
+                }
+                if s.in_flight() == 0 {
+                    break;
+                }
+                assert!(
+                    start.elapsed().as_secs() < 120,
+                    "position {f} did not settle"
+                );
+                std::thread::yield_now();
+            }
+        }
+        assert!(checked > 10_000, "only {checked} prefetched nodes checked");
+        assert!(s.stats.evicted > 0, "the budget evicted nothing");
+    }
 
     /// While a worker holds the job queue, an update does not wait for it: it leaves its
     /// requests to a later update, which makes them.

@@ -87,7 +87,13 @@ impl Streamer {
     /// next in turn): a part is at most `PREFETCH_PARTS` frames old; a part with no selection
     /// yet (the camera starts moving) or whose camera jumped is computed at once. The display
     /// set is computed every frame, so a stale part delays prefetch only.
-    pub(super) fn refresh_prefetch(&mut self, cam: &Camera, future: &[(f64, Camera)]) {
+    ///
+    /// Returns the parts computed again (bit `i` for part `i`): only their nodes can be
+    /// missing or need a higher class (a part's nodes are all requested when it is computed,
+    /// and a request for a prefetched node is never cancelled, nor is a prefetched resident
+    /// node evicted).
+    pub(super) fn refresh_prefetch(&mut self, cam: &Camera, future: &[(f64, Camera)]) -> u8 {
+        let mut refreshed = 0;
         let tau = self.settings.tau_px;
         let turn = (self.frame % PREFETCH_PARTS as u64) as usize;
         let part_camera = |part: usize| {
@@ -109,7 +115,9 @@ impl Streamer {
             .unwrap_or(turn);
         for part in 0..PREFETCH_PARTS {
             let Some((camera, factor)) = part_camera(part) else {
-                self.prefetch_parts[part] = PrefetchPart::default();
+                if self.prefetch_parts[part].camera.is_some() {
+                    self.prefetch_parts[part] = PrefetchPart::default();
+                }
                 continue;
             };
             if part != refresh_in_turn && !self.prefetch_parts[part].needs_now(camera) {
@@ -120,7 +128,9 @@ impl Streamer {
                 camera: Some(*camera),
                 nodes: self.needed_for(&wanted).to_set(),
             };
+            refreshed |= 1 << part;
         }
+        refreshed
     }
 
     /// Whether a prefetch part holds `key`.
@@ -134,9 +144,18 @@ impl Streamer {
 /// is built: that took two hash operations per node of every part in every frame, more than
 /// the frame's part selection.
 pub(super) fn entries(parts: &[PrefetchPart]) -> impl Iterator<Item = (usize, NodeKey)> + '_ {
+    entries_of(parts, u8::MAX)
+}
+
+/// [`entries`] of the parts in `mask` (bit `i` for part `i`).
+pub(super) fn entries_of(
+    parts: &[PrefetchPart],
+    mask: u8,
+) -> impl Iterator<Item = (usize, NodeKey)> + '_ {
     parts
         .iter()
         .enumerate()
+        .filter(move |(part, _)| mask & (1 << part) != 0)
         .flat_map(|(part, p)| p.nodes.iter().map(move |&k| (part_class(part), k)))
 }
 
