@@ -207,6 +207,23 @@ impl QuadTree {
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_child_knows_its_slot_among_its_parents_children() {
+        for parent in [
+            NodeKey::ROOT,
+            NodeKey {
+                level: 5,
+                ix: 13,
+                iy: 6,
+            },
+        ] {
+            for (slot, c) in parent.children().into_iter().enumerate() {
+                assert_eq!(c.child_slot(), slot, "{c:?}");
+                assert_eq!(c.parent(), Some(parent));
+            }
+        }
+    }
+
     /// The same set as every key's ancestors collected, sorted and deduplicated, for keys
     /// that share ancestors, nest in each other and repeat.
     #[test]
