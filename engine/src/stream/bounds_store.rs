@@ -113,7 +113,7 @@ impl<'a> WalkBounds for &'a KnownBounds {
 
     fn get(&mut self, key: NodeKey) -> Option<KnownRef<'a>> {
         let known: &'a KnownBounds = self;
-        known.index.get(&key).map(|&record| known.lend(record))
+        known.find(key)
     }
 
     fn child(&mut self, parent: &KnownRef<'a>, child: NodeKey) -> Option<KnownRef<'a>> {
@@ -140,9 +140,9 @@ impl KnownBounds {
         }
     }
 
-    #[cfg(test)]
-    pub(super) fn get(&self, key: &NodeKey) -> Option<&NodeBounds> {
-        self.index.get(key).map(|&i| &self.bounds[i as usize])
+    /// The node's bounds and record, looked up by key.
+    fn find(&self, key: NodeKey) -> Option<KnownRef<'_>> {
+        self.index.get(&key).map(|&record| self.lend(record))
     }
 
     /// Adds bounds not known yet (the first bounds given for a node stay), linked to the
@@ -195,14 +195,14 @@ mod tests {
             (key(2), NodeBounds::exact(7.0, 9.0)),
         ]);
         assert_eq!(known.len(), 3);
-        assert_eq!(known.get(&key(0)).map(|b| b.z_max_m), Some(1.0));
+        assert_eq!(known.find(key(0)).map(|b| b.bounds.z_max_m), Some(1.0));
         assert_eq!(
-            known.get(&key(1)).map(|b| b.z_min_m),
+            known.find(key(1)).map(|b| b.bounds.z_min_m),
             Some(2.0),
             "the first bounds stay"
         );
-        assert_eq!(known.get(&key(2)).map(|b| b.z_min_m), Some(7.0));
-        assert!(known.get(&key(3)).is_none());
+        assert_eq!(known.find(key(2)).map(|b| b.bounds.z_min_m), Some(7.0));
+        assert!(known.find(key(3)).is_none());
     }
 
     /// A walk following the child links reaches the same records as lookups by key, whatever
@@ -234,7 +234,7 @@ mod tests {
             let mut source = &known;
             let mut linked = 0;
             for &k in &keys {
-                let parent = WalkBounds::get(&mut source, k).expect("every key was added");
+                let parent = source.find(k).expect("every key was added");
                 assert_eq!(parent.record, known.index[&k]);
                 assert_eq!(*parent.bounds, known.bounds[parent.record as usize]);
                 for c in k.children() {

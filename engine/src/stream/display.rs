@@ -42,11 +42,14 @@ impl Streamer {
     /// Draw list: children take the lower part of their parent's dither interval in
     /// proportion to its split state; the list is front to back in plan view.
     pub(super) fn advance_fades_and_draw(&mut self, dt_s: Option<f64>) {
-        let step = match dt_s {
-            Some(dt) if self.settings.fade_s > 0.0 => (dt / self.settings.fade_s) as f32,
-            Some(_) => 1.0,
-            None => 0.0,
-        };
+        // The normal fade step of this frame; none when the states stay.
+        let step = dt_s.map(|dt| {
+            if self.settings.fade_s > 0.0 {
+                (dt / self.settings.fade_s) as f32
+            } else {
+                1.0
+            }
+        });
         // Sized like last frame's, so they are not grown node by node.
         let mut fade_px =
             FxHashMap::with_capacity_and_hasher(self.fade_px.len(), rustc_hash::FxBuildHasher);
@@ -74,7 +77,7 @@ impl Streamer {
             let mut children_drawable =
                 || *drawable.get_or_insert_with(|| self.children_drawable(key));
             let s = self.split.get(&key).copied().unwrap_or(0.0);
-            let ns = if dt_s.is_some() {
+            let ns = if let Some(step) = step {
                 let wants_split = self.show_split.contains(&key) && children_drawable();
                 // A node may only merge back once its children are no longer split
                 // themselves.
@@ -144,7 +147,7 @@ impl Streamer {
         }
         drop(stack);
         self.split = split;
-        if dt_s.is_some() {
+        if step.is_some() {
             self.fade_px = fade_px;
         }
         self.drawn = drawn;

@@ -115,9 +115,7 @@ impl Streamer {
             .unwrap_or(turn);
         for part in 0..PREFETCH_PARTS {
             let Some((camera, factor)) = part_camera(part) else {
-                if self.prefetch_parts[part].camera.is_some() {
-                    self.prefetch_parts[part] = PrefetchPart::default();
-                }
+                self.prefetch_parts[part] = PrefetchPart::default();
                 continue;
             };
             if part != refresh_in_turn && !self.prefetch_parts[part].needs_now(camera) {
