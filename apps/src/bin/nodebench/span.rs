@@ -24,11 +24,16 @@ pub(crate) struct SpanStart {
 
 impl Span {
     pub(crate) fn start() -> SpanStart {
-        // The run-queue figure is read first and last, outside the other two clocks.
+        // The wall clock is read first and last, around the other two: a thread is running
+        // when it reads them, so the on-CPU time and the waits counted between its reads lie
+        // within the wall clock's span, and together never exceed it. (Read outside, a wait
+        // just before the span or just after it counted, and the parts could pass the wall
+        // clock by a time slice.)
+        let wall = Instant::now();
         let run_delay_ns = run_delay_ns();
         SpanStart {
             on_cpu: cpu_time::ThreadTime::try_now().ok(),
-            wall: Instant::now(),
+            wall,
             run_delay_ns,
         }
     }
@@ -36,7 +41,6 @@ impl Span {
 
 impl SpanStart {
     pub(crate) fn stop(self) -> Span {
-        let wall_s = self.wall.elapsed().as_secs_f64();
         let on_cpu_s = self
             .on_cpu
             .and_then(|t| t.try_elapsed().ok())
@@ -45,6 +49,7 @@ impl SpanStart {
             .run_delay_ns
             .zip(run_delay_ns())
             .map(|(a, b)| b.saturating_sub(a) as f64 * 1e-9);
+        let wall_s = self.wall.elapsed().as_secs_f64();
         Span {
             wall_s,
             on_cpu_s,
