@@ -129,6 +129,8 @@ pub struct NodeWork {
     /// Set by the GPU phase: the GPU seconds its upload hooks expect the work they recorded
     /// to take (e.g. rendering a ground texture); counts in the per-frame GPU budget.
     pub gpu_estimate_s: f64,
+    /// The frame thread's time in the node's GPU phases, upload hooks included (s).
+    pub gpu_phases_s: f64,
     /// The node's GPU objects, set by the renderers' upload hooks, dropped with the node.
     pub gpu: GpuSlots,
 }
@@ -142,6 +144,7 @@ impl NodeWork {
             payloads: Vec::new(),
             uploaded_bytes: 0,
             gpu_estimate_s: 0.0,
+            gpu_phases_s: 0.0,
             gpu: GpuSlots::default(),
         }
     }

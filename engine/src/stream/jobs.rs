@@ -239,6 +239,7 @@ impl Streamer {
             self.stats.latencies.push(JobLatency {
                 request_to_ready_s: req.requested_at.elapsed().as_secs_f64(),
                 need_to_ready_s: req.needed_at.map(|t| t.elapsed().as_secs_f64()),
+                gpu_phases_s: work.gpu_phases_s,
             });
         }
         self.stats.completed += 1;
@@ -304,11 +305,13 @@ impl Streamer {
             };
             let mut w = std::mem::replace(work, Box::new(NodeWork::new(key)));
             let mut i = *next_phase;
+            let t = Instant::now();
             while i < self.phases.len() && self.phases[i].kind == PhaseKind::Gpu {
                 (self.phases[i].run)(&self.shared, &mut w);
                 upload(&self.shared, &mut w);
                 i += 1;
             }
+            w.gpu_phases_s += t.elapsed().as_secs_f64();
             bytes += w.uploaded_bytes;
             gpu_s += w.gpu_estimate_s;
             ran += 1;

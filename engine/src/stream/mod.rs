@@ -282,6 +282,10 @@ pub struct JobLatency {
     /// From the moment the node was first needed for display (requested or promoted to the
     /// display class) to ready (s); `None` for a prefetched node ready before it was needed.
     pub need_to_ready_s: Option<f64>,
+    /// The frame thread's time in the node's GPU phases, the renderers' upload hooks included
+    /// (s); not the deferred work those hooks leave for the end of the frame (ground textures,
+    /// impostor bakes).
+    pub gpu_phases_s: f64,
 }
 
 /// The streaming system. Owned by one thread (the render thread); workers run CPU phases.

@@ -689,6 +689,21 @@ impl FlightOutcome {
                 ),
             );
         }
+        let mut gpu_phases: Vec<f64> = self.latencies.iter().map(|l| l.gpu_phases_s).collect();
+        gpu_phases.sort_by(f64::total_cmp);
+        for (name, p) in [("p50", 0.5), ("p99", 0.99)] {
+            r.add(
+                "streaming",
+                &format!("GPU phases per node {name}"),
+                apps::percentile(&gpu_phases, p) * 1e6,
+                "µs",
+                &format!(
+                    "{params}; the frame thread's time in a node's GPU phases and upload hooks, \
+                     {} nodes; not the deferred work (ground textures, impostor bakes)",
+                    gpu_phases.len()
+                ),
+            );
+        }
         self.report_counts(request.len(), need.len(), r, params);
         r.add(
             "streaming",
