@@ -102,6 +102,8 @@ impl std::fmt::Debug for TerrainNodeGpu {
 
 /// Index ranges a node mesh has on the GPU, one per decimation.
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
+/// Bytes of one terrain vertex ([`MeshVertex`]).
+const VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();
 
 impl TerrainNodeGpu {
     /// First index (in the page) and index count drawn with `decimation`.
@@ -546,29 +548,21 @@ impl TerrainRenderer {
         tree: &QuadTree,
         mesh: &NodeMesh,
     ) -> Option<TerrainNodeGpu> {
-        let vertices: Vec<MeshVertex> = mesh
-            .positions
-            .iter()
-            .zip(&mesh.normals)
-            .zip(&mesh.ground)
-            .map(|((p, n), g)| MeshVertex {
-                position: *p,
-                normal: *n,
-                tag: u32::from(*g),
-            })
-            .collect();
-        // A mesh that decimates also keeps its decimated triangles (after its own).
-        let mut indices = mesh.indices.clone();
+        // The vertices and indices are written straight into the staging memory (no copy on
+        // the frame thread first); a mesh that decimates also keeps its decimated triangles,
+        // after its own.
+        let own = mesh.indices.len() as u32;
+        let mut index_len = own;
         let ranges: [[u32; 2]; DECIMATIONS] = std::array::from_fn(|d| {
-            let drawn = mesh.drawn_indices(d as u8);
+            let drawn = mesh.drawn_indices(d as u8).len() as u32;
             if d == 0 || !mesh.decimates() {
-                return [0, drawn.len() as u32];
+                return [0, drawn];
             }
-            let first = indices.len() as u32;
-            indices.extend_from_slice(drawn);
-            [first, drawn.len() as u32]
+            let first = index_len;
+            index_len += drawn;
+            [first, drawn]
         });
-        let lengths = [vertices.len() as u32, indices.len() as u32];
+        let lengths = [mesh.positions.len() as u32, index_len];
         let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
             log::warn!(
                 "terrain mesh pool or node table full: node {:?} is not drawn",
@@ -589,7 +583,7 @@ impl TerrainRenderer {
             self.pages.push(MeshPage {
                 vertices: buffer(
                     "vertices",
-                    u64::from(PAGE_VERTICES) * std::mem::size_of::<MeshVertex>() as u64,
+                    u64::from(PAGE_VERTICES) * VERTEX_BYTES as u64,
                     wgpu::BufferUsages::VERTEX,
                 ),
                 indices: buffer(
@@ -600,17 +594,51 @@ impl TerrainRenderer {
             });
         }
         let page = &self.pages[lease.page as usize];
-        let vertex_bytes = std::mem::size_of::<MeshVertex>() as u64;
-        queue.write_buffer(
-            &page.vertices,
-            u64::from(lease.start[0]) * vertex_bytes,
-            bytemuck::cast_slice(&vertices),
-        );
-        queue.write_buffer(
-            &page.indices,
-            u64::from(lease.start[1]) * 4,
-            bytemuck::cast_slice(&indices),
-        );
+        let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
+        let index_bytes = lengths[1] as usize * 4;
+        let (Some(mut vertex_view), Some(mut index_view)) = (
+            write_view(
+                queue,
+                &page.vertices,
+                lease.start[0],
+                VERTEX_BYTES,
+                vertex_bytes,
+            ),
+            write_view(queue, &page.indices, lease.start[1], 4, index_bytes),
+        ) else {
+            log::warn!(
+                "terrain mesh of node {:?} could not be staged for upload: not drawn",
+                mesh.key
+            );
+            return None;
+        };
+        let vertices = mesh
+            .positions
+            .iter()
+            .zip(&mesh.normals)
+            .zip(&mesh.ground)
+            .map(|((p, n), g)| {
+                bytemuck::cast::<MeshVertex, [u8; VERTEX_BYTES]>(MeshVertex {
+                    position: *p,
+                    normal: *n,
+                    tag: u32::from(*g),
+                })
+            });
+        vertex_view
+            .slice(..)
+            .into_chunks::<VERTEX_BYTES>()
+            .0
+            .write_iter(vertices);
+        index_view
+            .slice(..own as usize * 4)
+            .copy_from_slice(bytemuck::cast_slice(&mesh.indices));
+        if mesh.decimates() {
+            for (d, [first, count]) in ranges.iter().enumerate().skip(1) {
+                index_view
+                    .slice(*first as usize * 4..(first + count) as usize * 4)
+                    .copy_from_slice(bytemuck::cast_slice(mesh.drawn_indices(d as u8)));
+            }
+        }
         Some(TerrainNodeGpu {
             origin_m: mesh.origin_m,
             aabb_m: mesh.aabb_m(tree),
@@ -618,9 +646,22 @@ impl TerrainRenderer {
             ranges,
             slot,
             ground: Arc::new(OnceLock::new()),
-            bytes: vertices.len() * std::mem::size_of::<MeshVertex>() + indices.len() * 4,
+            bytes: vertex_bytes + index_bytes,
         })
     }
+}
+
+/// A staging view of `bytes` bytes written into `buffer` from element `start` (of
+/// `element_bytes` each) when dropped; None when `bytes` is 0 or the write is invalid.
+fn write_view(
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    start: u32,
+    element_bytes: usize,
+    bytes: usize,
+) -> Option<wgpu::QueueWriteBufferView> {
+    let size = wgpu::BufferSize::new(bytes as u64)?;
+    queue.write_buffer_with(buffer, u64::from(start) * element_bytes as u64, size)
 }
 
 impl NodeRenderer for TerrainRenderer {
