@@ -119,6 +119,8 @@ struct Inner {
     drawn: Mutex<Arc<DrawnGrids>>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
     computed: AtomicU64,
+    /// Grids stored so far (first computations and relights), counted after each store.
+    stored: Arc<AtomicU64>,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
     log: Mutex<std::collections::VecDeque<NodeKey>>,
     state: Mutex<ThreadState>,
@@ -218,6 +220,7 @@ impl Inner {
                 next.key,
                 sun,
             ));
+            self.stored.fetch_add(1, Ordering::AcqRel);
             let mut state = self.state.lock().expect("state lock");
             next.computing.store(false, Ordering::Release);
             state.busy -= 1;
@@ -245,6 +248,17 @@ impl Inner {
     fn poke(&self) {
         self.state.lock().expect("state lock").idle = false;
         self.wake.notify_all();
+    }
+}
+
+/// How many grids were stored so far (first computations and relights): a grid's new
+/// [`SharedGrid::version`] is visible once this count includes it.
+#[derive(Debug, Clone)]
+pub struct GridsStored(Arc<AtomicU64>);
+
+impl GridsStored {
+    pub fn get(&self) -> u64 {
+        self.0.load(Ordering::Acquire)
     }
 }
 
@@ -295,6 +309,7 @@ impl LightingContent {
                 drawn: Mutex::new(Arc::new(DrawnGrids::default())),
                 grids: Mutex::new(FxHashMap::default()),
                 computed: AtomicU64::new(0),
+                stored: Arc::new(AtomicU64::new(0)),
                 log: Mutex::new(std::collections::VecDeque::new()),
                 state: Mutex::new(ThreadState::default()),
                 wake: Condvar::new(),
@@ -323,6 +338,12 @@ impl LightingContent {
     /// Grids computed so far (first computations and relights).
     pub fn computed(&self) -> u64 {
         self.inner.computed.load(Ordering::Relaxed)
+    }
+
+    /// The count of grids stored, for a renderer to tell whether any grid changed since it
+    /// last looked.
+    pub fn grids_stored(&self) -> GridsStored {
+        GridsStored(Arc::clone(&self.inner.stored))
     }
 
     /// The keys of the last grids computed (up to [`LOG_LEN`]), oldest first.

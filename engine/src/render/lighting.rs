@@ -16,7 +16,7 @@ use super::light_pool::{LightEntry, LightLease, NO_LIGHT};
 use super::scene::{FrameDraws, NodeRenderer};
 use super::terrain::legend_srgb;
 use crate::color::srgb_to_linear;
-use crate::lighting::content::{LightingContent, NodeLight};
+use crate::lighting::content::{GridsStored, LightingContent, NodeLight};
 use crate::lighting::grid::layer_heights_m;
 use crate::lighting::seams::{coarser_sides, node_columns};
 use crate::stream::{NodeWork, Shared};
@@ -96,6 +96,10 @@ pub struct LightingRenderer {
     pub unlit_drawn: usize,
     /// Drawn nodes without their own grid this frame, shaded by an ancestor's coarser one.
     pub coarse_lit_drawn: usize,
+    /// The light threads' count of stored grids, and its value when `prepare` last wrote the
+    /// drawn nodes' changed grids: only a frame after a store looks at every drawn lease.
+    stored: Option<GridsStored>,
+    stored_written: u64,
 }
 
 impl LightingRenderer {
@@ -108,6 +112,10 @@ impl LightingRenderer {
                 &layer_heights_m(kind.canopy()),
                 mean_ground_albedo(&shared.world),
             );
+            return Box::new(Self {
+                stored: Some(kind.grids_stored()),
+                ..Self::default()
+            });
         }
         Box::new(Self::default())
     }
@@ -141,8 +149,13 @@ impl NodeRenderer for LightingRenderer {
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
         // The nodes drawn (or drawn through): a lease for those without one yet (the first
-        // frame they are drawn, or again each frame while the pool is full), then their tiles
-        // written where the grid arrived or was relit.
+        // frame they are drawn, or again each frame while the pool is full), its tile written
+        // if its grid is computed; then, in a frame after a grid was stored, the tiles of
+        // every drawn lease whose grid arrived or was relit since. (The count is read before
+        // the leases: a grid stored meanwhile is written in the next frame.)
+        let stored = self.stored.as_ref().map_or(0, GridsStored::get);
+        let any_stored = stored != self.stored_written;
+        self.stored_written = stored;
         for d in draws.drawn.iter().chain(draws.ancestors) {
             let Some(slot) = d.work.gpu.get::<NodeLightGpu>() else {
                 continue;
@@ -151,10 +164,10 @@ impl NodeRenderer for LightingRenderer {
                 && let Some(light) = d.work.get::<NodeLight>()
                 && let Some(lease) = frame.light.lease(&light.grid)
             {
+                frame.light.refresh(&gpu.queue, &lease);
                 // `prepare` is the only writer, so the slot is still empty.
                 let _ = slot.0.set(lease);
-            }
-            if let Some(l) = slot.lease() {
+            } else if any_stored && let Some(l) = slot.lease() {
                 frame.light.refresh(&gpu.queue, l);
             }
         }
