@@ -5,10 +5,11 @@
 //! and a drawn node that found the pool full tries again each frame. The terrain, vegetation and
 //! object renderers put [`light_entry`] into their node-table entries: until a node's grid
 //! arrives, the nearest drawn-through ancestor's written grid (coarser columns, the same values
-//! at them), fully lit without one. Each frame `prepare` also writes the tiles of drawn grids that arrived or were
-//! relit since (a sun change), nearest first as the light thread makes them, and finds the drawn
-//! nodes that blend toward a coarser neighbour's grid (`lighting::seams`); it runs before the
-//! other renderers'.
+//! at them), fully lit without one. `prepare` writes a grid's tile when its lease is taken
+//! and, in the frames after a light thread stored a grid, the tiles of drawn grids that
+//! arrived or were relit since (a sun change), nearest first as the light threads make them.
+//! Each frame it also finds the drawn nodes that blend toward a coarser neighbour's grid
+//! (`lighting::seams`); it runs before the other renderers'.
 
 use super::Gpu;
 use super::frame::{DrawStats, FrameResources};
