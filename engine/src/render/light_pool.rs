@@ -259,6 +259,15 @@ impl LightPool {
         lease.written.store(version, Ordering::Release);
     }
 
+    /// Writes every live lease's grid that arrived or changed since ([`Self::refresh`]),
+    /// whether or not a node holding it is drawn this frame.
+    pub fn refresh_all(&self, queue: &wgpu::Queue) {
+        let leases = self.leases.lock().expect("leases lock");
+        for lease in leases.values().filter_map(Weak::upgrade) {
+            self.refresh(queue, &lease);
+        }
+    }
+
     /// Grids holding a tile now.
     pub fn leased(&self) -> usize {
         let leases = self.leases.lock().expect("leases lock");

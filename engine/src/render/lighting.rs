@@ -6,7 +6,7 @@
 //! object renderers put [`light_entry`] into their node-table entries: until a node's grid
 //! arrives, the nearest drawn-through ancestor's written grid (coarser columns, the same values
 //! at them), fully lit without one. `prepare` writes a grid's tile when its lease is taken
-//! and, in the frames after a light thread stored a grid, the tiles of drawn grids that
+//! and, in the frames after a light thread stored a grid, the tiles of leased grids that
 //! arrived or were relit since (a sun change), nearest first as the light threads make them.
 //! Each frame it also finds the drawn nodes that blend toward a coarser neighbour's grid
 //! (`lighting::seams`); it runs before the other renderers'.
@@ -98,7 +98,7 @@ pub struct LightingRenderer {
     /// Drawn nodes without their own grid this frame, shaded by an ancestor's coarser one.
     pub coarse_lit_drawn: usize,
     /// The light threads' count of stored grids, and its value when `prepare` last wrote the
-    /// drawn nodes' changed grids: only a frame after a store looks at every drawn lease.
+    /// changed grids: only a frame after a store looks at every live lease.
     stored: Option<GridsStored>,
     stored_written: u64,
 }
@@ -149,14 +149,16 @@ impl NodeRenderer for LightingRenderer {
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        // The nodes drawn (or drawn through): a lease for those without one yet (the first
-        // frame they are drawn, or again each frame while the pool is full), its tile written
-        // if its grid is computed; then, in a frame after a grid was stored, the tiles of
-        // every drawn lease whose grid arrived or was relit since. (The count is read before
-        // the leases: a grid stored meanwhile is written in the next frame.)
+        // In a frame after a grid was stored, the tiles of every live lease whose grid
+        // arrived or was relit since, drawn or not (the count is read first: a grid stored
+        // meanwhile is written in the next frame). Then the nodes drawn (or drawn through): a
+        // lease for those without one yet (the first frame they are drawn, or again each
+        // frame while the pool is full), its tile written if its grid is computed.
         let stored = self.stored.as_ref().map_or(0, GridsStored::get);
-        let any_stored = stored != self.stored_written;
-        self.stored_written = stored;
+        if stored != self.stored_written {
+            self.stored_written = stored;
+            frame.light.refresh_all(&gpu.queue);
+        }
         for d in draws.drawn.iter().chain(draws.ancestors) {
             let Some(slot) = d.work.gpu.get::<NodeLightGpu>() else {
                 continue;
@@ -168,8 +170,6 @@ impl NodeRenderer for LightingRenderer {
                 frame.light.refresh(&gpu.queue, &lease);
                 // `prepare` is the only writer, so the slot is still empty.
                 let _ = slot.0.set(lease);
-            } else if any_stored && let Some(l) = slot.lease() {
-                frame.light.refresh(&gpu.queue, l);
             }
         }
         let lit: Vec<_> = draws
