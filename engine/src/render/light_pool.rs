@@ -72,6 +72,11 @@ impl LightLease {
         self.written.load(Ordering::Acquire) != NOT_WRITTEN
     }
 
+    /// The grid version the tile holds ([`SharedGrid::version`]), if written.
+    pub fn written_version(&self) -> Option<u64> {
+        Some(self.written.load(Ordering::Acquire)).filter(|&v| v != NOT_WRITTEN)
+    }
+
     /// The node-table numbers of node `key` shaded by this grid: tile, columns per metre and
     /// the node's south-west corner in the grid's columns ([`NO_LIGHT`]'s before the grid is
     /// written).

@@ -622,6 +622,97 @@ fn only_drawn_nodes_lease_light_grid_tiles() {
     );
 }
 
+/// A grid relit while none of the nodes it shades is drawn is still written into its tile
+/// (lavapipe): settle a view looking east, turn west (the east nodes stay resident and keep
+/// their leases but are not drawn), change the sun and draw the west view until the light
+/// threads are idle. Then every live lease's tile holds its grid's newest version, among them
+/// leases that shade no drawn node (there must be some, or this shows nothing); a renderer
+/// that wrote only the drawn nodes' relit grids left those with the old sun until the next
+/// store after they were drawn again.
+#[test]
+fn a_grid_relit_while_its_nodes_are_not_drawn_is_written() {
+    use engine::camera::Camera;
+    use engine::render::lighting::NodeLightGpu;
+    use engine::render::{COLOR_FORMAT, Target};
+    use glam::DVec3;
+    use std::collections::HashSet;
+
+    let Some(g) = tests::gpu::device() else {
+        return;
+    };
+    let mut v = tests::gpu::tiny_viewer(&g, 2.0);
+    let tree = *v.streamer.tree();
+    let (o, size) = (tree.origin_m, tree.map_size_m);
+    let (x, y) = (o[0] + 0.5 * size[0], o[1] + 0.5 * size[1]);
+    let eye = DVec3::new(x, y, v.streamer.shared.world.height_m(x, y) + 30.0);
+    let look = |dx: f64| {
+        Camera::look_at(
+            eye,
+            eye + DVec3::new(dx, 0.0, -0.3),
+            60f64.to_radians(),
+            [320, 180],
+        )
+    };
+    let (east, west) = (look(1.0), look(-1.0));
+    let target = Target::new(&g.device, east.viewport_px, COLOR_FORMAT);
+    tests::gpu::settle(&g, &mut v, &target, &east);
+    tests::gpu::settle(&g, &mut v, &target, &west);
+    v.set_sun(
+        Sun {
+            azimuth_deg: 200.0,
+            elevation_deg: 15.0,
+        },
+        eye,
+    );
+    let lighting = v.lighting().expect("registered");
+    lighting.wait_idle();
+    // The frame after the last store writes the changed grids.
+    for _ in 0..2 {
+        tests::gpu::frame(&g, &mut v, &target, &west, 0.05);
+    }
+    // Grids that shade a drawn node or an ancestor of one.
+    let mut drawn = HashSet::new();
+    for d in v.streamer.draw_list() {
+        let mut k = Some(d.key);
+        while let Some(key) = k {
+            drawn.insert(LightGrid::owner(&tree, key));
+            k = key.parent();
+        }
+    }
+    let (mut checked, mut undrawn) = (HashSet::new(), 0usize);
+    for k in v.streamer.resident_keys() {
+        let work = &v.streamer.resident(k).expect("resident").work;
+        let Some(lease) = work.gpu.get::<NodeLightGpu>().and_then(NodeLightGpu::lease) else {
+            continue;
+        };
+        if !checked.insert(lease.grid.key) {
+            continue;
+        }
+        assert_eq!(
+            lease.grid.version(),
+            2,
+            "grid {:?} relit once",
+            lease.grid.key
+        );
+        assert_eq!(
+            lease.written_version(),
+            Some(lease.grid.version()),
+            "grid {:?} (shading a drawn node: {}): its tile holds another version",
+            lease.grid.key,
+            drawn.contains(&lease.grid.key)
+        );
+        undrawn += usize::from(!drawn.contains(&lease.grid.key));
+    }
+    println!(
+        "{} leased grids hold their relit version, {undrawn} of them shading no drawn node",
+        checked.len()
+    );
+    assert!(
+        undrawn > 0,
+        "every leased grid shades a drawn node: the turn left none undrawn, so this shows nothing"
+    );
+}
+
 /// The renderer samples the grids where they belong (lavapipe, the "lighting only" view: grey
 /// albedo, no fog): looking down on the lowland west of a 100 m cliff under a sun 45 degrees
 /// high in the east, ground pixels 15 to 85 m from the cliff's foot (in its shadow, 100 m long)
