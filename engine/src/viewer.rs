@@ -8,7 +8,7 @@ use crate::lighting::content::LightingContent;
 use crate::render::frame::{DrawStats, ViewOptions};
 use crate::render::lighting::LightingRenderer;
 use crate::render::reference::{FrameContent, GpuReference};
-use crate::render::scene::{DrawnNode, FrameDraws, RenderTimes, Scene};
+use crate::render::scene::{DrawnNode, FrameDraws, RenderTimes, Scene, UploadEncoder};
 use crate::render::sky::{BoundsLines, SkyRenderer};
 use crate::render::terrain::TerrainRenderer;
 use crate::render::vegetation::VegetationRenderer;
@@ -254,7 +254,8 @@ impl Viewer {
         self.streamer.update(&select_cam, dt_s);
         self.show_textures_of_display();
         let t1 = Instant::now();
-        let (uploaded, expected_gpu_s) = self.upload(gpu, budget_s);
+        let (uploaded, expected_gpu_s) =
+            self.upload(gpu, budget_s, &mut UploadEncoder::Frame(encoder));
         let t2 = Instant::now();
         let upload_time_left_s = budget_s - (t2 - t1).as_secs_f64() - expected_gpu_s;
         let drawn: Vec<DrawnNode<'_>> = self
@@ -477,7 +478,10 @@ impl Viewer {
     pub fn upload_and_finish(&mut self, gpu: &Gpu) {
         let budget_s = self.streamer.settings.gpu_budget_s;
         let t0 = Instant::now();
-        let (_, expected_gpu_s) = self.upload(gpu, budget_s);
+        let mut copies = UploadEncoder::Own(None);
+        let (_, expected_gpu_s) = self.upload(gpu, budget_s, &mut copies);
+        self.scene.close_uploads();
+        copies.finish(&gpu.queue);
         let left_s = budget_s - t0.elapsed().as_secs_f64() - expected_gpu_s;
         self.show_textures_of_display();
         self.scene.finish_uploads(gpu, left_s);
@@ -513,15 +517,16 @@ impl Viewer {
             .map_or(0, TerrainRenderer::textures_pending)
     }
 
-    /// The streamer's GPU phases under `budget_s`, with every renderer's upload hook; returns
-    /// the bytes they uploaded and the GPU time their recorded work is expected to take.
-    fn upload(&mut self, gpu: &Gpu, budget_s: f64) -> (usize, f64) {
+    /// The streamer's GPU phases under `budget_s`, with every renderer's upload hook (their
+    /// copies recorded into `copies`); returns the bytes they uploaded and the GPU time their
+    /// recorded work is expected to take.
+    fn upload(&mut self, gpu: &Gpu, budget_s: f64, copies: &mut UploadEncoder<'_>) -> (usize, f64) {
         let scene = &mut self.scene;
         let (mut bytes, mut expected_gpu_s) = (0, 0.0);
         self.streamer
             .run_gpu_phases_within(budget_s, &mut |shared, work| {
                 let estimate_before_s = work.gpu_estimate_s;
-                work.uploaded_bytes = scene.upload(gpu, &shared.tree, work);
+                work.uploaded_bytes = scene.upload_into(gpu, &shared.tree, work, copies);
                 bytes += work.uploaded_bytes;
                 expected_gpu_s += work.gpu_estimate_s - estimate_before_s;
             });

@@ -14,7 +14,7 @@
 use super::Gpu;
 use super::frame::{DrawStats, FrameResources};
 use super::light_pool::{LightEntry, LightLease, NO_LIGHT};
-use super::scene::{FrameDraws, NodeRenderer};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
 use super::terrain::legend_srgb;
 use crate::color::srgb_to_linear;
 use crate::lighting::content::{GridsStored, LightingContent, NodeLight};
@@ -133,6 +133,7 @@ impl NodeRenderer for LightingRenderer {
         _frame: &FrameResources,
         _tree: &QuadTree,
         work: &mut NodeWork,
+        _copies: &mut UploadEncoder<'_>,
     ) -> usize {
         let Some(light) = work.get::<NodeLight>() else {
             return 0;

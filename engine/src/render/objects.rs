@@ -18,7 +18,7 @@ use super::frame::{
 };
 use super::lighting::light_entry;
 use super::paged_buffer::PagedBuffer;
-use super::scene::{FrameDraws, NodeRenderer};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
 use super::suballoc::Lease;
 use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
@@ -567,6 +567,7 @@ impl NodeRenderer for ObjectsRenderer {
         _frame: &FrameResources,
         _tree: &crate::terrain::quadtree::QuadTree,
         work: &mut crate::stream::NodeWork,
+        _copies: &mut UploadEncoder<'_>,
     ) -> usize {
         let Some(h) = work.get::<NodeObjects>().and_then(|o| o.hlod.as_ref()) else {
             return 0;

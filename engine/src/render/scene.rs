@@ -44,21 +44,59 @@ pub struct FrameDraws<'a> {
     pub upload_time_left_s: f64,
 }
 
+/// Where upload hooks record their copies into GPU buffers: the frame's command encoder (the
+/// copies are submitted with the frame, before its pass, in one submission), or, for GPU
+/// phases run without a frame, an encoder made on first use that the caller submits
+/// ([`Self::finish`]) after [`Scene::close_uploads`].
+pub enum UploadEncoder<'a> {
+    Frame(&'a mut wgpu::CommandEncoder),
+    Own(Option<wgpu::CommandEncoder>),
+}
+
+impl UploadEncoder<'_> {
+    /// The encoder to record into.
+    pub fn get(&mut self, device: &wgpu::Device) -> &mut wgpu::CommandEncoder {
+        match self {
+            Self::Frame(e) => e,
+            Self::Own(e) => e.get_or_insert_with(|| {
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("node uploads"),
+                })
+            }),
+        }
+    }
+
+    /// Submits what was recorded into an own encoder (the frame's is submitted with the
+    /// frame).
+    pub fn finish(self, queue: &wgpu::Queue) {
+        if let Self::Own(Some(e)) = self {
+            queue.submit([e.finish()]);
+        }
+    }
+}
+
 /// The GPU side of one kind of thing drawn.
 pub trait NodeRenderer: std::any::Any {
     fn name(&self) -> &'static str;
 
     /// The GPU phase of a prepared node: create this renderer's objects from the node's payload
-    /// (store them with `work.gpu.put`) and return the bytes uploaded. Default: nothing.
+    /// (store them with `work.gpu.put`, record copies into `copies`) and return the bytes
+    /// uploaded. Default: nothing.
     fn upload(
         &mut self,
         _gpu: &Gpu,
         _frame: &FrameResources,
         _tree: &QuadTree,
         _work: &mut NodeWork,
+        _copies: &mut UploadEncoder<'_>,
     ) -> usize {
         0
     }
+
+    /// After a frame's GPU phases, before the encoder their copies went into is submitted:
+    /// close the staging memory the upload hooks wrote (it is reused once the GPU has copied
+    /// out of it). Default: nothing.
+    fn close_uploads(&mut self) {}
 
     /// Submit what the upload hooks recorded (one submission per frame instead of one per
     /// node), and record and submit the work a renderer defers to here (node ground textures)
@@ -166,13 +204,37 @@ impl Scene {
         time_left_s
     }
 
-    /// The GPU phase of a node: every renderer's upload hook. Returns the bytes uploaded.
-    pub fn upload(&mut self, gpu: &Gpu, tree: &QuadTree, work: &mut NodeWork) -> usize {
+    /// The GPU phase of a node: every renderer's upload hook, their copies recorded into
+    /// `copies`. Returns the bytes uploaded. [`Self::close_uploads`] follows a frame's GPU
+    /// phases, before `copies` is submitted.
+    pub fn upload_into(
+        &mut self,
+        gpu: &Gpu,
+        tree: &QuadTree,
+        work: &mut NodeWork,
+        copies: &mut UploadEncoder<'_>,
+    ) -> usize {
         let frame = &self.frame;
         self.renderers
             .iter_mut()
-            .map(|r| r.upload(gpu, frame, tree, work))
+            .map(|r| r.upload(gpu, frame, tree, work, copies))
             .sum()
+    }
+
+    /// [`Self::upload_into`] one node on its own, its copies submitted at once.
+    pub fn upload(&mut self, gpu: &Gpu, tree: &QuadTree, work: &mut NodeWork) -> usize {
+        let mut copies = UploadEncoder::Own(None);
+        let bytes = self.upload_into(gpu, tree, work, &mut copies);
+        self.close_uploads();
+        copies.finish(&gpu.queue);
+        bytes
+    }
+
+    /// Every renderer's [`NodeRenderer::close_uploads`].
+    pub fn close_uploads(&mut self) {
+        for r in &mut self.renderers {
+            r.close_uploads();
+        }
     }
 
     /// Records the frame into `encoder`: one pass cleared to the view's colour and far depth,
@@ -186,6 +248,9 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
+        // The frame's GPU phases recorded their copies into the frame's encoder (submitted
+        // after this call).
+        self.close_uploads();
         let left_s = self.finish_uploads(gpu, draws.upload_time_left_s);
         let draws = &FrameDraws {
             upload_time_left_s: left_s,

@@ -31,7 +31,7 @@ use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot, layers_per_page};
 use super::lighting::light_entry;
 use super::node_table::NodeTable;
-use super::scene::{FrameDraws, NodeRenderer};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
 use super::suballoc::{Lease, Suballocator};
 use super::texture_credit::TextureCredit;
 use crate::ground::content::{GroundContent, NodeGround};
@@ -104,6 +104,12 @@ impl std::fmt::Debug for TerrainNodeGpu {
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
 /// Bytes of one terrain vertex ([`MeshVertex`]).
 const VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();
+/// Bytes of one staging chunk of the node-mesh uploads (a node's mesh is 60 - 70 KB): the
+/// chunks are kept and reused once the GPU has copied out of them, so their memory is written
+/// warm. As many are made as two frames' uploads fill (a frame's chunks are taken back in
+/// the next frame); a small chunk spreads making them (the pages of a new one are touched
+/// for the first time) over the first frames.
+const MESH_STAGING_CHUNK_BYTES: u64 = 1 << 20;
 
 impl TerrainNodeGpu {
     /// First index (in the page) and index count drawn with `decimation`.
@@ -241,6 +247,8 @@ pub struct TerrainRenderer {
     ground: Option<GroundTextures>,
     pool: Suballocator,
     pages: Vec<MeshPage>,
+    /// The node meshes' staging memory (copied out of by commands in the upload encoder).
+    staging: wgpu::util::StagingBelt,
     table: NodeTable,
     batches: Batches<BatchKey>,
     triangles: u64,
@@ -397,6 +405,7 @@ impl TerrainRenderer {
             detail,
             ground: None,
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
+            staging: wgpu::util::StagingBelt::new(device.clone(), MESH_STAGING_CHUNK_BYTES),
             pages: Vec::new(),
             table: NodeTable::new(device, frame, "terrain node table", 1),
             batches: Batches::new(),
@@ -544,13 +553,14 @@ impl TerrainRenderer {
     pub fn upload_mesh(
         &mut self,
         device: &wgpu::Device,
-        queue: &wgpu::Queue,
         tree: &QuadTree,
         mesh: &NodeMesh,
+        copies: &mut UploadEncoder<'_>,
     ) -> Option<TerrainNodeGpu> {
-        // The vertices and indices are written straight into the staging memory (no copy on
-        // the frame thread first); a mesh that decimates also keeps its decimated triangles,
-        // after its own.
+        // The vertices and indices are written straight into the staging belt's memory (no
+        // copy on the frame thread first; no staging buffer made and freed per write, whose
+        // fresh pages cost a page fault each); a mesh that decimates also keeps its decimated
+        // triangles, after its own.
         let own = mesh.indices.len() as u32;
         let mut index_len = own;
         let ranges: [[u32; 2]; DECIMATIONS] = std::array::from_fn(|d| {
@@ -596,22 +606,20 @@ impl TerrainRenderer {
         let page = &self.pages[lease.page as usize];
         let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
         let index_bytes = lengths[1] as usize * 4;
-        let (Some(mut vertex_view), Some(mut index_view)) = (
-            write_view(
-                queue,
-                &page.vertices,
-                lease.start[0],
-                VERTEX_BYTES,
-                vertex_bytes,
-            ),
-            write_view(queue, &page.indices, lease.start[1], 4, index_bytes),
+        let (Some(vertex_size), Some(index_size)) = (
+            wgpu::BufferSize::new(vertex_bytes as u64),
+            wgpu::BufferSize::new(index_bytes as u64),
         ) else {
-            log::warn!(
-                "terrain mesh of node {:?} could not be staged for upload: not drawn",
-                mesh.key
-            );
+            log::warn!("terrain mesh of node {:?} is empty: not drawn", mesh.key);
             return None;
         };
+        let copies = copies.get(device);
+        let mut vertex_view = self.staging.write_buffer(
+            copies,
+            &page.vertices,
+            u64::from(lease.start[0]) * VERTEX_BYTES as u64,
+            vertex_size,
+        );
         let vertices = mesh
             .positions
             .iter()
@@ -629,6 +637,13 @@ impl TerrainRenderer {
             .into_chunks::<VERTEX_BYTES>()
             .0
             .write_iter(vertices);
+        drop(vertex_view);
+        let mut index_view = self.staging.write_buffer(
+            copies,
+            &page.indices,
+            u64::from(lease.start[1]) * 4,
+            index_size,
+        );
         index_view
             .slice(..own as usize * 4)
             .copy_from_slice(bytemuck::cast_slice(&mesh.indices));
@@ -651,19 +666,6 @@ impl TerrainRenderer {
     }
 }
 
-/// A staging view of `bytes` bytes written into `buffer` from element `start` (of
-/// `element_bytes` each) when dropped; None when `bytes` is 0 or the write is invalid.
-fn write_view(
-    queue: &wgpu::Queue,
-    buffer: &wgpu::Buffer,
-    start: u32,
-    element_bytes: usize,
-    bytes: usize,
-) -> Option<wgpu::QueueWriteBufferView> {
-    let size = wgpu::BufferSize::new(bytes as u64)?;
-    queue.write_buffer_with(buffer, u64::from(start) * element_bytes as u64, size)
-}
-
 impl NodeRenderer for TerrainRenderer {
     fn name(&self) -> &'static str {
         "terrain"
@@ -675,11 +677,12 @@ impl NodeRenderer for TerrainRenderer {
         _frame: &FrameResources,
         tree: &QuadTree,
         work: &mut NodeWork,
+        copies: &mut UploadEncoder<'_>,
     ) -> usize {
         let Some(mesh) = work.get::<NodeMesh>() else {
             return 0;
         };
-        let Some(node) = self.upload_mesh(&gpu.device, &gpu.queue, tree, mesh) else {
+        let Some(node) = self.upload_mesh(&gpu.device, tree, mesh, copies) else {
             return 0;
         };
         if let Some(pieces) = work.get::<NodeGround>()
@@ -694,6 +697,14 @@ impl NodeRenderer for TerrainRenderer {
         let bytes = node.bytes;
         work.gpu.put(node);
         bytes
+    }
+
+    fn close_uploads(&mut self) {
+        // The chunks closed last time (their copies submitted since) return to the belt once
+        // the GPU has copied out of them (wgpu maps them again in a later submission's or
+        // poll's maintenance); then this frame's are closed.
+        self.staging.recall();
+        self.staging.finish();
     }
 
     fn finish_uploads(&mut self, gpu: &Gpu, time_left_s: f64) -> f64 {

@@ -19,7 +19,7 @@ use super::light_pool::LightEntry;
 use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::paged_buffer::PagedBuffer;
-use super::scene::{FrameDraws, NodeRenderer};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
 use super::suballoc::Lease;
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -878,6 +878,7 @@ impl NodeRenderer for VegetationRenderer {
         frame: &FrameResources,
         tree: &QuadTree,
         work: &mut NodeWork,
+        _copies: &mut UploadEncoder<'_>,
     ) -> usize {
         let Some(node) = work
             .get::<NodeVegetation>()
