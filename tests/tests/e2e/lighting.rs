@@ -9,6 +9,7 @@ use engine::surface::world::World;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
 use engine::vegetation::canopy::Canopy;
 use engine::vegetation::placement::Placer;
+use engine::viewer::Viewer;
 use std::collections::HashMap;
 use tests::terrain::{tiny_world, tree_of};
 use worldgen::noise::unit3;
@@ -545,6 +546,31 @@ fn streamed_nodes_share_grids_and_a_sun_change_relights_drawn_then_nearest_first
     }
 }
 
+/// A viewer of the tiny map (tau 2 px, one worker) and an eye 30 m above the ground at the
+/// fractions `fx`, `fy` of the map's sides.
+fn tiny_viewer_and_eye(g: &engine::render::Gpu, fx: f64, fy: f64) -> (Viewer, glam::DVec3) {
+    let v = tests::gpu::tiny_viewer(g, 2.0);
+    let tree = *v.streamer.tree();
+    let (o, size) = (tree.origin_m, tree.map_size_m);
+    let (x, y) = (o[0] + fx * size[0], o[1] + fy * size[1]);
+    let eye = glam::DVec3::new(x, y, v.streamer.shared.world.height_m(x, y) + 30.0);
+    (v, eye)
+}
+
+/// The grids that shade a node of the viewer's draw list or one of their ancestors.
+fn grids_of_drawn(v: &Viewer) -> std::collections::HashSet<NodeKey> {
+    let tree = v.streamer.tree();
+    let mut grids = std::collections::HashSet::new();
+    for d in v.streamer.draw_list() {
+        let mut k = Some(d.key);
+        while let Some(key) = k {
+            grids.insert(LightGrid::owner(tree, key));
+            k = key.parent();
+        }
+    }
+    grids
+}
+
 /// Only nodes that are drawn (or drawn through, as ancestors of drawn nodes) hold a tile of the
 /// light-grid pool (lavapipe): after a view settles, every leased grid shades a node of the
 /// draw list or one of their ancestors, the pool holds exactly the grids the resident nodes
@@ -562,11 +588,7 @@ fn only_drawn_nodes_lease_light_grid_tiles() {
     let Some(g) = tests::gpu::device() else {
         return;
     };
-    let mut v = tests::gpu::tiny_viewer(&g, 2.0);
-    let tree = *v.streamer.tree();
-    let (o, size) = (tree.origin_m, tree.map_size_m);
-    let (x, y) = (o[0] + 0.3 * size[0], o[1] + 0.4 * size[1]);
-    let eye = DVec3::new(x, y, v.streamer.shared.world.height_m(x, y) + 30.0);
+    let (mut v, eye) = tiny_viewer_and_eye(&g, 0.3, 0.4);
     let cam = Camera::look_at(
         eye,
         eye + DVec3::new(0.8, 0.3, -0.5),
@@ -580,14 +602,7 @@ fn only_drawn_nodes_lease_light_grid_tiles() {
         "drawn nodes without their grid after settling"
     );
     // Grids that may be leased: those of the drawn nodes and of all their ancestors.
-    let mut allowed = HashSet::new();
-    for d in v.streamer.draw_list() {
-        let mut k = Some(d.key);
-        while let Some(key) = k {
-            allowed.insert(LightGrid::owner(&tree, key));
-            k = key.parent();
-        }
-    }
+    let allowed = grids_of_drawn(&v);
     let (mut held, mut unleased) = (HashSet::new(), 0usize);
     for k in v.streamer.resident_keys() {
         let work = &v.streamer.resident(k).expect("resident").work;
@@ -640,11 +655,7 @@ fn a_grid_relit_while_its_nodes_are_not_drawn_is_written() {
     let Some(g) = tests::gpu::device() else {
         return;
     };
-    let mut v = tests::gpu::tiny_viewer(&g, 2.0);
-    let tree = *v.streamer.tree();
-    let (o, size) = (tree.origin_m, tree.map_size_m);
-    let (x, y) = (o[0] + 0.5 * size[0], o[1] + 0.5 * size[1]);
-    let eye = DVec3::new(x, y, v.streamer.shared.world.height_m(x, y) + 30.0);
+    let (mut v, eye) = tiny_viewer_and_eye(&g, 0.5, 0.5);
     let look = |dx: f64| {
         Camera::look_at(
             eye,
@@ -671,14 +682,7 @@ fn a_grid_relit_while_its_nodes_are_not_drawn_is_written() {
         tests::gpu::frame(&g, &mut v, &target, &west, 0.05);
     }
     // Grids that shade a drawn node or an ancestor of one.
-    let mut drawn = HashSet::new();
-    for d in v.streamer.draw_list() {
-        let mut k = Some(d.key);
-        while let Some(key) = k {
-            drawn.insert(LightGrid::owner(&tree, key));
-            k = key.parent();
-        }
-    }
+    let drawn = grids_of_drawn(&v);
     let (mut checked, mut undrawn) = (HashSet::new(), 0usize);
     for k in v.streamer.resident_keys() {
         let work = &v.streamer.resident(k).expect("resident").work;
@@ -725,7 +729,6 @@ fn rendered_terrain_is_dark_in_the_cliff_shadow_and_lit_beyond_it() {
     use engine::lighting::content::LightingContent;
     use engine::render::{COLOR_FORMAT, Target};
     use engine::stream::StreamSettings;
-    use engine::viewer::Viewer;
     use glam::DVec3;
 
     let Some(g) = tests::gpu::device() else {
@@ -960,7 +963,6 @@ fn no_step_where_light_grids_of_two_levels_meet() {
     use engine::camera::Camera;
     use engine::render::{COLOR_FORMAT, Target};
     use engine::stream::StreamSettings;
-    use engine::viewer::Viewer;
     use glam::DVec3;
 
     let Some(g) = tests::gpu::device() else {
