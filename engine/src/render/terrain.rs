@@ -107,9 +107,29 @@ const VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();
 /// Bytes of one staging chunk of the node-mesh uploads (a node's mesh is 60 - 70 KB): the
 /// chunks are kept and reused once the GPU has copied out of them, so their memory is written
 /// warm. As many are made as two frames' uploads fill (a frame's chunks are taken back in
-/// the next frame); a small chunk spreads making them (the pages of a new one are touched
-/// for the first time) over the first frames.
+/// the next frame).
 const MESH_STAGING_CHUNK_BYTES: u64 = 1 << 20;
+/// Chunks made with the renderer, about what the first frames' bursts of uploads fill (a
+/// chunk made in a frame costs that frame its zero-fill and the first touch of its pages).
+const MESH_STAGING_PREMADE_CHUNKS: usize = 16;
+
+/// The node meshes' staging belt with [`MESH_STAGING_PREMADE_CHUNKS`] chunks made, closed and
+/// given back (they are free once wgpu maps them again, at the first submission or poll).
+fn mesh_staging(device: &wgpu::Device) -> wgpu::util::StagingBelt {
+    let mut belt = wgpu::util::StagingBelt::new(device.clone(), MESH_STAGING_CHUNK_BYTES);
+    if let (Some(chunk), Some(align)) = (
+        wgpu::BufferSize::new(MESH_STAGING_CHUNK_BYTES),
+        wgpu::BufferSize::new(wgpu::COPY_BUFFER_ALIGNMENT),
+    ) {
+        for _ in 0..MESH_STAGING_PREMADE_CHUNKS {
+            // A whole chunk each: every call makes a new one.
+            let _ = belt.allocate(chunk, align);
+        }
+    }
+    belt.finish();
+    belt.recall();
+    belt
+}
 
 impl TerrainNodeGpu {
     /// First index (in the page) and index count drawn with `decimation`.
@@ -405,7 +425,7 @@ impl TerrainRenderer {
             detail,
             ground: None,
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
-            staging: wgpu::util::StagingBelt::new(device.clone(), MESH_STAGING_CHUNK_BYTES),
+            staging: mesh_staging(device),
             pages: Vec::new(),
             table: NodeTable::new(device, frame, "terrain node table", 1),
             batches: Batches::new(),
