@@ -227,7 +227,9 @@ impl Viewer {
     }
 
     /// Runs the streaming update and GPU uploads, then records the frame into `encoder`.
-    /// Returns the frame's statistics (GPU wait not included).
+    /// Returns the frame's statistics (GPU wait not included). The uploads' copies are
+    /// recorded into `encoder` too, before the frame's pass: submit it (the nodes uploaded in
+    /// this frame count as on the GPU from now on).
     pub fn frame(
         &mut self,
         gpu: &Gpu,
