@@ -118,7 +118,6 @@ struct Inner {
     /// priority) scanning its grids.
     drawn: Mutex<Arc<DrawnGrids>>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
-    computed: AtomicU64,
     /// Grids stored so far (first computations and relights), counted after each store.
     stored: Arc<AtomicU64>,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
@@ -195,7 +194,6 @@ impl Inner {
                         g.computing.store(true, Ordering::Release);
                         state.busy += 1;
                         // Logged in the order picked (nearest first), under the state lock.
-                        self.computed.fetch_add(1, Ordering::Relaxed);
                         let mut log = self.log.lock().expect("log lock");
                         if log.len() == LOG_LEN {
                             log.pop_front();
@@ -308,7 +306,6 @@ impl LightingContent {
                 camera_xy_m: [AtomicU64::new(0), AtomicU64::new(0)],
                 drawn: Mutex::new(Arc::new(DrawnGrids::default())),
                 grids: Mutex::new(FxHashMap::default()),
-                computed: AtomicU64::new(0),
                 stored: Arc::new(AtomicU64::new(0)),
                 log: Mutex::new(std::collections::VecDeque::new()),
                 state: Mutex::new(ThreadState::default()),
@@ -333,11 +330,6 @@ impl LightingContent {
     /// The canopy grids are lit through.
     pub fn canopy(&self) -> &Canopy {
         &self.inner.canopy
-    }
-
-    /// Grids computed so far (first computations and relights).
-    pub fn computed(&self) -> u64 {
-        self.inner.computed.load(Ordering::Relaxed)
     }
 
     /// The count of grids stored, for a renderer to tell whether any grid changed since it

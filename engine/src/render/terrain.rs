@@ -593,6 +593,15 @@ impl TerrainRenderer {
             [first, drawn]
         });
         let lengths = [mesh.positions.len() as u32, index_len];
+        let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
+        let index_bytes = lengths[1] as usize * 4;
+        let (Some(vertex_size), Some(index_size)) = (
+            wgpu::BufferSize::new(vertex_bytes as u64),
+            wgpu::BufferSize::new(index_bytes as u64),
+        ) else {
+            log::warn!("terrain mesh of node {:?} is empty: not drawn", mesh.key);
+            return None;
+        };
         let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
             log::warn!(
                 "terrain mesh pool or node table full: node {:?} is not drawn",
@@ -624,15 +633,6 @@ impl TerrainRenderer {
             });
         }
         let page = &self.pages[lease.page as usize];
-        let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
-        let index_bytes = lengths[1] as usize * 4;
-        let (Some(vertex_size), Some(index_size)) = (
-            wgpu::BufferSize::new(vertex_bytes as u64),
-            wgpu::BufferSize::new(index_bytes as u64),
-        ) else {
-            log::warn!("terrain mesh of node {:?} is empty: not drawn", mesh.key);
-            return None;
-        };
         let copies = copies.get(device);
         let mut vertex_view = self.staging.write_buffer(
             copies,
