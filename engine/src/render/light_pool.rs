@@ -13,7 +13,6 @@
 
 use crate::lighting::content::SharedGrid;
 use crate::lighting::grid::{COLUMNS, LAYERS};
-use crate::lighting::seams::SideSteps;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use rustc_hash::FxHashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -102,8 +101,8 @@ impl LightLease {
 pub struct LightEntry {
     /// [`LightLease::entry`].
     pub grid: [f32; 4],
-    /// The node's sides toward a coarser grid (a [`SideSteps`] code) and its width in the grid's
-    /// columns (`lighting::seams`).
+    /// The node's sides toward a coarser grid (a [`crate::lighting::seams::SideSteps`] code)
+    /// and its width in the grid's columns (`lighting::seams`).
     pub seam: [f32; 2],
 }
 
@@ -123,12 +122,13 @@ pub struct LightPool {
     /// Lease tries that found no free tile (the node drawn fully lit that frame), for
     /// statistics.
     pub refused: AtomicU64,
-    /// This frame's drawn nodes that blend toward a coarser neighbour's grid
-    /// (`lighting::seams::coarser_sides`, found by the lighting renderer's `prepare`).
-    pub seams: FxHashMap<NodeKey, SideSteps>,
-    /// This frame, the written grid of the nearest ancestor of each drawn (or drawn-through)
-    /// node whose own grid is not written yet (found by the lighting renderer's `prepare`).
-    pub fallback: FxHashMap<NodeKey, Arc<LightLease>>,
+    /// This frame's node-table numbers of each drawn node's light grid, in the order of
+    /// `FrameDraws::drawn`, then of each drawn-through ancestor's, in the order of
+    /// `FrameDraws::ancestors` (found once by the lighting renderer's `prepare`, which runs
+    /// first; read by the other renderers through [`Self::drawn_entry`] and
+    /// [`Self::ancestor_entry`]).
+    pub drawn_entries: Vec<LightEntry>,
+    pub ancestor_entries: Vec<LightEntry>,
 }
 
 impl std::fmt::Debug for LightPool {
@@ -174,8 +174,8 @@ impl LightPool {
             free: Arc::new(Mutex::new((0..POOL_TILES * POOL_TILES).rev().collect())),
             leases: Mutex::new(FxHashMap::default()),
             refused: AtomicU64::new(0),
-            seams: FxHashMap::default(),
-            fallback: FxHashMap::default(),
+            drawn_entries: Vec::new(),
+            ancestor_entries: Vec::new(),
         }
     }
 
@@ -271,6 +271,17 @@ impl LightPool {
         for lease in leases.values().filter_map(Weak::upgrade) {
             self.refresh(queue, &lease);
         }
+    }
+
+    /// This frame's light-grid numbers of the `i`-th drawn node ([`NO_LIGHT`] without the
+    /// lighting renderer).
+    pub fn drawn_entry(&self, i: usize) -> LightEntry {
+        self.drawn_entries.get(i).copied().unwrap_or(NO_LIGHT)
+    }
+
+    /// This frame's light-grid numbers of the `i`-th drawn-through ancestor.
+    pub fn ancestor_entry(&self, i: usize) -> LightEntry {
+        self.ancestor_entries.get(i).copied().unwrap_or(NO_LIGHT)
     }
 
     /// Grids holding a tile now.

@@ -3,9 +3,10 @@
 //! ancestor) `prepare` leases the pool tile of the grid that shades it
 //! ([`super::light_pool::LightPool::lease`]), so nodes that are only prefetched hold no tile,
 //! and a drawn node that found the pool full tries again each frame. The terrain, vegetation and
-//! object renderers put [`light_entry`] into their node-table entries: until a node's grid
-//! arrives, the nearest drawn-through ancestor's written grid (coarser columns, the same values
-//! at them), fully lit without one. `prepare` writes a grid's tile when its lease is taken
+//! object renderers put the node's light entry (found once a frame here, read through
+//! `LightPool::drawn_entry`) into their node-table entries: until a node's grid arrives, the
+//! nearest drawn-through ancestor's written grid (coarser columns, the same values at them),
+//! fully lit without one. `prepare` writes a grid's tile when its lease is taken
 //! and, in the frames after a light thread stored a grid, the tiles of leased grids that
 //! arrived or were relit since (a sun change), nearest first as the light threads make them.
 //! Each frame it also finds the drawn nodes that blend toward a coarser neighbour's grid
@@ -43,24 +44,15 @@ fn lease_of(work: &NodeWork) -> Option<&Arc<LightLease>> {
     work.gpu.get::<NodeLightGpu>().and_then(NodeLightGpu::lease)
 }
 
-/// The node-table numbers of `work`'s light grid this frame: its own grid's once written, else
-/// the nearest ancestor's written grid that `prepare` found for it (read at that grid's
-/// columns, which are every 2nd, 4th ... of its own: the same values there), else
-/// [`NO_LIGHT`].
-pub fn light_entry(frame: &FrameResources, tree: &QuadTree, work: &NodeWork) -> LightEntry {
-    // An ancestor's grid blends no seams (its sides' steps are for its own nodes).
-    let (l, steps) = match lease_of(work).filter(|l| l.written()) {
-        Some(l) => (l, frame.light.seams.get(&work.key).map_or(0, |s| s.0)),
-        None => match frame.light.fallback.get(&work.key) {
-            Some(l) => (l, 0),
-            None => return NO_LIGHT,
-        },
-    };
+/// The node-table numbers of node `key` shaded by grid lease `l` (its own, or an ancestor's,
+/// read at that grid's columns, which are every 2nd, 4th ... of its own: the same values
+/// there), blending toward coarser neighbours on the sides `steps` codes.
+fn light_entry(l: &LightLease, tree: &QuadTree, key: NodeKey, steps: u16) -> LightEntry {
     LightEntry {
-        grid: l.entry(tree, work.key),
+        grid: l.entry(tree, key),
         seam: [
             f32::from(steps),
-            node_columns(work.key.level, l.grid.key.level) as f32,
+            node_columns(key.level, l.grid.key.level) as f32,
         ],
     }
 }
@@ -179,31 +171,44 @@ impl NodeRenderer for LightingRenderer {
             .filter(|d| lease_of(d.work).is_some())
             .map(|d| d.key)
             .collect();
-        frame.light.seams = coarser_sides(draws.tree, &lit);
-        // Nodes whose own grid is not written yet: shaded by the nearest drawn-through
-        // ancestor's written grid, if any (drawn fully lit otherwise).
+        let seams = coarser_sides(draws.tree, &lit);
+        // Each drawn (or drawn-through) node's entry: its own grid once written, else the
+        // nearest drawn-through ancestor's written grid, if any (drawn fully lit otherwise).
         let written: FxHashMap<NodeKey, &Arc<LightLease>> = draws
             .ancestors
             .iter()
             .filter_map(|a| lease_of(a.work).filter(|l| l.written()).map(|l| (a.key, l)))
             .collect();
-        frame.light.fallback.clear();
         (self.unlit_drawn, self.coarse_lit_drawn) = (0, 0);
+        let light = &mut frame.light;
+        light.drawn_entries.clear();
+        light.ancestor_entries.clear();
         for (d, is_drawn) in draws
             .drawn
             .iter()
             .map(|d| (d, true))
             .chain(draws.ancestors.iter().map(|a| (a, false)))
         {
-            if lease_of(d.work).is_some_and(|l| l.written()) {
-                continue;
-            }
-            match nearest_ancestor(d.key, &written) {
+            let entry = match lease_of(d.work).filter(|l| l.written()) {
                 Some(l) => {
-                    frame.light.fallback.insert(d.key, Arc::clone(l));
-                    self.coarse_lit_drawn += usize::from(is_drawn);
+                    let steps = seams.get(&d.key).map_or(0, |s| s.0);
+                    light_entry(l, draws.tree, d.key, steps)
                 }
-                None => self.unlit_drawn += usize::from(is_drawn),
+                // An ancestor's grid blends no seams (its sides' steps are for its own nodes).
+                None => {
+                    if let Some(l) = nearest_ancestor(d.key, &written) {
+                        self.coarse_lit_drawn += usize::from(is_drawn);
+                        light_entry(l, draws.tree, d.key, 0)
+                    } else {
+                        self.unlit_drawn += usize::from(is_drawn);
+                        NO_LIGHT
+                    }
+                }
+            };
+            if is_drawn {
+                light.drawn_entries.push(entry);
+            } else {
+                light.ancestor_entries.push(entry);
             }
         }
     }

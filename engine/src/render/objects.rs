@@ -16,7 +16,6 @@ use super::batches::{Batches, Item};
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, storage_entry, texture_entry,
 };
-use super::lighting::light_entry;
 use super::paged_buffer::PagedBuffer;
 use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
 use super::suballoc::Lease;
@@ -610,7 +609,7 @@ impl NodeRenderer for ObjectsRenderer {
                 continue;
             };
             // Objects are lit by the drawing node's light grid (sky and sun visibility).
-            let light = light_entry(frame, draws.tree, node.work).grid;
+            let light = frame.light.drawn_entry(node_index).grid;
             if self.hlod_item(draws, node_index, objects, light, &mut uniforms) {
                 continue;
             }

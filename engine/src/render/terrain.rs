@@ -29,7 +29,6 @@ use super::gpu_data::MeshVertex;
 use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot, layers_per_page};
-use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
 use super::suballoc::{Lease, Suballocator};
@@ -799,7 +798,7 @@ impl NodeRenderer for TerrainRenderer {
         self.borrowed_textures = 0;
         self.untextured = 0;
         let mut visible = 0;
-        for d in draws.drawn {
+        for (i, d) in draws.drawn.iter().enumerate() {
             let Some(node) = d.work.gpu.get::<TerrainNodeGpu>() else {
                 continue;
             };
@@ -826,7 +825,7 @@ impl NodeRenderer for TerrainRenderer {
                     }
                     None => (NO_TEXTURE, [-1.0, 0.0, 0.0, 0.0]),
                 };
-                let light = light_entry(frame, draws.tree, d.work);
+                let light = frame.light.drawn_entry(i);
                 self.table.set(
                     frame,
                     slot,

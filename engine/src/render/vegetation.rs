@@ -16,7 +16,6 @@ use super::frame::{
 use super::gpu_data::MeshVertex;
 use super::impostors::ImpostorPages;
 use super::light_pool::LightEntry;
-use super::lighting::light_entry;
 use super::node_table::NodeTable;
 use super::paged_buffer::PagedBuffer;
 use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
@@ -918,7 +917,7 @@ impl NodeRenderer for VegetationRenderer {
         if draws.view.plants {
             let visible = |p: &PlantsGpu| draws.frustum.intersects_aabb(p.aabb_m.0, p.aabb_m.1);
             // Drawn nodes with their own interval, then ancestors' kept groups in full.
-            for d in draws.drawn {
+            for (i, d) in draws.drawn.iter().enumerate() {
                 if let Some(p) = d.work.gpu.get::<PlantsGpu>()
                     && d.dither[1] > d.dither[0]
                     && visible(p)
@@ -927,7 +926,7 @@ impl NodeRenderer for VegetationRenderer {
                         .ancestors
                         .binary_search_by_key(&d.key, |a| a.key)
                         .is_ok();
-                    let node = (d.key.level, light_entry(frame, draws.tree, d.work));
+                    let node = (d.key.level, frame.light.drawn_entry(i));
                     self.plan_node(
                         frame,
                         p,
@@ -939,12 +938,12 @@ impl NodeRenderer for VegetationRenderer {
                     );
                 }
             }
-            for a in draws.ancestors {
+            for (i, a) in draws.ancestors.iter().enumerate() {
                 if let Some(p) = a.work.gpu.get::<PlantsGpu>()
                     && p.groups.iter().any(|g| g.kept)
                     && visible(p)
                 {
-                    let node = (a.key.level, light_entry(frame, draws.tree, a.work));
+                    let node = (a.key.level, frame.light.ancestor_entry(i));
                     self.plan_node(frame, p, node, [0.0, 1.0], false, true, GroupDither::Full);
                 }
             }
