@@ -1,12 +1,14 @@
 //! `apps`: support shared by the binaries `flyover` (the viewer) and `nodebench` (the
-//! benchmark): opening (or generating) a map, and the one percentile rule their tables use.
+//! benchmark): opening (or generating) a map, the one percentile rule their tables use, and
+//! their heap on huge pages ([`heap`]).
 
 use engine::surface::World;
 use std::path::Path;
 
-/// The map folder used when none is given.
+pub mod heap;
 pub mod plot;
 
+/// The map folder used when none is given.
 pub const DEFAULT_MAP: &str = "maps/default";
 
 /// A map that cannot be opened (or generated).

@@ -397,6 +397,7 @@ fn display_available() -> bool {
 }
 
 fn main() -> std::process::ExitCode {
+    apps::heap::rerun_with_huge_pages();
     env_logger::Builder::from_env(
         env_logger::Env::default()
             .default_filter_or("warn,winit=error,egui_wgpu=error,wgpu_hal=off"),

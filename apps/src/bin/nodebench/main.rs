@@ -333,6 +333,7 @@ fn write_file(path: &std::path::Path, text: &str) -> Result<()> {
 }
 
 fn main() -> std::process::ExitCode {
+    apps::heap::rerun_with_huge_pages();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     match run(&Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
