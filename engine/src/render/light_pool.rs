@@ -126,9 +126,22 @@ pub struct LightPool {
     /// `FrameDraws::drawn`, then of each drawn-through ancestor's, in the order of
     /// `FrameDraws::ancestors` (found once by the lighting renderer's `prepare`, which runs
     /// first; read by the other renderers through [`Self::drawn_entry`] and
-    /// [`Self::ancestor_entry`]).
-    pub drawn_entries: Vec<LightEntry>,
-    pub ancestor_entries: Vec<LightEntry>,
+    /// [`Self::ancestor_entry`]), each with its node's key.
+    pub drawn_entries: Vec<(NodeKey, LightEntry)>,
+    pub ancestor_entries: Vec<(NodeKey, LightEntry)>,
+}
+
+/// The `i`-th of `entries` when it is `key`'s; a list made for another draw list (a bug:
+/// debug builds stop here) gives [`NO_LIGHT`].
+fn entry_of(entries: &[(NodeKey, LightEntry)], i: usize, key: NodeKey) -> LightEntry {
+    match entries.get(i) {
+        Some(&(k, entry)) if k == key => entry,
+        Some(&(k, _)) => {
+            debug_assert_eq!(k, key, "light entry {i} belongs to another node");
+            NO_LIGHT
+        }
+        None => NO_LIGHT,
+    }
 }
 
 impl std::fmt::Debug for LightPool {
@@ -273,20 +286,63 @@ impl LightPool {
         }
     }
 
-    /// This frame's light-grid numbers of the `i`-th drawn node ([`NO_LIGHT`] without the
-    /// lighting renderer).
-    pub fn drawn_entry(&self, i: usize) -> LightEntry {
-        self.drawn_entries.get(i).copied().unwrap_or(NO_LIGHT)
+    /// This frame's light-grid numbers of the `i`-th drawn node, `key` ([`NO_LIGHT`] without
+    /// the lighting renderer).
+    pub fn drawn_entry(&self, i: usize, key: NodeKey) -> LightEntry {
+        entry_of(&self.drawn_entries, i, key)
     }
 
-    /// This frame's light-grid numbers of the `i`-th drawn-through ancestor.
-    pub fn ancestor_entry(&self, i: usize) -> LightEntry {
-        self.ancestor_entries.get(i).copied().unwrap_or(NO_LIGHT)
+    /// This frame's light-grid numbers of the `i`-th drawn-through ancestor, `key`.
+    pub fn ancestor_entry(&self, i: usize, key: NodeKey) -> LightEntry {
+        entry_of(&self.ancestor_entries, i, key)
     }
 
     /// Grids holding a tile now.
     pub fn leased(&self) -> usize {
         let leases = self.leases.lock().expect("leases lock");
         leases.values().filter(|l| l.strong_count() > 0).count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(x: f32) -> LightEntry {
+        LightEntry {
+            grid: [x, 0.0, 0.0, 0.0],
+            seam: [0.0, 0.0],
+        }
+    }
+
+    /// A node reads its own entry by its place in the draw list; past the list's end (no
+    /// lighting renderer) it is drawn fully lit.
+    #[test]
+    fn a_drawn_node_reads_its_own_light_entry() {
+        let a = NodeKey {
+            level: 3,
+            ix: 1,
+            iy: 2,
+        };
+        let b = NodeKey { ix: 2, ..a };
+        let entries = [(a, entry(1.0)), (b, entry(2.0))];
+        assert_eq!(entry_of(&entries, 0, a), entry(1.0));
+        assert_eq!(entry_of(&entries, 1, b), entry(2.0));
+        assert_eq!(entry_of(&entries, 2, b), NO_LIGHT);
+        assert_eq!(entry_of(&[], 0, a), NO_LIGHT);
+    }
+
+    /// An entry list made for another draw list is a bug that debug builds stop at.
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic = "belongs to another node"]
+    fn an_entry_of_another_node_stops_a_debug_build() {
+        let a = NodeKey {
+            level: 3,
+            ix: 1,
+            iy: 2,
+        };
+        let b = NodeKey { ix: 2, ..a };
+        let _ = entry_of(&[(a, entry(1.0))], 0, b);
     }
 }

@@ -206,9 +206,9 @@ impl NodeRenderer for LightingRenderer {
                 }
             };
             if is_drawn {
-                light.drawn_entries.push(entry);
+                light.drawn_entries.push((d.key, entry));
             } else {
-                light.ancestor_entries.push(entry);
+                light.ancestor_entries.push((d.key, entry));
             }
         }
     }

@@ -609,7 +609,7 @@ impl NodeRenderer for ObjectsRenderer {
                 continue;
             };
             // Objects are lit by the drawing node's light grid (sky and sun visibility).
-            let light = frame.light.drawn_entry(node_index).grid;
+            let light = frame.light.drawn_entry(node_index, node.key).grid;
             if self.hlod_item(draws, node_index, objects, light, &mut uniforms) {
                 continue;
             }

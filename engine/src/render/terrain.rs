@@ -825,7 +825,7 @@ impl NodeRenderer for TerrainRenderer {
                     }
                     None => (NO_TEXTURE, [-1.0, 0.0, 0.0, 0.0]),
                 };
-                let light = frame.light.drawn_entry(i);
+                let light = frame.light.drawn_entry(i, d.key);
                 self.table.set(
                     frame,
                     slot,

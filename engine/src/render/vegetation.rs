@@ -926,7 +926,7 @@ impl NodeRenderer for VegetationRenderer {
                         .ancestors
                         .binary_search_by_key(&d.key, |a| a.key)
                         .is_ok();
-                    let node = (d.key.level, frame.light.drawn_entry(i));
+                    let node = (d.key.level, frame.light.drawn_entry(i, d.key));
                     self.plan_node(
                         frame,
                         p,
@@ -943,7 +943,7 @@ impl NodeRenderer for VegetationRenderer {
                     && p.groups.iter().any(|g| g.kept)
                     && visible(p)
                 {
-                    let node = (a.key.level, frame.light.ancestor_entry(i));
+                    let node = (a.key.level, frame.light.ancestor_entry(i, a.key));
                     self.plan_node(frame, p, node, [0.0, 1.0], false, true, GroupDither::Full);
                 }
             }
