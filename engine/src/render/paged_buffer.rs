@@ -60,6 +60,31 @@ impl PagedBuffer {
         &self.pages
     }
 
+    /// [`Self::write`] through staging belt `belt`, the copy recorded into `encoder`.
+    pub fn write_staged(
+        &self,
+        belt: &mut wgpu::util::StagingBelt,
+        encoder: &mut wgpu::CommandEncoder,
+        lease: &Lease,
+        bytes: &[u8],
+    ) {
+        debug_assert!(
+            bytes.len() as u64 <= u64::from(lease.len[0]) * self.element_bytes,
+            "a write past its lease"
+        );
+        let Some(size) = wgpu::BufferSize::new(bytes.len() as u64) else {
+            return;
+        };
+        belt.write_buffer(
+            encoder,
+            &self.pages[lease.page as usize],
+            u64::from(lease.start[0]) * self.element_bytes,
+            size,
+        )
+        .slice(..)
+        .copy_from_slice(bytes);
+    }
+
     /// Writes `bytes` into the lease's page from `offset` elements past the lease's start.
     pub fn write(&self, queue: &wgpu::Queue, lease: &Lease, offset: u32, bytes: &[u8]) {
         debug_assert!(

@@ -44,6 +44,32 @@ pub struct FrameDraws<'a> {
     pub upload_time_left_s: f64,
 }
 
+/// Bytes of one staging chunk of the node uploads: the chunks are kept and reused once the GPU
+/// has copied out of them, so their memory is written warm. As many are made as two frames'
+/// uploads fill (a frame's chunks are taken back in the next frame).
+pub const STAGING_CHUNK_BYTES: u64 = 1 << 20;
+
+/// A renderer's staging belt for its node uploads (copies recorded into the
+/// [`UploadEncoder`]; the renderer's [`NodeRenderer::close_uploads`] recalls and finishes it),
+/// with `premade` chunks made, closed and given back: they are free once wgpu maps them again,
+/// at the first submission or poll (a chunk made in a frame costs that frame its zero-fill
+/// and the first touch of its pages).
+pub fn staging_belt(device: &wgpu::Device, premade: usize) -> wgpu::util::StagingBelt {
+    let mut belt = wgpu::util::StagingBelt::new(device.clone(), STAGING_CHUNK_BYTES);
+    if let (Some(chunk), Some(align)) = (
+        wgpu::BufferSize::new(STAGING_CHUNK_BYTES),
+        wgpu::BufferSize::new(wgpu::COPY_BUFFER_ALIGNMENT),
+    ) {
+        for _ in 0..premade {
+            // A whole chunk each: every call makes a new one.
+            let _ = belt.allocate(chunk, align);
+        }
+    }
+    belt.finish();
+    belt.recall();
+    belt
+}
+
 /// Where upload hooks record their copies into GPU buffers: the frame's command encoder (the
 /// copies are submitted with the frame, before its pass, in one submission), or, for GPU
 /// phases run without a frame, an encoder made on first use that the caller submits

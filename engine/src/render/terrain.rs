@@ -30,7 +30,7 @@ use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot, layers_per_page};
 use super::node_table::NodeTable;
-use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, staging_belt};
 use super::suballoc::{Lease, Suballocator};
 use super::texture_credit::TextureCredit;
 use crate::ground::content::{GroundContent, NodeGround};
@@ -103,32 +103,9 @@ impl std::fmt::Debug for TerrainNodeGpu {
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
 /// Bytes of one terrain vertex ([`MeshVertex`]).
 const VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();
-/// Bytes of one staging chunk of the node-mesh uploads (a node's mesh is 60 - 70 KB): the
-/// chunks are kept and reused once the GPU has copied out of them, so their memory is written
-/// warm. As many are made as two frames' uploads fill (a frame's chunks are taken back in
-/// the next frame).
-const MESH_STAGING_CHUNK_BYTES: u64 = 1 << 20;
-/// Chunks made with the renderer, about what the first frames' bursts of uploads fill (a
-/// chunk made in a frame costs that frame its zero-fill and the first touch of its pages).
+/// Staging chunks made with the renderer, about what the first frames' bursts of node meshes
+/// fill (a node's mesh is 60 - 70 KB; see [`staging_belt`]).
 const MESH_STAGING_PREMADE_CHUNKS: usize = 16;
-
-/// The node meshes' staging belt with [`MESH_STAGING_PREMADE_CHUNKS`] chunks made, closed and
-/// given back (they are free once wgpu maps them again, at the first submission or poll).
-fn mesh_staging(device: &wgpu::Device) -> wgpu::util::StagingBelt {
-    let mut belt = wgpu::util::StagingBelt::new(device.clone(), MESH_STAGING_CHUNK_BYTES);
-    if let (Some(chunk), Some(align)) = (
-        wgpu::BufferSize::new(MESH_STAGING_CHUNK_BYTES),
-        wgpu::BufferSize::new(wgpu::COPY_BUFFER_ALIGNMENT),
-    ) {
-        for _ in 0..MESH_STAGING_PREMADE_CHUNKS {
-            // A whole chunk each: every call makes a new one.
-            let _ = belt.allocate(chunk, align);
-        }
-    }
-    belt.finish();
-    belt.recall();
-    belt
-}
 
 impl TerrainNodeGpu {
     /// First index (in the page) and index count drawn with `decimation`.
@@ -424,7 +401,7 @@ impl TerrainRenderer {
             detail,
             ground: None,
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
-            staging: mesh_staging(device),
+            staging: staging_belt(device, MESH_STAGING_PREMADE_CHUNKS),
             pages: Vec::new(),
             table: NodeTable::new(device, frame, "terrain node table", 1),
             batches: Batches::new(),

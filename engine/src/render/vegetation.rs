@@ -18,7 +18,7 @@ use super::impostors::ImpostorPages;
 use super::light_pool::LightEntry;
 use super::node_table::NodeTable;
 use super::paged_buffer::PagedBuffer;
-use super::scene::{FrameDraws, NodeRenderer, UploadEncoder};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, staging_belt};
 use super::suballoc::Lease;
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -32,6 +32,10 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs, DrawIndirectArgs};
+
+/// Staging chunks made with the renderer for the instance uploads (a node's instances are a
+/// few KB to a few tens of KB; see [`staging_belt`]).
+const INSTANCE_STAGING_PREMADE_CHUNKS: usize = 4;
 
 /// Instances in one page of the instance pool (32 MiB) and pages at most.
 const PAGE_INSTANCES: u32 = 1 << 20;
@@ -196,6 +200,8 @@ pub struct VegetationRenderer {
     frame_stats: DrawStats,
     merged: bool,
     bakes: PendingBakes,
+    /// The instances' staging memory (copied out of by commands in the upload encoder).
+    staging: wgpu::util::StagingBelt,
 }
 
 /// Impostor bakes recorded by this frame's uploads, submitted together before the frame is
@@ -497,6 +503,7 @@ impl VegetationRenderer {
             frame_stats: DrawStats::default(),
             merged: false,
             bakes: PendingBakes::new(),
+            staging: staging_belt(device, INSTANCE_STAGING_PREMADE_CHUNKS),
         };
         renderer.bake_atlas(gpu, frame, &bake, &looks_group, atlas_pair, atlas_size);
         renderer
@@ -571,6 +578,7 @@ impl VegetationRenderer {
         tree: &QuadTree,
         key: NodeKey,
         veg: &NodeVegetation,
+        copies: &mut UploadEncoder<'_>,
     ) -> Option<PlantsGpu> {
         let aabb_m = veg.items_box_m?;
         let o = tree.rect(key).min;
@@ -675,8 +683,12 @@ impl VegetationRenderer {
             log::warn!("plant instance pool full: node {key:?} has no plants drawn");
             return None;
         };
-        self.instances
-            .write(&gpu.queue, &instances, 0, bytemuck::cast_slice(&data));
+        self.instances.write_staged(
+            &mut self.staging,
+            copies.get(&gpu.device),
+            &instances,
+            bytemuck::cast_slice(&data),
+        );
         Some(PlantsGpu {
             origin_m: o,
             instances,
@@ -877,11 +889,11 @@ impl NodeRenderer for VegetationRenderer {
         frame: &FrameResources,
         tree: &QuadTree,
         work: &mut NodeWork,
-        _copies: &mut UploadEncoder<'_>,
+        copies: &mut UploadEncoder<'_>,
     ) -> usize {
         let Some(node) = work
             .get::<NodeVegetation>()
-            .and_then(|v| self.upload_node(gpu, frame, tree, work.key, v))
+            .and_then(|v| self.upload_node(gpu, frame, tree, work.key, v, copies))
         else {
             return 0;
         };
@@ -895,6 +907,13 @@ impl NodeRenderer for VegetationRenderer {
         let bytes = node.bytes;
         work.gpu.put(node);
         bytes
+    }
+
+    fn close_uploads(&mut self) {
+        // As the terrain renderer's: last frame's chunks back to the belt once copied out of,
+        // this frame's closed.
+        self.staging.recall();
+        self.staging.finish();
     }
 
     /// Submits the impostor bakes recorded since the last call; gives back what their uploads
