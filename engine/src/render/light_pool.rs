@@ -315,16 +315,21 @@ mod tests {
         }
     }
 
-    /// A node reads its own entry by its place in the draw list; past the list's end (no
-    /// lighting renderer) it is drawn fully lit.
-    #[test]
-    fn a_drawn_node_reads_its_own_light_entry() {
+    /// Two neighbouring nodes.
+    fn two_keys() -> (NodeKey, NodeKey) {
         let a = NodeKey {
             level: 3,
             ix: 1,
             iy: 2,
         };
-        let b = NodeKey { ix: 2, ..a };
+        (a, NodeKey { ix: 2, ..a })
+    }
+
+    /// A node reads its own entry by its place in the draw list; past the list's end (no
+    /// lighting renderer) it is drawn fully lit.
+    #[test]
+    fn a_drawn_node_reads_its_own_light_entry() {
+        let (a, b) = two_keys();
         let entries = [(a, entry(1.0)), (b, entry(2.0))];
         assert_eq!(entry_of(&entries, 0, a), entry(1.0));
         assert_eq!(entry_of(&entries, 1, b), entry(2.0));
@@ -337,12 +342,7 @@ mod tests {
     #[cfg(debug_assertions)]
     #[should_panic = "belongs to another node"]
     fn an_entry_of_another_node_stops_a_debug_build() {
-        let a = NodeKey {
-            level: 3,
-            ix: 1,
-            iy: 2,
-        };
-        let b = NodeKey { ix: 2, ..a };
+        let (a, b) = two_keys();
         let _ = entry_of(&[(a, entry(1.0))], 0, b);
     }
 }
