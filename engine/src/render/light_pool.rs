@@ -127,8 +127,8 @@ pub struct LightPool {
     /// `FrameDraws::ancestors` (found once by the lighting renderer's `prepare`, which runs
     /// first; read by the other renderers through [`Self::drawn_entry`] and
     /// [`Self::ancestor_entry`]), each with its node's key.
-    pub drawn_entries: Vec<(NodeKey, LightEntry)>,
-    pub ancestor_entries: Vec<(NodeKey, LightEntry)>,
+    pub(super) drawn_entries: Vec<(NodeKey, LightEntry)>,
+    pub(super) ancestor_entries: Vec<(NodeKey, LightEntry)>,
 }
 
 /// The `i`-th of `entries` when it is `key`'s; a list made for another draw list (a bug:

@@ -60,45 +60,43 @@ impl PagedBuffer {
         &self.pages
     }
 
+    /// Writes `bytes` into the lease's page from `offset` elements past the lease's start.
+    pub fn write(&self, queue: &wgpu::Queue, lease: &Lease, offset: u32, bytes: &[u8]) {
+        if bytes.is_empty() {
+            return;
+        }
+        let (page, at) = self.target(lease, offset, bytes.len());
+        queue.write_buffer(page, at, bytes);
+    }
+
     /// [`Self::write`] through staging belt `belt`, the copy recorded into `encoder`.
     pub fn write_staged(
         &self,
         belt: &mut wgpu::util::StagingBelt,
         encoder: &mut wgpu::CommandEncoder,
         lease: &Lease,
+        offset: u32,
         bytes: &[u8],
     ) {
-        debug_assert!(
-            bytes.len() as u64 <= u64::from(lease.len[0]) * self.element_bytes,
-            "a write past its lease"
-        );
         let Some(size) = wgpu::BufferSize::new(bytes.len() as u64) else {
             return;
         };
-        belt.write_buffer(
-            encoder,
-            &self.pages[lease.page as usize],
-            u64::from(lease.start[0]) * self.element_bytes,
-            size,
-        )
-        .slice(..)
-        .copy_from_slice(bytes);
+        let (page, at) = self.target(lease, offset, bytes.len());
+        belt.write_buffer(encoder, page, at, size)
+            .slice(..)
+            .copy_from_slice(bytes);
     }
 
-    /// Writes `bytes` into the lease's page from `offset` elements past the lease's start.
-    pub fn write(&self, queue: &wgpu::Queue, lease: &Lease, offset: u32, bytes: &[u8]) {
+    /// The page and byte offset of a write of `len` bytes `offset` elements past the lease's
+    /// start.
+    fn target(&self, lease: &Lease, offset: u32, len: usize) -> (&wgpu::Buffer, u64) {
         debug_assert!(
-            bytes.len() as u64
-                <= u64::from(lease.len[0] - offset.min(lease.len[0])) * self.element_bytes,
+            len as u64 <= u64::from(lease.len[0] - offset.min(lease.len[0])) * self.element_bytes,
             "a write past its lease"
         );
-        if bytes.is_empty() {
-            return;
-        }
-        queue.write_buffer(
+        (
             &self.pages[lease.page as usize],
             u64::from(lease.start[0] + offset) * self.element_bytes,
-            bytes,
-        );
+        )
     }
 }

@@ -70,6 +70,15 @@ pub fn staging_belt(device: &wgpu::Device, premade: usize) -> wgpu::util::Stagin
     belt
 }
 
+/// What a renderer's [`NodeRenderer::close_uploads`] does with its [`staging_belt`]: the
+/// chunks closed last time (their copies submitted since) return to the belt once the GPU has
+/// copied out of them (wgpu maps them again in a later submission's or poll's maintenance);
+/// then this frame's are closed.
+pub fn close_staging(belt: &mut wgpu::util::StagingBelt) {
+    belt.recall();
+    belt.finish();
+}
+
 /// Where upload hooks record their copies into GPU buffers: the frame's command encoder (the
 /// copies are submitted with the frame, before its pass, in one submission), or, for GPU
 /// phases run without a frame, an encoder made on first use that the caller submits

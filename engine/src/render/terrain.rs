@@ -30,7 +30,7 @@ use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot, layers_per_page};
 use super::node_table::NodeTable;
-use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, staging_belt};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, close_staging, staging_belt};
 use super::suballoc::{Lease, Suballocator};
 use super::texture_credit::TextureCredit;
 use crate::ground::content::{GroundContent, NodeGround};
@@ -696,11 +696,7 @@ impl NodeRenderer for TerrainRenderer {
     }
 
     fn close_uploads(&mut self) {
-        // The chunks closed last time (their copies submitted since) return to the belt once
-        // the GPU has copied out of them (wgpu maps them again in a later submission's or
-        // poll's maintenance); then this frame's are closed.
-        self.staging.recall();
-        self.staging.finish();
+        close_staging(&mut self.staging);
     }
 
     fn finish_uploads(&mut self, gpu: &Gpu, time_left_s: f64) -> f64 {

@@ -18,7 +18,7 @@ use super::impostors::ImpostorPages;
 use super::light_pool::LightEntry;
 use super::node_table::NodeTable;
 use super::paged_buffer::PagedBuffer;
-use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, staging_belt};
+use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, close_staging, staging_belt};
 use super::suballoc::Lease;
 use crate::stream::{NodeWork, Shared};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -687,6 +687,7 @@ impl VegetationRenderer {
             &mut self.staging,
             copies.get(&gpu.device),
             &instances,
+            0,
             bytemuck::cast_slice(&data),
         );
         Some(PlantsGpu {
@@ -910,10 +911,7 @@ impl NodeRenderer for VegetationRenderer {
     }
 
     fn close_uploads(&mut self) {
-        // As the terrain renderer's: last frame's chunks back to the belt once copied out of,
-        // this frame's closed.
-        self.staging.recall();
-        self.staging.finish();
+        close_staging(&mut self.staging);
     }
 
     /// Submits the impostor bakes recorded since the last call; gives back what their uploads
