@@ -37,19 +37,21 @@ use crate::ground::content::{GroundContent, NodeGround};
 use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{DisplayNodes, NodeWork, Shared};
 use crate::surface::World;
-use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh};
+use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh, grid_indices};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 use std::sync::{Arc, OnceLock, Weak};
 use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
 
-/// Vertices and indices in one page of the mesh pool: 3,435 grid nodes (1,221 vertices and
-/// 6,912 indices each), 112 + 96 MiB (within the 256 MiB every adapter allows a buffer). Each
-/// page a frame's nodes are in is one more multi-draw (with pages of 858 nodes, the flyover at
-/// 720p on lavapipe had three open and drew 21 terrain batches; with these, one page and 2).
+/// Vertices in one page of the mesh pool: 3,435 grid nodes (1,221 vertices each), 112 MiB
+/// (within the 256 MiB every adapter allows a buffer). Each page a frame's nodes are in is one
+/// more multi-draw (with pages of 858 nodes, the flyover at 720p on lavapipe had three open and
+/// drew 21 terrain batches; with these, one page and 2).
 const PAGE_VERTICES: u32 = 4 << 20;
-const PAGE_INDICES: u32 = 24 << 20;
+/// Indices one page leases to meshes with triangles of their own (grid meshes lease none: they
+/// draw the grid's lists, kept once after these): 16 MiB, a few hundred such meshes.
+const PAGE_INDICES: u32 = 4 << 20;
 /// Pages at most (far more than a cache budget keeps resident).
 const MAX_PAGES: usize = 64;
 
@@ -81,10 +83,11 @@ pub struct TerrainNodeGpu {
     pub origin_m: [f64; 2],
     /// World-space box of the mesh, skirts included.
     pub aabb_m: (DVec3, DVec3),
-    /// Part 0: vertices, part 1: indices (relative to the node's first vertex).
+    /// Part 0: vertices, part 1: the mesh's own indices (relative to its first vertex; none
+    /// for a grid mesh, which draws the grid's lists every page keeps).
     mesh: Lease,
-    /// Per decimation (0 ..= `MAX_DECIMATION`): first index (from the lease's) and count of
-    /// the triangles drawn with it (a mesh not laid out as a grid draws all of them each time).
+    /// Per decimation (0 ..= `MAX_DECIMATION`): first index in the page and count of the
+    /// triangles drawn with it (a mesh not laid out as a grid draws all of them each time).
     ranges: [[u32; 2]; DECIMATIONS],
     slot: Lease,
     /// The node's ground texture and its texture coordinates per metre, once made (the queue
@@ -103,15 +106,14 @@ impl std::fmt::Debug for TerrainNodeGpu {
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
 /// Bytes of one terrain vertex ([`MeshVertex`]).
 const VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();
-/// Staging chunks made with the renderer, about what the first frames' bursts of node meshes
-/// fill (a node's mesh is 60 - 70 KB; see [`staging_belt`]).
+/// Staging chunks made with the renderer, more than the first frames' bursts of node meshes
+/// fill (a grid node's vertices are 34 KB; see [`staging_belt`]).
 const MESH_STAGING_PREMADE_CHUNKS: usize = 16;
 
 impl TerrainNodeGpu {
     /// First index (in the page) and index count drawn with `decimation`.
     fn range(&self, decimation: u8) -> [u32; 2] {
-        let [first, count] = self.ranges[usize::from(decimation).min(DECIMATIONS - 1)];
-        [self.mesh.start[1] + first, count]
+        self.ranges[usize::from(decimation).min(DECIMATIONS - 1)]
     }
 
     /// The node's ground-texture layer, if it has been made.
@@ -243,6 +245,7 @@ pub struct TerrainRenderer {
     ground: Option<GroundTextures>,
     pool: Suballocator,
     pages: Vec<MeshPage>,
+    grid_ranges: GridRanges,
     /// The node meshes' staging memory (copied out of by commands in the upload encoder).
     staging: wgpu::util::StagingBelt,
     table: NodeTable,
@@ -403,6 +406,7 @@ impl TerrainRenderer {
             pool: Suballocator::new(&[PAGE_VERTICES, PAGE_INDICES], MAX_PAGES),
             staging: staging_belt(device, MESH_STAGING_PREMADE_CHUNKS),
             pages: Vec::new(),
+            grid_ranges: GridRanges::new(),
             table: NodeTable::new(device, frame, "terrain node table", 1),
             batches: Batches::new(),
             triangles: 0,
@@ -553,28 +557,15 @@ impl TerrainRenderer {
         mesh: &NodeMesh,
         copies: &mut UploadEncoder<'_>,
     ) -> Option<TerrainNodeGpu> {
-        // The vertices and indices are written straight into the staging belt's memory (no
-        // copy on the frame thread first; no staging buffer made and freed per write, whose
-        // fresh pages cost a page fault each); a mesh that decimates also keeps its decimated
-        // triangles, after its own.
-        let own = mesh.indices.len() as u32;
-        let mut index_len = own;
-        let ranges: [[u32; 2]; DECIMATIONS] = std::array::from_fn(|d| {
-            let drawn = mesh.drawn_indices(d as u8).len() as u32;
-            if d == 0 || !mesh.decimates() {
-                return [0, drawn];
-            }
-            let first = index_len;
-            index_len += drawn;
-            [first, drawn]
-        });
-        let lengths = [mesh.positions.len() as u32, index_len];
+        // A grid mesh draws the grid's index lists every page keeps (`GridRanges`): only its
+        // vertices are uploaded. Another mesh uploads its own indices and draws them at every
+        // decimation, except that one laid out as a grid draws the grid's decimated lists.
+        let shared = mesh.shares_grid_indices();
+        let own = if shared { 0 } else { mesh.indices.len() as u32 };
+        let lengths = [mesh.positions.len() as u32, own];
         let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
-        let index_bytes = lengths[1] as usize * 4;
-        let (Some(vertex_size), Some(index_size)) = (
-            wgpu::BufferSize::new(vertex_bytes as u64),
-            wgpu::BufferSize::new(index_bytes as u64),
-        ) else {
+        let index_bytes = own as usize * 4;
+        let Some(vertex_size) = wgpu::BufferSize::new(vertex_bytes as u64) else {
             log::warn!("terrain mesh of node {:?} is empty: not drawn", mesh.key);
             return None;
         };
@@ -585,31 +576,24 @@ impl TerrainRenderer {
             );
             return None;
         };
-        while self.pages.len() < self.pool.pages() {
-            let n = self.pages.len();
-            let buffer = |what: &str, bytes: u64, usage| {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(&format!("terrain page {n} {what}")),
-                    size: bytes,
-                    usage: usage | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            };
-            self.pages.push(MeshPage {
-                vertices: buffer(
-                    "vertices",
-                    u64::from(PAGE_VERTICES) * VERTEX_BYTES as u64,
-                    wgpu::BufferUsages::VERTEX,
-                ),
-                indices: buffer(
-                    "indices",
-                    u64::from(PAGE_INDICES) * 4,
-                    wgpu::BufferUsages::INDEX,
-                ),
-            });
-        }
-        let page = &self.pages[lease.page as usize];
         let copies = copies.get(device);
+        self.open_pages(device, copies);
+        let own_range = if shared {
+            self.grid_ranges.0[usize::from(mesh.decimation)]
+        } else {
+            [lease.start[1], own]
+        };
+        let ranges: [[u32; 2]; DECIMATIONS] = std::array::from_fn(|d| {
+            if d > 0 && mesh.decimates() {
+                self.grid_ranges.0[d]
+            } else {
+                own_range
+            }
+        });
+        // The vertices (and own indices) are written straight into the staging belt's memory
+        // (no copy on the frame thread first; no staging buffer made and freed per write, whose
+        // fresh pages cost a page fault each).
+        let page = &self.pages[lease.page as usize];
         let mut vertex_view = self.staging.write_buffer(
             copies,
             &page.vertices,
@@ -634,21 +618,15 @@ impl TerrainRenderer {
             .0
             .write_iter(vertices);
         drop(vertex_view);
-        let mut index_view = self.staging.write_buffer(
-            copies,
-            &page.indices,
-            u64::from(lease.start[1]) * 4,
-            index_size,
-        );
-        index_view
-            .slice(..own as usize * 4)
-            .copy_from_slice(bytemuck::cast_slice(&mesh.indices));
-        if mesh.decimates() {
-            for (d, [first, count]) in ranges.iter().enumerate().skip(1) {
-                index_view
-                    .slice(*first as usize * 4..(first + count) as usize * 4)
-                    .copy_from_slice(bytemuck::cast_slice(mesh.drawn_indices(d as u8)));
-            }
+        if let Some(index_size) = wgpu::BufferSize::new(index_bytes as u64) {
+            self.staging
+                .write_buffer(
+                    copies,
+                    &page.indices,
+                    u64::from(lease.start[1]) * 4,
+                    index_size,
+                )
+                .copy_from_slice(bytemuck::cast_slice(&mesh.indices));
         }
         Some(TerrainNodeGpu {
             origin_m: mesh.origin_m,
@@ -659,6 +637,59 @@ impl TerrainRenderer {
             ground: Arc::new(OnceLock::new()),
             bytes: vertex_bytes + index_bytes,
         })
+    }
+
+    /// Makes the pages the pool has opened and this renderer not yet, each with the grid's
+    /// index lists after its leased indices (copied by `copies`).
+    fn open_pages(&mut self, device: &wgpu::Device, copies: &mut wgpu::CommandEncoder) {
+        while self.pages.len() < self.pool.pages() {
+            let n = self.pages.len();
+            let buffer = |what: &str, bytes: u64, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("terrain page {n} {what}")),
+                    size: bytes,
+                    usage: usage | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            let grid = &self.grid_ranges.1;
+            let page = MeshPage {
+                vertices: buffer(
+                    "vertices",
+                    u64::from(PAGE_VERTICES) * VERTEX_BYTES as u64,
+                    wgpu::BufferUsages::VERTEX,
+                ),
+                indices: buffer(
+                    "indices",
+                    (u64::from(PAGE_INDICES) + grid.len() as u64) * 4,
+                    wgpu::BufferUsages::INDEX,
+                ),
+            };
+            if let Some(size) = wgpu::BufferSize::new(grid.len() as u64 * 4) {
+                self.staging
+                    .write_buffer(copies, &page.indices, u64::from(PAGE_INDICES) * 4, size)
+                    .copy_from_slice(bytemuck::cast_slice(grid));
+            }
+            self.pages.push(page);
+        }
+    }
+}
+
+/// The grid's index lists ([`grid_indices`], decimations 0 ..= `MAX_DECIMATION` one after
+/// another), which every page keeps after its `PAGE_INDICES` leased indices, and where each
+/// decimation's list is in a page (first index, count).
+struct GridRanges([[u32; 2]; DECIMATIONS], Vec<u32>);
+
+impl GridRanges {
+    fn new() -> Self {
+        let mut all = Vec::new();
+        let ranges = std::array::from_fn(|d| {
+            let list = &grid_indices(d as u8).indices;
+            let first = PAGE_INDICES + all.len() as u32;
+            all.extend_from_slice(list);
+            [first, list.len() as u32]
+        });
+        Self(ranges, all)
     }
 }
 

@@ -25,6 +25,7 @@ use crate::surface::world::World;
 use crate::terrain::bounds::{BoundsCache, NodeBounds, interpolate_grid};
 use crate::terrain::quadtree::{NODE_QUADS, NodeKey, QuadTree, Side};
 use crate::terrain::tiles::{TILE_SIZE_M, TILE_SPACING_M, Tile, TileKey};
+use std::sync::Arc;
 
 /// Vertices per node side.
 pub const NODE_VERTS: usize = NODE_QUADS as usize + 1;
@@ -49,8 +50,9 @@ pub struct NodeMesh {
     /// Ground type per vertex (legend index).
     pub ground: Vec<u8>,
     /// Triangles, counter-clockwise seen from above; the first `surface_index_count` indices are
-    /// the surface, the rest are skirts.
-    pub indices: Vec<u32>,
+    /// the surface, the rest are skirts. A grid mesh shares [`grid_indices`]' list (one for all
+    /// nodes; see [`NodeMesh::shares_grid_indices`]).
+    pub indices: Arc<[u32]>,
     pub surface_index_count: u32,
     pub bounds: NodeBounds,
     /// Skirt bottom height per side (West, East, South, North).
@@ -98,7 +100,7 @@ impl NodeMesh {
     pub fn decimated(&self, steps: u8) -> NodeMesh {
         let g = grid_indices(steps);
         NodeMesh {
-            indices: g.indices.clone(),
+            indices: Arc::clone(&g.indices),
             surface_index_count: g.surface_index_count,
             decimation: steps,
             ..self.clone()
@@ -121,9 +123,23 @@ impl NodeMesh {
         }
     }
 
-    /// Bytes of vertex and index data (as uploaded: 28 bytes a vertex, 4 an index).
+    /// Whether `indices` is the list [`grid_indices`] keeps for this mesh's decimation (as
+    /// [`build`] and [`Self::decimated`] make them): the same for every grid node, so a renderer
+    /// can keep it once instead of per node.
+    pub fn shares_grid_indices(&self) -> bool {
+        self.decimation <= MAX_DECIMATION
+            && Arc::ptr_eq(&self.indices, &grid_indices(self.decimation).indices)
+    }
+
+    /// Bytes of GPU data the mesh takes: 28 a vertex, and 4 an index of its own (none when it
+    /// [shares the grid's](Self::shares_grid_indices)).
     pub fn gpu_bytes(&self) -> usize {
-        self.positions.len() * 28 + self.indices.len() * 4
+        let own_indices = if self.shares_grid_indices() {
+            0
+        } else {
+            self.indices.len()
+        };
+        self.positions.len() * 28 + own_indices * 4
     }
 
     /// A stable hash of every byte of the mesh (for determinism tests).
@@ -144,7 +160,7 @@ impl NodeMesh {
             }
         }
         feed(&self.ground);
-        for i in &self.indices {
+        for i in self.indices.iter() {
             feed(&i.to_le_bytes());
         }
         h
@@ -371,7 +387,7 @@ pub fn build(
         positions,
         normals,
         ground,
-        indices: g.indices.clone(),
+        indices: Arc::clone(&g.indices),
         surface_index_count: g.surface_index_count,
         bounds: own,
         skirt_bottom_m,
@@ -396,7 +412,7 @@ fn border_vertex(side: Side, t: usize) -> usize {
 #[derive(Debug)]
 pub struct GridIndices {
     /// Counter-clockwise seen from above (skirts seen from outside).
-    pub indices: Vec<u32>,
+    pub indices: Arc<[u32]>,
     /// How many of `indices` are the surface's (the skirts' follow).
     pub surface_index_count: u32,
 }
@@ -443,7 +459,7 @@ fn grid_triangles(steps: u8) -> GridIndices {
         }
     }
     GridIndices {
-        indices,
+        indices: indices.into(),
         surface_index_count,
     }
 }

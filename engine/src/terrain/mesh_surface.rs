@@ -98,7 +98,7 @@ mod tests {
             positions: vec![[0.0, 0.0, 0.0], [s, 0.0, 0.0], [0.0, s, 0.0], [s, s, 10.0]],
             normals: vec![[0.0, 0.0, 1.0]; 4],
             ground: vec![0; 4],
-            indices: vec![0, 1, 2, 1, 3, 2],
+            indices: vec![0, 1, 2, 1, 3, 2].into(),
             surface_index_count: 6,
             bounds: NodeBounds::exact(0.0, 10.0),
             skirt_bottom_m: [0.0; 4],

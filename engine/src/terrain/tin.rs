@@ -102,7 +102,7 @@ pub fn build(grid: &NodeMesh, target_m: f64) -> (NodeMesh, TinStats) {
     }
     let surface = indices.len();
     indices.extend_from_slice(&grid.indices[grid.surface_index_count as usize..]);
-    mesh.indices = indices;
+    mesh.indices = indices.into();
     mesh.surface_index_count = surface as u32;
     mesh.bounds.error_m += delta_m;
     for b in &mut mesh.bounds.blocks {
@@ -233,7 +233,7 @@ mod tests {
             normals: vec![[0.0, 0.0, 1.0]; positions.len()],
             ground: vec![0; positions.len()],
             positions,
-            indices: Vec::new(),
+            indices: Vec::new().into(),
             surface_index_count: 0,
             bounds: NodeBounds::exact(0.0, 0.0),
             skirt_bottom_m: [0.0; 4],

@@ -157,7 +157,7 @@ fn quad(key: NodeKey, origin_m: [f64; 2], size_m: f32, z_m: f32, ground: u8) -> 
         ],
         normals: vec![[0.0, 0.0, 1.0]; 4],
         ground: vec![ground; 4],
-        indices: vec![0, 1, 3, 0, 3, 2],
+        indices: vec![0, 1, 3, 0, 3, 2].into(),
         surface_index_count: 6,
         bounds: NodeBounds::exact(f64::from(z_m), f64::from(z_m)),
         skirt_bottom_m: [f64::from(z_m); 4],
@@ -438,6 +438,19 @@ fn the_gpu_reference_covers_the_same_pixels_as_the_terrain_pass() {
     let cam = golden_view(size);
     let st = settle(&g, &mut v, &target, &cam);
     assert!(st.triangles > 1000, "{st:?}");
+    // Grid meshes draw the index lists each mesh page keeps once, the reference each node's
+    // own triangles from the CPU: the view draws both full and decimated grids.
+    let decimated = v
+        .streamer
+        .draw_list()
+        .iter()
+        .filter(|d| d.decimation > 0)
+        .count();
+    assert!(
+        decimated > 0 && decimated < v.streamer.draw_list().len(),
+        "{decimated} of {} drawn nodes decimated",
+        v.streamer.draw_list().len()
+    );
     let by_pass = covered_by_pass(&target.read_rgba(&g).expect("frame pixels"));
     let reference = reference_pixels(&g, &v);
     let by_reference = covered_by_reference(&reference);

@@ -388,7 +388,7 @@ fn without_skirts(meshes: &Map<NodeKey, NodeMesh>) -> Map<NodeKey, NodeMesh> {
         .iter()
         .map(|(k, m)| {
             let mut m = m.clone();
-            m.indices.truncate(m.surface_index_count as usize);
+            m.indices = m.indices[..m.surface_index_count as usize].into();
             (*k, m)
         })
         .collect()
