@@ -105,8 +105,7 @@ fn node_fade(n: Node) -> vec3<f32> {
     return vec3<f32>(n.offset_lo.w, n.hi_level.x, n.hi_level.y);
 }
 
-// A mesh vertex (terrain nodes and plant shapes): `tag` is the ground type of a terrain vertex
-// and the part (0 trunk, 1 foliage) of a plant-shape vertex.
+// A plant-shape vertex: `tag` is the part (0 trunk, 1 foliage).
 struct VertexIn {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,

@@ -49,16 +49,32 @@ struct TerrainOut {
     @location(8) local: vec2<f32>,
 };
 
+// A terrain vertex, from two streams: its position (metres from the node's south-west corner,
+// z absolute) and its shading word (engine::terrain::mesh::pack_shading: the normal in bits
+// 0 - 23, the ground type in bits 24 - 31).
+struct TerrainVertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) shading: u32,
+};
+
+// The unit normal of a shading word: two 12-bit coordinates of the upper hemisphere's
+// octahedral projection, turned 45 degrees (as engine::terrain::mesh::unpack_normal).
+fn shading_normal(word: u32) -> vec3<f32> {
+    let uv = vec2<f32>(f32(word & 0xfffu), f32((word >> 12u) & 0xfffu)) / 4095.0 * 2.0 - 1.0;
+    let p = vec2<f32>(uv.x + uv.y, uv.x - uv.y) * 0.5;
+    return normalize(vec3<f32>(p, 1.0 - abs(p.x) - abs(p.y)));
+}
+
 // The draw's first instance is the node's slot in the node table.
 @vertex
-fn vs_main(v: VertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
+fn vs_main(v: TerrainVertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
     let node = nodes[slot];
     var out: TerrainOut;
     let rel = v.position + node.offset_lo.xyz;
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);
     out.rel = rel;
-    out.normal = v.normal;
-    out.albedo = ground_colors[min(v.tag, GROUND_TYPES - 1u)].rgb;
+    out.normal = shading_normal(v.shading);
+    out.albedo = ground_colors[min(v.shading >> 24u, GROUND_TYPES - 1u)].rgb;
     out.fade = node_fade(node);
     // Texel columns run east from the west border, rows north from the south border; the
     // texture's row 0 is the north border's.

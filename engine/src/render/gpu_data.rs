@@ -41,15 +41,15 @@ pub struct NodeEntry {
     pub more: [f32; 4],
 }
 
-/// Mirrors `VertexIn` (28 bytes): terrain vertices and plant-shape vertices.
+/// Mirrors `VertexIn` (28 bytes): plant-shape vertices (terrain vertices are two streams of
+/// their own, `render::terrain`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct MeshVertex {
-    /// Terrain: x, y relative to the node's south-west corner, z absolute (m). Plant shapes:
-    /// unit shape coordinates.
+    /// Unit shape coordinates.
     pub position: [f32; 3],
     pub normal: [f32; 3],
-    /// Terrain: ground-type legend index. Plant shapes: part (0 trunk, 1 foliage).
+    /// The part (0 trunk, 1 foliage).
     pub tag: u32,
 }
 

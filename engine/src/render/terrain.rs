@@ -25,7 +25,6 @@ use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
     texture_entry, uint_texture_entry, uniform_entry,
 };
-use super::gpu_data::MeshVertex;
 use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use super::ground_detail::GroundDetail;
 use super::ground_pool::{GroundPool, GroundSlot, layers_per_page};
@@ -44,7 +43,7 @@ use std::sync::{Arc, OnceLock, Weak};
 use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs};
 
-/// Vertices in one page of the mesh pool: 3,435 grid nodes (1,221 vertices each), 112 MiB
+/// Vertices in one page of the mesh pool: 3,435 grid nodes (1,221 vertices each), 64 MiB
 /// (within the 256 MiB every adapter allows a buffer). Each page a frame's nodes are in is one
 /// more multi-draw (with pages of 858 nodes, the flyover at 720p on lavapipe had three open and
 /// drew 21 terrain batches; with these, one page and 2).
@@ -104,10 +103,28 @@ impl std::fmt::Debug for TerrainNodeGpu {
 
 /// Index ranges a node mesh has on the GPU, one per decimation.
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
-/// Bytes of one terrain vertex ([`MeshVertex`]).
-const VERTEX_BYTES: usize = std::mem::size_of::<MeshVertex>();
+/// Bytes of one terrain vertex: its position (three f32, metres from the node's south-west
+/// corner, z absolute) and its shading word (`terrain::mesh::pack_shading`). A page's vertex
+/// buffer holds the positions of its `PAGE_VERTICES` vertices, then their shading words
+/// (from [`SHADING_OFFSET`]), bound as two vertex streams ([`VERTEX_LAYOUTS`]).
+const VERTEX_BYTES: usize = POSITION_BYTES as usize + 4;
+const POSITION_BYTES: u64 = 12;
+const SHADING_OFFSET: u64 = PAGE_VERTICES as u64 * POSITION_BYTES;
+/// The terrain shader's `TerrainVertexIn`: location 0 the position, 1 the shading word.
+const VERTEX_LAYOUTS: [Option<wgpu::VertexBufferLayout<'static>>; 2] = [
+    Some(wgpu::VertexBufferLayout {
+        array_stride: POSITION_BYTES,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+    }),
+    Some(wgpu::VertexBufferLayout {
+        array_stride: 4,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![1 => Uint32],
+    }),
+];
 /// Staging chunks made with the renderer, more than the first frames' bursts of node meshes
-/// fill (a grid node's vertices are 34 KB; see [`staging_belt`]).
+/// fill (a grid node's vertices are 20 KB; see [`staging_belt`]).
 const MESH_STAGING_PREMADE_CHUNKS: usize = 16;
 
 impl TerrainNodeGpu {
@@ -294,7 +311,7 @@ impl TerrainRenderer {
             true,
             &[Some(&colors_layout)],
         );
-        let buffers = [Some(MeshVertex::LAYOUT)];
+        let buffers = VERTEX_LAYOUTS;
         let spec = PipelineSpec::triangles(
             "terrain fill",
             "vs_main",
@@ -565,10 +582,22 @@ impl TerrainRenderer {
         let lengths = [mesh.positions.len() as u32, own];
         let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
         let index_bytes = own as usize * 4;
-        let Some(vertex_size) = wgpu::BufferSize::new(vertex_bytes as u64) else {
+        let (Some(position_size), Some(shading_size)) = (
+            wgpu::BufferSize::new(u64::from(lengths[0]) * POSITION_BYTES),
+            wgpu::BufferSize::new(u64::from(lengths[0]) * 4),
+        ) else {
             log::warn!("terrain mesh of node {:?} is empty: not drawn", mesh.key);
             return None;
         };
+        if mesh.shading.len() != mesh.positions.len() {
+            log::warn!(
+                "terrain mesh of node {:?} has {} shading words for {} vertices: not drawn",
+                mesh.key,
+                mesh.shading.len(),
+                mesh.positions.len()
+            );
+            return None;
+        }
         let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
             log::warn!(
                 "terrain mesh pool or node table full: node {:?} is not drawn",
@@ -590,34 +619,26 @@ impl TerrainRenderer {
                 own_range
             }
         });
-        // The vertices (and own indices) are written straight into the staging belt's memory
-        // (no copy on the frame thread first; no staging buffer made and freed per write, whose
-        // fresh pages cost a page fault each).
+        // The positions, shading words (and own indices) are copied straight into the staging
+        // belt's memory (no staging buffer made and freed per write, whose fresh pages cost a
+        // page fault each).
         let page = &self.pages[lease.page as usize];
-        let mut vertex_view = self.staging.write_buffer(
-            copies,
-            &page.vertices,
-            u64::from(lease.start[0]) * VERTEX_BYTES as u64,
-            vertex_size,
-        );
-        let vertices = mesh
-            .positions
-            .iter()
-            .zip(&mesh.normals)
-            .zip(&mesh.ground)
-            .map(|((p, n), g)| {
-                bytemuck::cast::<MeshVertex, [u8; VERTEX_BYTES]>(MeshVertex {
-                    position: *p,
-                    normal: *n,
-                    tag: u32::from(*g),
-                })
-            });
-        vertex_view
-            .slice(..)
-            .into_chunks::<VERTEX_BYTES>()
-            .0
-            .write_iter(vertices);
-        drop(vertex_view);
+        self.staging
+            .write_buffer(
+                copies,
+                &page.vertices,
+                u64::from(lease.start[0]) * POSITION_BYTES,
+                position_size,
+            )
+            .copy_from_slice(bytemuck::cast_slice(&mesh.positions));
+        self.staging
+            .write_buffer(
+                copies,
+                &page.vertices,
+                SHADING_OFFSET + u64::from(lease.start[0]) * 4,
+                shading_size,
+            )
+            .copy_from_slice(bytemuck::cast_slice(&mesh.shading));
         if let Some(index_size) = wgpu::BufferSize::new(index_bytes as u64) {
             self.staging
                 .write_buffer(
@@ -898,7 +919,8 @@ impl NodeRenderer for TerrainRenderer {
                 bound = Some(fading);
             }
             let page = &self.pages[page as usize];
-            pass.set_vertex_buffer(0, page.vertices.slice(..));
+            pass.set_vertex_buffer(0, page.vertices.slice(..SHADING_OFFSET));
+            pass.set_vertex_buffer(1, page.vertices.slice(SHADING_OFFSET..));
             pass.set_index_buffer(page.indices.slice(..), wgpu::IndexFormat::Uint32);
             stats.draw_calls += self.batches.record(pass, run, self.merged);
             stats.items += run.items();

@@ -230,8 +230,7 @@ mod tests {
         NodeMesh {
             key: NodeKey::ROOT,
             origin_m: [0.0, 0.0],
-            normals: vec![[0.0, 0.0, 1.0]; positions.len()],
-            ground: vec![0; positions.len()],
+            shading: vec![crate::terrain::mesh::pack_shading([0.0, 0.0, 1.0], 0); positions.len()],
             positions,
             indices: Vec::new().into(),
             surface_index_count: 0,

@@ -155,8 +155,7 @@ fn quad(key: NodeKey, origin_m: [f64; 2], size_m: f32, z_m: f32, ground: u8) -> 
             [0.0, size_m, z_m],
             [size_m, size_m, z_m],
         ],
-        normals: vec![[0.0, 0.0, 1.0]; 4],
-        ground: vec![ground; 4],
+        shading: vec![engine::terrain::mesh::pack_shading([0.0, 0.0, 1.0], ground); 4],
         indices: vec![0, 1, 3, 0, 3, 2].into(),
         surface_index_count: 6,
         bounds: NodeBounds::exact(f64::from(z_m), f64::from(z_m)),
@@ -229,38 +228,8 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
         ..ViewOptions::default()
     };
     let target = Target::new(&g.device, size, COLOR_FORMAT);
-    let frustum = cam.frustum();
-    let mut draw = |works: &[&NodeWork]| {
-        let drawn: Vec<DrawnNode<'_>> = works
-            .iter()
-            .map(|w| DrawnNode {
-                key,
-                work: w,
-                dither: [0.0, 1.0],
-                decimation: 0,
-            })
-            .collect();
-        let draws = FrameDraws {
-            camera: &cam,
-            frustum: &frustum,
-            view: &view,
-            tree: &tree,
-            drawn: &drawn,
-            ancestors: &[],
-            dt_s: 0.0,
-            tau_px: 2.0,
-            upload_bytes_left: usize::MAX,
-            upload_time_left_s: f64::INFINITY,
-        };
-        let mut enc = g
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("depth test"),
-            });
-        scene.render(&g, &mut enc, &target.color_view, &target.depth_view, &draws);
-        g.queue.submit([enc.finish()]);
-        target.read_rgba(&g).expect("readback")
-    };
+    let mut draw =
+        |works: &[&NodeWork]| draw_nodes(&g, &mut scene, &tree, &cam, &view, &target, works);
     // Control: the far quad alone shows blue everywhere (the set-up sees it).
     let alone = draw(&[&far_quad]);
     assert!(
@@ -276,6 +245,109 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
         assert_eq!(
             wrong, 0,
             "{wrong} pixels show the farther quad (or nothing)"
+        );
+    }
+}
+
+/// Draws `works` (nodes of `tree`, each at its own place, not fading) with `scene` from `cam`
+/// into `target`; returns its pixels.
+fn draw_nodes(
+    g: &engine::render::Gpu,
+    scene: &mut Scene,
+    tree: &QuadTree,
+    cam: &Camera,
+    view: &ViewOptions,
+    target: &Target,
+    works: &[&NodeWork],
+) -> Vec<u8> {
+    let frustum = cam.frustum();
+    let drawn: Vec<DrawnNode<'_>> = works
+        .iter()
+        .map(|w| DrawnNode {
+            key: w.key,
+            work: w,
+            dither: [0.0, 1.0],
+            decimation: 0,
+        })
+        .collect();
+    let draws = FrameDraws {
+        camera: cam,
+        frustum: &frustum,
+        view,
+        tree,
+        drawn: &drawn,
+        ancestors: &[],
+        dt_s: 0.0,
+        tau_px: 2.0,
+        upload_bytes_left: usize::MAX,
+        upload_time_left_s: f64::INFINITY,
+    };
+    let mut enc = g
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("test nodes"),
+        });
+    scene.render(g, &mut enc, &target.color_view, &target.depth_view, &draws);
+    g.queue.submit([enc.finish()]);
+    target.read_rgba(g).expect("readback")
+}
+
+/// A terrain vertex's normal reaches the shader through its shading word
+/// (`terrain::mesh::pack_shading`) facing the right way: flat quads, each with one normal
+/// tilted toward one of five azimuths, drawn lit (lighting only: one grey albedo, no fog, no
+/// sky, no light grid) under a sun whose azimuth is no multiple of 45 degrees, come out
+/// brighter in the order of their normals' cosines with the sun, computed here from the
+/// normals before packing. (A decoder that swapped or negated a coordinate reverses it.)
+#[test]
+fn packed_terrain_normals_face_the_sun_they_were_given() {
+    let Some(g) = device() else { return };
+    let size = [16u32, 16];
+    let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
+    let mut scene = Scene::new(&g, COLOR_FORMAT);
+    scene.push(Box::new(TerrainRenderer::new(
+        &g,
+        &scene.frame,
+        &[[200, 200, 200]],
+    )));
+    let sun = engine::lighting::grid::Sun {
+        azimuth_deg: 110.0,
+        elevation_deg: 40.0,
+    };
+    let view = ViewOptions {
+        sky: false,
+        fog_per_m: 0.0,
+        lighting_only: true,
+        sun,
+        ..ViewOptions::default()
+    };
+    let p = DVec3::new(0.0, 0.0, 100.0);
+    let mut cam = Camera::look_at(p, DVec3::new(0.0, 1.0, 0.0), 40f64.to_radians(), size);
+    cam.near_m = 0.1;
+    let target = Target::new(&g.device, size, COLOR_FORMAT);
+    let key = NodeKey::ROOT;
+    // Tilted half the sun's elevation: every normal sees the sun, so no cosine is clamped.
+    let tilt = (sun.elevation_deg / 2.0).to_radians();
+    let mut seen: Vec<(f64, u32)> = [0.0f64, 40.0, 80.0, 120.0, 160.0]
+        .iter()
+        .map(|off| {
+            let a = (sun.azimuth_deg + off).to_radians();
+            let n = DVec3::new(a.sin() * tilt.sin(), a.cos() * tilt.sin(), tilt.cos());
+            let mut mesh = quad(key, [-3000.0, -3000.0], 6000.0, 0.0, 0);
+            mesh.shading = vec![engine::terrain::mesh::pack_shading(n.to_array(), 0); 4];
+            let mut w = NodeWork::new(key);
+            w.put(mesh);
+            scene.upload(&g, &tree, &mut w);
+            let px = draw_nodes(&g, &mut scene, &tree, &cam, &view, &target, &[&w]);
+            let brightness: u32 = px.chunks_exact(4).map(|p| u32::from(p[1])).sum();
+            (n.dot(sun.toward()), brightness)
+        })
+        .collect();
+    seen.sort_by(|a, b| a.0.total_cmp(&b.0));
+    println!("cosine with the sun, summed green: {seen:?}");
+    for w in seen.windows(2) {
+        assert!(
+            w[1].1 > w[0].1,
+            "a normal nearer the sun drew darker: {seen:?}"
         );
     }
 }
