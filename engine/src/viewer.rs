@@ -74,6 +74,8 @@ pub struct FrameStats {
     pub reference_triangles: u64,
     /// Of `update_ms`: the selection of wanted nodes.
     pub selection_ms: f64,
+    /// Of `update_ms`: its stages, in the order of `stream::UpdateStages::NAMES`.
+    pub update_stages_ms: [f64; 7],
     /// Wall-clock time of update, uploads and encode.
     pub cpu_frame_ms: f64,
     /// The frame thread's own CPU time over the same span (the time the OS gave other threads
@@ -341,6 +343,7 @@ impl Viewer {
             gpu_reference_ms: self.reference.as_ref().and_then(GpuReference::last_ms),
             reference_triangles: self.reference.as_ref().map_or(0, |r| r.triangles),
             selection_ms: st.last_update.selections_s() * 1e3,
+            update_stages_ms: st.last_update.seconds().map(|s| s * 1e3),
             cpu_frame_ms: ms(t0, t3),
             cpu_frame_on_cpu_ms: on_cpu.map(|d| d.as_secs_f64() * 1e3),
             draw_calls: stats.draw_calls,

@@ -246,10 +246,16 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
             col(|s| s.update_ms),
         ),
         ("  of which selection".into(), col(|s| s.selection_ms)),
+    ];
+    for (i, name) in engine::stream::UpdateStages::NAMES.iter().enumerate() {
+        let stage: Vec<f64> = all.iter().map(|s| s.update_stages_ms[i]).collect();
+        rows.push((format!("  stage: {name}"), stage));
+    }
+    rows.extend([
         ("GPU uploads".into(), col(|s| s.upload_ms)),
         ("encode".into(), col(|s| s.encode_ms)),
         ("  of which the draw list".into(), col(|s| s.draw_list_ms)),
-    ];
+    ]);
     rows.extend(renderer_rows(all));
     rows.push((
         "  of which recording the pass".into(),
