@@ -118,8 +118,9 @@ struct Inner {
     /// priority) scanning its grids.
     drawn: Mutex<Arc<DrawnGrids>>,
     grids: Mutex<FxHashMap<NodeKey, Weak<SharedGrid>>>,
-    /// Grids stored so far (first computations and relights), counted after each store.
-    stored: Arc<AtomicU64>,
+    /// Per subscriber ([`LightingContent::grids_stored`]), the keys of the grids stored (first
+    /// computations and relights) since it last took them; dropped subscribers are forgotten.
+    stored: Mutex<Vec<Weak<Mutex<Vec<NodeKey>>>>>,
     /// The keys picked for computing, in order (the last [`LOG_LEN`]).
     log: Mutex<std::collections::VecDeque<NodeKey>>,
     state: Mutex<ThreadState>,
@@ -140,6 +141,20 @@ struct DrawnGrids {
 }
 
 impl Inner {
+    /// Lists `key` for every subscriber still there (after the grid is stored).
+    fn announce_stored(&self, key: NodeKey) {
+        self.stored
+            .lock()
+            .expect("stored lock")
+            .retain(|list| match list.upgrade() {
+                Some(list) => {
+                    list.lock().expect("stored lock").push(key);
+                    true
+                }
+                None => false,
+            });
+    }
+
     fn sun(&self) -> Sun {
         *self.sun.lock().expect("sun lock")
     }
@@ -218,7 +233,7 @@ impl Inner {
                 next.key,
                 sun,
             ));
-            self.stored.fetch_add(1, Ordering::AcqRel);
+            self.announce_stored(next.key);
             let mut state = self.state.lock().expect("state lock");
             next.computing.store(false, Ordering::Release);
             state.busy -= 1;
@@ -249,14 +264,15 @@ impl Inner {
     }
 }
 
-/// How many grids were stored so far (first computations and relights): a grid's new
-/// [`SharedGrid::version`] is visible once this count includes it.
-#[derive(Debug, Clone)]
-pub struct GridsStored(Arc<AtomicU64>);
+/// One subscriber's keys of the grids stored (first computations and relights) since it last
+/// took them: a grid's new [`SharedGrid::version`] is visible once its key is listed.
+#[derive(Debug)]
+pub struct GridsStored(Arc<Mutex<Vec<NodeKey>>>);
 
 impl GridsStored {
-    pub fn get(&self) -> u64 {
-        self.0.load(Ordering::Acquire)
+    /// The keys listed since the last call (a grid stored twice meanwhile is listed twice).
+    pub fn take(&self) -> Vec<NodeKey> {
+        std::mem::take(&mut *self.0.lock().expect("stored lock"))
     }
 }
 
@@ -306,7 +322,7 @@ impl LightingContent {
                 camera_xy_m: [AtomicU64::new(0), AtomicU64::new(0)],
                 drawn: Mutex::new(Arc::new(DrawnGrids::default())),
                 grids: Mutex::new(FxHashMap::default()),
-                stored: Arc::new(AtomicU64::new(0)),
+                stored: Mutex::new(Vec::new()),
                 log: Mutex::new(std::collections::VecDeque::new()),
                 state: Mutex::new(ThreadState::default()),
                 wake: Condvar::new(),
@@ -332,10 +348,16 @@ impl LightingContent {
         &self.inner.canopy
     }
 
-    /// The count of grids stored, for a renderer to tell whether any grid changed since it
-    /// last looked.
+    /// A new subscriber to the grids stored from now on: a renderer takes their keys each frame
+    /// instead of looking at every grid it holds.
     pub fn grids_stored(&self) -> GridsStored {
-        GridsStored(Arc::clone(&self.inner.stored))
+        let list = Arc::new(Mutex::new(Vec::new()));
+        self.inner
+            .stored
+            .lock()
+            .expect("stored lock")
+            .push(Arc::downgrade(&list));
+        GridsStored(list)
     }
 
     /// The keys of the last grids computed (up to [`LOG_LEN`]), oldest first.

@@ -277,11 +277,16 @@ impl LightPool {
         lease.written.store(version, Ordering::Release);
     }
 
-    /// Writes every live lease's grid that arrived or changed since ([`Self::refresh`]),
-    /// whether or not a node holding it is drawn this frame.
-    pub fn refresh_all(&self, queue: &wgpu::Queue) {
-        let leases = self.leases.lock().expect("leases lock");
-        for lease in leases.values().filter_map(Weak::upgrade) {
+    /// Writes the grid of node `key`'s live lease, if any, when it arrived or changed since
+    /// ([`Self::refresh`]), whether or not a node holding it is drawn this frame.
+    pub fn refresh_key(&self, queue: &wgpu::Queue, key: NodeKey) {
+        let lease = self
+            .leases
+            .lock()
+            .expect("leases lock")
+            .get(&key)
+            .and_then(Weak::upgrade);
+        if let Some(lease) = lease {
             self.refresh(queue, &lease);
         }
     }

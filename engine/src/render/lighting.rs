@@ -6,9 +6,9 @@
 //! object renderers put the node's light entry (found once a frame here, read through
 //! `LightPool::drawn_entry`) into their node-table entries: until a node's grid arrives, the
 //! nearest drawn-through ancestor's written grid (coarser columns, the same values at them),
-//! fully lit without one. `prepare` writes a grid's tile when its lease is taken
-//! and, in the frames after a light thread stored a grid, the tiles of leased grids that
-//! arrived or were relit since (a sun change), nearest first as the light threads make them.
+//! fully lit without one. `prepare` writes a grid's tile when its lease is taken, and the
+//! tiles of the leased grids among those the light threads stored since the last frame (first
+//! computations and relights after a sun change; the light kind lists their keys).
 //! Each frame it also finds the drawn nodes that blend toward a coarser neighbour's grid
 //! (`lighting::seams`); it runs before the other renderers'.
 
@@ -89,10 +89,8 @@ pub struct LightingRenderer {
     pub unlit_drawn: usize,
     /// Drawn nodes without their own grid this frame, shaded by an ancestor's coarser one.
     pub coarse_lit_drawn: usize,
-    /// The light threads' count of stored grids, and its value when `prepare` last wrote the
-    /// changed grids: only a frame after a store looks at every live lease.
+    /// The keys of the grids the light threads stored since the last `prepare`.
     stored: Option<GridsStored>,
-    stored_written: u64,
 }
 
 impl LightingRenderer {
@@ -142,15 +140,18 @@ impl NodeRenderer for LightingRenderer {
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {
-        // In a frame after a grid was stored, the tiles of every live lease whose grid
-        // arrived or was relit since, drawn or not (the count is read first: a grid stored
-        // meanwhile is written in the next frame). Then the nodes drawn (or drawn through): a
-        // lease for those without one yet (the first frame they are drawn, or again each
-        // frame while the pool is full), its tile written if its grid is computed.
-        let stored = self.stored.as_ref().map_or(0, GridsStored::get);
-        if stored != self.stored_written {
-            self.stored_written = stored;
-            frame.light.refresh_all(&gpu.queue);
+        // The tiles of the live leases whose grids were stored since the last frame, drawn
+        // or not (a grid stored meanwhile is listed for the next frame). Then the nodes drawn
+        // (or drawn through): a lease for those without one yet (the first frame they are
+        // drawn, or again each frame while the pool is full), its tile written if its grid is
+        // computed.
+        for key in self
+            .stored
+            .as_ref()
+            .map(GridsStored::take)
+            .unwrap_or_default()
+        {
+            frame.light.refresh_key(&gpu.queue, key);
         }
         for d in draws.drawn.iter().chain(draws.ancestors) {
             let Some(slot) = d.work.gpu.get::<NodeLightGpu>() else {
