@@ -201,11 +201,8 @@ fn a_world_ten_thousand_km_out_renders_like_the_original() {
 fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
     let Some(g) = device() else { return };
     let size = [128u32, 128];
-    let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
     // Red (legend 0) is 1 cm above blue (legend 1).
-    let mut scene = Scene::new(&g, COLOR_FORMAT);
-    let terrain = TerrainRenderer::new(&g, &scene.frame, &[[255, 0, 0], [0, 0, 255]]);
-    scene.push(Box::new(terrain));
+    let (tree, mut scene) = terrain_scene(&g, &[[255, 0, 0], [0, 0, 255]]);
     let key = NodeKey {
         level: 0,
         ix: 0,
@@ -247,6 +244,15 @@ fn depth_resolves_quads_one_centimetre_apart_at_five_kilometres() {
             "{wrong} pixels show the farther quad (or nothing)"
         );
     }
+}
+
+/// A 4 km quad tree at the origin and a scene with only a terrain renderer whose legend
+/// colours are `legend` (sRGB), for hand-made node meshes.
+fn terrain_scene(g: &engine::render::Gpu, legend: &[[u8; 3]]) -> (QuadTree, Scene) {
+    let mut scene = Scene::new(g, COLOR_FORMAT);
+    let terrain = TerrainRenderer::new(g, &scene.frame, legend);
+    scene.push(Box::new(terrain));
+    (QuadTree::new([0.0, 0.0], [4096.0, 4096.0]), scene)
 }
 
 /// Draws `works` (nodes of `tree`, each at its own place, not fading) with `scene` from `cam`
@@ -302,13 +308,7 @@ fn draw_nodes(
 fn packed_terrain_normals_face_the_sun_they_were_given() {
     let Some(g) = device() else { return };
     let size = [16u32, 16];
-    let tree = QuadTree::new([0.0, 0.0], [4096.0, 4096.0]);
-    let mut scene = Scene::new(&g, COLOR_FORMAT);
-    scene.push(Box::new(TerrainRenderer::new(
-        &g,
-        &scene.frame,
-        &[[200, 200, 200]],
-    )));
+    let (tree, mut scene) = terrain_scene(&g, &[[200, 200, 200]]);
     let sun = engine::lighting::grid::Sun {
         azimuth_deg: 110.0,
         elevation_deg: 40.0,
