@@ -75,7 +75,7 @@ pub struct FrameStats {
     /// Of `update_ms`: the selection of wanted nodes.
     pub selection_ms: f64,
     /// Of `update_ms`: its stages, in the order of `stream::UpdateStages::NAMES`.
-    pub update_stages_ms: [f64; 7],
+    pub update_stages_ms: [f64; crate::stream::UpdateStages::NAMES.len()],
     /// Wall-clock time of update, uploads and encode.
     pub cpu_frame_ms: f64,
     /// The frame thread's own CPU time over the same span (the time the OS gave other threads

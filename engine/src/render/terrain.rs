@@ -36,7 +36,7 @@ use crate::ground::content::{GroundContent, NodeGround};
 use crate::ground::layout::{BORDER, SIDE, texel_m};
 use crate::stream::{DisplayNodes, NodeWork, Shared};
 use crate::surface::World;
-use crate::terrain::mesh::{MAX_DECIMATION, NodeMesh, grid_indices};
+use crate::terrain::mesh::{DrawnList, GPU_VERTEX_BYTES, MAX_DECIMATION, NodeMesh, grid_indices};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
 use std::sync::{Arc, OnceLock, Weak};
@@ -103,11 +103,10 @@ impl std::fmt::Debug for TerrainNodeGpu {
 
 /// Index ranges a node mesh has on the GPU, one per decimation.
 const DECIMATIONS: usize = MAX_DECIMATION as usize + 1;
-/// Bytes of one terrain vertex: its position (three f32, metres from the node's south-west
-/// corner, z absolute) and its shading word (`terrain::mesh::pack_shading`). A page's vertex
-/// buffer holds the positions of its `PAGE_VERTICES` vertices, then their shading words
-/// (from [`SHADING_OFFSET`]), bound as two vertex streams ([`VERTEX_LAYOUTS`]).
-const VERTEX_BYTES: usize = POSITION_BYTES as usize + 4;
+/// A terrain vertex ([`GPU_VERTEX_BYTES`]) is its position (three f32, metres from the node's
+/// south-west corner, z absolute) and its shading word (`terrain::mesh::pack_shading`). A
+/// page's vertex buffer holds the positions of its `PAGE_VERTICES` vertices, then their
+/// shading words (from [`SHADING_OFFSET`]), bound as two vertex streams ([`VERTEX_LAYOUTS`]).
 const POSITION_BYTES: u64 = 12;
 const SHADING_OFFSET: u64 = PAGE_VERTICES as u64 * POSITION_BYTES;
 /// The terrain shader's `TerrainVertexIn`: location 0 the position, 1 the shading word.
@@ -575,13 +574,9 @@ impl TerrainRenderer {
         copies: &mut UploadEncoder<'_>,
     ) -> Option<TerrainNodeGpu> {
         // A grid mesh draws the grid's index lists every page keeps (`GridRanges`): only its
-        // vertices are uploaded. Another mesh uploads its own indices and draws them at every
-        // decimation, except that one laid out as a grid draws the grid's decimated lists.
-        let shared = mesh.shares_grid_indices();
-        let own = if shared { 0 } else { mesh.indices.len() as u32 };
-        let lengths = [mesh.positions.len() as u32, own];
-        let vertex_bytes = lengths[0] as usize * VERTEX_BYTES;
-        let index_bytes = own as usize * 4;
+        // vertices are uploaded. Another mesh uploads its own indices too.
+        let own = mesh.own_gpu_indices();
+        let lengths = [mesh.positions.len() as u32, own.len() as u32];
         let (Some(position_size), Some(shading_size)) = (
             wgpu::BufferSize::new(u64::from(lengths[0]) * POSITION_BYTES),
             wgpu::BufferSize::new(u64::from(lengths[0]) * 4),
@@ -607,18 +602,11 @@ impl TerrainRenderer {
         };
         let copies = copies.get(device);
         self.open_pages(device, copies);
-        let own_range = if shared {
-            self.grid_ranges.0[usize::from(mesh.decimation)]
-        } else {
-            [lease.start[1], own]
-        };
-        let ranges: [[u32; 2]; DECIMATIONS] = std::array::from_fn(|d| {
-            if d > 0 && mesh.decimates() {
-                self.grid_ranges.0[d]
-            } else {
-                own_range
-            }
-        });
+        let ranges: [[u32; 2]; DECIMATIONS] =
+            std::array::from_fn(|d| match mesh.drawn_list(d as u8) {
+                DrawnList::Grid(steps) => self.grid_ranges.ranges[usize::from(steps)],
+                DrawnList::Own => [lease.start[1], lengths[1]],
+            });
         // The positions, shading words (and own indices) are copied straight into the staging
         // belt's memory (no staging buffer made and freed per write, whose fresh pages cost a
         // page fault each).
@@ -639,7 +627,7 @@ impl TerrainRenderer {
                 shading_size,
             )
             .copy_from_slice(bytemuck::cast_slice(&mesh.shading));
-        if let Some(index_size) = wgpu::BufferSize::new(index_bytes as u64) {
+        if let Some(index_size) = wgpu::BufferSize::new(u64::from(lengths[1]) * 4) {
             self.staging
                 .write_buffer(
                     copies,
@@ -647,7 +635,7 @@ impl TerrainRenderer {
                     u64::from(lease.start[1]) * 4,
                     index_size,
                 )
-                .copy_from_slice(bytemuck::cast_slice(&mesh.indices));
+                .copy_from_slice(bytemuck::cast_slice(own));
         }
         Some(TerrainNodeGpu {
             origin_m: mesh.origin_m,
@@ -656,7 +644,7 @@ impl TerrainRenderer {
             ranges,
             slot,
             ground: Arc::new(OnceLock::new()),
-            bytes: vertex_bytes + index_bytes,
+            bytes: mesh.gpu_bytes(),
         })
     }
 
@@ -673,11 +661,11 @@ impl TerrainRenderer {
                     mapped_at_creation: false,
                 })
             };
-            let grid = &self.grid_ranges.1;
+            let grid = &self.grid_ranges.indices;
             let page = MeshPage {
                 vertices: buffer(
                     "vertices",
-                    u64::from(PAGE_VERTICES) * VERTEX_BYTES as u64,
+                    u64::from(PAGE_VERTICES) * GPU_VERTEX_BYTES as u64,
                     wgpu::BufferUsages::VERTEX,
                 ),
                 indices: buffer(
@@ -699,18 +687,21 @@ impl TerrainRenderer {
 /// The grid's index lists ([`grid_indices`], decimations 0 ..= `MAX_DECIMATION` one after
 /// another), which every page keeps after its `PAGE_INDICES` leased indices, and where each
 /// decimation's list is in a page (first index, count).
-struct GridRanges([[u32; 2]; DECIMATIONS], Vec<u32>);
+struct GridRanges {
+    ranges: [[u32; 2]; DECIMATIONS],
+    indices: Vec<u32>,
+}
 
 impl GridRanges {
     fn new() -> Self {
-        let mut all = Vec::new();
+        let mut indices = Vec::new();
         let ranges = std::array::from_fn(|d| {
             let list = &grid_indices(d as u8).indices;
-            let first = PAGE_INDICES + all.len() as u32;
-            all.extend_from_slice(list);
+            let first = PAGE_INDICES + indices.len() as u32;
+            indices.extend_from_slice(list);
             [first, list.len() as u32]
         });
-        Self(ranges, all)
+        Self { ranges, indices }
     }
 }
 

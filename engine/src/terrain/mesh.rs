@@ -30,6 +30,18 @@ use std::sync::Arc;
 /// Vertices per node side.
 pub const NODE_VERTS: usize = NODE_QUADS as usize + 1;
 
+/// Bytes a vertex takes on the GPU: its position and its [`pack_shading`] word.
+pub const GPU_VERTEX_BYTES: usize = std::mem::size_of::<[f32; 3]>() + std::mem::size_of::<u32>();
+
+/// Which index list a mesh draws at a decimation ([`NodeMesh::drawn_list`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DrawnList {
+    /// [`grid_indices`] of this many halvings, the same for every grid node.
+    Grid(u8),
+    /// The mesh's own `indices`.
+    Own,
+}
+
 /// The most halvings of a grid mesh's vertex spacing a node may be drawn with (see the module
 /// docs): a node drawn with `d` halvings shows `(32 / 2^d)^2 x 2` surface triangles.
 pub const MAX_DECIMATION: u8 = 2;
@@ -113,13 +125,24 @@ impl NodeMesh {
         self.decimation == 0 && self.positions.len() == NODE_VERTS * NODE_VERTS + 4 * NODE_VERTS
     }
 
-    /// The indices drawn with `decimation` halvings: the grid's decimated triangles where the
-    /// mesh [`decimates`](Self::decimates), else its own.
-    pub fn drawn_indices(&self, decimation: u8) -> &[u32] {
+    /// The index list drawn with `decimation` halvings: the grid's decimated triangles where
+    /// the mesh [`decimates`](Self::decimates), else its own indices, which may be the grid's
+    /// shared list ([`Self::shares_grid_indices`]).
+    pub fn drawn_list(&self, decimation: u8) -> DrawnList {
         if decimation > 0 && self.decimates() {
-            &grid_indices(decimation).indices
+            DrawnList::Grid(decimation)
+        } else if self.shares_grid_indices() {
+            DrawnList::Grid(self.decimation)
         } else {
-            &self.indices
+            DrawnList::Own
+        }
+    }
+
+    /// The indices of [`Self::drawn_list`].
+    pub fn drawn_indices(&self, decimation: u8) -> &[u32] {
+        match self.drawn_list(decimation) {
+            DrawnList::Grid(steps) => &grid_indices(steps).indices,
+            DrawnList::Own => &self.indices,
         }
     }
 
@@ -131,15 +154,19 @@ impl NodeMesh {
             && Arc::ptr_eq(&self.indices, &grid_indices(self.decimation).indices)
     }
 
-    /// Bytes of GPU data the mesh takes: 16 a vertex (position and shading word), and 4 an
-    /// index of its own (none when it [shares the grid's](Self::shares_grid_indices)).
+    /// Bytes of GPU data the mesh takes: [`GPU_VERTEX_BYTES`] a vertex, and 4 an index of its
+    /// own (none when it [shares the grid's](Self::shares_grid_indices)).
     pub fn gpu_bytes(&self) -> usize {
-        let own_indices = if self.shares_grid_indices() {
-            0
+        self.positions.len() * GPU_VERTEX_BYTES + self.own_gpu_indices().len() * 4
+    }
+
+    /// The indices a renderer keeps for this mesh alone: none when it shares the grid's list.
+    pub fn own_gpu_indices(&self) -> &[u32] {
+        if self.shares_grid_indices() {
+            &[]
         } else {
-            self.indices.len()
-        };
-        self.positions.len() * 16 + own_indices * 4
+            &self.indices
+        }
     }
 
     /// A stable hash of every byte of the mesh (for determinism tests).
