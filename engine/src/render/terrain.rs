@@ -209,7 +209,10 @@ const NO_TEXTURE: u32 = u32::MAX;
 struct GroundTextures {
     texturer: GroundTexturer,
     tree: QuadTree,
+    /// Textures waiting to be made, in arrival order.
     pending: Vec<PendingTexture>,
+    /// The queue's length after dropped nodes' textures were last forgotten.
+    swept_len: usize,
     pool: GroundPool,
     /// The map's decals (the nodes' pieces refer to them by index).
     decals: Vec<worldgen::map::Decal>,
@@ -236,7 +239,22 @@ impl GroundTextures {
     fn shown(&self, key: NodeKey) -> bool {
         self.shown.as_ref().is_none_or(|s| s.contains(&key))
     }
+
+    /// Forgets the queued textures of dropped nodes once the queue has doubled since the last
+    /// time (a texture the display needs is forgotten as soon as it comes up; a prefetched
+    /// node may drop without ever being needed). So the queue holds at most about twice the
+    /// live nodes' textures, and a frame does not visit every queued texture.
+    fn forget_dropped(&mut self) {
+        if self.pending.len() >= 2 * self.swept_len.max(FORGET_DROPPED_MIN) {
+            self.pending.retain(|p| p.target.strong_count() > 0);
+            self.swept_len = self.pending.len();
+        }
+    }
 }
+
+/// Queued textures below which dropped nodes' are left in the queue (see
+/// `GroundTextures::forget_dropped`).
+const FORGET_DROPPED_MIN: usize = 64;
 
 /// Terrain pipelines, the mesh pool, the node table and this frame's batches.
 pub struct TerrainRenderer {
@@ -463,6 +481,7 @@ impl TerrainRenderer {
             texturer,
             tree,
             pending: Vec::new(),
+            swept_len: 0,
             decals: world.map.decals.clone(),
             encoder: None,
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
@@ -490,6 +509,13 @@ impl TerrainRenderer {
         self.ground
             .as_ref()
             .map_or(0, |g| g.pending.iter().filter(|p| g.shown(p.key)).count())
+    }
+
+    /// Node textures queued, made for no node yet, whether the display needs them or not and
+    /// whether their nodes are resident or not (those of dropped nodes are forgotten in bulk
+    /// once the queue has doubled).
+    pub fn textures_queued(&self) -> usize {
+        self.ground.as_ref().map_or(0, |g| g.pending.len())
     }
 
     /// From now on makes the textures of `keys` only (the nodes the display needs: needed for
@@ -746,33 +772,34 @@ impl NodeRenderer for TerrainRenderer {
         let Some(g) = self.ground.as_mut() else {
             return 0.0;
         };
-        // Coarsest first (they stand in for the finer ones), in arrival order within a level;
-        // textures of dropped nodes are forgotten.
+        g.forget_dropped();
+        // Only the textures the display needs are looked at (the rest of the queue, mostly
+        // prefetched nodes', waits untouched): coarsest first (they stand in for the finer
+        // ones), in arrival order within a level. The queue itself stays in arrival order.
         let mut queue = std::mem::take(&mut g.pending);
-        queue.sort_by_key(|p| p.key.level);
+        let mut order: Vec<usize> = (0..queue.len())
+            .filter(|&i| g.shown(queue[i].key))
+            .collect();
+        order.sort_by_key(|&i| queue[i].key.level);
         let gpu_per_texture_s = g.timer.per_item_s();
         let per_texture_s = gpu_per_texture_s + g.frame_thread.per_item_s();
         let mut made = 0;
         // The frame thread's time in the textures themselves (recording, submitting); going
         // through the queue is not per texture and is left out of the estimate.
         let mut textures_s = 0.0;
-        let mut waiting = Vec::new();
+        // Queue entries done with: made, or their node dropped.
+        let mut done = vec![false; queue.len()];
         // Whether a texture the display needs waits for the budget (the credit carries over).
         let mut shown_waiting = false;
         // This frame's share and what earlier frames carried over.
         let mut credit_s = g.credit.start(time_left_s);
-        // Taken out for the loop (which renders through `self`), put back after it.
-        let shown = g.shown.take();
-        for p in queue {
+        for i in order {
+            let p = &queue[i];
             let Some(target) = p.target.upgrade() else {
+                done[i] = true;
                 continue;
             };
-            if shown.as_ref().is_some_and(|s| !s.contains(&p.key)) {
-                waiting.push(p);
-                continue;
-            }
             if per_texture_s > credit_s {
-                waiting.push(p);
                 shown_waiting = true;
                 continue;
             }
@@ -780,6 +807,7 @@ impl NodeRenderer for TerrainRenderer {
             let texture = self.render_ground(gpu, p.key, &p.pieces);
             textures_s += t.elapsed().as_secs_f64();
             credit_s -= per_texture_s;
+            done[i] = true;
             if let Some(texture) = texture {
                 // Only this queue sets a node's texture, once.
                 let _ = target.set(texture);
@@ -789,12 +817,16 @@ impl NodeRenderer for TerrainRenderer {
                 }
             }
         }
+        let mut i = 0;
+        queue.retain(|_| {
+            i += 1;
+            !done[i - 1]
+        });
         let Some(g) = self.ground.as_mut() else {
             return 0.0;
         };
-        g.shown = shown;
         g.credit.end(credit_s, per_texture_s, shown_waiting);
-        g.pending = waiting;
+        g.pending = queue;
         let t = Instant::now();
         if let Some(mut enc) = g.encoder.take() {
             g.timer.before_submit(&mut enc);

@@ -408,6 +408,9 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
         )
     };
     let mut max_layers = 0;
+    // Resident nodes at most, and queued textures at most over that (the queue forgets dropped
+    // nodes' textures in bulk: at most twice the live ones at the last sweep, plus a frame's).
+    let (mut max_resident, mut max_queued_ratio) = (0usize, 0.0f64);
     for i in 0..10_000i64 {
         let c = if i % 400 < 200 {
             cam(
@@ -436,6 +439,13 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
             .renderer::<TerrainRenderer>()
             .expect("terrain renderer");
         max_layers = max_layers.max(terrain.ground_pool_use().0);
+        max_resident = max_resident.max(v.streamer.resident_keys().len());
+        let queued = terrain.textures_queued();
+        max_queued_ratio = max_queued_ratio.max(queued as f64 / max_resident.max(64) as f64);
+        assert!(
+            queued <= 3 * max_resident.max(64),
+            "frame {i}: {queued} textures queued, at most {max_resident} nodes resident"
+        );
         if i % 250 == 0 {
             let (layers, holders) = layers_and_holders(&v);
             assert_eq!(
@@ -445,6 +455,7 @@ fn a_teleport_storm_leaks_no_ground_texture_layer() {
         }
     }
     assert!(max_layers > 20, "the storm made only {max_layers} textures");
+    eprintln!("textures queued at most {max_queued_ratio:.2}x the resident nodes (at least 64)");
     let last = cam(250.0, 250.0, 30.0, 1.0);
     let start = std::time::Instant::now();
     while !v.stream_only(&g, &last, 0.1) {
