@@ -118,7 +118,7 @@ pub struct LightPool {
     pub sampler: wgpu::Sampler,
     pub info: wgpu::Buffer,
     free: Arc<Mutex<Vec<u32>>>,
-    leases: Mutex<FxHashMap<NodeKey, Weak<LightLease>>>,
+    leases: Mutex<Leases>,
     /// Lease tries that found no free tile (the node drawn fully lit that frame), for
     /// statistics.
     pub refused: AtomicU64,
@@ -185,7 +185,7 @@ impl LightPool {
             sampler,
             info,
             free: Arc::new(Mutex::new((0..POOL_TILES * POOL_TILES).rev().collect())),
-            leases: Mutex::new(FxHashMap::default()),
+            leases: Mutex::new(Leases::default()),
             refused: AtomicU64::new(0),
             drawn_entries: Vec::new(),
             ancestor_entries: Vec::new(),
@@ -211,7 +211,7 @@ impl LightPool {
     /// the grid is computed), or None when the pool is full.
     pub fn lease(&self, grid: &Arc<SharedGrid>) -> Option<Arc<LightLease>> {
         let mut leases = self.leases.lock().expect("leases lock");
-        if let Some(l) = leases.get(&grid.key).and_then(Weak::upgrade)
+        if let Some(l) = leases.by_key.get(&grid.key).and_then(Weak::upgrade)
             && Arc::ptr_eq(&l.grid, grid)
         {
             return Some(l);
@@ -232,7 +232,6 @@ impl LightPool {
             written: AtomicU64::new(NOT_WRITTEN),
             free: Arc::clone(&self.free),
         });
-        leases.retain(|_, l| l.strong_count() > 0);
         leases.insert(grid.key, Arc::downgrade(&lease));
         Some(lease)
     }
@@ -284,6 +283,7 @@ impl LightPool {
             .leases
             .lock()
             .expect("leases lock")
+            .by_key
             .get(&key)
             .and_then(Weak::upgrade);
         if let Some(lease) = lease {
@@ -305,7 +305,42 @@ impl LightPool {
     /// Grids holding a tile now.
     pub fn leased(&self) -> usize {
         let leases = self.leases.lock().expect("leases lock");
-        leases.values().filter(|l| l.strong_count() > 0).count()
+        leases
+            .by_key
+            .values()
+            .filter(|l| l.strong_count() > 0)
+            .count()
+    }
+}
+
+/// Entries below which dropped leases are left in [`Leases`].
+const FORGET_DROPPED_MIN: usize = 64;
+
+/// The grids' leases by grid key, dropped ones among them until they are forgotten in bulk,
+/// once the map has doubled since the last time: a new lease does not visit every lease.
+#[derive(Debug)]
+struct Leases<T = LightLease> {
+    by_key: FxHashMap<NodeKey, Weak<T>>,
+    /// Entries after dropped leases were last forgotten.
+    swept_len: usize,
+}
+
+impl<T> Default for Leases<T> {
+    fn default() -> Self {
+        Self {
+            by_key: FxHashMap::default(),
+            swept_len: 0,
+        }
+    }
+}
+
+impl<T> Leases<T> {
+    fn insert(&mut self, key: NodeKey, lease: Weak<T>) {
+        if self.by_key.len() >= 2 * self.swept_len.max(FORGET_DROPPED_MIN) {
+            self.by_key.retain(|_, l| l.strong_count() > 0);
+            self.swept_len = self.by_key.len();
+        }
+        self.by_key.insert(key, lease);
     }
 }
 
@@ -340,6 +375,42 @@ mod tests {
         assert_eq!(entry_of(&entries, 1, b), entry(2.0));
         assert_eq!(entry_of(&entries, 2, b), NO_LIGHT);
         assert_eq!(entry_of(&[], 0, a), NO_LIGHT);
+    }
+
+    /// Dropped leases are forgotten in bulk: over 10,000 leases of distinct grids, each dropped
+    /// after the next few are taken, the map never holds more than twice the live ones at the
+    /// last sweep (at least 64) plus one, and every live lease is still found by its key.
+    #[test]
+    fn dropped_leases_are_forgotten_and_live_ones_kept() {
+        let mut leases = Leases::<u32>::default();
+        let mut live = std::collections::VecDeque::<(NodeKey, Arc<u32>)>::new();
+        for i in 0..10_000u32 {
+            let key = NodeKey {
+                level: 12,
+                ix: i % 4096,
+                iy: i / 4096,
+            };
+            let lease = Arc::new(i);
+            leases.insert(key, Arc::downgrade(&lease));
+            live.push_back((key, lease));
+            // 10 to 300 live at once, in waves.
+            let keep = 10 + (i as usize / 500 % 3) * 145;
+            while live.len() > keep {
+                live.pop_front();
+            }
+            assert!(
+                leases.by_key.len() <= 2 * 300usize.max(FORGET_DROPPED_MIN) + 1,
+                "{} entries with {} live",
+                leases.by_key.len(),
+                live.len()
+            );
+            for (k, l) in &live {
+                let found = leases.by_key.get(k).and_then(Weak::upgrade);
+                assert_eq!(found.as_deref(), Some(&**l), "lease {k:?} lost");
+            }
+        }
+        // Without forgetting, every one of the 10,000 would still be there.
+        assert!(leases.by_key.len() < 1_000);
     }
 
     /// An entry list made for another draw list is a bug that debug builds stop at.
