@@ -766,17 +766,21 @@ impl VegetationRenderer {
         let first_entry = self.table.first_entry(&p.slot);
         let base = p.instances.start[0];
         let page = p.instances.page;
+        let interval = match wanted {
+            GroupDither::Own => dither,
+            GroupDither::Full => [0.0, 1.0],
+        };
+        // The node's two entries (groups replaced on split, kept groups), each set once.
+        let mut entry_set = [false; 2];
         for g in &p.groups {
             if group_dither(!g.kept, drawn, is_ancestor) != Some(wanted) {
                 continue;
             }
-            let entry = first_entry + u32::from(g.kept);
-            let interval = match wanted {
-                GroupDither::Own => dither,
-                GroupDither::Full => [0.0, 1.0],
-            };
-            self.table
-                .set(frame, entry, p.origin_m, level, interval, [0.0; 4], light);
+            if !std::mem::replace(&mut entry_set[usize::from(g.kept)], true) {
+                let entry = first_entry + u32::from(g.kept);
+                self.table
+                    .set(frame, entry, p.origin_m, level, interval, [0.0; 4], light);
+            }
             let first_instance = base + g.first;
             let quads = |key| {
                 (
