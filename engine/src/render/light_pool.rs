@@ -11,6 +11,7 @@
 //! by every node the grid shades; it returns to the pool when the last [`LightLease`] drops
 //! (with the nodes' GPU objects). A relit grid is written again into the same tile.
 
+use super::bulk_forget::BulkForget;
 use crate::lighting::content::SharedGrid;
 use crate::lighting::grid::{COLUMNS, LAYERS};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -313,39 +314,37 @@ impl LightPool {
     }
 }
 
-/// Entries below which dropped leases are left in [`Leases`].
-const FORGET_DROPPED_MIN: usize = 64;
-
-/// The grids' leases by grid key, dropped ones among them until they are forgotten in bulk,
-/// once the map has doubled since the last time: a new lease does not visit every lease.
+/// The grids' leases by grid key, dropped ones among them until they are forgotten in bulk
+/// ([`BulkForget`]): a new lease does not visit every lease.
 #[derive(Debug)]
 struct Leases<T = LightLease> {
     by_key: FxHashMap<NodeKey, Weak<T>>,
-    /// Entries after dropped leases were last forgotten.
-    swept_len: usize,
+    forget: BulkForget,
 }
 
 impl<T> Default for Leases<T> {
     fn default() -> Self {
         Self {
             by_key: FxHashMap::default(),
-            swept_len: 0,
+            forget: BulkForget::default(),
         }
     }
 }
 
 impl<T> Leases<T> {
     fn insert(&mut self, key: NodeKey, lease: Weak<T>) {
-        if self.by_key.len() >= 2 * self.swept_len.max(FORGET_DROPPED_MIN) {
-            self.by_key.retain(|_, l| l.strong_count() > 0);
-            self.swept_len = self.by_key.len();
-        }
+        let by_key = &mut self.by_key;
+        self.forget.sweep_if_due(by_key.len(), || {
+            by_key.retain(|_, l| l.strong_count() > 0);
+            by_key.len()
+        });
         self.by_key.insert(key, lease);
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::bulk_forget::MIN_ENTRIES;
     use super::*;
 
     fn entry(x: f32) -> LightEntry {
@@ -399,7 +398,7 @@ mod tests {
                 live.pop_front();
             }
             assert!(
-                leases.by_key.len() <= 2 * 300usize.max(FORGET_DROPPED_MIN) + 1,
+                leases.by_key.len() <= 2 * 300usize.max(MIN_ENTRIES) + 1,
                 "{} entries with {} live",
                 leases.by_key.len(),
                 live.len()

@@ -23,6 +23,7 @@
 
 pub mod batch_timer;
 pub mod batches;
+mod bulk_forget;
 pub mod frame;
 pub mod gpu_data;
 pub mod ground;

@@ -21,6 +21,7 @@
 use super::Gpu;
 use super::batch_timer::{BatchTimer, ItemCost};
 use super::batches::{Batches, Item};
+use super::bulk_forget::BulkForget;
 use super::frame::{
     DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
     texture_entry, uint_texture_entry, uniform_entry,
@@ -211,8 +212,8 @@ struct GroundTextures {
     tree: QuadTree,
     /// Textures waiting to be made, in arrival order.
     pending: Vec<PendingTexture>,
-    /// The queue's length after dropped nodes' textures were last forgotten.
-    swept_len: usize,
+    /// When dropped nodes' textures are forgotten.
+    forget: BulkForget,
     pool: GroundPool,
     /// The map's decals (the nodes' pieces refer to them by index).
     decals: Vec<worldgen::map::Decal>,
@@ -240,21 +241,17 @@ impl GroundTextures {
         self.shown.as_ref().is_none_or(|s| s.contains(&key))
     }
 
-    /// Forgets the queued textures of dropped nodes once the queue has doubled since the last
-    /// time (a texture the display needs is forgotten as soon as it comes up; a prefetched
-    /// node may drop without ever being needed). So the queue holds at most about twice the
-    /// live nodes' textures, and a frame does not visit every queued texture.
+    /// Forgets the queued textures of dropped nodes in bulk ([`BulkForget`]; a texture the
+    /// display needs is forgotten as soon as it comes up, but a prefetched node may drop
+    /// without ever being needed), so a frame does not visit every queued texture.
     fn forget_dropped(&mut self) {
-        if self.pending.len() >= 2 * self.swept_len.max(FORGET_DROPPED_MIN) {
-            self.pending.retain(|p| p.target.strong_count() > 0);
-            self.swept_len = self.pending.len();
-        }
+        let pending = &mut self.pending;
+        self.forget.sweep_if_due(pending.len(), || {
+            pending.retain(|p| p.target.strong_count() > 0);
+            pending.len()
+        });
     }
 }
-
-/// Queued textures below which dropped nodes' are left in the queue (see
-/// `GroundTextures::forget_dropped`).
-const FORGET_DROPPED_MIN: usize = 64;
 
 /// Terrain pipelines, the mesh pool, the node table and this frame's batches.
 pub struct TerrainRenderer {
@@ -481,7 +478,7 @@ impl TerrainRenderer {
             texturer,
             tree,
             pending: Vec::new(),
-            swept_len: 0,
+            forget: BulkForget::default(),
             decals: world.map.decals.clone(),
             encoder: None,
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
