@@ -211,15 +211,48 @@ fn fs_area(in: AreaOut) -> @location(0) vec4<f32> {
     return vec4<f32>(color, w);
 }
 
-// Mip levels of a node texture (engine::render::ground::GroundTexturer::record_mips): each
-// texel the mean of the four texels above it, in linear light (the sRGB target encodes).
-@group(3) @binding(0) var mip_source: texture_2d<f32>;
+// Mip levels 1 - 3 of a node texture (engine::render::ground::GroundTexturer::record_mips),
+// one workgroup per 32 x 32 block of level 0: a level-k texel is the mean of the 4^k level-0
+// texels under it, in linear light (level 0 is read through its sRGB view, which decodes; the
+// levels are written through linear storage views, so this encodes). Each level is averaged
+// from the one above before rounding to 8 bits. Blocks never straddle a node edge, so
+// neighbours' shared border texels stay equal at every level.
+@group(3) @binding(0) var mip_base: texture_2d<f32>;
+@group(3) @binding(1) var mip_1: texture_storage_2d<rgba8unorm, write>;
+@group(3) @binding(2) var mip_2: texture_storage_2d<rgba8unorm, write>;
+@group(3) @binding(3) var mip_3: texture_storage_2d<rgba8unorm, write>;
 
-@fragment
-fn fs_downsample(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
-    let p = vec2<i32>(frag.xy) * 2;
-    let sum = textureLoad(mip_source, p, 0) + textureLoad(mip_source, p + vec2<i32>(1, 0), 0)
-        + textureLoad(mip_source, p + vec2<i32>(0, 1), 0)
-        + textureLoad(mip_source, p + vec2<i32>(1, 1), 0);
-    return sum * 0.25;
+var<workgroup> mip_1_block: array<vec4<f32>, 256>;
+var<workgroup> mip_2_block: array<vec4<f32>, 64>;
+
+fn srgb_encoded(c: vec4<f32>) -> vec4<f32> {
+    let rgb = clamp(c.rgb, vec3<f32>(0.0), vec3<f32>(1.0));
+    let curve = 1.055 * pow(rgb, vec3<f32>(1.0 / 2.4)) - 0.055;
+    return vec4<f32>(select(curve, rgb * 12.92, rgb <= vec3<f32>(0.0031308)), c.a);
+}
+
+@compute @workgroup_size(16, 16)
+fn cs_mips(@builtin(workgroup_id) block: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>) {
+    let p1 = block.xy * 16u + l.xy;
+    let b = vec2<i32>(p1 * 2u);
+    let m1 = 0.25 * (textureLoad(mip_base, b, 0) + textureLoad(mip_base, b + vec2<i32>(1, 0), 0)
+        + textureLoad(mip_base, b + vec2<i32>(0, 1), 0)
+        + textureLoad(mip_base, b + vec2<i32>(1, 1), 0));
+    textureStore(mip_1, p1, srgb_encoded(m1));
+    mip_1_block[l.y * 16u + l.x] = m1;
+    workgroupBarrier();
+    if (l.x < 8u && l.y < 8u) {
+        let k = l.y * 32u + l.x * 2u;
+        let m2 = 0.25 * (mip_1_block[k] + mip_1_block[k + 1u] + mip_1_block[k + 16u]
+            + mip_1_block[k + 17u]);
+        textureStore(mip_2, block.xy * 8u + l.xy, srgb_encoded(m2));
+        mip_2_block[l.y * 8u + l.x] = m2;
+    }
+    workgroupBarrier();
+    if (l.x < 4u && l.y < 4u) {
+        let k = l.y * 16u + l.x * 2u;
+        let m3 = 0.25 * (mip_2_block[k] + mip_2_block[k + 1u] + mip_2_block[k + 8u]
+            + mip_2_block[k + 9u]);
+        textureStore(mip_3, block.xy * 4u + l.xy, srgb_encoded(m3));
+    }
 }

@@ -4,10 +4,10 @@
 //! the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's closed
 //! decal areas (fields, dirt, rock patches: each its box, an inside test and a soft edge) and
 //! its road and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around
-//! its segment, blended in file order (areas before segments); then its mip levels
-//! (`record_mips`). The materials' detail height rides in their alpha channel, which this pass
-//! ignores: the terrain shader bumps the ground's normal with it near the camera
-//! (`render::ground_detail`).
+//! its segment, blended in file order (areas before segments); then its mip levels, all of a
+//! batch's textures in one compute pass (`record_mips`). The materials' detail height rides
+//! in their alpha channel, which this pass ignores: the terrain shader bumps the ground's
+//! normal with it near the camera (`render::ground_detail`).
 //!
 //! Nodes recorded between two submissions share one set of buffers: each node's uniforms sit
 //! at a 256-byte dynamic offset, its segments and areas are instance ranges of the batch's
@@ -16,7 +16,7 @@
 
 use super::Gpu;
 use super::frame::{sampler_entry, texture_entry, uint_texture_entry};
-use super::ground_pool::GroundSlot;
+use super::ground_pool::LayerMips;
 use crate::ground::layout::{SIDE, lattice_index, texel_m};
 use crate::ground::materials::{
     MATERIAL_TEXELS, MATERIAL_TILE_M, MAX_RELIEF_M, Material, materials,
@@ -28,8 +28,20 @@ use wgpu::util::DeviceExt;
 use worldgen::house_textures::MipChain;
 use worldgen::map::DecalKind;
 
-/// Format of node ground textures (shaded in linear light, stored sRGB).
+/// Format node ground textures are rendered into and sampled through (shaded in linear light,
+/// stored sRGB).
 pub const GROUND_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// Format of the pool's texture pages: the same bytes as [`GROUND_TEXTURE_FORMAT`] (pages are
+/// viewed through it), but one that compute shaders can write: the mip pass writes the sRGB
+/// encoding itself through views of this format.
+pub const GROUND_PAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// Texels a side of level 0 one workgroup of the mip pass reduces (`cs_mips`: 16 x 16
+/// invocations, one level-1 texel each, then levels 2 and 3 from the workgroup's memory).
+const MIP_BLOCK: u32 = 32;
+const _: () = assert!(
+    crate::ground::layout::MIP_LEVELS == 4 && SIDE.is_multiple_of(MIP_BLOCK),
+    "cs_mips writes levels 1 - 3 of whole 32 x 32 blocks"
+);
 /// Linear albedo of roads (asphalt) and paths (dirt).
 const ROAD_LINEAR: [f32; 3] = [0.045, 0.045, 0.05];
 const PATH_LINEAR: [f32; 3] = [0.26, 0.17, 0.09];
@@ -130,9 +142,9 @@ pub struct GroundTexturer {
     segments: wgpu::RenderPipeline,
     /// Closed areas as their boxes, blended over the ground in file order (before segments).
     areas: wgpu::RenderPipeline,
-    /// A mip level from the one above it (2 x 2 box filter in linear light).
-    downsample: wgpu::RenderPipeline,
-    downsample_layout: wgpu::BindGroupLayout,
+    /// Mip levels 1 - 3 of a node texture from its level 0 (box filter in linear light).
+    mips: wgpu::ComputePipeline,
+    mips_layout: wgpu::BindGroupLayout,
     layout: wgpu::BindGroupLayout,
     ground_types: wgpu::TextureView,
     materials: wgpu::TextureView,
@@ -322,35 +334,53 @@ impl GroundTexturer {
             bind_group_layouts: &[None, None, Some(&layout)],
             immediate_size: 0,
         });
-        let downsample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ground mip source layout"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
+        let level = |binding: u32| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: GROUND_PAGE_FORMAT,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            count: None,
+        };
+        let mips_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ground mip layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
                 },
-                count: None,
-            }],
+                level(1),
+                level(2),
+                level(3),
+            ],
         });
-        let downsample_pipeline_layout =
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("ground mip pipeline layout"),
-                bind_group_layouts: &[None, None, None, Some(&downsample_layout)],
-                immediate_size: 0,
-            });
         let module = super::shader::module(device, "ground", &shader_source());
+        let mips = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("ground texture mips"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("ground mip pipeline layout"),
+                    bind_group_layouts: &[None, None, None, Some(&mips_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            module: &module,
+            entry_point: Some("cs_mips"),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            cache: None,
+        });
         let make = |label: &str, vs: &str, fs: &str, blend: Option<wgpu::BlendState>| {
-            let layout = if fs == "fs_downsample" {
-                &downsample_pipeline_layout
-            } else {
-                &pipeline_layout
-            };
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
-                layout: Some(layout),
+                layout: Some(&pipeline_layout),
                 vertex: wgpu::VertexState {
                     module: &module,
                     entry_point: Some(vs),
@@ -387,7 +417,6 @@ impl GroundTexturer {
             "fs_area",
             Some(wgpu::BlendState::ALPHA_BLENDING),
         );
-        let downsample = make("ground texture mips", "vs_fill", "fs_downsample", None);
         let buffers = BatchBuffers::new(
             device,
             &layout,
@@ -399,8 +428,8 @@ impl GroundTexturer {
             pipeline,
             segments,
             areas,
-            downsample,
-            downsample_layout,
+            mips,
+            mips_layout,
             layout,
             ground_types,
             materials,
@@ -426,10 +455,10 @@ impl GroundTexturer {
         )
     }
 
-    /// The layout of a mip pass's source: what [`super::ground_pool::GroundPool`] binds each
-    /// layer's levels with.
-    pub fn mip_source_layout(&self) -> &wgpu::BindGroupLayout {
-        &self.downsample_layout
+    /// The layout of the mip pass's bindings: what [`super::ground_pool::GroundPool`] binds
+    /// each layer's levels with ([`LayerMips`]).
+    pub fn mip_layout(&self) -> &wgpu::BindGroupLayout {
+        &self.mips_layout
     }
 
     /// Writes the node data of everything recorded since the last submission to the GPU, then
@@ -450,16 +479,25 @@ impl GroundTexturer {
         gpu.queue.submit([enc.finish()]);
     }
 
-    /// Records the mip levels of a node texture in `slot`: level k >= 1 from level k - 1, each
-    /// texel the mean of the four above it in linear light. Texel blocks never straddle
-    /// a node edge (node sides are `TEXELS` texels, a multiple of `2^(levels - 1)`), so
-    /// neighbours' shared border texels stay equal at every level.
-    pub fn record_mips(&self, enc: &mut wgpu::CommandEncoder, slot: &GroundSlot) {
-        for (target, source) in slot.mips.iter().zip(&slot.mip_sources) {
-            let mut pass = clear_pass(enc, target, "ground texture mip");
-            pass.set_pipeline(&self.downsample);
-            pass.set_bind_group(3, source, &[]);
-            pass.draw(0..3, 0..1);
+    /// Records the mip levels of the node textures in `layers` (their level 0 recorded before,
+    /// into `enc`), all in one compute pass: a level-k texel is the mean of the `4^k` level-0
+    /// texels under it, in linear light. Texel blocks never straddle a node edge (node sides
+    /// are `TEXELS` texels, a multiple of `2^(levels - 1)`), so neighbours' shared border
+    /// texels stay equal at every level. One pass for a batch, not a render pass per level
+    /// and texture: each pass costs the frame thread more to encode than its texels cost.
+    pub fn record_mips(&self, enc: &mut wgpu::CommandEncoder, layers: &[LayerMips]) {
+        if layers.is_empty() {
+            return;
+        }
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("ground texture mips"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.mips);
+        let blocks = SIDE / MIP_BLOCK;
+        for layer in layers {
+            pass.set_bind_group(3, &layer.0, &[]);
+            pass.dispatch_workgroups(blocks, blocks, 1);
         }
     }
 

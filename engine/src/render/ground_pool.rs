@@ -2,11 +2,11 @@
 //! of a few `SIDE x SIDE` texture arrays (pages of [`LAYERS_PER_PAGE`], or up to
 //! [`MAX_LAYERS_PER_PAGE`] where the device allows ([`layers_per_page`]), created as needed, at
 //! most as many as the byte budget allows), one layer leased per node and given back when the
-//! lease drops (with the node's GPU objects, on eviction). A layer's views and the bind groups
-//! its mip passes read are made once, the first time the layer is leased, and kept with the
+//! lease drops (with the node's GPU objects, on eviction). A layer's view and the bind group
+//! of its mip levels are made once, the first time the layer is leased, and kept with the
 //! page (a node texture then creates no GPU object).
 
-use super::ground::GROUND_TEXTURE_FORMAT;
+use super::ground::{GROUND_PAGE_FORMAT, GROUND_TEXTURE_FORMAT};
 use super::suballoc::{Lease, Suballocator};
 use crate::ground::layout::{MIP_LEVELS, SIDE};
 
@@ -33,22 +33,24 @@ pub fn layers_per_page(device: &wgpu::Device, budget_bytes: usize) -> u32 {
         .max(1)
 }
 
-/// A node's layer: the lease (given back on drop), the view of its level 0 to render into, the
-/// views of its smaller mip levels (1, 2, ...) and, per mip level k >= 1, the bind group that
-/// reads level k - 1 (`GroundTexturer::record_mips`).
+/// A node's layer: the lease (given back on drop), the view of its level 0 to render into and
+/// the bindings of its mip levels (`GroundTexturer::record_mips`).
 pub struct GroundSlot {
     lease: Lease,
     pub view: wgpu::TextureView,
-    pub mips: Vec<wgpu::TextureView>,
-    pub mip_sources: Vec<wgpu::BindGroup>,
+    pub mips: LayerMips,
 }
+
+/// A layer's bindings for the mip pass: its level 0 through the sRGB view (read) and levels
+/// 1 - 3 through [`GROUND_PAGE_FORMAT`] views (written).
+#[derive(Clone, Debug)]
+pub struct LayerMips(pub(super) wgpu::BindGroup);
 
 /// What a layer's slots share: made once per layer.
 #[derive(Clone)]
 struct LayerViews {
     view: wgpu::TextureView,
-    mips: Vec<wgpu::TextureView>,
-    mip_sources: Vec<wgpu::BindGroup>,
+    mips: LayerMips,
 }
 
 impl std::fmt::Debug for GroundSlot {
@@ -77,10 +79,10 @@ pub struct GroundPool {
     layers_per_page: u32,
     alloc: Suballocator,
     pages: Vec<wgpu::Texture>,
-    /// Per page, per layer: its views and mip-source bind groups, once leased.
+    /// Per page, per layer: its view and mip bindings, once leased.
     layers: Vec<Vec<Option<LayerViews>>>,
-    /// The layout of a mip pass's source (`GroundTexturer::mip_source_layout`).
-    mip_source_layout: wgpu::BindGroupLayout,
+    /// The layout of the mip pass's bindings (`GroundTexturer::mip_layout`).
+    mip_layout: wgpu::BindGroupLayout,
 }
 
 impl std::fmt::Debug for GroundPool {
@@ -96,9 +98,9 @@ impl std::fmt::Debug for GroundPool {
 
 impl GroundPool {
     /// A pool of at most `budget_bytes` of texture pages of [`LAYERS_PER_PAGE`] (at least one
-    /// page), whose mip passes read their source through `mip_source_layout`.
-    pub fn new(budget_bytes: usize, mip_source_layout: &wgpu::BindGroupLayout) -> Self {
-        Self::with_pages_of(budget_bytes, LAYERS_PER_PAGE, mip_source_layout)
+    /// page), whose layers' mip levels are bound through `mip_layout`.
+    pub fn new(budget_bytes: usize, mip_layout: &wgpu::BindGroupLayout) -> Self {
+        Self::with_pages_of(budget_bytes, LAYERS_PER_PAGE, mip_layout)
     }
 
     /// A pool of at most `budget_bytes` of pages of `layers_per_page` layers (at least one
@@ -106,7 +108,7 @@ impl GroundPool {
     pub fn with_pages_of(
         budget_bytes: usize,
         layers_per_page: u32,
-        mip_source_layout: &wgpu::BindGroupLayout,
+        mip_layout: &wgpu::BindGroupLayout,
     ) -> Self {
         let page_bytes = LAYER_BYTES * layers_per_page as usize;
         Self {
@@ -114,7 +116,7 @@ impl GroundPool {
             alloc: Suballocator::new(&[layers_per_page], (budget_bytes / page_bytes).max(1)),
             pages: Vec::new(),
             layers: Vec::new(),
-            mip_source_layout: mip_source_layout.clone(),
+            mip_layout: mip_layout.clone(),
         }
     }
 
@@ -134,11 +136,12 @@ impl GroundPool {
                     mip_level_count: MIP_LEVELS,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    format: GROUND_TEXTURE_FORMAT,
+                    format: GROUND_PAGE_FORMAT,
                     usage: wgpu::TextureUsages::RENDER_ATTACHMENT
                         | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::STORAGE_BINDING
                         | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
+                    view_formats: &[GROUND_TEXTURE_FORMAT],
                 }));
         }
         while self.layers.len() < self.pages.len() {
@@ -146,15 +149,12 @@ impl GroundPool {
         }
         let (page, layer) = (lease.page as usize, lease.start[0]);
         let views = self.layers[page][layer as usize]
-            .get_or_insert_with(|| {
-                layer_views(device, &self.pages[page], layer, &self.mip_source_layout)
-            })
+            .get_or_insert_with(|| layer_views(device, &self.pages[page], layer, &self.mip_layout))
             .clone();
         Some(GroundSlot {
             lease,
             view: views.view,
             mips: views.mips,
-            mip_sources: views.mip_sources,
         })
     }
 
@@ -163,7 +163,8 @@ impl GroundPool {
         self.pages.len()
     }
 
-    /// The texture of page `page` (for sampling and readback).
+    /// The texture of page `page` (for readback; sample it through a view of
+    /// [`GROUND_TEXTURE_FORMAT`]).
     pub fn page(&self, page: u32) -> Option<&wgpu::Texture> {
         self.pages.get(page as usize)
     }
@@ -180,17 +181,20 @@ impl GroundPool {
     }
 }
 
-/// Layer `layer` of `page`: a view per mip level and, per level k >= 1, a bind group of level
-/// k - 1 as the source of its mip pass.
+/// Layer `layer` of `page`: the sRGB view of its level 0 and the bind group of its mip pass.
 fn layer_views(
     device: &wgpu::Device,
     page: &wgpu::Texture,
     layer: u32,
-    mip_source_layout: &wgpu::BindGroupLayout,
+    mip_layout: &wgpu::BindGroupLayout,
 ) -> LayerViews {
-    let level = |mip: u32| {
+    // Each view allows what its format supports: the sRGB one is rendered into and read, the
+    // linear ones are written by the mip pass.
+    let level = |mip: u32, format: wgpu::TextureFormat, usage: wgpu::TextureUsages| {
         page.create_view(&wgpu::TextureViewDescriptor {
             label: Some("ground texture layer"),
+            format: Some(format),
+            usage: Some(usage),
             dimension: Some(wgpu::TextureViewDimension::D2),
             base_array_layer: layer,
             array_layer_count: Some(1),
@@ -199,23 +203,32 @@ fn layer_views(
             ..Default::default()
         })
     };
-    let all: Vec<wgpu::TextureView> = (0..MIP_LEVELS).map(level).collect();
-    let mip_sources = all[..all.len() - 1]
-        .iter()
-        .map(|source| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("ground mip source"),
-                layout: mip_source_layout,
-                entries: &[wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(source),
-                }],
-            })
+    let view = level(
+        0,
+        GROUND_TEXTURE_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+    );
+    let written: Vec<wgpu::TextureView> = (1..MIP_LEVELS)
+        .map(|mip| {
+            level(
+                mip,
+                GROUND_PAGE_FORMAT,
+                wgpu::TextureUsages::STORAGE_BINDING,
+            )
         })
         .collect();
-    LayerViews {
-        view: all[0].clone(),
-        mips: all[1..].to_vec(),
-        mip_sources,
-    }
+    let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(&view)
+        .chain(&written)
+        .zip(0..)
+        .map(|(v, binding)| wgpu::BindGroupEntry {
+            binding,
+            resource: wgpu::BindingResource::TextureView(v),
+        })
+        .collect();
+    let mips = LayerMips(device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("ground texture mips"),
+        layout: mip_layout,
+        entries: &entries,
+    }));
+    LayerViews { view, mips }
 }

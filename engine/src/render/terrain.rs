@@ -28,7 +28,7 @@ use super::frame::{
 };
 use super::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
 use super::ground_detail::GroundDetail;
-use super::ground_pool::{GroundPool, GroundSlot, layers_per_page};
+use super::ground_pool::{GroundPool, GroundSlot, LayerMips, layers_per_page};
 use super::node_table::NodeTable;
 use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, close_staging, staging_belt};
 use super::suballoc::{Lease, Suballocator};
@@ -218,6 +218,9 @@ struct GroundTextures {
     /// The map's decals (the nodes' pieces refer to them by index).
     decals: Vec<worldgen::map::Decal>,
     encoder: Option<wgpu::CommandEncoder>,
+    /// The mip bindings of the textures recorded into `encoder` (their mip levels are recorded
+    /// in one pass before it is submitted).
+    mips_due: Vec<LayerMips>,
     /// GPU time per node texture (timestamp queries around each submitted batch).
     timer: BatchTimer,
     /// The frame thread's time per node texture: recording it and its share of the batch's
@@ -473,7 +476,7 @@ impl TerrainRenderer {
             pool: GroundPool::with_pages_of(
                 pool_budget_bytes,
                 layers_per_page(&gpu.device, pool_budget_bytes),
-                texturer.mip_source_layout(),
+                texturer.mip_layout(),
             ),
             texturer,
             tree,
@@ -481,6 +484,7 @@ impl TerrainRenderer {
             forget: BulkForget::default(),
             decals: world.map.decals.clone(),
             encoder: None,
+            mips_due: Vec::new(),
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
             frame_thread: ItemCost::new(TEXTURE_FRAME_THREAD_PRIOR_S),
             credit: TextureCredit::default(),
@@ -572,7 +576,7 @@ impl TerrainRenderer {
         g.timer.item(gpu, enc);
         g.texturer
             .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
-        g.texturer.record_mips(enc, &slot);
+        g.mips_due.push(slot.mips.clone());
         let uv_per_m = 1.0 / (texel_m(tree, key.level) * f64::from(SIDE));
         Some((slot, uv_per_m as f32))
     }
@@ -826,6 +830,8 @@ impl NodeRenderer for TerrainRenderer {
         g.pending = queue;
         let t = Instant::now();
         if let Some(mut enc) = g.encoder.take() {
+            g.texturer.record_mips(&mut enc, &g.mips_due);
+            g.mips_due.clear();
             g.timer.before_submit(&mut enc);
             g.texturer.submit(gpu, enc);
             g.timer.after_submit();
@@ -960,6 +966,8 @@ fn ground_group(
 ) -> wgpu::BindGroup {
     let view = page.create_view(&wgpu::TextureViewDescriptor {
         label: Some("ground texture page"),
+        format: Some(GROUND_TEXTURE_FORMAT),
+        usage: Some(wgpu::TextureUsages::TEXTURE_BINDING),
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
     });

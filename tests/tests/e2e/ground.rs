@@ -65,7 +65,7 @@ fn render_levels(
 ) -> Vec<Vec<u8>> {
     let slot = pool.lease(&gpu.device).expect("a free layer");
     let mut enc = record_node(gpu, t, &slot.view, world, index, tree, key);
-    t.record_mips(&mut enc, &slot);
+    t.record_mips(&mut enc, std::slice::from_ref(&slot.mips));
     t.submit(gpu, enc);
     let page = pool.page(slot.page()).expect("the slot's page");
     (0..MIP_LEVELS)
@@ -159,7 +159,7 @@ fn neighbours_share_border_texels_at_every_mip_level() {
     let tree = tree_of(&world);
     let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
     let t = GroundTexturer::new(&gpu, &world);
-    let mut pool = GroundPool::new(0, t.mip_source_layout());
+    let mut pool = GroundPool::new(0, t.mip_layout());
     let road = world
         .map
         .decals
@@ -201,22 +201,30 @@ fn neighbours_share_border_texels_at_every_mip_level() {
                     }
                 }
             }
-            // The mips are of this texture: level 1's texel is the mean of level 0's four
-            // (within sRGB rounding), so a mip chain left black or stale would fail here.
-            for (i, j) in [(5, 7), (60, 33), (100, 120)] {
-                let m = texel_of(&other[1], SIDE >> 1, i, j);
-                for c in 0..3 {
-                    let lin = engine::color::srgb_to_linear;
-                    let mean = (0..4)
-                        .map(|q| lin(texel_of(&other[0], SIDE, 2 * i + q % 2, 2 * j + q / 2)[c]))
-                        .sum::<f64>()
-                        / 4.0;
-                    let got = lin(m[c]);
-                    assert!(
-                        (got - mean).abs() <= 0.01 + 0.02 * mean,
-                        "level {level} {side:?}: mip 1 texel ({i}, {j}) channel {c} is {got}, \
-                         the mean of its four level-0 texels is {mean}"
-                    );
+            // The mips are of this texture: a level-k texel is the mean of the 4^k level-0
+            // texels under it in linear light (within sRGB rounding), so a mip level left
+            // black or stale would fail here.
+            for mip in 1..MIP_LEVELS {
+                let n = 1u32 << mip;
+                for (i, j) in [(5, 7), (60, 33), (100, 120), (31, 2)] {
+                    let (i, j) = (i >> (mip - 1), j >> (mip - 1));
+                    let m = texel_of(&other[mip as usize], SIDE >> mip, i, j);
+                    for c in 0..3 {
+                        let lin = engine::color::srgb_to_linear;
+                        let mean = (0..n * n)
+                            .map(
+                                |q| lin(texel_of(&other[0], SIDE, n * i + q % n, n * j + q / n)[c]),
+                            )
+                            .sum::<f64>()
+                            / f64::from(n * n);
+                        let got = lin(m[c]);
+                        assert!(
+                            (got - mean).abs() <= 0.01 + 0.02 * mean,
+                            "level {level} {side:?}: mip {mip} texel ({i}, {j}) channel {c} is \
+                             {got}, the mean of its {} level-0 texels is {mean}",
+                            n * n
+                        );
+                    }
                 }
             }
         }
@@ -323,7 +331,7 @@ fn the_texture_pool_stays_in_its_budget_and_reuses_dropped_layers() {
     let page = LAYERS_PER_PAGE as usize * LAYER_BYTES;
     let world = tiny_world();
     let t = GroundTexturer::new(&gpu, &world);
-    let mut pool = GroundPool::new(page + page / 2, t.mip_source_layout());
+    let mut pool = GroundPool::new(page + page / 2, t.mip_layout());
     let mut slots: Vec<_> = (0..LAYERS_PER_PAGE)
         .map(|_| pool.lease(&gpu.device).expect("a free layer"))
         .collect();

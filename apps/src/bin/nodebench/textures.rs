@@ -41,7 +41,7 @@ pub(crate) fn section_textures(
     let texturer = GroundTexturer::new(gpu, world);
     let index = DecalIndex::new(&world.map.decals, world.origin_m(), world.size_m());
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
-    let mut pool = GroundPool::new(1, texturer.mip_source_layout());
+    let mut pool = GroundPool::new(1, texturer.mip_layout());
     let Some(slot) = pool.lease(&gpu.device) else {
         anyhow::bail!("textures: the pool gave no layer");
     };
@@ -66,7 +66,7 @@ pub(crate) fn section_textures(
             &pieces,
             &world.map.decals,
         );
-        texturer.record_mips(&mut enc, &slot);
+        texturer.record_mips(&mut enc, std::slice::from_ref(&slot.mips));
         if timed && let Some(t) = &timer {
             t.end(&mut enc);
         }
