@@ -1,6 +1,7 @@
 //! Node bounds known so far, shared by the jobs (which measure and add them) and handed on to
 //! the streamer's own copy for selection.
 
+use super::records::Records;
 use crate::surface::World;
 use crate::terrain::bounds::{self, NodeBounds};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -81,14 +82,20 @@ impl BoundsStore {
 /// node), and each node's links to its children's records, so a selection walk finds a
 /// node's children without probing the index (four scattered reads a split node; after the
 /// frame thread was idle they are cache misses). Bounds are only added: a node's bounds never
-/// change.
-#[derive(Debug, Default)]
+/// change. The records never move and their memory is made resident off the frame thread
+/// ([`Records`]).
+#[derive(Debug)]
 pub(super) struct KnownBounds {
     index: FxHashMap<NodeKey, u32>,
-    bounds: Vec<NodeBounds>,
-    /// Per record, its children's records in [`NodeKey::children`] order ([`NO_RECORD`]
-    /// where not known).
-    children: Vec<[u32; 4]>,
+    records: Records<Record>,
+}
+
+/// A known node's bounds and, in [`NodeKey::children`] order, its children's records
+/// ([`NO_RECORD`] where not known).
+#[derive(Debug, Clone, Copy)]
+struct Record {
+    bounds: NodeBounds,
+    children: [u32; 4],
 }
 
 /// A child link to a node whose bounds are not known.
@@ -118,25 +125,27 @@ impl<'a> WalkBounds for &'a KnownBounds {
 
     fn child(&mut self, parent: &KnownRef<'a>, child: NodeKey) -> Option<KnownRef<'a>> {
         let known: &'a KnownBounds = self;
-        let record = known.children[parent.record as usize][child.child_slot()];
+        let record = known.records.get(parent.record as usize).children[child.child_slot()];
         (record != NO_RECORD).then(|| known.lend(record))
     }
 }
 
 impl KnownBounds {
-    /// Room for `nodes` from the start (growing copies the records within one frame).
+    /// Room for `nodes` in the index from the start (growing it rehashes within one frame).
     pub(super) fn with_capacity(nodes: usize) -> Self {
         Self {
             index: FxHashMap::with_capacity_and_hasher(nodes, rustc_hash::FxBuildHasher),
-            bounds: Vec::with_capacity(nodes),
-            children: Vec::with_capacity(nodes),
+            records: Records::new(Record {
+                bounds: NodeBounds::exact(0.0, 0.0),
+                children: [NO_RECORD; 4],
+            }),
         }
     }
 
     fn lend(&self, record: u32) -> KnownRef<'_> {
         KnownRef {
             record,
-            bounds: &self.bounds[record as usize],
+            bounds: &self.records.get(record as usize).bounds,
         }
     }
 
@@ -152,25 +161,27 @@ impl KnownBounds {
             let std::collections::hash_map::Entry::Vacant(e) = self.index.entry(key) else {
                 continue;
             };
-            let record = u32::try_from(self.bounds.len())
+            let record = u32::try_from(self.records.len())
                 .ok()
                 .filter(|&r| r != NO_RECORD)
                 .expect("fewer than 2^32 - 1 known nodes");
             e.insert(record);
-            self.bounds.push(b);
             let children = key
                 .children()
                 .map(|c| self.index.get(&c).copied().unwrap_or(NO_RECORD));
-            self.children.push(children);
-            if let Some(parent) = key.parent().and_then(|p| self.index.get(&p)) {
-                self.children[*parent as usize][key.child_slot()] = record;
+            self.records.push(Record {
+                bounds: b,
+                children,
+            });
+            if let Some(&parent) = key.parent().and_then(|p| self.index.get(&p)) {
+                self.records.get_mut(parent as usize).children[key.child_slot()] = record;
             }
         }
     }
 
     #[cfg(test)]
     pub(super) fn len(&self) -> usize {
-        self.bounds.len()
+        self.records.len()
     }
 }
 
@@ -236,7 +247,10 @@ mod tests {
             for &k in &keys {
                 let parent = source.find(k).expect("every key was added");
                 assert_eq!(parent.record, known.index[&k]);
-                assert_eq!(*parent.bounds, known.bounds[parent.record as usize]);
+                assert_eq!(
+                    *parent.bounds,
+                    known.records.get(parent.record as usize).bounds
+                );
                 for c in k.children() {
                     let found = source.child(&parent, c).map(|r| r.record);
                     assert_eq!(found, known.index.get(&c).copied(), "{k:?} -> {c:?}");

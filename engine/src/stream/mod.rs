@@ -44,6 +44,7 @@ pub use jobs::{idle_priority, lower_priority};
 pub use needed::{DisplayNodes, NeededSet};
 pub mod predict;
 mod queue;
+mod records;
 mod residency;
 
 pub use bounds_store::BoundsStore;
