@@ -1,12 +1,13 @@
 //! An append-only list whose growth never stalls the thread that appends: records live in
-//! fixed chunks (growing never copies them), and the next chunk's memory is written once on a
-//! helper thread before it is needed, so the appending thread never takes its page faults.
+//! fixed chunks (growing never copies them), and the next chunk's memory is written once on the
+//! list's helper thread before it is needed, so the appending thread never takes its page
+//! faults.
 //! With the heap on transparent huge pages (`apps::heap`) a first touch of a fresh 2 MiB page
 //! costs the faulting thread milliseconds (the kernel zeroes, and may compact, a huge page):
 //! the frame thread's copy of the known bounds took two such 6 - 7 ms stalls in a 300-frame
 //! flight before this.
 
-use std::thread::JoinHandle;
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
 
 /// Records per chunk (a power of two; the record's index splits into chunk and slot).
 pub const CHUNK_RECORDS: usize = 4096;
@@ -18,8 +19,10 @@ type Chunk<T> = Vec<T>;
 #[derive(Debug)]
 pub struct Records<T: Copy + Send + 'static> {
     chunks: Vec<Chunk<T>>,
-    /// The next chunk, its memory being made resident on a helper thread.
-    spare: Option<JoinHandle<Chunk<T>>>,
+    /// The next chunk, made resident by the helper thread (which waits until it is taken,
+    /// then makes another; it ends when the list is dropped). None without a helper (the
+    /// system refused a thread): chunks are then made on the appending thread.
+    spare: Option<Receiver<Chunk<T>>>,
     fill: T,
     len: usize,
 }
@@ -32,12 +35,23 @@ fn resident_chunk<T: Copy>(fill: T) -> Chunk<T> {
     c
 }
 
+/// The helper thread: resident chunks, one at a time, each handed over when taken; returns
+/// once the list is gone.
+fn make_chunks<T: Copy>(send: &SyncSender<Chunk<T>>, fill: T) {
+    while send.send(resident_chunk(fill)).is_ok() {}
+}
+
 impl<T: Copy + Send + 'static> Records<T> {
-    /// An empty list; `fill` is the value chunks are written with before use (never read).
+    /// An empty list and its helper thread; `fill` is the value chunks are written with
+    /// before use (never read).
     pub fn new(fill: T) -> Self {
+        let (send, spare) = sync_channel(0);
+        let helper = std::thread::Builder::new()
+            .name("records chunks".into())
+            .spawn(move || make_chunks(&send, fill));
         Self {
             chunks: Vec::new(),
-            spare: None,
+            spare: helper.is_ok().then_some(spare),
             fill,
             len: 0,
         }
@@ -47,25 +61,20 @@ impl<T: Copy + Send + 'static> Records<T> {
         self.len
     }
 
-    /// Appends `record` at index `len()`. When the last chunk is full, the spare made on the
-    /// helper thread becomes the next one (made here only when it is not ready yet), and a
-    /// new spare is started.
+    /// Appends `record` at index `len()`. When the last chunk is full, the helper's spare
+    /// becomes the next one (made here only when the helper is not done with it yet).
     pub fn push(&mut self, record: T) {
         if self.chunks.last().is_none_or(|c| c.len() == CHUNK_RECORDS) {
-            let ready = self
-                .spare
-                .take_if(|s| s.is_finished())
-                .and_then(|s| s.join().ok());
+            let ready = match self.spare.as_ref().map(Receiver::try_recv) {
+                Some(Ok(chunk)) => Some(chunk),
+                Some(Err(TryRecvError::Empty)) => None,
+                Some(Err(TryRecvError::Disconnected)) | None => {
+                    self.spare = None;
+                    None
+                }
+            };
             let chunk = ready.unwrap_or_else(|| resident_chunk(self.fill));
             self.chunks.push(chunk);
-            if self.spare.is_none() {
-                let fill = self.fill;
-                // Without a thread (the system refused one) the next chunk is made here.
-                self.spare = std::thread::Builder::new()
-                    .name("records chunk".into())
-                    .spawn(move || resident_chunk(fill))
-                    .ok();
-            }
         }
         if let Some(c) = self.chunks.last_mut() {
             c.push(record);
