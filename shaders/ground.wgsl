@@ -222,8 +222,16 @@ fn fs_area(in: AreaOut) -> @location(0) vec4<f32> {
 @group(3) @binding(2) var mip_2: texture_storage_2d<rgba8unorm, write>;
 @group(3) @binding(3) var mip_3: texture_storage_2d<rgba8unorm, write>;
 
-var<workgroup> mip_1_block: array<vec4<f32>, 256>;
-var<workgroup> mip_2_block: array<vec4<f32>, 64>;
+// Level 1 of the workgroup's block (16 x 16, from 0), then level 2 (8 x 8, from 256).
+var<workgroup> mip_block: array<vec4<f32>, 320>;
+
+// The mean of the 2 x 2 texels of a level in `mip_block` (its first texel at `first`,
+// `width` a row) under texel `l` of the level below.
+fn block_mean(first: u32, width: u32, l: vec2<u32>) -> vec4<f32> {
+    let k = first + l.y * 2u * width + l.x * 2u;
+    return 0.25 * (mip_block[k] + mip_block[k + 1u] + mip_block[k + width]
+        + mip_block[k + width + 1u]);
+}
 
 fn srgb_encoded(c: vec4<f32>) -> vec4<f32> {
     let rgb = clamp(c.rgb, vec3<f32>(0.0), vec3<f32>(1.0));
@@ -239,20 +247,15 @@ fn cs_mips(@builtin(workgroup_id) block: vec3<u32>, @builtin(local_invocation_id
         + textureLoad(mip_base, b + vec2<i32>(0, 1), 0)
         + textureLoad(mip_base, b + vec2<i32>(1, 1), 0));
     textureStore(mip_1, p1, srgb_encoded(m1));
-    mip_1_block[l.y * 16u + l.x] = m1;
+    mip_block[l.y * 16u + l.x] = m1;
     workgroupBarrier();
     if (l.x < 8u && l.y < 8u) {
-        let k = l.y * 32u + l.x * 2u;
-        let m2 = 0.25 * (mip_1_block[k] + mip_1_block[k + 1u] + mip_1_block[k + 16u]
-            + mip_1_block[k + 17u]);
+        let m2 = block_mean(0u, 16u, l.xy);
         textureStore(mip_2, block.xy * 8u + l.xy, srgb_encoded(m2));
-        mip_2_block[l.y * 8u + l.x] = m2;
+        mip_block[256u + l.y * 8u + l.x] = m2;
     }
     workgroupBarrier();
     if (l.x < 4u && l.y < 4u) {
-        let k = l.y * 16u + l.x * 2u;
-        let m3 = 0.25 * (mip_2_block[k] + mip_2_block[k + 1u] + mip_2_block[k + 8u]
-            + mip_2_block[k + 9u]);
-        textureStore(mip_3, block.xy * 4u + l.xy, srgb_encoded(m3));
+        textureStore(mip_3, block.xy * 4u + l.xy, srgb_encoded(block_mean(256u, 8u, l.xy)));
     }
 }

@@ -24,7 +24,6 @@ pub struct Records<T: Copy + Send + 'static> {
     /// system refused a thread): chunks are then made on the appending thread.
     spare: Option<Receiver<Chunk<T>>>,
     fill: T,
-    len: usize,
 }
 
 /// An empty chunk whose memory has been written (so it is resident).
@@ -53,12 +52,13 @@ impl<T: Copy + Send + 'static> Records<T> {
             chunks: Vec::new(),
             spare: helper.is_ok().then_some(spare),
             fill,
-            len: 0,
         }
     }
 
     pub fn len(&self) -> usize {
-        self.len
+        self.chunks
+            .last()
+            .map_or(0, |c| (self.chunks.len() - 1) * CHUNK_RECORDS + c.len())
     }
 
     /// Appends `record` at index `len()`. When the last chunk is full, the helper's spare
@@ -78,7 +78,6 @@ impl<T: Copy + Send + 'static> Records<T> {
         }
         if let Some(c) = self.chunks.last_mut() {
             c.push(record);
-            self.len += 1;
         }
     }
 
