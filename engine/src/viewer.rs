@@ -76,10 +76,17 @@ pub struct FrameStats {
     pub selection_ms: f64,
     /// Of `update_ms`: its stages, in the order of `stream::UpdateStages::NAMES`.
     pub update_stages_ms: [f64; crate::stream::UpdateStages::NAMES.len()],
-    /// Wall-clock time of update, uploads and encode.
+    /// Finishing the frame's command buffer ([`Viewer::submit_frame`]; wgpu encodes the
+    /// recorded passes and copies there). Of `cpu_frame_ms`.
+    pub finish_ms: f64,
+    /// Submitting it, wall clock (wgpu also frees the commands of finished submissions there).
+    /// Not in `cpu_frame_ms`: on a software adapter the submission waits for the work
+    /// submitted before it. Its on-CPU time is in `cpu_frame_on_cpu_ms`.
+    pub submit_ms: f64,
+    /// Wall-clock time of update, uploads, encode and the frame's finish.
     pub cpu_frame_ms: f64,
-    /// The frame thread's own CPU time over the same span (the time the OS gave other threads
-    /// meanwhile left out), when the platform reports it.
+    /// The frame thread's own CPU time from the frame's start through its submission (the
+    /// time the OS gave other threads meanwhile left out), when the platform reports it.
     pub cpu_frame_on_cpu_ms: Option<f64>,
     /// Terrain draw calls recorded (a multi-draw counts once) and the node meshes they draw.
     pub draw_calls: u32,
@@ -344,6 +351,8 @@ impl Viewer {
             reference_triangles: self.reference.as_ref().map_or(0, |r| r.triangles),
             selection_ms: st.last_update.selections_s() * 1e3,
             update_stages_ms: st.last_update.seconds().map(|s| s * 1e3),
+            finish_ms: 0.0,
+            submit_ms: 0.0,
             cpu_frame_ms: ms(t0, t3),
             cpu_frame_on_cpu_ms: on_cpu.map(|d| d.as_secs_f64() * 1e3),
             draw_calls: stats.draw_calls,
@@ -411,9 +420,8 @@ impl Viewer {
             cam,
             dt_s,
         );
+        self.submit_frame(gpu, [], enc, &mut st);
         let t0 = Instant::now();
-        gpu.queue.submit([enc.finish()]);
-        self.after_submit();
         gpu.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| format!("waiting for the GPU: {e}"))?;
@@ -421,9 +429,35 @@ impl Viewer {
         Ok(st)
     }
 
-    /// Call after submitting the encoder given to [`Self::frame`] (starts the timestamp
-    /// readback).
-    pub fn after_submit(&self) {
+    /// Finishes `enc` (the encoder given to [`Self::frame`]) and submits it after `before`
+    /// (command buffers that must run first, e.g. a UI's uploads). The finish counts in `st`'s
+    /// CPU frame (`finish_ms`, `cpu_frame_ms`); the submission in its on-CPU time only
+    /// (`submit_ms` holds its wall-clock time: a software adapter makes it wait for the work
+    /// submitted before, GPU time on a hardware one).
+    pub fn submit_frame(
+        &self,
+        gpu: &Gpu,
+        before: impl IntoIterator<Item = wgpu::CommandBuffer>,
+        enc: wgpu::CommandEncoder,
+        st: &mut FrameStats,
+    ) {
+        let t0 = Instant::now();
+        let on_cpu0 = cpu_time::ThreadTime::try_now().ok();
+        let commands = enc.finish();
+        let t1 = Instant::now();
+        gpu.queue.submit(before.into_iter().chain([commands]));
+        self.after_submit();
+        let on_cpu_ms = on_cpu0
+            .and_then(|t| t.try_elapsed().ok())
+            .map(|d| d.as_secs_f64() * 1e3);
+        st.finish_ms = (t1 - t0).as_secs_f64() * 1e3;
+        st.submit_ms = t1.elapsed().as_secs_f64() * 1e3;
+        st.cpu_frame_ms += st.finish_ms;
+        st.cpu_frame_on_cpu_ms = st.cpu_frame_on_cpu_ms.zip(on_cpu_ms).map(|(a, b)| a + b);
+    }
+
+    /// Called by [`Self::submit_frame`] after the submission (starts the timestamp readback).
+    fn after_submit(&self) {
         if let Some(t) = &self.timer {
             t.after_submit();
         }

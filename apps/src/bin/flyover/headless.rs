@@ -236,9 +236,8 @@ fn renderer_rows(all: &[FrameStats]) -> Vec<(String, Vec<f64>)> {
     rows
 }
 
-/// Prints the per-frame table (median, p95, max of every row) and the GPU ratio; returns the
-/// summary for `stats.json`.
-fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
+/// The table's rows of the frame thread's parts (update, uploads, encode, finish, submit).
+fn frame_part_rows(all: &[FrameStats]) -> Vec<(String, Vec<f64>)> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
     let mut rows: Vec<(String, Vec<f64>)> = vec![
         (
@@ -257,10 +256,28 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         ("  of which the draw list".into(), col(|s| s.draw_list_ms)),
     ]);
     rows.extend(renderer_rows(all));
-    rows.push((
-        "  of which recording the pass".into(),
-        col(|s| s.render.record_ms),
-    ));
+    rows.extend([
+        (
+            "  of which recording the pass".into(),
+            col(|s| s.render.record_ms),
+        ),
+        (
+            "finishing the frame's commands (wgpu encodes the pass there)".into(),
+            col(|s| s.finish_ms),
+        ),
+        (
+            "submitting them (on a software adapter: waits for earlier submissions to run)".into(),
+            col(|s| s.submit_ms),
+        ),
+    ]);
+    rows
+}
+
+/// Prints the per-frame table (median, p95, max of every row) and the GPU ratio; returns the
+/// summary for `stats.json`.
+fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
+    let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
+    let mut rows = frame_part_rows(all);
     let more: [(&str, Vec<f64>); 25] = [
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
@@ -272,11 +289,11 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
             all.iter().filter_map(|s| s.gpu_reference_ms).collect(),
         ),
         (
-            "CPU frame (update + uploads + encode)",
+            "CPU frame (update + uploads + encode + finish)",
             col(|s| s.cpu_frame_ms),
         ),
         (
-            "  the same, on-CPU time of the frame thread (time given to other threads left out)",
+            "  on-CPU time of the frame thread, through the submission (time given to other threads left out)",
             all.iter().filter_map(|s| s.cpu_frame_on_cpu_ms).collect(),
         ),
         ("triangles", col(|s| s.triangles as f64)),

@@ -464,7 +464,7 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("window frame"),
         });
-    let stats = st
+    let mut stats = st
         .viewer
         .frame(&st.gpu, &mut enc, &terrain_view, &st.depth, &st.cam, dt);
     // The UI: two passes on the first frame (egui lays windows out on the first pass).
@@ -527,10 +527,8 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
         st.egui_renderer
             .update_buffers(&st.gpu.device, &st.gpu.queue, &mut enc, &prims, &screen);
     draw_ui(&mut enc, &view, &st.egui_renderer, &prims, &screen);
-    st.gpu
-        .queue
-        .submit(extra_cmds.into_iter().chain([enc.finish()]));
-    st.viewer.after_submit();
+    // The UI's encoding counts in the CPU frame too (one finish for both).
+    st.viewer.submit_frame(&st.gpu, extra_cmds, enc, &mut stats);
     st.gpu.queue.present(frame);
     for id in &textures.free {
         st.egui_renderer.free_texture(id);
