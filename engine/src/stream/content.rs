@@ -11,7 +11,7 @@ use crate::terrain::bounds::NodeBounds;
 use crate::terrain::quadtree::NodeKey;
 use crate::terrain::tiles::{Tile, TileKey};
 use glam::DVec3;
-use std::any::Any;
+use std::any::{Any, TypeId};
 use std::sync::Arc;
 
 /// Where a phase runs.
@@ -122,8 +122,10 @@ pub struct NodeWork {
     pub bounds: Option<NodeBounds>,
     /// Tiles held by this job (released when the job's CPU phases end, finished or cancelled).
     pub tiles: Vec<(TileKey, Arc<Tile>)>,
-    /// One payload per content kind that produced one (at most one of each type).
-    payloads: Vec<Box<dyn Payload>>,
+    /// One payload per content kind that produced one (at most one of each type), each with
+    /// its type's id: a lookup compares ids in place, with no call through each payload's
+    /// vtable (renderers look up every drawn node's payloads every frame).
+    payloads: Vec<(TypeId, Box<dyn Payload>)>,
     /// Set by the GPU phase: bytes that went to the GPU.
     pub uploaded_bytes: usize,
     /// Set by the GPU phase: the GPU seconds its upload hooks expect the work they recorded
@@ -151,28 +153,29 @@ impl NodeWork {
 
     /// Stores a payload (replacing one of the same type).
     pub fn put<T: Payload>(&mut self, payload: T) {
-        self.payloads
-            .retain(|p| !(p.as_ref() as &dyn Any).is::<T>());
-        self.payloads.push(Box::new(payload));
+        let id = TypeId::of::<T>();
+        self.payloads.retain(|(t, _)| *t != id);
+        self.payloads.push((id, Box::new(payload)));
     }
 
     /// The payload of type `T`, if a phase stored one.
     pub fn get<T: Payload>(&self) -> Option<&T> {
-        self.payloads
-            .iter()
-            .find_map(|p| (p.as_ref() as &dyn Any).downcast_ref::<T>())
+        let id = TypeId::of::<T>();
+        let (_, p) = self.payloads.iter().find(|(t, _)| *t == id)?;
+        (p.as_ref() as &dyn Any).downcast_ref::<T>()
     }
 
     /// Bytes this node keeps resident (all payloads).
     pub fn bytes(&self) -> usize {
-        self.payloads.iter().map(|p| p.bytes()).sum()
+        self.payloads.iter().map(|(_, p)| p.bytes()).sum()
     }
 }
 
 /// GPU objects of one node, one per renderer, of types only the renderers know (the streaming
 /// system stays free of wgpu).
+/// Each object is kept with its type's id, as the payloads are.
 #[derive(Default)]
-pub struct GpuSlots(Vec<Box<dyn Any + Send + Sync>>);
+pub struct GpuSlots(Vec<(TypeId, Box<dyn Any + Send + Sync>)>);
 
 impl std::fmt::Debug for GpuSlots {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -183,12 +186,15 @@ impl std::fmt::Debug for GpuSlots {
 impl GpuSlots {
     /// Stores a renderer's object for the node (replacing one of the same type).
     pub fn put<T: Any + Send + Sync>(&mut self, object: T) {
-        self.0.retain(|o| !o.is::<T>());
-        self.0.push(Box::new(object));
+        let id = TypeId::of::<T>();
+        self.0.retain(|(t, _)| *t != id);
+        self.0.push((id, Box::new(object)));
     }
 
     /// The stored object of type `T`.
     pub fn get<T: Any>(&self) -> Option<&T> {
-        self.0.iter().find_map(|o| o.downcast_ref::<T>())
+        let id = TypeId::of::<T>();
+        let (_, o) = self.0.iter().find(|(t, _)| *t == id)?;
+        o.downcast_ref::<T>()
     }
 }
