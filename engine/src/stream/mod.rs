@@ -316,6 +316,8 @@ pub struct Streamer {
     /// The part of the needed set's split nodes drawn split: nodes over the display threshold
     /// (`show_factor * tau`) and their ancestors.
     show_split: FxHashSet<NodeKey>,
+    /// The last frame's `show_split` and `wanted`, reused by the next update.
+    spare_sets: [FxHashSet<NodeKey>; 2],
     /// The prefetch set's parts, each refreshed when stale (see [`predict`]); a node is
     /// prefetched when a part holds it and it is not needed now.
     prefetch_parts: Vec<predict::PrefetchPart>,
@@ -413,6 +415,7 @@ impl Streamer {
             known: bounds_store::KnownBounds::with_capacity(KNOWN_CAPACITY),
             needed: NeededSet::empty(tree),
             show_split: FxHashSet::default(),
+            spare_sets: Default::default(),
             prefetch_parts: vec![predict::PrefetchPart::default(); predict::PREFETCH_PARTS],
             parts_to_request: 0,
             split: FxHashMap::default(),
@@ -475,7 +478,12 @@ impl Streamer {
     /// so ground about to come into view (the camera turning, or passing a hill) is split
     /// before it shows, instead of appearing coarse and fading to its children on screen.
     pub fn select_wanted(&self, cam: &Camera, tau_px: f64) -> FxHashSet<NodeKey> {
-        self.select(cam, tau_px, None)
+        let mut wanted = FxHashSet::with_capacity_and_hasher(
+            self.wanted.len() + self.wanted.len() / 4,
+            rustc_hash::FxBuildHasher,
+        );
+        self.select(cam, tau_px, None, &mut wanted);
+        wanted
     }
 
     /// [`Self::select_wanted`]; with `over` = (set, threshold), also puts each node split
@@ -485,11 +493,8 @@ impl Streamer {
         cam: &Camera,
         tau_px: f64,
         mut over: Option<(&mut FxHashSet<NodeKey>, f64)>,
-    ) -> FxHashSet<NodeKey> {
-        let mut wanted = FxHashSet::with_capacity_and_hasher(
-            self.wanted.len() + self.wanted.len() / 4,
-            rustc_hash::FxBuildHasher,
-        );
+        wanted: &mut FxHashSet<NodeKey>,
+    ) {
         // Only errors over tau are looked at (the split test, what vegetation lets through
         // of them, and the display threshold over them); without vegetation's share, none
         // over the larger of the two thresholds.
@@ -545,7 +550,6 @@ impl Streamer {
                 });
             },
         );
-        wanted
     }
 
     /// The nodes needed to show the selection `wanted`: its ancestors and their children (see
@@ -589,16 +593,20 @@ impl Streamer {
         }
         stages.results_s = lap.next();
         let tau = self.settings.tau_px;
-        let mut shown = FxHashSet::with_capacity_and_hasher(
-            self.show_split.len() + 16,
-            rustc_hash::FxBuildHasher,
-        );
+        // Into the last frame's sets, emptied (their tables kept: no allocation, no fresh
+        // pages each frame).
+        let [mut shown, mut wanted] = std::mem::take(&mut self.spare_sets).map(|mut set| {
+            set.clear();
+            set
+        });
         let show_px = tau * self.settings.show_factor.max(self.settings.split_factor);
-        self.wanted = self.select(
+        self.select(
             cam,
             tau * self.settings.split_factor,
             Some((&mut shown, show_px)),
+            &mut wanted,
         );
+        let last_wanted = std::mem::replace(&mut self.wanted, wanted);
         // Everything on the path from the root to a wanted node is needed too (ancestors are
         // what is shown until the wanted nodes are ready).
         self.needed = self.needed_for(&self.wanted);
@@ -607,7 +615,7 @@ impl Streamer {
         shown.retain(|k| self.needed.split().contains(k));
         let above = ancestor_set(shown.iter().copied());
         shown.extend(above);
-        self.show_split = shown;
+        self.spare_sets = [std::mem::replace(&mut self.show_split, shown), last_wanted];
         stages.selection_s = lap.next();
         self.parts_to_request |= self.refresh_prefetch(cam, future);
         stages.prefetch_s = lap.next();
