@@ -17,6 +17,8 @@ struct Page {
     /// Albedo and coverage, then normals.
     textures: [wgpu::Texture; 2],
     group: wgpu::BindGroup,
+    /// Each layer's two views (bake targets), made at its first lease and kept for the next.
+    layer_views: Vec<Option<[wgpu::TextureView; 2]>>,
 }
 
 /// The pages, their layer allocator and the bind-group layout (albedo array at binding 3,
@@ -114,20 +116,26 @@ impl ImpostorPages {
                     },
                 ],
             });
-            self.pages.push(Page { textures, group });
+            self.pages.push(Page {
+                textures,
+                group,
+                layer_views: vec![None; LAYERS_PER_PAGE as usize],
+            });
         }
-        let layer_views = self.pages[lease.page as usize]
-            .textures
-            .each_ref()
-            .map(|t| {
+        let page = &mut self.pages[lease.page as usize];
+        let layer = lease.start[0];
+        let layer_views = page.layer_views[layer as usize].get_or_insert_with(|| {
+            page.textures.each_ref().map(|t| {
                 t.create_view(&wgpu::TextureViewDescriptor {
                     label: Some("impostor layer"),
                     dimension: Some(wgpu::TextureViewDimension::D2),
-                    base_array_layer: lease.start[0],
+                    base_array_layer: layer,
                     array_layer_count: Some(1),
                     ..Default::default()
                 })
-            });
+            })
+        });
+        let layer_views = layer_views.clone();
         Some((lease, layer_views))
     }
 

@@ -189,6 +189,9 @@ pub struct VegetationRenderer {
     atlas_group: wgpu::BindGroup,
     /// The atlas as a plain texture + sampler (sampled by the impostor bake).
     atlas_texture_group: wgpu::BindGroup,
+    /// The frame resources' group 0 (bound by the impostor bakes, recorded where the frame
+    /// resources are not at hand).
+    frame_group: wgpu::BindGroup,
     cluster_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
     /// Plant instances: one range per node, in pages of [`PAGE_INSTANCES`].
@@ -204,25 +207,106 @@ pub struct VegetationRenderer {
     staging: wgpu::util::StagingBelt,
 }
 
-/// Impostor bakes recorded by this frame's uploads, submitted together before the frame is
-/// drawn (one submission per frame instead of one per node).
+/// Impostor bakes asked for by this frame's uploads, recorded and submitted together when the
+/// uploads finish (one submission per frame instead of one per node). Every bake's clusters
+/// and members go into two buffers shared by all of them, written once per submission: a bake
+/// costs its pass, not two new buffers and a bind group.
 struct PendingBakes {
-    encoder: Option<wgpu::CommandEncoder>,
-    /// The frame thread's time per bake at that submission (where wgpu encodes the recorded
-    /// passes): each upload that bakes charges it to the frame's budget beforehand.
+    asked: Vec<BakeAsk>,
+    /// One block of [`CLUSTER_COUNT`] clusters per bake, and every bake's members, in order.
+    clusters: Vec<ClusterUniform>,
+    members: Vec<PlantInstance>,
+    /// The shared buffers (grown to the largest submission so far), with the clusters' bind
+    /// group (a dynamic offset picks a bake's block).
+    buffers: Option<BakeBuffers>,
+    /// The frame thread's time per bake at that submission (where its pass is recorded and
+    /// encoded): each upload that bakes charges it to the frame's budget beforehand.
     submit: ItemCost,
-    /// Bakes recorded since the last submission, and what their uploads charged the budget.
-    recorded: usize,
+    /// What the uploads of the bakes asked for since the last submission charged the budget.
     charged_s: f64,
+    /// The most bakes one submission held so far.
+    most_together: usize,
 }
+
+/// One asked-for bake: the node (for the pass's label), its layer's two views, its members.
+struct BakeAsk {
+    key: NodeKey,
+    views: [wgpu::TextureView; 2],
+    members: std::ops::Range<u32>,
+}
+
+struct BakeBuffers {
+    clusters: wgpu::Buffer,
+    members: wgpu::Buffer,
+    group: wgpu::BindGroup,
+}
+
+/// Bytes of one bake's cluster block (a multiple of every adapter's uniform offset alignment,
+/// 256 at most).
+const CLUSTER_BLOCK_BYTES: u64 = (CLUSTER_COUNT * std::mem::size_of::<ClusterUniform>()) as u64;
+const _: () = assert!(CLUSTER_BLOCK_BYTES.is_multiple_of(256));
 
 impl PendingBakes {
     fn new() -> Self {
         Self {
-            encoder: None,
+            asked: Vec::new(),
+            clusters: Vec::new(),
+            members: Vec::new(),
+            buffers: None,
             submit: ItemCost::new(BAKE_SUBMIT_PRIOR_S),
-            recorded: 0,
             charged_s: 0.0,
+            most_together: 0,
+        }
+    }
+
+    /// Grows the shared buffers (to a power of two) to hold what is asked for now.
+    fn grow_buffers(&mut self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout) {
+        let need = [
+            (self.clusters.len() * std::mem::size_of::<ClusterUniform>()) as u64,
+            (self.members.len() * std::mem::size_of::<PlantInstance>()) as u64,
+        ];
+        let fits = self
+            .buffers
+            .as_ref()
+            .is_some_and(|b| b.clusters.size() >= need[0] && b.members.size() >= need[1].max(1));
+        if !fits {
+            let have = self
+                .buffers
+                .as_ref()
+                .map_or([0, 0], |b| [b.clusters.size(), b.members.size()]);
+            let size = |i: usize| {
+                need[i]
+                    .max(have[i])
+                    .max(CLUSTER_BLOCK_BYTES)
+                    .next_power_of_two()
+            };
+            let buffer = |label, size, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage: usage | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            let clusters = buffer("impostor clusters", size(0), wgpu::BufferUsages::UNIFORM);
+            let members = buffer("impostor members", size(1), wgpu::BufferUsages::VERTEX);
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("impostor clusters"),
+                layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &clusters,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(CLUSTER_BLOCK_BYTES),
+                    }),
+                }],
+            });
+            self.buffers = Some(BakeBuffers {
+                clusters,
+                members,
+                group,
+            });
         }
     }
 }
@@ -379,7 +463,7 @@ impl VegetationRenderer {
         );
         let texture_layout = layout("vegetation texture layout", &atlas);
         let looks_layout = layout("vegetation looks layout", &[looks_entry]);
-        let cluster_entry = uniform_entry(1, false, wgpu::ShaderStages::VERTEX);
+        let cluster_entry = uniform_entry(1, true, wgpu::ShaderStages::VERTEX);
         let cluster_layout = layout("impostor cluster layout", &[cluster_entry]);
         let drawn_layout =
             frame.pipeline_layout(device, "vegetation layout", true, &[Some(&atlas_layout)]);
@@ -486,6 +570,7 @@ impl VegetationRenderer {
                 &sampler,
                 Some(&looks_buffer),
             ),
+            frame_group: frame.group.clone(),
             atlas_texture_group: texture_group(
                 device,
                 "billboard atlas texture",
@@ -569,12 +654,12 @@ impl VegetationRenderer {
 
     /// Uploads a node's vegetation (None when it has none, or when the instance pool, the
     /// impostor pages or the node table are full). Group-billboard members are baked, cluster
-    /// by cluster, into the node's impostor layer (a render pass submitted here); the node then
-    /// draws one quad per cluster instead of its members.
+    /// by cluster, into the node's impostor layer (a render pass recorded and submitted with the
+    /// frame's other bakes when the uploads finish); the node then draws one quad per cluster
+    /// instead of its members.
     pub fn upload_node(
         &mut self,
         gpu: &Gpu,
-        frame: &FrameResources,
         tree: &QuadTree,
         key: NodeKey,
         veg: &NodeVegetation,
@@ -675,7 +760,7 @@ impl VegetationRenderer {
                 kind: PlantDraw::Impostor,
                 kept: veg.clusters.kept,
             });
-            self.bake_impostors(gpu, frame, key, &uniforms, &members, &layer_views);
+            self.bake_impostors(key, &uniforms, &members, layer_views);
             impostors = Some(layer);
             texture_bytes = self.impostors.layer_bytes();
         }
@@ -706,47 +791,67 @@ impl VegetationRenderer {
     /// `layer_views` (one tile per cluster, seen from the south).
     fn bake_impostors(
         &mut self,
-        gpu: &Gpu,
-        frame: &FrameResources,
         key: NodeKey,
         clusters: &[ClusterUniform; CLUSTER_COUNT],
         members: &[PlantInstance],
-        layer_views: &[wgpu::TextureView; 2],
+        layer_views: [wgpu::TextureView; 2],
     ) {
-        let device = &gpu.device;
-        let label = format!("node {}/{}/{} impostors", key.level, key.ix, key.iy);
-        let cluster_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("impostor clusters"),
-            contents: bytemuck::cast_slice(clusters),
-            usage: wgpu::BufferUsages::UNIFORM,
+        let b = &mut self.bakes;
+        let first = b.members.len() as u32;
+        b.members.extend_from_slice(members);
+        b.clusters.extend_from_slice(clusters);
+        b.asked.push(BakeAsk {
+            key,
+            views: layer_views,
+            members: first..b.members.len() as u32,
         });
-        let cluster_group = uniform_group(
-            device,
-            "impostor clusters",
-            &self.cluster_layout,
-            1,
-            &cluster_buffer,
-        );
-        let member_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("impostor members"),
-            contents: bytemuck::cast_slice(members),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let enc = self.bakes.encoder.get_or_insert_with(|| {
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("impostor bakes"),
-            })
-        });
-        {
-            let targets = [&layer_views[0], &layer_views[1]];
-            let mut pass = bake_pass(enc, &label, &targets, &self.impostors.bake_depth);
-            pass.set_pipeline(&self.group_bake);
-            pass.set_bind_group(0, &frame.group, &[]);
-            pass.set_bind_group(1, &cluster_group, &[]);
-            pass.set_bind_group(2, &self.atlas_texture_group, &[]);
-            pass.set_vertex_buffer(0, member_buffer.slice(..));
-            pass.draw(0..6, 0..members.len() as u32);
+    }
+
+    /// The most impostor bakes one submission held so far (they share its cluster and
+    /// member buffers).
+    pub fn most_bakes_submitted_together(&self) -> usize {
+        self.bakes.most_together
+    }
+
+    /// Records and submits the bakes asked for since the last call (see [`PendingBakes`]).
+    fn submit_bakes(&mut self, gpu: &Gpu) {
+        if self.bakes.asked.is_empty() {
+            return;
         }
+        let device = &gpu.device;
+        let b = &mut self.bakes;
+        b.grow_buffers(device, &self.cluster_layout);
+        let Some(buffers) = &b.buffers else { return };
+        gpu.queue
+            .write_buffer(&buffers.clusters, 0, bytemuck::cast_slice(&b.clusters));
+        gpu.queue
+            .write_buffer(&buffers.members, 0, bytemuck::cast_slice(&b.members));
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("impostor bakes"),
+        });
+        let member_bytes = std::mem::size_of::<PlantInstance>() as u64;
+        for (i, ask) in b.asked.iter().enumerate() {
+            let label = format!(
+                "node {}/{}/{} impostors",
+                ask.key.level, ask.key.ix, ask.key.iy
+            );
+            let targets = [&ask.views[0], &ask.views[1]];
+            let mut pass = bake_pass(&mut enc, &label, &targets, &self.impostors.bake_depth);
+            pass.set_pipeline(&self.group_bake);
+            pass.set_bind_group(0, &self.frame_group, &[]);
+            let offset = i as u64 * CLUSTER_BLOCK_BYTES;
+            pass.set_bind_group(1, &buffers.group, &[offset as u32]);
+            pass.set_bind_group(2, &self.atlas_texture_group, &[]);
+            let bytes = u64::from(ask.members.start) * member_bytes
+                ..u64::from(ask.members.end) * member_bytes;
+            pass.set_vertex_buffer(0, buffers.members.slice(bytes));
+            pass.draw(0..6, 0..ask.members.len() as u32);
+        }
+        gpu.queue.submit([enc.finish()]);
+        b.most_together = b.most_together.max(b.asked.len());
+        b.asked.clear();
+        b.clusters.clear();
+        b.members.clear();
     }
 
     /// Adds the draws of node `p` (at `level`, dither interval `dither`) whose groups' dither
@@ -891,14 +996,14 @@ impl NodeRenderer for VegetationRenderer {
     fn upload(
         &mut self,
         gpu: &Gpu,
-        frame: &FrameResources,
+        _frame: &FrameResources,
         tree: &QuadTree,
         work: &mut NodeWork,
         copies: &mut UploadEncoder<'_>,
     ) -> usize {
         let Some(node) = work
             .get::<NodeVegetation>()
-            .and_then(|v| self.upload_node(gpu, frame, tree, work.key, v, copies))
+            .and_then(|v| self.upload_node(gpu, tree, work.key, v, copies))
         else {
             return 0;
         };
@@ -907,7 +1012,6 @@ impl NodeRenderer for VegetationRenderer {
             let charge_s = self.bakes.submit.per_item_s();
             work.gpu_estimate_s += charge_s;
             self.bakes.charged_s += charge_s;
-            self.bakes.recorded += 1;
         }
         let bytes = node.bytes;
         work.gpu.put(node);
@@ -922,12 +1026,10 @@ impl NodeRenderer for VegetationRenderer {
     /// charged the budget, since the caller counts the submission's measured time instead.
     fn finish_uploads(&mut self, gpu: &Gpu, _time_left_s: f64) -> f64 {
         let t0 = Instant::now();
+        let baked = self.bakes.asked.len();
+        self.submit_bakes(gpu);
         let b = &mut self.bakes;
-        if let Some(enc) = b.encoder.take() {
-            gpu.queue.submit([enc.finish()]);
-        }
-        b.submit.observe(t0.elapsed().as_secs_f64(), b.recorded);
-        b.recorded = 0;
+        b.submit.observe(t0.elapsed().as_secs_f64(), baked);
         -std::mem::take(&mut b.charged_s)
     }
 

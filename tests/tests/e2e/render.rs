@@ -657,3 +657,58 @@ fn merged_draws_draw_exactly_the_pixels_of_per_item_draws() {
         );
     }
 }
+
+/// Impostor bakes submitted together (their clusters and members in buffers shared by the
+/// submission, each bake at its own offsets) bake the textures of bakes submitted one by one:
+/// the same settled view of the tiny map's group billboards has the same pixels when every
+/// frame uploads all the nodes that are ready (several bakes a submission) and when each frame
+/// uploads one (a byte budget of 1: one bake a submission).
+#[test]
+fn impostor_bakes_submitted_together_bake_what_single_bakes_do() {
+    use engine::render::vegetation::VegetationRenderer;
+    let Some(g) = device() else {
+        return;
+    };
+    let size = [320u32, 180];
+    let cam = golden_view(size);
+    let target = Target::new(&g.device, size, COLOR_FORMAT);
+    let mut pictures = Vec::new();
+    for one_a_frame in [false, true] {
+        let mut v = tiny_viewer(&g, 1.0);
+        if one_a_frame {
+            v.streamer.settings.gpu_budget_bytes = 1;
+        }
+        let st = settle(&g, &mut v, &target, &cam);
+        assert!(
+            st.group_billboards > 0,
+            "no group billboards in view: {st:?}"
+        );
+        let together = v
+            .scene
+            .renderer::<VegetationRenderer>()
+            .expect("a vegetation renderer")
+            .most_bakes_submitted_together();
+        println!("one node a frame {one_a_frame}: at most {together} bakes a submission");
+        if one_a_frame {
+            assert_eq!(
+                together, 1,
+                "one upload a frame bakes one node a submission"
+            );
+        } else {
+            assert!(
+                together >= 2,
+                "bakes were never submitted together ({together})"
+            );
+        }
+        pictures.push(target.read_rgba(&g).expect("readback"));
+    }
+    let differ = pictures[0]
+        .chunks(4)
+        .zip(pictures[1].chunks(4))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(
+        differ, 0,
+        "{differ} pixels differ between bakes submitted together and one by one"
+    );
+}
