@@ -1,6 +1,6 @@
 //! Cost per item of work done in batches (node ground textures, impostor bakes: several per
 //! submission): GPU time from timestamp queries around whole batches, and the frame thread's
-//! time from the wall time of recording and submitting a batch, so that the per-frame budget
+//! time from the wall time of recording a batch, so that the per-frame budget
 //! can count both before the work is done.
 
 use super::{Gpu, GpuTimer};

@@ -461,10 +461,15 @@ impl GroundTexturer {
         &self.mips_layout
     }
 
-    /// Writes the node data of everything recorded since the last submission to the GPU, then
-    /// submits `enc` (which holds those recordings). Every encoder [`Self::record`] wrote to
-    /// must be submitted through here.
+    /// [`Self::write_recorded`], then submits `enc` (which holds those recordings).
     pub fn submit(&self, gpu: &Gpu, enc: wgpu::CommandEncoder) {
+        self.write_recorded(gpu);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Writes the node data of everything recorded since the last call to the GPU: call it
+    /// before the encoders [`Self::record`] wrote to are submitted.
+    pub fn write_recorded(&self, gpu: &Gpu) {
         let mut guard = self
             .pending
             .lock()
@@ -475,8 +480,6 @@ impl GroundTexturer {
         }
         p.buffers.write(&gpu.queue, &p.batch);
         p.batch.clear();
-        drop(guard);
-        gpu.queue.submit([enc.finish()]);
     }
 
     /// Records the mip levels of the node textures in `layers` (their level 0 recorded before,

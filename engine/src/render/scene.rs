@@ -102,11 +102,13 @@ impl UploadEncoder<'_> {
     }
 
     /// Submits what was recorded into an own encoder (the frame's is submitted with the
-    /// frame).
-    pub fn finish(self, queue: &wgpu::Queue) {
+    /// frame); true when it submitted.
+    pub fn finish(self, queue: &wgpu::Queue) -> bool {
         if let Self::Own(Some(e)) = self {
             queue.submit([e.finish()]);
+            return true;
         }
+        false
     }
 }
 
@@ -133,18 +135,28 @@ pub trait NodeRenderer: std::any::Any {
     /// out of it). Default: nothing.
     fn close_uploads(&mut self) {}
 
-    /// Submit what the upload hooks recorded (one submission per frame instead of one per
-    /// node), and record and submit the work a renderer defers to here (node ground textures)
-    /// within `time_left_s` (what the nodes' GPU phases left of the frame's budget), counting
-    /// both the GPU time and the frame thread's time it expects the work to take, at least one
-    /// item. Returns the GPU time it expects the submitted work to take, less what upload hooks
-    /// already charged the budget (`NodeWork::gpu_estimate_s`) for work whose frame-thread time
-    /// was measured here: the caller counts this call's wall time apart. [`Scene::render`]
-    /// calls it before any renderer's `prepare`, so everything a frame samples is submitted
-    /// before the frame.
-    fn finish_uploads(&mut self, _gpu: &Gpu, _time_left_s: f64) -> f64 {
+    /// Record into `deferred` the work a renderer defers to here (node ground textures, the
+    /// impostor bakes its uploads asked for) within `time_left_s` (what the nodes' GPU phases
+    /// left of the frame's budget), counting both the GPU time and the frame thread's time it
+    /// expects the work to take, at least one item. Every renderer records into the same
+    /// encoder, submitted once after the last ([`Scene::finish_uploads`]; then
+    /// [`Self::after_deferred_submit`]). Returns the GPU time it expects the recorded work to
+    /// take, less what upload hooks already charged the budget (`NodeWork::gpu_estimate_s`) for
+    /// work whose frame-thread time was measured here: the caller counts this call's wall time
+    /// apart. [`Scene::render`] calls it before any renderer's `prepare`, so everything a frame
+    /// samples is submitted before the frame.
+    fn finish_uploads(
+        &mut self,
+        _gpu: &Gpu,
+        _deferred: &mut UploadEncoder<'_>,
+        _time_left_s: f64,
+    ) -> f64 {
         0.0
     }
+
+    /// After the submission of what `finish_uploads` recorded (e.g. to read back its
+    /// timestamps). Default: nothing.
+    fn after_deferred_submit(&mut self) {}
 
     /// Before the pass: choose this frame's draws, set their node-table entries and upload the
     /// frame's batches.
@@ -229,14 +241,26 @@ impl Scene {
     /// left: less the GPU time the work is expected to take and the frame-thread time it took.
     pub fn finish_uploads(&mut self, gpu: &Gpu, mut time_left_s: f64) -> f64 {
         self.last_times.deferred_ms.clear();
+        let mut deferred = UploadEncoder::Own(None);
         for r in &mut self.renderers {
             let t = Instant::now();
-            time_left_s -= r.finish_uploads(gpu, time_left_s);
+            time_left_s -= r.finish_uploads(gpu, &mut deferred, time_left_s);
             let took_s = t.elapsed().as_secs_f64();
             time_left_s -= took_s;
             self.last_times.deferred_ms.push((r.name(), took_s * 1e3));
         }
-        time_left_s
+        // One submission for every renderer's deferred work.
+        let t = Instant::now();
+        if deferred.finish(&gpu.queue) {
+            for r in &mut self.renderers {
+                r.after_deferred_submit();
+            }
+        }
+        let took_s = t.elapsed().as_secs_f64();
+        self.last_times
+            .deferred_ms
+            .push(("their submission", took_s * 1e3));
+        time_left_s - took_s
     }
 
     /// The GPU phase of a node: every renderer's upload hook, their copies recorded into

@@ -197,16 +197,15 @@ type BatchKey = (bool, u32, u32);
 /// on 2 cores (`nodebench --only textures`).
 const TEXTURE_GPU_PRIOR_S: f64 = 0.5e-3;
 
-/// Frame-thread time a node texture (recording and submitting its passes) is expected to take
-/// before the first batch was timed.
+/// Frame-thread time a node texture (recording its passes) is expected to take before the first
+/// batch was timed.
 const TEXTURE_FRAME_THREAD_PRIOR_S: f64 = 0.1e-3;
 
 /// The ground page of nodes without a ground texture.
 const NO_TEXTURE: u32 = u32::MAX;
 
 /// Node ground textures: the pass that renders them, the layer pool they live in, the textures
-/// waiting to be made, the passes recorded since the last submission, and bind group 2 per pool
-/// page.
+/// waiting to be made, the mip levels due, and bind group 2 per pool page.
 struct GroundTextures {
     texturer: GroundTexturer,
     tree: QuadTree,
@@ -217,14 +216,13 @@ struct GroundTextures {
     pool: GroundPool,
     /// The map's decals (the nodes' pieces refer to them by index).
     decals: Vec<worldgen::map::Decal>,
-    encoder: Option<wgpu::CommandEncoder>,
-    /// The mip bindings of the textures recorded into `encoder` (their mip levels are recorded
-    /// in one pass before it is submitted).
+    /// The mip bindings of the textures recorded this frame (their mip levels are recorded in
+    /// one pass after them).
     mips_due: Vec<LayerMips>,
     /// GPU time per node texture (timestamp queries around each submitted batch).
     timer: BatchTimer,
-    /// The frame thread's time per node texture: recording it and its share of the batch's
-    /// submission (where wgpu encodes the recorded passes).
+    /// The frame thread's time per node texture: recording it (the submission of the frame's
+    /// deferred work, where wgpu encodes the passes, is counted by the scene).
     frame_thread: ItemCost,
     groups: Vec<wgpu::BindGroup>,
     /// Nodes left without a texture because the pool was full.
@@ -483,7 +481,6 @@ impl TerrainRenderer {
             pending: Vec::new(),
             forget: BulkForget::default(),
             decals: world.map.decals.clone(),
-            encoder: None,
             mips_due: Vec::new(),
             timer: BatchTimer::new(gpu, TEXTURE_GPU_PRIOR_S),
             frame_thread: ItemCost::new(TEXTURE_FRAME_THREAD_PRIOR_S),
@@ -537,11 +534,12 @@ impl TerrainRenderer {
             .map_or_else(Vec::new, |g| std::mem::take(&mut g.made))
     }
 
-    /// Renders node `key`'s ground texture into a new pool layer (recorded; submitted by
-    /// `finish_uploads`). None without ground textures or when the pool is full.
+    /// Renders node `key`'s ground texture into a new pool layer (recorded into `enc`, the
+    /// scene's deferred work). None without ground textures or when the pool is full.
     fn render_ground(
         &mut self,
         gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
         key: NodeKey,
         pieces: &NodeGround,
     ) -> Option<(GroundSlot, f32)> {
@@ -567,12 +565,6 @@ impl TerrainRenderer {
                 &self.detail,
             ));
         }
-        let enc = g.encoder.get_or_insert_with(|| {
-            gpu.device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("ground textures"),
-                })
-        });
         g.timer.item(gpu, enc);
         g.texturer
             .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
@@ -769,7 +761,12 @@ impl NodeRenderer for TerrainRenderer {
         close_staging(&mut self.staging);
     }
 
-    fn finish_uploads(&mut self, gpu: &Gpu, time_left_s: f64) -> f64 {
+    fn finish_uploads(
+        &mut self,
+        gpu: &Gpu,
+        deferred: &mut UploadEncoder<'_>,
+        time_left_s: f64,
+    ) -> f64 {
         let Some(g) = self.ground.as_mut() else {
             return 0.0;
         };
@@ -785,8 +782,8 @@ impl NodeRenderer for TerrainRenderer {
         let gpu_per_texture_s = g.timer.per_item_s();
         let per_texture_s = gpu_per_texture_s + g.frame_thread.per_item_s();
         let mut made = 0;
-        // The frame thread's time in the textures themselves (recording, submitting); going
-        // through the queue is not per texture and is left out of the estimate.
+        // The frame thread's time in the textures themselves (recording their passes and mips);
+        // going through the queue is not per texture and is left out of the estimate.
         let mut textures_s = 0.0;
         // Queue entries done with: made, or their node dropped.
         let mut done = vec![false; queue.len()];
@@ -805,7 +802,7 @@ impl NodeRenderer for TerrainRenderer {
                 continue;
             }
             let t = Instant::now();
-            let texture = self.render_ground(gpu, p.key, &p.pieces);
+            let texture = self.render_ground(gpu, deferred.get(&gpu.device), p.key, &p.pieces);
             textures_s += t.elapsed().as_secs_f64();
             credit_s -= per_texture_s;
             done[i] = true;
@@ -829,16 +826,22 @@ impl NodeRenderer for TerrainRenderer {
         g.credit.end(credit_s, per_texture_s, shown_waiting);
         g.pending = queue;
         let t = Instant::now();
-        if let Some(mut enc) = g.encoder.take() {
-            g.texturer.record_mips(&mut enc, &g.mips_due);
+        if !g.mips_due.is_empty() {
+            let enc = deferred.get(&gpu.device);
+            g.texturer.record_mips(enc, &g.mips_due);
             g.mips_due.clear();
-            g.timer.before_submit(&mut enc);
-            g.texturer.submit(gpu, enc);
-            g.timer.after_submit();
+            g.timer.before_submit(enc);
+            g.texturer.write_recorded(gpu);
         }
         textures_s += t.elapsed().as_secs_f64();
         g.frame_thread.observe(textures_s, made);
         made as f64 * gpu_per_texture_s
+    }
+
+    fn after_deferred_submit(&mut self) {
+        if let Some(g) = self.ground.as_mut() {
+            g.timer.after_submit();
+        }
     }
 
     fn prepare(&mut self, gpu: &Gpu, frame: &mut FrameResources, draws: &FrameDraws<'_>) {

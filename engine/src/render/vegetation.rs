@@ -40,8 +40,8 @@ const INSTANCE_STAGING_PREMADE_CHUNKS: usize = 4;
 /// Instances in one page of the instance pool (32 MiB) and pages at most.
 const PAGE_INSTANCES: u32 = 1 << 20;
 const MAX_INSTANCE_PAGES: usize = 16;
-/// Frame-thread time one impostor bake is expected to add to the frame's submission before the
-/// first submission was timed.
+/// Frame-thread time one impostor bake is expected to take (recording its pass) before the first
+/// bakes were timed.
 const BAKE_SUBMIT_PRIOR_S: f64 = 0.1e-3;
 
 /// Species looks (shape and colour) the renderer holds; the atlas has one tile per look.
@@ -207,8 +207,8 @@ pub struct VegetationRenderer {
     staging: wgpu::util::StagingBelt,
 }
 
-/// Impostor bakes asked for by this frame's uploads, recorded and submitted together when the
-/// uploads finish (one submission per frame instead of one per node). Every bake's clusters
+/// Impostor bakes asked for by this frame's uploads, recorded together when the uploads finish
+/// (into the scene's one submission of deferred work, not one per node). Every bake's clusters
 /// and members go into two buffers shared by all of them, written once per submission: a bake
 /// costs its pass, not two new buffers and a bind group.
 struct PendingBakes {
@@ -219,12 +219,13 @@ struct PendingBakes {
     /// The shared buffers (grown to the largest submission so far), with the clusters' bind
     /// group (a dynamic offset picks a bake's block).
     buffers: Option<BakeBuffers>,
-    /// The frame thread's time per bake at that submission (where its pass is recorded and
-    /// encoded): each upload that bakes charges it to the frame's budget beforehand.
+    /// The frame thread's time per bake when they are recorded: each upload that bakes charges
+    /// it to the frame's budget beforehand.
     submit: ItemCost,
-    /// What the uploads of the bakes asked for since the last submission charged the budget.
+    /// What the uploads of the bakes asked for since they were last recorded charged the
+    /// budget.
     charged_s: f64,
-    /// The most bakes one submission held so far.
+    /// The most bakes recorded together (one submission) so far.
     most_together: usize,
 }
 
@@ -813,8 +814,8 @@ impl VegetationRenderer {
         self.bakes.most_together
     }
 
-    /// Records and submits the bakes asked for since the last call (see [`PendingBakes`]).
-    fn submit_bakes(&mut self, gpu: &Gpu) {
+    /// Records into `deferred` the bakes asked for since the last call (see [`PendingBakes`]).
+    fn record_bakes(&mut self, gpu: &Gpu, deferred: &mut UploadEncoder<'_>) {
         if self.bakes.asked.is_empty() {
             return;
         }
@@ -826,9 +827,7 @@ impl VegetationRenderer {
             .write_buffer(&buffers.clusters, 0, bytemuck::cast_slice(&b.clusters));
         gpu.queue
             .write_buffer(&buffers.members, 0, bytemuck::cast_slice(&b.members));
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("impostor bakes"),
-        });
+        let enc = deferred.get(device);
         let member_bytes = std::mem::size_of::<PlantInstance>() as u64;
         for (i, ask) in b.asked.iter().enumerate() {
             let label = format!(
@@ -836,7 +835,7 @@ impl VegetationRenderer {
                 ask.key.level, ask.key.ix, ask.key.iy
             );
             let targets = [&ask.views[0], &ask.views[1]];
-            let mut pass = bake_pass(&mut enc, &label, &targets, &self.impostors.bake_depth);
+            let mut pass = bake_pass(enc, &label, &targets, &self.impostors.bake_depth);
             pass.set_pipeline(&self.group_bake);
             pass.set_bind_group(0, &self.frame_group, &[]);
             let offset = i as u64 * CLUSTER_BLOCK_BYTES;
@@ -847,7 +846,6 @@ impl VegetationRenderer {
             pass.set_vertex_buffer(0, buffers.members.slice(bytes));
             pass.draw(0..6, 0..ask.members.len() as u32);
         }
-        gpu.queue.submit([enc.finish()]);
         b.most_together = b.most_together.max(b.asked.len());
         b.asked.clear();
         b.clusters.clear();
@@ -1008,7 +1006,7 @@ impl NodeRenderer for VegetationRenderer {
             return 0;
         };
         if node.impostors.is_some() {
-            // Its bake's share of the deferred submission, counted in this frame's budget.
+            // Its bake's recording (deferred), counted in this frame's budget.
             let charge_s = self.bakes.submit.per_item_s();
             work.gpu_estimate_s += charge_s;
             self.bakes.charged_s += charge_s;
@@ -1022,12 +1020,18 @@ impl NodeRenderer for VegetationRenderer {
         close_staging(&mut self.staging);
     }
 
-    /// Submits the impostor bakes recorded since the last call; gives back what their uploads
-    /// charged the budget, since the caller counts the submission's measured time instead.
-    fn finish_uploads(&mut self, gpu: &Gpu, _time_left_s: f64) -> f64 {
+    /// Records the impostor bakes asked for since the last call into `deferred`; gives back what
+    /// their uploads charged the budget, since the caller counts this call's measured time
+    /// instead.
+    fn finish_uploads(
+        &mut self,
+        gpu: &Gpu,
+        deferred: &mut UploadEncoder<'_>,
+        _time_left_s: f64,
+    ) -> f64 {
         let t0 = Instant::now();
         let baked = self.bakes.asked.len();
-        self.submit_bakes(gpu);
+        self.record_bakes(gpu, deferred);
         let b = &mut self.bakes;
         b.submit.observe(t0.elapsed().as_secs_f64(), baked);
         -std::mem::take(&mut b.charged_s)
