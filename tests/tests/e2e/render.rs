@@ -603,6 +603,11 @@ fn the_gpu_reference_draws_the_frames_plant_instances() {
     );
 }
 
+/// Pixels (RGBA8) that differ between two pictures of the same size.
+fn differing_pixels(a: &[u8], b: &[u8]) -> usize {
+    a.chunks(4).zip(b.chunks(4)).filter(|(p, q)| p != q).count()
+}
+
 /// Merged draws (seed 002: node geometry suballocated from shared pages, one multi-draw per
 /// render state and page) draw exactly the pixels of per-item draws (one draw call per node mesh
 /// and per node instance group, the fallback path), terrain and vegetation with group
@@ -646,11 +651,7 @@ fn merged_draws_draw_exactly_the_pixels_of_per_item_draws() {
                 assert_eq!(calls, items, "the fallback draws item by item");
             }
         }
-        let differ = images[0]
-            .chunks(4)
-            .zip(images[1].chunks(4))
-            .filter(|(a, b)| a != b)
-            .count();
+        let differ = differing_pixels(&images[0], &images[1]);
         assert_eq!(
             differ, 0,
             "{differ} pixels differ between merged and per-item draws"
@@ -702,11 +703,7 @@ fn impostor_bakes_submitted_together_bake_what_single_bakes_do() {
         }
         pictures.push(target.read_rgba(&g).expect("readback"));
     }
-    let differ = pictures[0]
-        .chunks(4)
-        .zip(pictures[1].chunks(4))
-        .filter(|(a, b)| a != b)
-        .count();
+    let differ = differing_pixels(&pictures[0], &pictures[1]);
     assert_eq!(
         differ, 0,
         "{differ} pixels differ between bakes submitted together and one by one"
