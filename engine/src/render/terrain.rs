@@ -534,12 +534,13 @@ impl TerrainRenderer {
             .map_or_else(Vec::new, |g| std::mem::take(&mut g.made))
     }
 
-    /// Renders node `key`'s ground texture into a new pool layer (recorded into `enc`, the
-    /// scene's deferred work). None without ground textures or when the pool is full.
+    /// Renders node `key`'s ground texture into a new pool layer (recorded into `deferred`, the
+    /// scene's deferred work, made only when a texture is recorded). None without ground
+    /// textures or when the pool is full.
     fn render_ground(
         &mut self,
         gpu: &Gpu,
-        enc: &mut wgpu::CommandEncoder,
+        deferred: &mut UploadEncoder<'_>,
         key: NodeKey,
         pieces: &NodeGround,
     ) -> Option<(GroundSlot, f32)> {
@@ -565,6 +566,7 @@ impl TerrainRenderer {
                 &self.detail,
             ));
         }
+        let enc = deferred.get(&gpu.device);
         g.timer.item(gpu, enc);
         g.texturer
             .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
@@ -802,7 +804,7 @@ impl NodeRenderer for TerrainRenderer {
                 continue;
             }
             let t = Instant::now();
-            let texture = self.render_ground(gpu, deferred.get(&gpu.device), p.key, &p.pieces);
+            let texture = self.render_ground(gpu, deferred, p.key, &p.pieces);
             textures_s += t.elapsed().as_secs_f64();
             credit_s -= per_texture_s;
             done[i] = true;

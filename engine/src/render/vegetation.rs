@@ -42,7 +42,7 @@ const PAGE_INSTANCES: u32 = 1 << 20;
 const MAX_INSTANCE_PAGES: usize = 16;
 /// Frame-thread time one impostor bake is expected to take (recording its pass) before the first
 /// bakes were timed.
-const BAKE_SUBMIT_PRIOR_S: f64 = 0.1e-3;
+const BAKE_RECORD_PRIOR_S: f64 = 0.1e-3;
 
 /// Species looks (shape and colour) the renderer holds; the atlas has one tile per look.
 pub const MAX_LOOKS: u32 = 16;
@@ -221,7 +221,7 @@ struct PendingBakes {
     buffers: Option<BakeBuffers>,
     /// The frame thread's time per bake when they are recorded: each upload that bakes charges
     /// it to the frame's budget beforehand.
-    submit: ItemCost,
+    record: ItemCost,
     /// What the uploads of the bakes asked for since they were last recorded charged the
     /// budget.
     charged_s: f64,
@@ -254,7 +254,7 @@ impl PendingBakes {
             clusters: Vec::new(),
             members: Vec::new(),
             buffers: None,
-            submit: ItemCost::new(BAKE_SUBMIT_PRIOR_S),
+            record: ItemCost::new(BAKE_RECORD_PRIOR_S),
             charged_s: 0.0,
             most_together: 0,
         }
@@ -1007,7 +1007,7 @@ impl NodeRenderer for VegetationRenderer {
         };
         if node.impostors.is_some() {
             // Its bake's recording (deferred), counted in this frame's budget.
-            let charge_s = self.bakes.submit.per_item_s();
+            let charge_s = self.bakes.record.per_item_s();
             work.gpu_estimate_s += charge_s;
             self.bakes.charged_s += charge_s;
         }
@@ -1033,7 +1033,7 @@ impl NodeRenderer for VegetationRenderer {
         let baked = self.bakes.asked.len();
         self.record_bakes(gpu, deferred);
         let b = &mut self.bakes;
-        b.submit.observe(t0.elapsed().as_secs_f64(), baked);
+        b.record.observe(t0.elapsed().as_secs_f64(), baked);
         -std::mem::take(&mut b.charged_s)
     }
 

@@ -599,7 +599,7 @@ fn screenshot(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("screenshot"),
         });
-    st.viewer.frame(
+    let mut shot = st.viewer.frame(
         &st.gpu,
         &mut enc,
         &target.color_view,
@@ -614,7 +614,8 @@ fn screenshot(
         prims,
         screen,
     );
-    st.gpu.queue.submit([enc.finish()]);
+    // Through the viewer, like every frame: its timers' readback follows the submission.
+    st.viewer.submit_frame(&st.gpu, [], enc, &mut shot);
     std::fs::create_dir_all(&cli.out)?;
     let p = cli
         .out
