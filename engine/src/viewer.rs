@@ -268,34 +268,16 @@ impl Viewer {
         let (uploaded, expected_gpu_s) =
             self.upload(gpu, budget_s, &mut UploadEncoder::Frame(encoder));
         let t2 = Instant::now();
-        let upload_time_left_s = budget_s - (t2 - t1).as_secs_f64() - expected_gpu_s;
-        let drawn: Vec<DrawnNode<'_>> = self
-            .streamer
-            .draw_list()
-            .iter()
-            .filter_map(|d| {
-                Some(DrawnNode {
-                    key: d.key,
-                    work: &self.streamer.resident(d.key)?.work,
-                    dither: [d.dither_lo, d.dither_hi],
-                    decimation: d.decimation,
-                })
-            })
-            .collect();
-        // Ancestors of drawn nodes draw what they keep through splits (they are resident: the
-        // draw list is walked down from the root through them).
-        let ancestor_keys = unique_ancestors(drawn.iter().map(|d| d.key));
-        let ancestors: Vec<DrawnNode<'_>> = ancestor_keys
-            .iter()
-            .filter_map(|&key| {
-                Some(DrawnNode {
-                    key,
-                    work: &self.streamer.resident(key)?.work,
-                    dither: [0.0, 1.0],
-                    decimation: 0,
-                })
-            })
-            .collect();
+        // The deferred work goes into the frame's encoder, before the frame's pass: one
+        // submission a frame.
+        self.scene.close_uploads();
+        let upload_time_left_s = self.scene.finish_uploads(
+            gpu,
+            &mut UploadEncoder::Frame(encoder),
+            budget_s - (t2 - t1).as_secs_f64() - expected_gpu_s,
+        );
+        let t_deferred = Instant::now();
+        let (drawn, ancestors) = drawn_nodes(&self.streamer);
         let t_draw_list = Instant::now();
         if let Some(t) = self.timer.as_mut() {
             t.harvest(gpu);
@@ -343,7 +325,7 @@ impl Viewer {
             update_ms: ms(t0, t1),
             upload_ms: ms(t1, t2),
             encode_ms: ms(t2, t3),
-            draw_list_ms: ms(t2, t_draw_list),
+            draw_list_ms: ms(t_deferred, t_draw_list),
             render: self.scene.last_times.clone(),
             gpu_wait_ms: 0.0,
             gpu_terrain_ms: self.timer.as_ref().and_then(|t| t.last_ms),
@@ -435,7 +417,7 @@ impl Viewer {
     /// (`submit_ms` holds its wall-clock time: a software adapter makes it wait for the work
     /// submitted before, GPU time on a hardware one).
     pub fn submit_frame(
-        &self,
+        &mut self,
         gpu: &Gpu,
         before: impl IntoIterator<Item = wgpu::CommandBuffer>,
         enc: wgpu::CommandEncoder,
@@ -456,8 +438,9 @@ impl Viewer {
         st.cpu_frame_on_cpu_ms = st.cpu_frame_on_cpu_ms.zip(on_cpu_ms).map(|(a, b)| a + b);
     }
 
-    /// Called by [`Self::submit_frame`] after the submission (starts the timestamp readback).
-    fn after_submit(&self) {
+    /// Called by [`Self::submit_frame`] after the submission (starts the timestamp readbacks).
+    fn after_submit(&mut self) {
+        self.scene.after_deferred_submit();
         if let Some(t) = &self.timer {
             t.after_submit();
         }
@@ -523,7 +506,16 @@ impl Viewer {
         copies.finish(&gpu.queue);
         let left_s = budget_s - t0.elapsed().as_secs_f64() - expected_gpu_s;
         self.show_textures_of_display();
-        self.scene.finish_uploads(gpu, left_s);
+        let mut deferred = UploadEncoder::Own(None);
+        self.scene.finish_uploads(gpu, &mut deferred, left_s);
+        let t = Instant::now();
+        if deferred.finish(&gpu.queue) {
+            self.scene.after_deferred_submit();
+        }
+        self.scene
+            .last_times
+            .deferred_ms
+            .push(("their submission", t.elapsed().as_secs_f64() * 1e3));
         self.charge_made_textures();
     }
 
@@ -593,6 +585,36 @@ impl Viewer {
     pub fn drawn_keys(&self) -> Vec<NodeKey> {
         self.streamer.draw_list().iter().map(|d| d.key).collect()
     }
+}
+
+/// The frame's drawn nodes (the streamer's draw list, resident) and their resident ancestors,
+/// which draw what they keep through splits (the draw list is walked down from the root
+/// through them), sorted by key.
+fn drawn_nodes(streamer: &Streamer) -> (Vec<DrawnNode<'_>>, Vec<DrawnNode<'_>>) {
+    let drawn: Vec<DrawnNode<'_>> = streamer
+        .draw_list()
+        .iter()
+        .filter_map(|d| {
+            Some(DrawnNode {
+                key: d.key,
+                work: &streamer.resident(d.key)?.work,
+                dither: [d.dither_lo, d.dither_hi],
+                decimation: d.decimation,
+            })
+        })
+        .collect();
+    let ancestors = unique_ancestors(drawn.iter().map(|d| d.key))
+        .iter()
+        .filter_map(|&key| {
+            Some(DrawnNode {
+                key,
+                work: &streamer.resident(key)?.work,
+                dither: [0.0, 1.0],
+                decimation: 0,
+            })
+        })
+        .collect();
+    (drawn, ancestors)
 }
 
 /// The GPU reference of a frame: the terrain meshes the terrain renderer draws (in the frustum,

@@ -139,12 +139,12 @@ pub trait NodeRenderer: std::any::Any {
     /// impostor bakes its uploads asked for) within `time_left_s` (what the nodes' GPU phases
     /// left of the frame's budget), counting both the GPU time and the frame thread's time it
     /// expects the work to take, at least one item. Every renderer records into the same
-    /// encoder, submitted once after the last ([`Scene::finish_uploads`]; then
-    /// [`Self::after_deferred_submit`]). Returns the GPU time it expects the recorded work to
+    /// encoder ([`Scene::finish_uploads`]; a frame's own, so the work is submitted with the
+    /// frame; then [`Self::after_deferred_submit`]). Returns the GPU time it expects the recorded work to
     /// take, less what upload hooks already charged the budget (`NodeWork::gpu_estimate_s`) for
     /// work whose frame-thread time was measured here: the caller counts this call's wall time
-    /// apart. [`Scene::render`] calls it before any renderer's `prepare`, so everything a frame
-    /// samples is submitted before the frame.
+    /// apart. A frame calls it before any renderer's `prepare`, its work recorded before the
+    /// frame's pass, so everything the pass samples is drawn before it.
     fn finish_uploads(
         &mut self,
         _gpu: &Gpu,
@@ -172,9 +172,10 @@ pub trait NodeRenderer: std::any::Any {
     );
 }
 
-/// Where the frame thread's time went in [`Scene::render`] (wall clock, ms), per renderer by
-/// name in drawing order: the work deferred to the frame (`finish_uploads`: node ground textures,
-/// submitting what the upload hooks recorded), `prepare`; and recording the pass.
+/// Where the frame thread's time went in [`Scene::finish_uploads`] and [`Scene::render`] (wall
+/// clock, ms), per renderer by name in drawing order: the work deferred to the frame
+/// (`finish_uploads`: node ground textures, impostor bakes; benchmarks that submit it apart add
+/// the submission), `prepare`; and recording the pass.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct RenderTimes {
     pub deferred_ms: Vec<(&'static str, f64)>,
@@ -236,31 +237,34 @@ impl Scene {
             .find_map(|r| (r.as_mut() as &mut dyn std::any::Any).downcast_mut::<T>())
     }
 
-    /// Submits what the renderers' upload hooks recorded and the work they defer, within
-    /// `time_left_s` of the frame's budget (also done by [`Self::render`]); returns the time
-    /// left: less the GPU time the work is expected to take and the frame-thread time it took.
-    pub fn finish_uploads(&mut self, gpu: &Gpu, mut time_left_s: f64) -> f64 {
+    /// Records every renderer's deferred work into `deferred` within `time_left_s` of the
+    /// frame's budget; returns the time left: less the GPU time the work is expected to take
+    /// and the frame-thread time it took. The caller submits `deferred` (a frame records into
+    /// its own encoder, before the frame's pass) and then calls
+    /// [`Self::after_deferred_submit`].
+    pub fn finish_uploads(
+        &mut self,
+        gpu: &Gpu,
+        deferred: &mut UploadEncoder<'_>,
+        mut time_left_s: f64,
+    ) -> f64 {
         self.last_times.deferred_ms.clear();
-        let mut deferred = UploadEncoder::Own(None);
         for r in &mut self.renderers {
             let t = Instant::now();
-            time_left_s -= r.finish_uploads(gpu, &mut deferred, time_left_s);
+            time_left_s -= r.finish_uploads(gpu, deferred, time_left_s);
             let took_s = t.elapsed().as_secs_f64();
             time_left_s -= took_s;
             self.last_times.deferred_ms.push((r.name(), took_s * 1e3));
         }
-        // One submission for every renderer's deferred work.
-        let t = Instant::now();
-        if deferred.finish(&gpu.queue) {
-            for r in &mut self.renderers {
-                r.after_deferred_submit();
-            }
+        time_left_s
+    }
+
+    /// Every renderer's [`NodeRenderer::after_deferred_submit`]: call once the encoder given
+    /// to [`Self::finish_uploads`] was submitted.
+    pub fn after_deferred_submit(&mut self) {
+        for r in &mut self.renderers {
+            r.after_deferred_submit();
         }
-        let took_s = t.elapsed().as_secs_f64();
-        self.last_times
-            .deferred_ms
-            .push(("their submission", took_s * 1e3));
-        time_left_s - took_s
     }
 
     /// The GPU phase of a node: every renderer's upload hook, their copies recorded into
@@ -297,7 +301,8 @@ impl Scene {
     }
 
     /// Records the frame into `encoder`: one pass cleared to the view's colour and far depth,
-    /// every renderer in order.
+    /// every renderer in order. The frame's uploads and deferred work ([`Self::close_uploads`],
+    /// [`Self::finish_uploads`]) are recorded first.
     pub fn render(
         &mut self,
         gpu: &Gpu,
@@ -307,14 +312,6 @@ impl Scene {
         draws: &FrameDraws<'_>,
     ) -> DrawStats {
         self.frame.begin(&gpu.queue, draws.camera, draws.view);
-        // The frame's GPU phases recorded their copies into the frame's encoder (submitted
-        // after this call).
-        self.close_uploads();
-        let left_s = self.finish_uploads(gpu, draws.upload_time_left_s);
-        let draws = &FrameDraws {
-            upload_time_left_s: left_s,
-            ..*draws
-        };
         self.last_times.prepare_ms.clear();
         for r in &mut self.renderers {
             let t = Instant::now();

@@ -3,7 +3,7 @@
 
 use engine::camera::Camera;
 use engine::render::frame::ViewOptions;
-use engine::render::scene::{DrawnNode, FrameDraws, Scene};
+use engine::render::scene::{DrawnNode, FrameDraws, Scene, UploadEncoder};
 use engine::render::terrain::TerrainRenderer;
 use engine::render::{COLOR_FORMAT, Target};
 use engine::stream::NodeWork;
@@ -293,8 +293,11 @@ fn draw_nodes(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("test nodes"),
         });
+    scene.close_uploads();
+    scene.finish_uploads(g, &mut UploadEncoder::Frame(&mut enc), f64::INFINITY);
     scene.render(g, &mut enc, &target.color_view, &target.depth_view, &draws);
     g.queue.submit([enc.finish()]);
+    scene.after_deferred_submit();
     target.read_rgba(g).expect("readback")
 }
 
