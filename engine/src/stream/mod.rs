@@ -424,7 +424,12 @@ impl Streamer {
             frame: 0,
             camera: None,
             velocity_m_per_s: glam::DVec3::ZERO,
-            stats: StreamStats::default(),
+            // The log's whole capacity at once: growing it in the frame thread reallocated
+            // ever larger blocks there (and had glibc consolidate its free lists).
+            stats: StreamStats {
+                latencies: Vec::with_capacity(MAX_LATENCIES_KEPT),
+                ..StreamStats::default()
+            },
         }
     }
 
