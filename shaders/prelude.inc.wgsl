@@ -19,7 +19,7 @@ struct Frame {
     camera_wrap: vec4<f32>,
 };
 
-// One entry of the renderer's node table (`engine::render::node_table`).
+// One row of the renderer's node table (`engine::render::node_table`).
 struct Node {
     // xyz: node origin minus camera (m); w: dither interval start.
     offset_lo: vec4<f32>,
@@ -54,6 +54,9 @@ struct LightInfo {
 @group(0) @binding(2) var light_sampler: sampler;
 @group(0) @binding(3) var<uniform> light_info: LightInfo;
 @group(1) @binding(0) var<storage, read> nodes: array<Node>;
+// A by-slot node table's row of each entry (engine::render::node_table); a by-draw table's
+// draws give their row as the first instance.
+@group(1) @binding(1) var<storage, read> row_of_entry: array<u32>;
 
 // A plant instance (engine::render::vegetation::PlantInstance; vegetation and the GPU
 // reference): position relative to the node's south-west corner (z absolute), height, crown

@@ -16,7 +16,8 @@ fn fs_reference() -> @location(0) vec4<f32> {
 // One plant shape's triangles per instance, placed like `vs_plant` places them.
 @vertex
 fn vs_reference_plant(v: VertexIn, inst: PlantInstanceIn) -> @builtin(position) vec4<f32> {
-    let rel = inst.position + plant_offset(v.position, inst) + nodes[inst.entry].offset_lo.xyz;
+    let node = nodes[row_of_entry[inst.entry]];
+    let rel = inst.position + plant_offset(v.position, inst) + node.offset_lo.xyz;
     return frame.clip_from_rel * vec4<f32>(rel, 1.0);
 }
 
@@ -26,6 +27,6 @@ fn vs_reference_quad(
     @builtin(vertex_index) i: u32,
     inst: PlantInstanceIn,
 ) -> @builtin(position) vec4<f32> {
-    let base = inst.position + nodes[inst.entry].offset_lo.xyz;
+    let base = inst.position + nodes[row_of_entry[inst.entry]].offset_lo.xyz;
     return frame.clip_from_rel * vec4<f32>(quad_rel(base, quad_corner(i), inst), 1.0);
 }

@@ -65,10 +65,10 @@ fn shading_normal(word: u32) -> vec3<f32> {
     return normalize(vec3<f32>(p, 1.0 - abs(p.x) - abs(p.y)));
 }
 
-// The draw's first instance is the node's slot in the node table.
+// The draw's first instance is the node's entry in the frame's node table.
 @vertex
-fn vs_main(v: TerrainVertexIn, @builtin(instance_index) slot: u32) -> TerrainOut {
-    let node = nodes[slot];
+fn vs_main(v: TerrainVertexIn, @builtin(instance_index) entry: u32) -> TerrainOut {
+    let node = nodes[entry];
     var out: TerrainOut;
     let rel = v.position + node.offset_lo.xyz;
     out.clip = frame.clip_from_rel * vec4<f32>(rel, 1.0);

@@ -12,7 +12,7 @@ const TRUNK: vec3<f32> = vec3<f32>(0.16, 0.11, 0.07);
 // Instanced unit-shape meshes (height 1, radius 1), scaled, turned and placed per instance.
 @vertex
 fn vs_plant(v: VertexIn, inst: PlantInstanceIn) -> VertexOut {
-    let node = nodes[inst.entry];
+    let node = nodes[row_of_entry[inst.entry]];
     let turned = plant_offset(v.position, inst);
     let c = cos(inst.yaw);
     let s = sin(inst.yaw);
@@ -61,7 +61,7 @@ fn fs_plant(in: VertexOut) -> @location(0) vec4<f32> {
 @vertex
 fn vs_billboard(@builtin(vertex_index) i: u32, inst: PlantInstanceIn) -> BillboardOut {
     let corner = quad_corner(i);
-    let node = nodes[inst.entry];
+    let node = nodes[row_of_entry[inst.entry]];
     let base = inst.position + node.offset_lo.xyz;
     let right = quad_right(base);
     let rel = quad_rel(base, corner, inst);

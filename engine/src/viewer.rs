@@ -495,21 +495,21 @@ impl Viewer {
     }
 
     /// The GPU phases under the frame's budget, then the renderers' deferred work (node
-    /// textures) in what they left of it, as a frame does them after the streamer's update
-    /// (benchmarks call the two halves apart to time them apart).
+    /// textures, impostor bakes) in what they left of it, both in one submission, as a frame
+    /// does them after the streamer's update (benchmarks call the two halves apart to time
+    /// them apart).
     pub fn upload_and_finish(&mut self, gpu: &Gpu) {
         let budget_s = self.streamer.settings.gpu_budget_s;
         let t0 = Instant::now();
-        let mut copies = UploadEncoder::Own(None);
-        let (_, expected_gpu_s) = self.upload(gpu, budget_s, &mut copies);
+        let mut encoder = UploadEncoder::Own(None);
+        let (_, expected_gpu_s) = self.upload(gpu, budget_s, &mut encoder);
         self.scene.close_uploads();
-        copies.finish(&gpu.queue);
         let left_s = budget_s - t0.elapsed().as_secs_f64() - expected_gpu_s;
         self.show_textures_of_display();
-        let mut deferred = UploadEncoder::Own(None);
-        self.scene.finish_uploads(gpu, &mut deferred, left_s);
+        self.scene.finish_uploads(gpu, &mut encoder, left_s);
+        // One submission, as a frame's.
         let t = Instant::now();
-        if deferred.finish(&gpu.queue) {
+        if encoder.finish(&gpu.queue) {
             self.scene.after_deferred_submit();
         }
         self.scene

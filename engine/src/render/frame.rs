@@ -304,7 +304,10 @@ impl FrameResources {
         });
         let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("node table layout"),
-            entries: &[storage_entry(0, wgpu::ShaderStages::VERTEX)],
+            entries: &[
+                storage_entry(0, wgpu::ShaderStages::VERTEX),
+                storage_entry(1, wgpu::ShaderStages::VERTEX),
+            ],
         });
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame uniforms"),

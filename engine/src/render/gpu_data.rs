@@ -21,8 +21,9 @@ pub struct FrameUniforms {
     pub camera_wrap: [f32; 4],
 }
 
-/// Mirrors `Node`: one entry of a renderer's node table (a storage array indexed by the draw's
-/// instance index or by the instance's `entry`, see `render::node_table`).
+/// Mirrors `Node`: one row of a renderer's node table (a storage array of this frame's rows,
+/// found by the draw's instance index or through the instance's `entry`, see
+/// `render::node_table`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
 pub struct NodeEntry {

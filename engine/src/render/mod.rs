@@ -9,7 +9,7 @@
 //!   (group 1), view options, draw statistics, pipeline and pass helpers.
 //! - Merged draws (seed 002): [`suballoc`] (node geometry suballocated from a few large
 //!   buffers; [`paged_buffer`] the pages of one such buffer), [`node_table`] (per-node data as
-//!   one storage array per renderer), [`batches`] (a frame's draws as one multi-draw per render
+//!   one storage array per renderer, a row per node drawn this frame), [`batches`] (a frame's draws as one multi-draw per render
 //!   state and page, a plain loop as fallback).
 //! - One renderer per kind of thing drawn: [`sky`] (sky, node-bounds lines), [`terrain`],
 //!   [`vegetation`] (with its atlas and impostor bakes). Each owns its pipelines, its per-node

@@ -1,6 +1,7 @@
 //! The terrain renderer: node meshes suballocated from a few large vertex and index buffers
 //! (pages), drawn as one multi-draw per mesh page and ground-texture page (each node mesh one
-//! indirect record whose first instance is the node's slot in the node table), filled or as
+//! indirect record whose first instance is the node's entry in this frame's node table, which
+//! lists the drawn nodes in drawing order), filled or as
 //! wireframe. The ground's colour is the node's ground texture where the ground kind is
 //! registered: its upload hook queues the texture, and `finish_uploads` renders queued textures
 //! ([`super::ground`]), coarsest first, within what the frame's GPU budget leaves (carried over
@@ -76,8 +77,8 @@ pub fn shader_source() -> String {
     )
 }
 
-/// One node's mesh on the GPU: its ranges in a page of the mesh pool and its node-table slot
-/// (both given back when dropped).
+/// One node's mesh on the GPU: its ranges in a page of the mesh pool (given back when
+/// dropped).
 pub struct TerrainNodeGpu {
     /// World position of the node's south-west corner (vertices are relative to it).
     pub origin_m: [f64; 2],
@@ -89,7 +90,6 @@ pub struct TerrainNodeGpu {
     /// Per decimation (0 ..= `MAX_DECIMATION`): first index in the page and count of the
     /// triangles drawn with it (a mesh not laid out as a grid draws all of them each time).
     ranges: [[u32; 2]; DECIMATIONS],
-    slot: Lease,
     /// The node's ground texture and its texture coordinates per metre, once made (the queue
     /// of textures to make holds a weak reference).
     ground: Arc<OnceLock<(GroundSlot, f32)>>,
@@ -439,7 +439,7 @@ impl TerrainRenderer {
             staging: staging_belt(device, MESH_STAGING_PREMADE_CHUNKS),
             pages: Vec::new(),
             grid_ranges: GridRanges::new(),
-            table: NodeTable::new(device, frame, "terrain node table", 1),
+            table: NodeTable::by_draw(device, frame, "terrain node table"),
             batches: Batches::new(),
             triangles: 0,
             culled: 0,
@@ -614,11 +614,8 @@ impl TerrainRenderer {
             );
             return None;
         }
-        let (Some(lease), Some(slot)) = (self.pool.lease(&lengths), self.table.lease()) else {
-            log::warn!(
-                "terrain mesh pool or node table full: node {:?} is not drawn",
-                mesh.key
-            );
+        let Some(lease) = self.pool.lease(&lengths) else {
+            log::warn!("terrain mesh pool full: node {:?} is not drawn", mesh.key);
             return None;
         };
         let copies = copies.get(device);
@@ -663,7 +660,6 @@ impl TerrainRenderer {
             aabb_m: mesh.aabb_m(tree),
             mesh: lease,
             ranges,
-            slot,
             ground: Arc::new(OnceLock::new()),
             bytes: mesh.gpu_bytes(),
         })
@@ -861,7 +857,6 @@ impl NodeRenderer for TerrainRenderer {
             if d.dither[1] > d.dither[0]
                 && draws.frustum.intersects_aabb(node.aabb_m.0, node.aabb_m.1)
             {
-                let slot = self.table.first_entry(&node.slot);
                 let shown = self
                     .ground
                     .is_some()
@@ -882,15 +877,14 @@ impl NodeRenderer for TerrainRenderer {
                     None => (NO_TEXTURE, [-1.0, 0.0, 0.0, 0.0]),
                 };
                 let light = frame.light.drawn_entry(i, d.key);
-                self.table.set(
-                    frame,
-                    slot,
-                    node.origin_m,
-                    d.key.level,
-                    d.dither,
-                    extra,
-                    light,
-                );
+                // The table holds this frame's drawn nodes in drawing order (a few hundred
+                // entries written, not one per resident node).
+                let Some(entry) =
+                    self.table
+                        .push(frame, node.origin_m, d.key.level, d.dither, extra, light)
+                else {
+                    continue;
+                };
                 let m = &node.mesh;
                 let fading = d.dither[0] > 0.0 || d.dither[1] < 1.0;
                 let [first_index, index_count] = node.range(d.decimation);
@@ -901,7 +895,7 @@ impl NodeRenderer for TerrainRenderer {
                         instance_count: 1,
                         first_index,
                         base_vertex: m.start[0] as i32,
-                        first_instance: slot,
+                        first_instance: entry,
                     }),
                 );
                 self.triangles += u64::from(index_count / 3);

@@ -584,7 +584,7 @@ impl VegetationRenderer {
             sampler,
             instances: instance_pages(),
             impostors,
-            table: NodeTable::new(device, frame, "vegetation node table", 2),
+            table: NodeTable::by_slot(device, frame, "vegetation node table", 2),
             batches: Batches::new(),
             frame_stats: DrawStats::default(),
             merged: false,
