@@ -236,9 +236,11 @@ impl Viewer {
     }
 
     /// Runs the streaming update and GPU uploads, then records the frame into `encoder`.
-    /// Returns the frame's statistics (GPU wait not included). The uploads' copies are
-    /// recorded into `encoder` too, before the frame's pass: submit it (the nodes uploaded in
-    /// this frame count as on the GPU from now on).
+    /// Returns the frame's statistics (GPU wait not included). The uploads' copies and the
+    /// renderers' deferred work (ground textures, impostor bakes) are recorded into `encoder`
+    /// too, before the frame's pass: submit it with [`Self::submit_frame`] (the nodes uploaded
+    /// in this frame count as on the GPU from now on, and the renderers read back their
+    /// timings).
     pub fn frame(
         &mut self,
         gpu: &Gpu,

@@ -124,10 +124,7 @@ impl NodeTable {
         slot.start[0] * self.entries_per_slot
     }
 
-    /// The row of the node at `origin_m` (south-west corner) drawn at `level` with dither
-    /// interval `dither`, four numbers only its renderer reads (`extra`; terrain: the
-    /// ground-texture layer it shows, texture coordinates per metre and its corner in that
-    /// texture's node, m) and its light grid (`light`: `lighting::light_entry`).
+    /// The row of [`Self::push`]'s fields.
     fn row(
         frame: &FrameResources,
         origin_m: [f64; 2],
@@ -145,8 +142,12 @@ impl NodeTable {
         }
     }
 
-    /// By draw: appends this frame's next row (fields as in [`Self::row`]); returns its index,
-    /// the draw's `first_instance`, or None when the table is full.
+    /// By draw: appends this frame's next row, of the node at `origin_m` (south-west corner)
+    /// drawn at `level` with dither interval `dither`, four numbers only its renderer reads
+    /// (`extra`; terrain: the ground-texture layer it shows, texture coordinates per metre and
+    /// its corner in that texture's node, m) and its light grid (`light`:
+    /// `lighting::light_entry`); returns its index, the draw's `first_instance`, or None when
+    /// the table is full.
     pub fn push(
         &mut self,
         frame: &FrameResources,
@@ -166,7 +167,7 @@ impl NodeTable {
     }
 
     /// By slot: sets entry `entry` (of a leased slot) for this frame (fields as in
-    /// [`Self::row`]); set again in the same frame, it keeps its row with the new fields.
+    /// [`Self::push`]); set again in the same frame, it keeps its row with the new fields.
     #[allow(clippy::too_many_arguments, reason = "one entry's fields")]
     pub fn set(
         &mut self,
