@@ -272,7 +272,6 @@ impl Viewer {
         let t2 = Instant::now();
         // The deferred work goes into the frame's encoder, before the frame's pass: one
         // submission a frame.
-        self.scene.close_uploads();
         let upload_time_left_s = self.scene.finish_uploads(
             gpu,
             &mut UploadEncoder::Frame(encoder),
@@ -505,7 +504,6 @@ impl Viewer {
         let t0 = Instant::now();
         let mut encoder = UploadEncoder::Own(None);
         let (_, expected_gpu_s) = self.upload(gpu, budget_s, &mut encoder);
-        self.scene.close_uploads();
         let left_s = budget_s - t0.elapsed().as_secs_f64() - expected_gpu_s;
         self.show_textures_of_display();
         self.scene.finish_uploads(gpu, &mut encoder, left_s);

@@ -23,7 +23,8 @@ use super::suballoc::{Lease, Suballocator};
 pub const TABLE_SLOTS: u32 = 1 << 15;
 
 pub struct NodeTable {
-    slots: Suballocator,
+    /// By slot: the node slots (none for a by-draw table).
+    slots: Option<Suballocator>,
     entries_per_slot: u32,
     /// This frame's rows, in the order set (at most `row_capacity`, the buffer's).
     rows: Vec<NodeEntry>,
@@ -43,7 +44,10 @@ pub struct NodeTable {
 
 impl std::fmt::Debug for NodeTable {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "NodeTable({} slots used)", self.slots.used(0))
+        match &self.slots {
+            Some(s) => write!(f, "NodeTable({} slots used)", s.used(0)),
+            None => write!(f, "NodeTable(by draw)"),
+        }
     }
 }
 
@@ -101,7 +105,7 @@ impl NodeTable {
         });
         let by_slot_len = if by_slot { rows } else { 0 };
         Self {
-            slots: Suballocator::new(&[TABLE_SLOTS], 1),
+            slots: by_slot.then(|| Suballocator::new(&[TABLE_SLOTS], 1)),
             entries_per_slot,
             rows: Vec::with_capacity(rows),
             row_capacity: rows,
@@ -114,9 +118,10 @@ impl NodeTable {
         }
     }
 
-    /// A slot for a newly uploaded node (None when all [`TABLE_SLOTS`] are taken).
+    /// By slot: a slot for a newly uploaded node (None when all [`TABLE_SLOTS`] are taken, and
+    /// always for a by-draw table).
     pub fn lease(&self) -> Option<Lease> {
-        self.slots.lease(&[1])
+        self.slots.as_ref()?.lease(&[1])
     }
 
     /// The first entry of a leased slot.
@@ -124,8 +129,12 @@ impl NodeTable {
         slot.start[0] * self.entries_per_slot
     }
 
-    /// The row of [`Self::push`]'s fields.
-    fn row(
+    /// The row of the node at `origin_m` (south-west corner) drawn at `level` with dither
+    /// interval `dither`, four numbers only its renderer reads (`extra`; terrain: the
+    /// ground-texture layer it shows, texture coordinates per metre and its corner in that
+    /// texture's node, m) and its light grid (`light`: `lighting::light_entry`), for
+    /// [`Self::push`] or [`Self::set`].
+    pub fn row(
         frame: &FrameResources,
         origin_m: [f64; 2],
         level: u8,
@@ -142,45 +151,21 @@ impl NodeTable {
         }
     }
 
-    /// By draw: appends this frame's next row, of the node at `origin_m` (south-west corner)
-    /// drawn at `level` with dither interval `dither`, four numbers only its renderer reads
-    /// (`extra`; terrain: the ground-texture layer it shows, texture coordinates per metre and
-    /// its corner in that texture's node, m) and its light grid (`light`:
-    /// `lighting::light_entry`); returns its index, the draw's `first_instance`, or None when
-    /// the table is full.
-    pub fn push(
-        &mut self,
-        frame: &FrameResources,
-        origin_m: [f64; 2],
-        level: u8,
-        dither: [f32; 2],
-        extra: [f32; 4],
-        light: LightEntry,
-    ) -> Option<u32> {
+    /// By draw: appends `row` as this frame's next row; returns its index, the draw's
+    /// `first_instance`, or None when the table is full.
+    pub fn push(&mut self, row: NodeEntry) -> Option<u32> {
         if self.rows.len() >= self.row_capacity {
             return None;
         }
         let index = u32::try_from(self.rows.len()).ok()?;
-        self.rows
-            .push(Self::row(frame, origin_m, level, dither, extra, light));
+        self.rows.push(row);
         Some(index)
     }
 
-    /// By slot: sets entry `entry` (of a leased slot) for this frame (fields as in
-    /// [`Self::push`]); set again in the same frame, it keeps its row with the new fields.
-    #[allow(clippy::too_many_arguments, reason = "one entry's fields")]
-    pub fn set(
-        &mut self,
-        frame: &FrameResources,
-        entry: u32,
-        origin_m: [f64; 2],
-        level: u8,
-        dither: [f32; 2],
-        extra: [f32; 4],
-        light: LightEntry,
-    ) {
+    /// By slot: gives entry `entry` (of a leased slot) `row` for this frame; set again in the
+    /// same frame, it keeps its row with the new fields.
+    pub fn set(&mut self, entry: u32, row: NodeEntry) {
         let e = entry as usize;
-        let row = Self::row(frame, origin_m, level, dither, extra, light);
         let at = self.row_of_entry[e] as usize;
         if self.entry_of_row.get(at) == Some(&entry) {
             self.rows[at] = row;

@@ -82,7 +82,7 @@ pub fn close_staging(belt: &mut wgpu::util::StagingBelt) {
 /// Where upload hooks record their copies into GPU buffers: the frame's command encoder (the
 /// copies are submitted with the frame, before its pass, in one submission), or, for GPU
 /// phases run without a frame, an encoder made on first use that the caller submits
-/// ([`Self::finish`]) after [`Scene::close_uploads`].
+/// ([`Self::finish`]) after [`Scene::finish_uploads`] (which closes the uploads' staging).
 pub enum UploadEncoder<'a> {
     Frame(&'a mut wgpu::CommandEncoder),
     Own(Option<wgpu::CommandEncoder>),
@@ -237,17 +237,19 @@ impl Scene {
             .find_map(|r| (r.as_mut() as &mut dyn std::any::Any).downcast_mut::<T>())
     }
 
-    /// Records every renderer's deferred work into `deferred` within `time_left_s` of the
-    /// frame's budget; returns the time left: less the GPU time the work is expected to take
-    /// and the frame-thread time it took. The caller submits `deferred` (a frame records into
-    /// its own encoder, before the frame's pass) and then calls
-    /// [`Self::after_deferred_submit`].
+    /// Closes the staging memory the frame's upload hooks wrote (every renderer's
+    /// [`NodeRenderer::close_uploads`]), then records every renderer's deferred work into
+    /// `deferred` within `time_left_s` of the frame's budget; returns the time left: less the
+    /// GPU time the work is expected to take and the frame-thread time it took. The caller
+    /// submits `deferred` (a frame records into its own encoder, which holds the uploads'
+    /// copies too, before the frame's pass) and then calls [`Self::after_deferred_submit`].
     pub fn finish_uploads(
         &mut self,
         gpu: &Gpu,
         deferred: &mut UploadEncoder<'_>,
         mut time_left_s: f64,
     ) -> f64 {
+        self.close_uploads();
         self.last_times.deferred_ms.clear();
         for r in &mut self.renderers {
             let t = Instant::now();
@@ -268,8 +270,8 @@ impl Scene {
     }
 
     /// The GPU phase of a node: every renderer's upload hook, their copies recorded into
-    /// `copies`. Returns the bytes uploaded. [`Self::close_uploads`] follows a frame's GPU
-    /// phases, before `copies` is submitted.
+    /// `copies`. Returns the bytes uploaded. [`Self::finish_uploads`] follows a frame's GPU
+    /// phases (it closes their staging memory), before `copies` is submitted.
     pub fn upload_into(
         &mut self,
         gpu: &Gpu,
@@ -294,15 +296,15 @@ impl Scene {
     }
 
     /// Every renderer's [`NodeRenderer::close_uploads`].
-    pub fn close_uploads(&mut self) {
+    fn close_uploads(&mut self) {
         for r in &mut self.renderers {
             r.close_uploads();
         }
     }
 
     /// Records the frame into `encoder`: one pass cleared to the view's colour and far depth,
-    /// every renderer in order. The frame's uploads and deferred work ([`Self::close_uploads`],
-    /// [`Self::finish_uploads`]) are recorded first.
+    /// every renderer in order. The frame's uploads and deferred work
+    /// ([`Self::finish_uploads`]) are recorded first.
     pub fn render(
         &mut self,
         gpu: &Gpu,

@@ -879,10 +879,8 @@ impl NodeRenderer for TerrainRenderer {
                 let light = frame.light.drawn_entry(i, d.key);
                 // The table holds this frame's drawn nodes in drawing order (a few hundred
                 // entries written, not one per resident node).
-                let Some(entry) =
-                    self.table
-                        .push(frame, node.origin_m, d.key.level, d.dither, extra, light)
-                else {
+                let row = NodeTable::row(frame, node.origin_m, d.key.level, d.dither, extra, light);
+                let Some(entry) = self.table.push(row) else {
                     continue;
                 };
                 let m = &node.mesh;

@@ -881,8 +881,8 @@ impl VegetationRenderer {
             }
             if !std::mem::replace(&mut entry_set[usize::from(g.kept)], true) {
                 let entry = first_entry + u32::from(g.kept);
-                self.table
-                    .set(frame, entry, p.origin_m, level, interval, [0.0; 4], light);
+                let row = NodeTable::row(frame, p.origin_m, level, interval, [0.0; 4], light);
+                self.table.set(entry, row);
             }
             let first_instance = base + g.first;
             let quads = |key| {

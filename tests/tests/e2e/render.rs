@@ -293,7 +293,6 @@ fn draw_nodes(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("test nodes"),
         });
-    scene.close_uploads();
     scene.finish_uploads(g, &mut UploadEncoder::Frame(&mut enc), f64::INFINITY);
     scene.render(g, &mut enc, &target.color_view, &target.depth_view, &draws);
     g.queue.submit([enc.finish()]);
