@@ -182,7 +182,8 @@ impl Default for StreamSettings {
 pub struct Resident {
     /// Boxed: the resident map moves only pointers when it grows.
     pub work: Box<NodeWork>,
-    /// The last frame that needed or prefetched the node, or the frame it became resident.
+    /// The last frame that needed, prefetched, drew or faded the node (held nodes are marked
+    /// in the frames that evict), or the frame it became resident.
     pub last_used_frame: u64,
     /// The frame it became resident.
     pub ready_frame: u64,

@@ -36,17 +36,6 @@ impl Streamer {
             .sum()
     }
 
-    /// The drawn nodes that are not needed, prefetched or in a fade (few: a drawn node is
-    /// almost always needed): with those three sets, what [`Self::pinned`] holds, without
-    /// building that set.
-    fn drawn_only(&self) -> FxHashSet<NodeKey> {
-        self.drawn
-            .iter()
-            .map(|d| d.key)
-            .filter(|k| !self.held(k))
-            .collect()
-    }
-
     /// Needed, prefetched or in a fade.
     fn held(&self, k: &NodeKey) -> bool {
         self.needed.contains(k) || self.prefetched(k) || self.split.contains_key(k)
@@ -74,23 +63,45 @@ impl Streamer {
             return;
         }
         let low_water = budget - budget / EVICTION_SLACK;
-        let drawn_only = self.drawn_only();
-        // `last_used_frame == frame` means this frame's update marked the node (needed or
-        // prefetched, so held) unless it only became resident this frame: such nodes are
-        // skipped without the lookups (most of the resident nodes in a flight).
+        // Every held node is marked used in this frame first: the needed ones are (by this
+        // frame's update), so the prefetched, drawn and fading ones are marked here, one
+        // lookup each. Then a node not marked in this frame is free without a lookup, and of
+        // the marked ones only those that became resident in this frame (marked when they
+        // arrived, held or not) are checked. Checking every unmarked node instead took a
+        // needed, a fade and a lookup per prefetch part for each of the many free ones.
         let frame = self.frame;
-        let maybe_free = |r: &super::Resident| r.last_used_frame < frame || r.ready_frame == frame;
+        let held = super::predict::entries(&self.prefetch_parts)
+            .map(|(_, k)| k)
+            .chain(self.drawn.iter().map(|d| d.key))
+            .chain(self.split.keys().copied());
+        for k in held {
+            if let Some(r) = self.resident.get_mut(&k) {
+                r.last_used_frame = frame;
+            }
+        }
+        let free = |k: &NodeKey, r: &super::Resident| {
+            r.last_used_frame < frame
+                || (r.ready_frame == frame
+                    && !self.held(k)
+                    && !self.drawn.iter().any(|d| d.key == *k))
+        };
         // Least recently used first (ties by key); a heap, as a pass evicts few of many.
         let mut candidates: std::collections::BinaryHeap<_> = self
             .resident
             .iter()
-            .filter(|(k, r)| maybe_free(r) && !self.held(k) && !drawn_only.contains(k))
+            .filter(|(k, r)| free(k, r))
             .map(|(k, r)| std::cmp::Reverse((r.last_used_frame, *k)))
             .collect();
+        // What the marks stand for, checked against the sets themselves in debug builds (the
+        // tests' builds): no pinned node is a candidate.
+        #[cfg(debug_assertions)]
+        let pinned = self.pinned();
         while self.resident_bytes > low_water {
             let Some(std::cmp::Reverse((_, k))) = candidates.pop() else {
                 break;
             };
+            #[cfg(debug_assertions)]
+            assert!(!pinned.contains(&k), "eviction chose pinned node {k:?}");
             if let Some(r) = self.resident.remove(&k) {
                 self.resident_bytes -= r.bytes;
                 self.dropper.drop_node(r.work);
