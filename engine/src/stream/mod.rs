@@ -625,9 +625,9 @@ impl Streamer {
         stages.selection_s = lap.next();
         self.parts_to_request |= self.refresh_prefetch(cam, future);
         stages.prefetch_s = lap.next();
-        // Resident nodes needed, or in a part computed again, are marked used this frame (a
-        // prefetched node is marked when its part is computed: eviction keeps every held
-        // node, and orders the others by that mark); the others are missing, each in its
+        // Resident nodes needed, or in a part computed again, are marked used this frame
+        // (eviction counts on the needed nodes' mark and marks the other pinned nodes itself,
+        // then orders the unmarked by their last mark); the others are missing, each in its
         // class (once per part holding it: sorted, the smallest class comes first and is the
         // one requested).
         let frame = self.frame;

@@ -36,9 +36,13 @@ impl Streamer {
             .sum()
     }
 
-    /// Needed, prefetched or in a fade.
-    fn held(&self, k: &NodeKey) -> bool {
-        self.needed.contains(k) || self.prefetched(k) || self.split.contains_key(k)
+    /// Whether `k` is one of [`Self::pinned`] (needed, prefetched, in a fade or drawn), asked
+    /// without building that set.
+    fn is_pinned(&self, k: &NodeKey) -> bool {
+        self.needed.contains(k)
+            || self.prefetched(k)
+            || self.split.contains_key(k)
+            || self.drawn.iter().any(|d| d.key == *k)
     }
 
     /// Counts `bytes` that a renderer allocated for resident node `key` after the node became
@@ -80,10 +84,7 @@ impl Streamer {
             }
         }
         let free = |k: &NodeKey, r: &super::Resident| {
-            r.last_used_frame < frame
-                || (r.ready_frame == frame
-                    && !self.held(k)
-                    && !self.drawn.iter().any(|d| d.key == *k))
+            r.last_used_frame < frame || (r.ready_frame == frame && !self.is_pinned(k))
         };
         // Least recently used first (ties by key); a heap, as a pass evicts few of many.
         let mut candidates: std::collections::BinaryHeap<_> = self
