@@ -89,7 +89,9 @@ if ./target/debug/worldgen building --roof dome --out "$smoke/bad.obj" 2>/dev/nu
 fi
 
 step "smoke: nodebench --quick on the tiny map"
-./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" --pm-plot "$smoke/pm_error.png" > "$smoke/nodebench.md"
+./target/debug/nodebench --quick --map maps/tiny --json "$smoke/nodebench.json" --plot "$smoke/speed_vs_error.png" --pm-plot "$smoke/pm_error.png" --doc "$smoke/bench.md" > "$smoke/nodebench.md"
+grep -q "^# Benchmarks" "$smoke/bench.md"
+test ! -e "$smoke/bench.partial.md"
 grep -q '"section": "selection"' "$smoke/nodebench.json"
 grep -q '"machine"' "$smoke/nodebench.json"
 grep -q '"section": "gpu"' "$smoke/nodebench.json"
@@ -103,6 +105,14 @@ fi
 if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
   echo "nodebench accepted an unknown section" >&2; exit 1
 fi
+# A run that fails late (here: section worlds cannot make its folder) keeps the rows it measured.
+if ./target/debug/nodebench --quick --only tiles,worlds --worlds-scratch /dev/null/worlds \
+  --map maps/tiny --doc "$smoke/failed.md" >/dev/null 2>&1; then
+  echo "nodebench made a world folder under /dev/null" >&2; exit 1
+fi
+test ! -e "$smoke/failed.md"
+grep -q "Incomplete" "$smoke/failed.partial.md"
+grep -q "| tiles |" "$smoke/failed.partial.md"
 
 step "smoke: flyover headless, and its fallback when there is no display"
 ./target/debug/flyover --headless --map maps/tiny --frames 60 --every 30 --size 320x180 \

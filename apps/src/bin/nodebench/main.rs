@@ -93,7 +93,9 @@ struct Cli {
     #[arg(long)]
     json: Option<PathBuf>,
     /// Write the benchmark document (Markdown: command, machine, every row of this run) here,
-    /// e.g. docs/benchmarks.md.
+    /// e.g. docs/benchmarks.md. Until it is written at the end, the rows so far are kept after
+    /// every section in `<name>.partial.md` beside it (e.g. docs/benchmarks.partial.md, removed
+    /// when the document is written), so a run that fails late loses nothing.
     #[arg(long)]
     doc: Option<PathBuf>,
     /// Write the speed-against-error plot (PNG) here.
@@ -108,8 +110,9 @@ struct Cli {
     /// Worker threads for the throughput rows (default: all cores).
     #[arg(long)]
     workers: Option<usize>,
-    /// Section worlds: the map sides to generate and fly, metres (comma-separated).
-    #[arg(long, value_delimiter = ',', default_values_t = [2048.0, 8192.0, 32768.0])]
+    /// Section worlds: the map sides to generate and fly, metres (comma-separated; default
+    /// 2048, 8192, 32768, and with --quick 2048 only).
+    #[arg(long, value_delimiter = ',')]
     world_sizes: Vec<f64>,
     /// Section worlds: where its maps go (gigabytes for 32 km).
     #[arg(long, default_value = "target/nodebench/worlds")]
@@ -139,8 +142,13 @@ fn run(cli: &Cli) -> Result<()> {
         }
     }
     let want = |s: &str| cli.only.is_empty() || cli.only.iter().any(|o| o == s);
+    let world_sizes_m: Vec<f64> = match (&cli.world_sizes[..], cli.quick) {
+        ([], true) => vec![2048.0],
+        ([], false) => vec![2048.0, 8192.0, 32768.0],
+        (given, _) => given.to_vec(),
+    };
     if cli.only.iter().any(|o| o == "worlds") {
-        for &s in &cli.world_sizes {
+        for &s in &world_sizes_m {
             if !(s.is_finite() && (256.0..=65_536.0).contains(&s)) {
                 bail!("--world-sizes: {s} m is outside 256..=65536 m");
             }
@@ -165,24 +173,44 @@ fn run(cli: &Cli) -> Result<()> {
     }
     let mut report = Report { rows: Vec::new() };
     let t0 = Instant::now();
+    // With --doc: the rows so far go to `<doc>.partial.md` after every section, so a run that
+    // fails or is stopped an hour in still leaves what it measured; removed once the document
+    // itself is written.
+    let partial = cli.doc.as_ref().map(|p| p.with_extension("partial.md"));
+    let checkpoint = |report: &Report, section: &str, adapter: Option<&str>| -> Result<()> {
+        let Some(p) = &partial else { return Ok(()) };
+        let summary = format!(
+            "**Incomplete**: the rows of a nodebench run up to section {section}, {:.1} s in; \
+             it failed, was stopped or is still running. Not the benchmark document.",
+            t0.elapsed().as_secs_f64()
+        );
+        let machine = report::machine_block(workers, adapter);
+        write_file(p, &report.document(&command_line(), &summary, &machine))
+    };
     if want("tiles") {
         tiles::section_tiles(&world, &mut report, cli.quick, workers);
+        checkpoint(&report, "tiles", None)?;
     }
     if want("terrain") {
         terrain::section_terrain(&world, &tree, &cams, &mut report, cli.quick, workers);
+        checkpoint(&report, "terrain", None)?;
     }
     if want("selection") {
         selection::section_selection(&world, &tree, &cams, &mut report, cli.quick);
+        checkpoint(&report, "selection", None)?;
     }
     let mut curve = Vec::new();
     if want("error") {
         curve = error::section_error(&world, &tree, &cams, &mut report, cli.quick);
+        checkpoint(&report, "error", None)?;
     }
     if want("vegetation") {
         vegetation::section_vegetation(&world, &tree, &cams, &mut report, cli.quick);
+        checkpoint(&report, "vegetation", None)?;
     }
     if want("lighting") {
         lighting::section_lighting(&world, &tree, &cams, &mut report, cli.quick, workers);
+        checkpoint(&report, "lighting", None)?;
     }
     if want("pm") {
         let curves = pm::section_pm(&cli.meshes, &mut report, cli.quick);
@@ -203,9 +231,11 @@ fn run(cli: &Cli) -> Result<()> {
             Ok(()) => {}
             Err(e) => eprintln!("warning: pm plot not written: {e:#}"),
         }
+        checkpoint(&report, "pm", None)?;
     }
     if want("buildings") {
         buildings::section_buildings(&world, &tree, &cams, &mut report, cli.quick);
+        checkpoint(&report, "buildings", None)?;
     }
     // One adapter for the sections that use it (streaming renders ground textures with it).
     let adapter = if want("streaming") || want("gpu") || want("textures") || want("soak") {
@@ -213,6 +243,10 @@ fn run(cli: &Cli) -> Result<()> {
     } else {
         None
     };
+    let mut adapter_name = adapter
+        .as_ref()
+        .filter(|_| want("streaming"))
+        .map(|(_, name)| name.clone());
     if want("streaming") {
         streaming::section_streaming(
             &cli.map,
@@ -223,6 +257,7 @@ fn run(cli: &Cli) -> Result<()> {
             adapter.as_ref().map(|(g, name)| (g, name.as_str())),
             &cli.speeds,
         )?;
+        checkpoint(&report, "streaming", adapter_name.as_deref())?;
     }
     if want("bookkeeping") {
         bookkeeping::section_bookkeeping(
@@ -232,18 +267,19 @@ fn run(cli: &Cli) -> Result<()> {
             workers,
             [vh * 16 / 9, vh],
         )?;
+        checkpoint(&report, "bookkeeping", adapter_name.as_deref())?;
     }
-    let mut adapter_name = adapter
-        .as_ref()
-        .filter(|_| want("streaming"))
-        .map(|(_, name)| name.clone());
     if (want("gpu") || want("textures") || want("soak"))
         && let Some(name) = adapter_sections(cli, adapter, &world, &tree, &cams, &mut report)?
     {
         adapter_name = Some(name);
     }
+    if want("gpu") || want("textures") || want("soak") {
+        checkpoint(&report, "gpu, textures and soak", adapter_name.as_deref())?;
+    }
     if cli.only.iter().any(|o| o == "worlds") {
-        worlds::section_worlds(&cli.world_sizes, &cli.worlds_scratch, &mut report)?;
+        worlds::section_worlds(&world_sizes_m, &cli.worlds_scratch, &mut report)?;
+        checkpoint(&report, "worlds", adapter_name.as_deref())?;
     }
     let summary = format!(
         "nodebench on {} ({} x {} m, {} levels), {} worker(s), {:.1} s{}",
@@ -264,12 +300,12 @@ fn run(cli: &Cli) -> Result<()> {
     }
     let machine = report::machine_block(workers, adapter_name.as_deref());
     if let Some(p) = &cli.doc {
-        let command: Vec<String> = std::env::args()
-            .enumerate()
-            .map(|(i, a)| if i == 0 { "nodebench".to_string() } else { a })
-            .collect();
-        write_file(p, &report.document(&command.join(" "), &summary, &machine))?;
+        write_file(p, &report.document(&command_line(), &summary, &machine))?;
         println!("benchmark document: {}", p.display());
+        if let Some(partial) = partial.as_ref().filter(|q| q.exists()) {
+            std::fs::remove_file(partial)
+                .with_context(|| format!("removing {}", partial.display()))?;
+        }
     }
     if let Some(p) = &cli.json {
         let doc = serde_json::json!({ "machine": machine, "rows": report.rows });
@@ -322,6 +358,15 @@ fn adapter_sections(
         None => eprintln!("no GPU adapter: sections gpu, textures and soak left out"),
     }
     Ok(None)
+}
+
+/// This run's command line as the document prints it (the program named `nodebench`).
+fn command_line() -> String {
+    let args: Vec<String> = std::env::args()
+        .enumerate()
+        .map(|(i, a)| if i == 0 { "nodebench".to_string() } else { a })
+        .collect();
+    args.join(" ")
 }
 
 /// Writes `text` to `path`, creating its folder.
