@@ -142,18 +142,7 @@ fn run(cli: &Cli) -> Result<()> {
         }
     }
     let want = |s: &str| cli.only.is_empty() || cli.only.iter().any(|o| o == s);
-    let world_sizes_m: Vec<f64> = match (&cli.world_sizes[..], cli.quick) {
-        ([], true) => vec![2048.0],
-        ([], false) => vec![2048.0, 8192.0, 32768.0],
-        (given, _) => given.to_vec(),
-    };
-    if cli.only.iter().any(|o| o == "worlds") {
-        for &s in &world_sizes_m {
-            if !(s.is_finite() && (256.0..=65_536.0).contains(&s)) {
-                bail!("--world-sizes: {s} m is outside 256..=65536 m");
-            }
-        }
-    }
+    let world_sizes_m = world_sizes_m(cli)?;
     let workers = cli
         .workers
         .unwrap_or_else(|| {
@@ -213,24 +202,7 @@ fn run(cli: &Cli) -> Result<()> {
         checkpoint(&report, "lighting", None)?;
     }
     if want("pm") {
-        let curves = pm::section_pm(&cli.meshes, &mut report, cli.quick);
-        let mesh = if cli.quick {
-            "cow.obj"
-        } else {
-            "stanford-bunny.obj"
-        };
-        let shown: Vec<_> = curves.iter().filter(|c| c.label.contains(mesh)).collect();
-        let title = format!("{mesh}: measured two-sided error against triangles");
-        match apps::plot::write_loglog(
-            &cli.pm_plot,
-            &title,
-            "Hausdorff distance / diagonal",
-            &shown,
-        ) {
-            Ok(()) if !curves.is_empty() => println!("pm plot: {}", cli.pm_plot.display()),
-            Ok(()) => {}
-            Err(e) => eprintln!("warning: pm plot not written: {e:#}"),
-        }
+        section_pm_with_plot(cli, &mut report);
         checkpoint(&report, "pm", None)?;
     }
     if want("buildings") {
@@ -313,6 +285,47 @@ fn run(cli: &Cli) -> Result<()> {
         println!("json: {}", p.display());
     }
     Ok(())
+}
+
+/// The map sizes of section worlds: `--world-sizes`, or 2048, 8192 and 32768 m (2048 m only
+/// under `--quick`); an error names a size outside 256..=65536 m when the section runs.
+fn world_sizes_m(cli: &Cli) -> Result<Vec<f64>> {
+    let sizes_m: Vec<f64> = match (&cli.world_sizes[..], cli.quick) {
+        ([], true) => vec![2048.0],
+        ([], false) => vec![2048.0, 8192.0, 32768.0],
+        (given, _) => given.to_vec(),
+    };
+    if cli.only.iter().any(|o| o == "worlds") {
+        for &s in &sizes_m {
+            if !(s.is_finite() && (256.0..=65_536.0).contains(&s)) {
+                bail!("--world-sizes: {s} m is outside 256..=65536 m");
+            }
+        }
+    }
+    Ok(sizes_m)
+}
+
+/// Section pm, and its error curves for one mesh (the bunny; the cow under `--quick`) plotted
+/// to `--pm-plot`; a plot that cannot be written is a warning, not a failed run.
+fn section_pm_with_plot(cli: &Cli, report: &mut Report) {
+    let curves = pm::section_pm(&cli.meshes, report, cli.quick);
+    let mesh = if cli.quick {
+        "cow.obj"
+    } else {
+        "stanford-bunny.obj"
+    };
+    let shown: Vec<_> = curves.iter().filter(|c| c.label.contains(mesh)).collect();
+    let title = format!("{mesh}: measured two-sided error against triangles");
+    match apps::plot::write_loglog(
+        &cli.pm_plot,
+        &title,
+        "Hausdorff distance / diagonal",
+        &shown,
+    ) {
+        Ok(()) if !curves.is_empty() => println!("pm plot: {}", cli.pm_plot.display()),
+        Ok(()) => {}
+        Err(e) => eprintln!("warning: pm plot not written: {e:#}"),
+    }
 }
 
 /// Sections `gpu`, `textures` and `soak` (as `cli` wants them) on the adapter; its name, or
