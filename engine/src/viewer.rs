@@ -157,6 +157,11 @@ pub struct Viewer {
     pub view: ViewOptions,
     /// Debug: when set, selection uses this camera while rendering follows the live one.
     pub frozen: Option<Camera>,
+    /// The camera's path ahead when the owner knows it (an automatic or replayed flight):
+    /// (seconds ahead, camera) as in [`crate::stream::Streamer::update_along`], see
+    /// [`crate::stream::predict::along`]. The next [`Self::frame`] prefetches along it and
+    /// empties it; when empty, the prefetch extrapolates the camera's velocity.
+    pub path_ahead: Vec<(f64, Camera)>,
     timer: Option<GpuTimer>,
     reference: Option<GpuReference>,
     reference_size: [u32; 2],
@@ -211,6 +216,7 @@ impl Viewer {
             scene,
             view: ViewOptions::default(),
             frozen: None,
+            path_ahead: Vec::new(),
             timer: GpuTimer::new(gpu),
             reference: None,
             reference_size: [1, 1],
@@ -261,10 +267,15 @@ impl Viewer {
             .settings
             .gpu_budget_s
             .max(GPU_BUDGET_FRAME_SHARE * interval_s);
-        let select_cam = self.frozen.unwrap_or(*cam);
         // The textures the last frame made, in the budget before this update evicts.
         self.charge_made_textures();
-        self.streamer.update(&select_cam, dt_s);
+        let ahead = std::mem::take(&mut self.path_ahead);
+        match self.frozen {
+            // A frozen selection has no path ahead.
+            Some(frozen) => self.streamer.update(&frozen, dt_s),
+            None if !ahead.is_empty() => self.streamer.update_along(cam, dt_s, &ahead),
+            None => self.streamer.update(cam, dt_s),
+        }
         self.show_textures_of_display();
         let t1 = Instant::now();
         let (uploaded, expected_gpu_s) =

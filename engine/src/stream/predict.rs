@@ -38,6 +38,15 @@ pub fn extrapolate(cam: &Camera, velocity_m_per_s: glam::DVec3) -> Vec<(f64, Cam
         .collect()
 }
 
+/// The path ahead of a camera whose path is known (`camera_at` gives the camera at a time, in
+/// s): the cameras at `t_s` plus each horizon, for [`Streamer::update_along`].
+pub fn along(t_s: f64, camera_at: impl Fn(f64) -> Camera) -> Vec<(f64, Camera)> {
+    PREDICT_HORIZONS_S
+        .iter()
+        .map(|&h| (h, camera_at(t_s + h)))
+        .collect()
+}
+
 /// A prefetch part (one predicted camera, or the lower-tau ring around the camera) is stale
 /// when its camera moved more than this since it was computed (m) ...
 const REFRESH_MOVED_M: f64 = 8.0;

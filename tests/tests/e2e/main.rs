@@ -18,4 +18,5 @@ mod terrain;
 mod texcache;
 mod towns;
 mod vegetation;
+mod viewer_prefetch;
 mod viewer_xvfb;

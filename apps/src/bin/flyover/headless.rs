@@ -73,13 +73,12 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let mut written = Vec::new();
     for f in 0..cli.frames {
         let t_s = f as f64 * dt;
-        let cam = scripted_camera(
-            cli,
-            path.as_ref(),
-            &viewer.streamer.shared.world,
-            t_s,
-            cli.size,
-        );
+        let world = &viewer.streamer.shared.world;
+        let cam = scripted_camera(cli, path.as_ref(), world, t_s, cli.size);
+        // The flight is scripted: prefetch follows its path, not the camera's velocity.
+        viewer.path_ahead = engine::stream::predict::along(t_s, |t| {
+            scripted_camera(cli, path.as_ref(), world, t, cli.size)
+        });
         let mut st = viewer
             .render_offscreen(&gpu, &target, &cam, dt)
             .map_err(|e| anyhow::anyhow!(e))?;

@@ -420,7 +420,11 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
     let vp = [st.config.width, st.config.height];
     if st.auto {
         st.t_s += dt;
-        st.cam = scripted_camera(cli, path, &st.viewer.streamer.shared.world, st.t_s, vp);
+        let world = &st.viewer.streamer.shared.world;
+        st.cam = scripted_camera(cli, path, world, st.t_s, vp);
+        // A scripted flight: prefetch follows its path (free flight extrapolates the velocity).
+        st.viewer.path_ahead =
+            engine::stream::predict::along(st.t_s, |t| scripted_camera(cli, path, world, t, vp));
         st.yaw_pitch = (
             st.cam.forward.y.atan2(st.cam.forward.x),
             st.cam.forward.z.asin(),

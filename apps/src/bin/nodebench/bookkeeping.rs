@@ -67,10 +67,8 @@ pub(crate) fn section_bookkeeping(
             let world = &s.shared.world;
             let cam = loop_camera(world, flight, t_s, viewport_px);
             // The path ahead as a flight predicts it, so every prefetch part is computed.
-            let future: Vec<_> = engine::stream::predict::PREDICT_HORIZONS_S
-                .iter()
-                .map(|&h| (h, loop_camera(world, flight, t_s + h, viewport_px)))
-                .collect();
+            let future =
+                engine::stream::predict::along(t_s, |t| loop_camera(world, flight, t, viewport_px));
             // Settle with the path ahead prefetched too.
             let t0 = Instant::now();
             loop {

@@ -333,15 +333,9 @@ pub(crate) fn section_streaming(
         // The replayed path is known: prefetch follows it.
         let future: Vec<Vec<(f64, Camera)>> = (0..frames)
             .map(|f| {
-                engine::stream::predict::PREDICT_HORIZONS_S
-                    .iter()
-                    .map(|&h| {
-                        (
-                            h,
-                            loop_camera(&world, flight, f as f64 * dt + h, viewport_px),
-                        )
-                    })
-                    .collect()
+                engine::stream::predict::along(f as f64 * dt, |t_s| {
+                    loop_camera(&world, flight, t_s, viewport_px)
+                })
             })
             .collect();
         let settings = StreamSettings {
