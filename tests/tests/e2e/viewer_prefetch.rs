@@ -14,7 +14,7 @@ const SIZE_PX: [u32; 2] = [160, 90];
 const TAU_PX: f64 = 1.0;
 
 /// A camera of a flight across the tiny map, `t` from 0 to 1.
-fn along(t: f64) -> Camera {
+fn flight_at(t: f64) -> Camera {
     thread_local! {
         static WORLD: engine::surface::world::World = tiny_world();
     }
@@ -37,12 +37,12 @@ fn missing_at(v: &Viewer, far: &Camera) -> usize {
 fn frames_with_the_path_ahead_set_prefetch_along_it_and_use_it_once() {
     let Some(g) = device() else { return };
     let target = Target::new(&g.device, SIZE_PX, COLOR_FORMAT);
-    let here = along(0.0);
+    let here = flight_at(0.0);
     // The path ahead: the same flight, far on (the camera itself stays at its start, so a
     // velocity-based prediction would predict nothing).
     let future: Vec<(f64, Camera)> = (1..)
         .zip(PREDICT_HORIZONS_S)
-        .map(|(i, h)| (h, along(0.25 * f64::from(i))))
+        .map(|(i, h)| (h, flight_at(0.25 * f64::from(i))))
         .collect();
     let far = future[future.len() - 1].1;
 
