@@ -140,6 +140,10 @@ pub struct FrameStats {
     /// showing none (legend colours). 0 without ground textures.
     pub borrowed_textures: usize,
     pub untextured_nodes: usize,
+    /// Layers of the ground-texture pool leased (one per node with its own texture) and bytes
+    /// of the pool's pages made so far; 0 without ground textures.
+    pub ground_layers_in_use: usize,
+    pub ground_pool_bytes: usize,
 }
 
 impl FrameStats {
@@ -330,6 +334,7 @@ impl Viewer {
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
         let wanted_missing = self.wanted_not_drawn();
         let terrain = self.scene.renderer::<TerrainRenderer>();
+        let ground_pool = terrain.map_or((0, 0), TerrainRenderer::ground_pool_use);
         self.frame += 1;
         FrameStats {
             frame: self.frame,
@@ -389,6 +394,8 @@ impl Viewer {
                 .map_or(0, |r| r.coarse_lit_drawn),
             borrowed_textures: terrain.map_or(0, |t| t.borrowed_textures),
             untextured_nodes: terrain.map_or(0, |t| t.untextured),
+            ground_layers_in_use: ground_pool.0,
+            ground_pool_bytes: ground_pool.1,
         }
     }
 

@@ -62,8 +62,9 @@ impl Streamer {
             FxHashMap::with_capacity_and_hasher(self.split.len() + 64, rustc_hash::FxBuildHasher);
         // Each entry carries its dither interval and its ancestors' bounds for the decimation
         // (the walk came through them), so a drawn node needs no lookup of its ancestors.
-        let mut stack: Vec<(NodeKey, f32, f32, Ancestors)> =
-            vec![(NodeKey::ROOT, 0.0, 1.0, [None; MAX_DECIMATION as usize])];
+        // Depth first, so short: on the call stack (see `select::walk`).
+        let mut stack: smallvec::SmallVec<[(NodeKey, f32, f32, Ancestors); 64]> =
+            smallvec::smallvec![(NodeKey::ROOT, 0.0, 1.0, [None; MAX_DECIMATION as usize])];
         while let Some((key, lo, hi, up)) = stack.pop() {
             if !self.shared.tree.overlaps_map(key) {
                 continue;

@@ -14,6 +14,7 @@ use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rec
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use glam::DVec3;
+use smallvec::SmallVec;
 use std::borrow::Borrow;
 
 /// The world-space box of a node.
@@ -391,6 +392,9 @@ pub struct Walked {
     pub culled: u32,
 }
 
+/// Entries [`walk`]'s stack keeps inline: three siblings per level of a 20-level tree and one.
+const WALK_STACK_INLINE: usize = 64;
+
 /// The traversal of [`traverse_in`], handing each node it reaches to `reached` instead of
 /// collecting them, with the bounds as `bounds` gives them: a source that lends its bounds
 /// (`&NodeBounds`) lets a per-frame selection run without copying any, and one that links a
@@ -412,7 +416,11 @@ pub fn walk<S: WalkBounds>(
     // another: no lookup waits for another's result, so their cache misses can overlap. Each
     // entry carries the frustum planes its box may cross: those its parent's box crossed when
     // its box lies within the parent's (a box inside a plane has every box within it inside).
-    let mut stack = Vec::new();
+    // The stack is depth first, so it holds at most three siblings per level below the root
+    // and the node popped: it lives on the call stack for any tree of up to 20 levels (a heap
+    // vector grown in each walk reallocated three or four times a call, and glibc consolidated
+    // its free lists for the larger blocks, in the frame thread).
+    let mut stack: SmallVec<[_; WALK_STACK_INLINE]> = SmallVec::new();
     if tree.overlaps_map(NodeKey::ROOT) {
         stack.push((NodeKey::ROOT, bounds.get(NodeKey::ROOT), ALL_PLANES));
     }

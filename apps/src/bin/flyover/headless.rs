@@ -277,7 +277,7 @@ fn frame_part_rows(all: &[FrameStats]) -> Vec<(String, Vec<f64>)> {
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
     let mut rows = frame_part_rows(all);
-    let more: [(&str, Vec<f64>); 25] = [
+    let more: [(&str, Vec<f64>); 27] = [
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
             "GPU frame pass (timestamp queries, when supported)",
@@ -365,6 +365,14 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
         (
             "drawn nodes showing an ancestor's ground texture (their own not made yet)",
             col(|s| s.borrowed_textures as f64),
+        ),
+        (
+            "ground-texture layers in use (one per node with its own texture)",
+            col(|s| s.ground_layers_in_use as f64),
+        ),
+        (
+            "ground-texture pool MiB (pages made so far)",
+            col(|s| s.ground_pool_bytes as f64 / f64::from(1 << 20)),
         ),
     ];
     rows.extend(more.into_iter().map(|(n, v)| (n.to_string(), v)));
