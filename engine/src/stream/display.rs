@@ -5,6 +5,7 @@ use super::Streamer;
 use crate::terrain::bounds::NodeBounds;
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::NodeKey;
+use crate::terrain::select::WALK_STACK_INLINE;
 use rustc_hash::FxHashMap;
 
 /// The bounds of a node's parent, grandparent, ... as far as a decimation looks (`None` where
@@ -62,8 +63,8 @@ impl Streamer {
             FxHashMap::with_capacity_and_hasher(self.split.len() + 64, rustc_hash::FxBuildHasher);
         // Each entry carries its dither interval and its ancestors' bounds for the decimation
         // (the walk came through them), so a drawn node needs no lookup of its ancestors.
-        // Depth first, so short: on the call stack (see `select::walk`).
-        let mut stack: smallvec::SmallVec<[(NodeKey, f32, f32, Ancestors); 64]> =
+        // Depth first, so short: on the call stack.
+        let mut stack: smallvec::SmallVec<[(NodeKey, f32, f32, Ancestors); WALK_STACK_INLINE]> =
             smallvec::smallvec![(NodeKey::ROOT, 0.0, 1.0, [None; MAX_DECIMATION as usize])];
         while let Some((key, lo, hi, up)) = stack.pop() {
             if !self.shared.tree.overlaps_map(key) {

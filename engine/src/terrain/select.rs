@@ -392,8 +392,10 @@ pub struct Walked {
     pub culled: u32,
 }
 
-/// Entries [`walk`]'s stack keeps inline: three siblings per level of a 20-level tree and one.
-const WALK_STACK_INLINE: usize = 64;
+/// Entries a depth-first walk of the tree ([`walk`], the streamer's draw-list walk) keeps on
+/// the call stack: three siblings per level of a 20-level tree and the node popped (a deeper
+/// tree spills to the heap).
+pub(crate) const WALK_STACK_INLINE: usize = 64;
 
 /// The traversal of [`traverse_in`], handing each node it reaches to `reached` instead of
 /// collecting them, with the bounds as `bounds` gives them: a source that lends its bounds
