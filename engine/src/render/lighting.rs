@@ -39,11 +39,6 @@ impl NodeLightGpu {
     }
 }
 
-/// The node's lease on its grid's tile, once taken.
-fn lease_of(work: &NodeWork) -> Option<&Arc<LightLease>> {
-    work.gpu.get::<NodeLightGpu>().and_then(NodeLightGpu::lease)
-}
-
 /// The node-table numbers of node `key` shaded by grid lease `l` (its own, or an ancestor's,
 /// read at that grid's columns, which are every 2nd, 4th ... of its own: the same values
 /// there), blending toward coarser neighbours on the sides `steps` codes.
@@ -153,24 +148,31 @@ impl NodeRenderer for LightingRenderer {
         {
             frame.light.refresh_key(&gpu.queue, key);
         }
-        for d in draws.drawn.iter().chain(draws.ancestors) {
-            let Some(slot) = d.work.gpu.get::<NodeLightGpu>() else {
-                continue;
-            };
-            if slot.lease().is_none()
-                && let Some(light) = d.work.get::<NodeLight>()
-                && let Some(lease) = frame.light.lease(&light.grid)
-            {
-                frame.light.refresh(&gpu.queue, &lease);
-                // `prepare` is the only writer, so the slot is still empty.
-                let _ = slot.0.set(lease);
-            }
-        }
+        // Each drawn, then drawn-through, node's lease, looked up once.
+        let leases: Vec<Option<&Arc<LightLease>>> = draws
+            .drawn
+            .iter()
+            .chain(draws.ancestors)
+            .map(|d| {
+                let slot = d.work.gpu.get::<NodeLightGpu>()?;
+                if slot.lease().is_none()
+                    && let Some(light) = d.work.get::<NodeLight>()
+                    && let Some(lease) = frame.light.lease(&light.grid)
+                {
+                    frame.light.refresh(&gpu.queue, &lease);
+                    // `prepare` is the only writer, so the slot is still empty.
+                    let _ = slot.0.set(lease);
+                }
+                slot.lease()
+            })
+            .collect();
+        let (drawn_leases, ancestor_leases) = leases.split_at(draws.drawn.len());
         let lit: Vec<_> = draws
             .drawn
             .iter()
-            .filter(|d| lease_of(d.work).is_some())
-            .map(|d| d.key)
+            .zip(drawn_leases)
+            .filter(|(_, l)| l.is_some())
+            .map(|(d, _)| d.key)
             .collect();
         let seams = coarser_sides(draws.tree, &lit);
         // Each drawn (or drawn-through) node's entry: its own grid once written, else the
@@ -178,19 +180,21 @@ impl NodeRenderer for LightingRenderer {
         let written: FxHashMap<NodeKey, &Arc<LightLease>> = draws
             .ancestors
             .iter()
-            .filter_map(|a| lease_of(a.work).filter(|l| l.written()).map(|l| (a.key, l)))
+            .zip(ancestor_leases)
+            .filter_map(|(a, l)| l.filter(|l| l.written()).map(|l| (a.key, l)))
             .collect();
         (self.unlit_drawn, self.coarse_lit_drawn) = (0, 0);
         let light = &mut frame.light;
         light.drawn_entries.clear();
         light.ancestor_entries.clear();
-        for (d, is_drawn) in draws
+        for ((d, is_drawn), lease) in draws
             .drawn
             .iter()
             .map(|d| (d, true))
             .chain(draws.ancestors.iter().map(|a| (a, false)))
+            .zip(&leases)
         {
-            let entry = match lease_of(d.work).filter(|l| l.written()) {
+            let entry = match lease.filter(|l| l.written()) {
                 Some(l) => {
                     let steps = seams.get(&d.key).map_or(0, |s| s.0);
                     light_entry(l, draws.tree, d.key, steps)
