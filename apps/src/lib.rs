@@ -70,6 +70,43 @@ fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::P
     engine::terrain::precomputed::open(map, cache.as_deref(), progress)
 }
 
+/// The vertical fields of view the apps accept, degrees (the default is 60).
+pub const FOV_DEG_RANGE: std::ops::RangeInclusive<f64> = 20.0..=120.0;
+
+/// A vertical field of view in degrees from the command line: a number in [`FOV_DEG_RANGE`].
+pub fn parse_fov_deg(s: &str) -> Result<f64, String> {
+    let (lo, hi) = (FOV_DEG_RANGE.start(), FOV_DEG_RANGE.end());
+    match s.trim().parse::<f64>() {
+        Ok(v) if FOV_DEG_RANGE.contains(&v) => Ok(v),
+        Ok(v) => Err(format!(
+            "the field of view {v} degrees is outside {lo}..={hi} degrees (vertical)"
+        )),
+        Err(e) => Err(format!(
+            "the field of view {s:?} is not a number of degrees ({e}); give {lo}..={hi}"
+        )),
+    }
+}
+
+/// A screen aspect ratio from the command line, `W:H` such as `16:9` or `21:9`: width over
+/// height, each a number above 0, the ratio within 1:4..=8:1.
+pub fn parse_aspect(s: &str) -> Result<f64, String> {
+    let bad = |why: &str| format!("aspect {s:?}: {why}; give W:H such as 16:9 or 21:9");
+    let (w, h) = s.split_once(':').ok_or_else(|| bad("no ':'"))?;
+    let num = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .ok_or_else(|| bad(&format!("{v:?} is not a number above 0")))
+    };
+    let ratio = num(w)? / num(h)?;
+    if (0.25..=8.0).contains(&ratio) {
+        Ok(ratio)
+    } else {
+        Err(bad("the ratio must be within 1:4..=8:1"))
+    }
+}
+
 /// The `p`-quantile (0..=1) of `sorted` (ascending): the element at index `round((n - 1) p)`,
 /// so 0 is the minimum, 1 the maximum and 0.5 the median (for an even count, the upper of the
 /// two middle elements: `round` goes half away from zero). NaN for an empty slice.
@@ -84,6 +121,20 @@ pub fn percentile(sorted: &[f64], p: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::percentile;
+
+    #[test]
+    fn fields_of_view_and_aspects_outside_their_range_are_refused_with_their_name() {
+        assert_eq!(super::parse_fov_deg("90"), Ok(90.0));
+        for bad in ["0", "200", "nan", "NaN", "inf", "-60", "", "wide"] {
+            let e = super::parse_fov_deg(bad).unwrap_err();
+            assert!(e.contains("field of view"), "{bad}: {e}");
+        }
+        assert!((super::parse_aspect("21:9").unwrap() - 21.0 / 9.0).abs() < 1e-12);
+        for bad in ["16/9", "0:9", "16:0", "nan:1", "100:1", "x:y"] {
+            let e = super::parse_aspect(bad).unwrap_err();
+            assert!(e.contains("aspect"), "{bad}: {e}");
+        }
+    }
 
     #[test]
     fn percentile_picks_the_nearest_rank() {

@@ -1,7 +1,7 @@
 //! The camera: an f64 perspective camera (z up), its frustum, and the projection constant `K`
 //! of the pixel-error metric (`px = err_m * K / dist_m`).
 
-use glam::DVec3;
+use glam::{DMat4, DVec3};
 
 /// A perspective camera in f64 world space (z up).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,6 +53,19 @@ impl Camera {
     /// Pixels per (metre / metre of distance): `viewport_height / (2 tan(fovy / 2))`.
     pub fn k_px(&self) -> f64 {
         f64::from(self.viewport_px[1]) / (2.0 * (self.fovy_rad * 0.5).tan())
+    }
+
+    /// Clip space from camera-relative world space (a point minus [`Self::position_m`]): the
+    /// view rotation and a reversed-Z perspective with an infinite far plane (WebGPU: NDC z in
+    /// [0, 1], y up), the matrix the renderer draws with (it builds the same in f32).
+    pub fn clip_from_rel(&self) -> DMat4 {
+        let view = glam::dcamera::rh::view::look_to_mat4(DVec3::ZERO, self.forward, self.up);
+        let proj = glam::dcamera::rh::proj::directx::perspective_infinite_reverse(
+            self.fovy_rad,
+            self.aspect(),
+            self.near_m,
+        );
+        proj * view
     }
 
     /// The frustum planes (inward unit normals through the camera, plus the near plane).

@@ -9,7 +9,7 @@ use crate::terrain::mesh::NodeMesh;
 use crate::terrain::mesh_surface::MeshSurface;
 use crate::terrain::quadtree::{NODE_QUADS, QuadTree};
 use crate::terrain::select::{Selection, traverse};
-use glam::DVec3;
+use glam::{DMat4, DVec3, DVec4};
 
 /// Where inner samples sit inside their lattice step: not on a vertex (0), not on the check
 /// lattice (multiples of 1 / CHECK_SUBDIV of a quad, whatever the samples per quad: the
@@ -41,7 +41,8 @@ pub fn true_block_errors(
     let mut out = [(0.0f64, f64::NEG_INFINITY); BLOCKS];
     // The block a sample index lies in along one axis.
     let block_of = |k: usize| (k / per_block).min(BLOCKS_PER_SIDE - 1);
-    visit_samples(world, tree, m, per_quad, |[i, j], _, f, err| {
+    visit_samples(world, tree, m, per_quad, |[i, j], _, f, diff| {
+        let err = diff.abs();
         let b = block_of(j) * BLOCKS_PER_SIDE + block_of(i);
         let bounds = &m.bounds.blocks[b];
         out[b].0 = out[b].0.max(err);
@@ -74,22 +75,213 @@ fn visit_samples(
             ];
             let (x, y) = (r.min[0] + d[0], r.min[1] + d[1]);
             let f = world.height_m(x, y);
-            visit([i, j], d, f, (surface.height_at(x, y) - f).abs());
+            visit([i, j], d, f, surface.height_at(x, y) - f);
+        }
+    }
+}
+
+/// A view's error: over samples of the drawn meshes, the largest, the 99.9th percentile and the
+/// mean in pixels, and the largest by screen region ([`ScreenRegion`] as the index; the
+/// on-axis measures leave it at 0).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ViewError {
+    pub max_px: f64,
+    pub p999_px: f64,
+    pub mean_px: f64,
+    pub samples: u64,
+    pub region_max_px: [f64; 3],
+}
+
+impl ViewError {
+    /// Summary of per-sample errors (px) and their regions.
+    fn of(mut px: Vec<f64>, region_max_px: [f64; 3]) -> Self {
+        px.sort_by(f64::total_cmp);
+        let n = px.len();
+        let at = |q: f64| px[((q * n as f64).ceil() as usize).clamp(1, n) - 1];
+        Self {
+            max_px: px.last().copied().unwrap_or(0.0),
+            p999_px: if n > 0 { at(0.999) } else { 0.0 },
+            mean_px: if n > 0 {
+                px.iter().sum::<f64>() / n as f64
+            } else {
+                0.0
+            },
+            samples: n as u64,
+            region_max_px,
+        }
+    }
+}
+
+/// Where on the screen an error shows: the viewport cut in thirds each way, its middle cell,
+/// the four cells beside it (edge bands) and the four corner cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScreenRegion {
+    Centre = 0,
+    Edges = 1,
+    Corners = 2,
+}
+
+impl ScreenRegion {
+    pub const ALL: [Self; 3] = [Self::Centre, Self::Edges, Self::Corners];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Centre => "centre third",
+            Self::Edges => "edge bands",
+            Self::Corners => "corners",
+        }
+    }
+}
+
+/// A camera's projection to pixels, for measuring on the screen: the camera's clip-space
+/// matrix ([`Camera::clip_from_rel`]) and viewport, nothing of the selection's bound.
+#[derive(Debug, Clone, Copy)]
+pub struct ScreenProjection {
+    eye_m: DVec3,
+    clip_from_rel: DMat4,
+    viewport_px: [f64; 2],
+    /// `K` and `cos²` of the screen corner's off-axis angle, for [`Self::most_px`].
+    k_px: f64,
+    cos2_corner: f64,
+}
+
+impl ScreenProjection {
+    pub fn new(cam: &Camera) -> Self {
+        Self {
+            eye_m: cam.position_m,
+            clip_from_rel: cam.clip_from_rel(),
+            viewport_px: [f64::from(cam.viewport_px[0]), f64::from(cam.viewport_px[1])],
+            k_px: cam.k_px(),
+            cos2_corner: {
+                let ty = (cam.fovy_rad * 0.5).tan();
+                let tx = ty * cam.aspect();
+                1.0 / (1.0 + tx * tx + ty * ty)
+            },
+        }
+    }
+
+    fn clip(&self, p: DVec3) -> DVec4 {
+        self.clip_from_rel * (p - self.eye_m).extend(1.0)
+    }
+
+    /// The pixel position (x right, y down from the top-left corner) of a clip-space point in
+    /// front of the camera.
+    fn pixel(&self, c: DVec4) -> [f64; 2] {
+        [
+            (c.x / c.w + 1.0) * 0.5 * self.viewport_px[0],
+            (1.0 - c.y / c.w) * 0.5 * self.viewport_px[1],
+        ]
+    }
+
+    /// The pixel position of world point `p`, when it is in the view frustum.
+    pub fn pixel_of(&self, p: DVec3) -> Option<[f64; 2]> {
+        self.segment_px(p, p).map(|(_, at)| at)
+    }
+
+    /// The segment `a..b` (world metres) as the screen shows it: clipped to the view frustum
+    /// (the four sides and the near plane) in clip space, its length in pixels and the pixel
+    /// position of its middle; `None` when no part of it is on the screen. A straight segment
+    /// projects to a straight one, so the length is the distance between the clipped ends'
+    /// pixels.
+    pub fn segment_px(&self, a: DVec3, b: DVec3) -> Option<(f64, [f64; 2])> {
+        let (ca, cb) = (self.clip(a), self.clip(b));
+        // Inside where each is >= 0: |x| <= w, |y| <= w, and the near plane (reversed Z: the
+        // clip z is the near distance and w the depth, so z <= w).
+        let inside = |c: DVec4| [c.w + c.x, c.w - c.x, c.w + c.y, c.w - c.y, c.w - c.z];
+        let (ia, ib) = (inside(ca), inside(cb));
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for (da, db) in ia.into_iter().zip(ib) {
+            if da < 0.0 && db < 0.0 {
+                return None;
+            }
+            if da < 0.0 {
+                t0 = t0.max(da / (da - db));
+            } else if db < 0.0 {
+                t1 = t1.min(da / (da - db));
+            }
+        }
+        if t0 > t1 {
+            return None;
+        }
+        let (pa, pb) = (self.pixel(ca.lerp(cb, t0)), self.pixel(ca.lerp(cb, t1)));
+        let length = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
+        Some((length, [(pa[0] + pb[0]) * 0.5, (pa[1] + pb[1]) * 0.5]))
+    }
+
+    /// The region of the screen a pixel position lies in.
+    pub fn region(&self, at: [f64; 2]) -> ScreenRegion {
+        let third = |v: f64, size: f64| ((3.0 * v / size).floor() as i64).clamp(0, 2);
+        let (cx, cy) = (
+            third(at[0], self.viewport_px[0]),
+            third(at[1], self.viewport_px[1]),
+        );
+        match (cx == 1, cy == 1) {
+            (true, true) => ScreenRegion::Centre,
+            (false, false) => ScreenRegion::Corners,
+            _ => ScreenRegion::Edges,
+        }
+    }
+
+    /// An upper bound of what any displacement of `error_m` at distance at least `dist_m` can
+    /// become on this screen: `error_m * K / (dist_m * cos²θcorner)` (the largest stretch of a
+    /// flat screen is `1 / cos²θ`, largest at its corners), for skipping samples that cannot
+    /// beat a larger error found already.
+    fn most_px(&self, error_m: f64, dist_m: f64) -> f64 {
+        if dist_m > 0.0 {
+            error_m * self.k_px / (dist_m * self.cos2_corner)
+        } else {
+            f64::INFINITY
         }
     }
 }
 
 /// On-screen error of a view: for points on a lattice of `per_side` x `per_side` in every drawn
-/// node that lie in front of the camera, `|mesh - surface| * K / distance`, the mesh sampled
-/// through its own triangles (grid or TIN).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct ViewError {
-    pub max_px: f64,
-    pub mean_px: f64,
-    pub samples: u64,
+/// node, the true surface point and the drawn mesh point above or below it (the mesh sampled
+/// through its own triangles, grid or TIN), projected through the camera's matrices: the
+/// length in pixels of the part of the segment between them that is on the screen. Samples with
+/// no part on the screen do not count.
+pub fn view_error(
+    world: &World,
+    tree: &QuadTree,
+    meshes: &[NodeMesh],
+    cam: &Camera,
+    per_side: u32,
+) -> ViewError {
+    let screen = ScreenProjection::new(cam);
+    let mut px = Vec::new();
+    let mut region_max_px = [0.0f64; 3];
+    for m in meshes {
+        let r = tree.rect(m.key);
+        let step = (r.max[0] - r.min[0]) / f64::from(per_side);
+        let surface = MeshSurface::new(m, tree);
+        for j in 0..per_side {
+            for i in 0..per_side {
+                let (x, y) = (
+                    r.min[0] + (f64::from(i) + 0.5) * step,
+                    r.min[1] + (f64::from(j) + 0.5) * step,
+                );
+                let f = world.height_m(x, y);
+                let (truth, drawn) = (
+                    DVec3::new(x, y, f),
+                    DVec3::new(x, y, surface.height_at(x, y)),
+                );
+                if let Some((len, at)) = screen.segment_px(truth, drawn) {
+                    let region = screen.region(at) as usize;
+                    region_max_px[region] = region_max_px[region].max(len);
+                    px.push(len);
+                }
+            }
+        }
+    }
+    ViewError::of(px, region_max_px)
 }
 
-pub fn view_error(
+/// The error of a view in the pixel metric's on-axis model (not on the screen: off axis the
+/// screen stretches an error up to `1 / cos²θ` more): for points on a lattice of `per_side` x
+/// `per_side` in every drawn node that lie in the view frustum, `|mesh - surface| * K /
+/// distance`, the mesh sampled through its own triangles (grid or TIN). No percentile or
+/// regions.
+pub fn view_error_on_axis(
     world: &World,
     tree: &QuadTree,
     meshes: &[NodeMesh],
@@ -131,6 +323,7 @@ pub fn view_error(
             0.0
         },
         samples,
+        ..ViewError::default()
     }
 }
 
@@ -144,19 +337,19 @@ pub struct ErrorSamples {
     pub max_m: DVec3,
     /// Node origin (the rectangle's minimum corner) the sample positions are relative to.
     origin_m: [f64; 2],
-    /// (x, y relative to `origin_m`, surface z, |mesh - surface|), largest error first; samples
+    /// (x, y relative to `origin_m`, surface z, mesh - surface), largest |error| first; samples
     /// with zero error are left out.
     samples: Vec<[f32; 4]>,
 }
 
 impl ErrorSamples {
-    /// The largest error of any sample (m).
+    /// The largest |error| of any sample (m).
     pub fn max_error_m(&self) -> f64 {
-        self.samples.first().map_or(0.0, |s| f64::from(s[3]))
+        self.samples.first().map_or(0.0, |s| f64::from(s[3].abs()))
     }
 }
 
-/// Measures `|mesh - surface|` (the mesh through its own triangles) on a lattice of `per_quad`
+/// Measures `mesh - surface` (the mesh through its own triangles) on a lattice of `per_quad`
 /// points per quad, inner samples offset by [`SAMPLE_OFFSET`] of a step like
 /// [`true_node_error`].
 pub fn node_error_samples(
@@ -168,14 +361,14 @@ pub fn node_error_samples(
     let r = tree.rect(m.key);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut samples = Vec::new();
-    visit_samples(world, tree, m, per_quad, |_, [dx, dy], f, err| {
-        z_lo = z_lo.min(f);
-        z_hi = z_hi.max(f);
-        if err > 0.0 {
-            samples.push([dx as f32, dy as f32, f as f32, err as f32]);
+    visit_samples(world, tree, m, per_quad, |_, [dx, dy], f, diff| {
+        z_lo = z_lo.min(f).min(f + diff);
+        z_hi = z_hi.max(f).max(f + diff);
+        if diff != 0.0 {
+            samples.push([dx as f32, dy as f32, f as f32, diff as f32]);
         }
     });
-    samples.sort_by(|a, b| b[3].total_cmp(&a[3]));
+    samples.sort_by(|a, b| b[3].abs().total_cmp(&a[3].abs()));
     ErrorSamples {
         // f32 positions: widen the box by their rounding so it still holds every sample.
         min_m: DVec3::new(r.min[0], r.min[1], z_lo - z_lo.abs() * 1e-6 - 1e-6),
@@ -185,10 +378,11 @@ pub fn node_error_samples(
     }
 }
 
-/// The largest on-screen error `|mesh - surface| * K / distance` over the samples of the given
-/// nodes that lie in the view frustum: exact over the samples, found by branch and bound (a node
-/// is skipped once its largest error over its box distance cannot beat the best so far).
-pub fn view_max_error_px(nodes: &[&ErrorSamples], cam: &Camera) -> f64 {
+/// The largest error in the pixel metric's on-axis model, `|mesh - surface| * K / distance`,
+/// over the samples of the given nodes that lie in the view frustum: exact over the samples,
+/// found by branch and bound (a node is skipped once its largest error over its box distance
+/// cannot beat the best so far). Not on the screen: see [`view_max_error_px`].
+pub fn view_max_error_on_axis_px(nodes: &[&ErrorSamples], cam: &Camera) -> f64 {
     let k = cam.k_px();
     let frustum = cam.frustum();
     let eye = cam.position_m;
@@ -213,7 +407,7 @@ pub fn view_max_error_px(nodes: &[&ErrorSamples], cam: &Camera) -> f64 {
         }
         let d_min = crate::camera::distance_to_aabb(eye, s.min_m, s.max_m);
         for p in &s.samples {
-            let err = f64::from(p[3]);
+            let err = f64::from(p[3].abs());
             if d_min > 0.0 && err * k / d_min <= best {
                 break; // sorted by error: no later sample can beat `best`
             }
@@ -228,6 +422,59 @@ pub fn view_max_error_px(nodes: &[&ErrorSamples], cam: &Camera) -> f64 {
         }
     }
     best
+}
+
+/// The largest on-screen error over the samples of the given nodes (each measured as
+/// [`view_error`] measures its lattice: the true and the drawn point projected through the
+/// camera's matrices, the segment between them clipped to the view), and the largest by screen
+/// region. With `by_region` false only the overall largest is wanted, and it is found by branch
+/// and bound: a node, or the rest of a node's samples (sorted by error), is skipped once its
+/// largest error cannot beat the best so far even with a flat screen's largest stretch.
+pub fn view_max_error_px(nodes: &[&ErrorSamples], cam: &Camera, by_region: bool) -> ViewError {
+    let screen = ScreenProjection::new(cam);
+    let frustum = cam.frustum();
+    let eye = cam.position_m;
+    let most = |error_m: f64, dist_m: f64| screen.most_px(error_m, dist_m);
+    let mut order: Vec<(f64, &ErrorSamples)> = nodes
+        .iter()
+        .filter(|s| frustum.intersects_aabb(s.min_m, s.max_m))
+        .map(|s| {
+            let d = crate::camera::distance_to_aabb(eye, s.min_m, s.max_m);
+            (most(s.max_error_m(), d), *s)
+        })
+        .collect();
+    order.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut best, mut region_max_px, mut samples) = (0.0f64, [0.0f64; 3], 0u64);
+    for (bound, s) in order {
+        if !by_region && bound <= best {
+            break;
+        }
+        let d_min = crate::camera::distance_to_aabb(eye, s.min_m, s.max_m);
+        for p in &s.samples {
+            let err = f64::from(p[3].abs());
+            if !by_region && most(err, d_min) <= best {
+                break; // sorted by error: no later sample can beat `best`
+            }
+            let (x, y) = (
+                s.origin_m[0] + f64::from(p[0]),
+                s.origin_m[1] + f64::from(p[1]),
+            );
+            let truth = DVec3::new(x, y, f64::from(p[2]));
+            let drawn = DVec3::new(x, y, f64::from(p[2]) + f64::from(p[3]));
+            if let Some((len, at)) = screen.segment_px(truth, drawn) {
+                samples += 1;
+                best = best.max(len);
+                let region = screen.region(at) as usize;
+                region_max_px[region] = region_max_px[region].max(len);
+            }
+        }
+    }
+    ViewError {
+        max_px: best,
+        samples,
+        region_max_px,
+        ..ViewError::default()
+    }
 }
 
 /// A CDLOD-style selection: split a node while the camera is closer than

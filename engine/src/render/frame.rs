@@ -566,3 +566,36 @@ pub fn bake_pass<'e>(
 pub fn srgb_to_linear(c: u8) -> f32 {
     crate::color::srgb_to_linear(c) as f32
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The matrix the frame draws with is the camera's own ([`Camera::clip_from_rel`], which the
+    /// on-screen error measure projects with), built in f32: they agree to f32 rounding.
+    #[test]
+    fn the_frame_draws_with_the_cameras_matrix() {
+        for (fovy_deg, size) in [
+            (60.0, [1280, 720]),
+            (90.0, [1680, 720]),
+            (120.0, [320, 180]),
+        ] {
+            let cam = Camera::look_at(
+                DVec3::new(10.0, -20.0, 300.0),
+                DVec3::new(500.0, 400.0, 0.0),
+                f64::to_radians(fovy_deg),
+                size,
+            );
+            let frame = FrameResources::uniforms(&cam, &ViewOptions::default()).clip_from_rel;
+            let camera = cam.clip_from_rel().as_mat4().to_cols_array_2d();
+            for (fc, cc) in frame.iter().zip(camera) {
+                for (f, c) in fc.iter().zip(cc) {
+                    assert!(
+                        (f - c).abs() <= 1e-5 * c.abs().max(1.0),
+                        "{frame:?} {camera:?}"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -167,8 +167,7 @@ impl Streamer {
             &self.shared.tree,
             key,
             b,
-            cam.position_m,
-            cam.k_px(),
+            &crate::terrain::select::ScreenBound::new(cam),
             Some(frustum),
             cam.near_m,
         ))
@@ -183,8 +182,7 @@ impl Streamer {
                 crate::terrain::select::decimation(
                     &self.shared.tree,
                     key,
-                    cam.position_m,
-                    cam.k_px(),
+                    &crate::terrain::select::ScreenBound::new(&cam),
                     cam.near_m,
                     self.settings.show_factor.max(self.settings.split_factor)
                         * self.settings.tau_px,

@@ -4,7 +4,8 @@
 //! - [`quadtree`]: node keys and geometry (root over the map, 8 m leaves, 32 x 32 quads a node).
 //! - [`bounds`]: proven, monotone per-node errors and height ranges; [`precomputed`]: the 32 m
 //!   nodes' bounds measured once per map and kept with the map-error grids.
-//! - [`select`]: split while the projected error exceeds tau; frustum culling.
+//! - [`select`]: split while the projected error exceeds tau; frustum culling;
+//!   [`screen_bound`]: the projected error on a flat screen, off-axis stretch included.
 //! - [`tiles`]: 16 m tiles of the finest surface at 0.25 m, refcounted.
 //! - [`mesh`]: node meshes with skirts of proven depth; [`mesh_surface`]: a mesh's drawn
 //!   surface sampled through its own triangles (for measuring any variant).
@@ -18,6 +19,7 @@ pub mod mesh_surface;
 pub mod precomputed;
 pub mod quadtree;
 pub mod refine;
+pub mod screen_bound;
 pub mod select;
 pub mod tiles;
 #[cfg(feature = "measure")]

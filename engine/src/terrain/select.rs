@@ -1,18 +1,19 @@
 //! Per-frame node selection: split a node while its projected error exceeds the pixel
 //! threshold; cull by the view frustum against node AABBs.
 //!
-//! A node's projected error is the largest over its bound blocks of `error_m * K / dist_m`, with
-//! `K = viewport_height_px / (2 tan(fovy / 2))` and `dist_m` the distance from the camera to the
-//! nearest point of the block's box (so the projected error of every point of the block is at
-//! most that), and at least the vegetation term with the node's box distance; see
-//! [`projected_error_px`]. When culling, blocks outside the view frustum show nothing and do not
-//! count.
+//! A node's projected error is the largest over its bound blocks of the block's error as it can
+//! appear on the screen ([`ScreenBound`]: `error_m * K / dist_m` times the stretch a flat screen
+//! gives off its axis, with `K = viewport_height_px / (2 tan(fovy / 2))` and `dist_m` the
+//! distance from the camera to the nearest point of the block's box), and at least the
+//! vegetation term with the node's box; see [`projected_error_px`]. When culling, blocks outside
+//! the view frustum show nothing and do not count.
 
 use crate::camera::{ALL_PLANES, Camera, Frustum, Planes, distance_to_aabb};
 use crate::surface::world::World;
 use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
+pub use crate::terrain::screen_bound::ScreenBound;
 use glam::DVec3;
 use smallvec::SmallVec;
 use std::borrow::Borrow;
@@ -36,21 +37,20 @@ pub fn block_aabb(tree: &QuadTree, key: NodeKey, b: &NodeBounds, index: usize) -
     )
 }
 
-/// A node's projected error bound in pixels for a camera at `eye_m` with pixel factor `k_px`:
-/// the largest over its blocks (those that may be in `frustum`, when given) of the block error
-/// times `k_px` over the distance to the block's box, and the vegetation error over the node box's
-/// distance. Distances are taken as at least `near_m`; a distance of 0 (the eye inside a box
-/// that counts) gives infinity.
+/// A node's projected error bound in pixels on the screen of `screen`: the largest over its
+/// blocks (those that may be in `frustum`, when given) of the block error as [`ScreenBound`]
+/// bounds it on the screen from the block's box, and the vegetation error likewise from the node's
+/// box. Distances are taken as at least `near_m`; a distance of 0 (the eye inside a box that
+/// counts) gives infinity.
 pub fn projected_error_px(
     tree: &QuadTree,
     key: NodeKey,
     b: &NodeBounds,
-    eye_m: DVec3,
-    k_px: f64,
+    screen: &ScreenBound,
     frustum: Option<&Frustum>,
     near_m: f64,
 ) -> f64 {
-    projected_error_in_px(tree, key, b, eye_m, k_px, frustum, near_m, PxWindow::EXACT)
+    projected_error_in_px(tree, key, b, screen, frustum, near_m, PxWindow::EXACT)
 }
 
 /// Where a caller needs a projected error exactly: below `floor_px` only that it is at or
@@ -80,58 +80,64 @@ pub fn projected_error_in_px(
     tree: &QuadTree,
     key: NodeKey,
     b: &NodeBounds,
-    eye_m: DVec3,
-    k_px: f64,
+    screen: &ScreenBound,
     frustum: Option<&Frustum>,
     near_m: f64,
     window: PxWindow,
 ) -> f64 {
     let (lo, hi) = node_aabb(tree, key, b);
-    let node_dist_m = distance_to_aabb(eye_m, lo, hi);
+    let node_dist_m = distance_to_aabb(screen.eye_m, lo, hi);
     projected_error_at(
         tree,
         key,
         b,
+        (lo, hi),
         node_dist_m,
-        eye_m,
-        k_px,
+        screen,
         frustum.map(|f| (f, ALL_PLANES)),
         near_m,
         window,
     )
 }
 
-/// [`projected_error_in_px`] with the distance from `eye_m` to the node's box given
-/// (`node_dist_m`, as [`distance_to_aabb`] finds it), for a caller that has it already, and
+/// [`projected_error_in_px`] with the node's box (as [`node_aabb`] gives it) and the distance
+/// from the eye to it given (`node_dist_m`, as [`distance_to_aabb`] finds it), for a caller
+/// that has them already, and
 /// the frustum with the planes the node's box crosses (as [`Frustum::classify_aabb`] found
 /// them): a block within the node's box is tested against those planes only.
 fn projected_error_at(
     tree: &QuadTree,
     key: NodeKey,
     b: &NodeBounds,
+    node_box: (DVec3, DVec3),
     node_dist_m: f64,
-    eye_m: DVec3,
-    k_px: f64,
+    screen: &ScreenBound,
     frustum: Option<(&Frustum, Planes)>,
     near_m: f64,
     window: PxWindow,
 ) -> f64 {
+    let k_px = screen.k_px();
     let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
-    let mut out = px(b.vegetation_error_m, node_dist_m);
+    // The off-axis stretch anywhere in the node's box: no block's is larger (a block's box is
+    // within the node's, and its own bound is capped by the node's).
+    let node_stretch = screen.stretch(node_box.0, node_box.1, node_dist_m);
+    // Vegetation's error may point any way: the isotropic stretch.
+    let mut out = px(b.vegetation_error_m * node_stretch.any, node_dist_m);
     if out > window.ceiling_px {
         return out;
     }
     // What a block must pass to change the answer: the largest error so far, or the floor.
     let mut cut = out.max(window.floor_px);
-    // A block's box lies inside the node's, so it is at least as far: a block whose error is
-    // at most `skip_m` cannot pass the cut and is skipped without its box (no division per
-    // block). `skip_m` is a little below `cut` over the node's distance in metres, so a block
-    // skipped is one whose error at the node's distance is at most the cut; near the boundary
-    // the block is taken and measured exactly, so the answer is the same as without skipping.
+    // A block's box lies inside the node's, so it is at least as far and its stretch is at
+    // most the node's: a block whose error is at most `skip_m` cannot pass the cut and is
+    // skipped without its box (no division per block). `skip_m` is a little below `cut` over
+    // the node's distance and stretch in metres, so a block skipped is one whose error at the
+    // node's distance and stretch is at most the cut; near the boundary the block is taken and
+    // measured exactly, so the answer is the same as without skipping.
     let node_d_m = node_dist_m.max(near_m);
     let skip_below = |cut: f64| {
         if node_d_m > 0.0 {
-            cut * node_d_m / k_px * (1.0 - 8.0 * f64::EPSILON)
+            cut * node_d_m / (k_px * node_stretch.vertical) * (1.0 - 8.0 * f64::EPSILON)
         } else {
             -1.0
         }
@@ -148,7 +154,12 @@ fn projected_error_at(
             continue;
         }
         let (lo, hi) = block_aabb(tree, key, b, i);
-        let block_px = px(block.error_m, distance_to_aabb(eye_m, lo, hi));
+        // The block's own bound, or the node's where that is smaller (it holds for the
+        // block's points too).
+        let dist_m = distance_to_aabb(screen.eye_m, lo, hi);
+        let stretch = screen.stretch(lo, hi, dist_m);
+        let block_px = px(block.error_m * stretch.vertical, dist_m)
+            .min(px(block.error_m * node_stretch.vertical, node_dist_m));
         // The frustum test (the costlier part) only for blocks that would pass the cut, and
         // only against the planes the node's box crosses when the block's box is within it.
         let outside = |(f, crossed): (&Frustum, Planes)| {
@@ -197,7 +208,7 @@ fn error_px(error_m: f64, dist_m: f64, k_px: f64, near_m: f64) -> f64 {
 }
 
 /// How many halvings of its grid mesh's vertex spacing node `key` may be drawn with (at most
-/// [`MAX_DECIMATION`]) at threshold `tau_px`, seen from `eye_m` with pixel factor `k_px`.
+/// [`MAX_DECIMATION`]) at threshold `tau_px` on the screen of `screen`.
 ///
 /// Drawn with `d` halvings, the node shows its level-`L - d` ancestor's mesh over its own
 /// square (see [`crate::terrain::mesh`]), whose error there is bounded by the ancestor's blocks
@@ -208,8 +219,7 @@ fn error_px(error_m: f64, dist_m: f64, k_px: f64, near_m: f64) -> f64 {
 pub fn decimation<B: Borrow<NodeBounds>>(
     tree: &QuadTree,
     key: NodeKey,
-    eye_m: DVec3,
-    k_px: f64,
+    screen: &ScreenBound,
     near_m: f64,
     tau_px: f64,
     mut bounds: impl FnMut(NodeKey) -> Option<B>,
@@ -229,8 +239,9 @@ pub fn decimation<B: Borrow<NodeBounds>>(
             (ox..ox + per).all(|bx| {
                 let i = by * BLOCKS_PER_SIDE + bx;
                 let (lo, hi) = block_aabb(tree, a, b, i);
-                let dist_m = distance_to_aabb(eye_m, lo, hi);
-                error_px(b.blocks[i].error_m, dist_m, k_px, near_m) <= tau_px
+                let dist_m = distance_to_aabb(screen.eye_m, lo, hi);
+                let stretch = screen.stretch(lo, hi, dist_m).vertical;
+                error_px(b.blocks[i].error_m * stretch, dist_m, screen.k_px(), near_m) <= tau_px
             })
         });
         if !within {
@@ -279,6 +290,10 @@ pub struct SelectParams {
     pub cull: bool,
     /// Find each node's [`decimation`] (off: every node is drawn through all its vertices).
     pub decimate: bool,
+    /// Bound the stretch a flat screen gives an error off its axis ([`ScreenBound::new`]); off:
+    /// the on-axis model `error_m * K / dist_m` ([`ScreenBound::on_axis`]), which the screen
+    /// exceeds away from its centre, kept to measure what the stretch costs.
+    pub off_axis: bool,
 }
 
 impl SelectParams {
@@ -289,6 +304,7 @@ impl SelectParams {
             max_level: tree.max_level,
             cull: true,
             decimate: true,
+            off_axis: true,
         }
     }
 }
@@ -308,10 +324,22 @@ pub fn traverse<B: Into<Option<NodeBounds>>>(
 }
 
 /// [`traverse`] culling by `frustum` (none: no culling), which may differ from the camera's
-/// own (a guard band); pixel errors are the camera's.
+/// own (a guard band); pixel errors are on the camera's screen.
 pub fn traverse_in<B: Into<Option<NodeBounds>>>(
     tree: &QuadTree,
     cam: &Camera,
+    frustum: Option<Frustum>,
+    bounds: impl FnMut(NodeKey) -> B,
+    split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
+) -> Selection {
+    traverse_bounded(tree, &ScreenBound::new(cam), frustum, bounds, split)
+}
+
+/// [`traverse_in`] with the pixel errors bounded by `screen` (for example the on-axis model,
+/// [`ScreenBound::on_axis`], to measure what the off-axis stretch costs).
+pub fn traverse_bounded<B: Into<Option<NodeBounds>>>(
+    tree: &QuadTree,
+    screen: &ScreenBound,
     frustum: Option<Frustum>,
     mut bounds: impl FnMut(NodeKey) -> B,
     split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
@@ -319,7 +347,7 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
     let mut out = Selection::default();
     let walked = walk(
         tree,
-        cam,
+        screen,
         frustum,
         PxWindow::EXACT,
         ByKey(|key| bounds(key).into()),
@@ -405,7 +433,7 @@ pub(crate) const WALK_STACK_INLINE: usize = 64;
 /// passes it as the floor, and as the ceiling when no larger error matters to it.
 pub fn walk<S: WalkBounds>(
     tree: &QuadTree,
-    cam: &Camera,
+    screen: &ScreenBound,
     frustum: Option<Frustum>,
     window: PxWindow,
     mut bounds: S,
@@ -413,7 +441,6 @@ pub fn walk<S: WalkBounds>(
     mut reached: impl FnMut(Reached<S::Found>),
 ) -> Walked {
     let mut out = Walked::default();
-    let k = cam.k_px();
     // Each node's bounds are looked up when it is pushed, a split node's children one after
     // another: no lookup waits for another's result, so their cache misses can overlap. Each
     // entry carries the frustum planes its box may cross: those its parent's box crossed when
@@ -442,14 +469,14 @@ pub fn walk<S: WalkBounds>(
             out.culled += 1;
             continue;
         };
-        let dist_m = distance_to_aabb(cam.position_m, min, max);
+        let dist_m = distance_to_aabb(screen.eye_m, min, max);
         let error_px = projected_error_at(
             tree,
             key,
             b,
+            (min, max),
             dist_m,
-            cam.position_m,
-            k,
+            screen,
             frustum.as_ref().map(|f| (f, crossed)),
             0.0,
             window,
@@ -501,10 +528,15 @@ pub fn select_occluded(
     p: SelectParams,
     canopy: Option<&crate::vegetation::Canopy>,
 ) -> Selection {
-    let mut out = traverse(
+    let screen = if p.off_axis {
+        ScreenBound::new(cam)
+    } else {
+        ScreenBound::on_axis(cam)
+    };
+    let mut out = traverse_bounded(
         tree,
-        cam,
-        p.cull,
+        &screen,
+        p.cull.then(|| cam.frustum()),
         |key| cache.get(world, tree, key),
         |key, b, dist, px| {
             px > p.tau_px
@@ -517,32 +549,24 @@ pub fn select_occluded(
     );
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     if p.decimate {
-        decimate(&mut out, tree, cam, p.tau_px, |k| {
+        decimate(&mut out, tree, &screen, p.tau_px, |k| {
             Some(cache.get(world, tree, k))
         });
     }
     out
 }
 
-/// Sets every selected node's [`decimation`] at threshold `tau_px` for `cam` (`bounds` gives
-/// the ancestors' bounds).
+/// Sets every selected node's [`decimation`] at threshold `tau_px` on the screen of `screen`
+/// (`bounds` gives the ancestors' bounds).
 pub fn decimate(
     sel: &mut Selection,
     tree: &QuadTree,
-    cam: &Camera,
+    screen: &ScreenBound,
     tau_px: f64,
     mut bounds: impl FnMut(NodeKey) -> Option<NodeBounds>,
 ) {
     for s in &mut sel.nodes {
-        s.decimation = decimation(
-            tree,
-            s.key,
-            cam.position_m,
-            cam.k_px(),
-            0.0,
-            tau_px,
-            &mut bounds,
-        );
+        s.decimation = decimation(tree, s.key, screen, 0.0, tau_px, &mut bounds);
     }
 }
 
@@ -612,19 +636,31 @@ mod tests {
             let cam = Camera::look_at(eye, look, 1.0, [1280, 720]);
             let frustum = cam.frustum();
             let f = (next() < 0.5).then_some(&frustum);
-            let k = cam.k_px();
-            // The reference: every block that counts, none skipped.
+            let screen = if next() < 0.8 {
+                ScreenBound::new(&cam)
+            } else {
+                ScreenBound::on_axis(&cam)
+            };
+            let k = screen.k_px();
+            // The reference: every block that counts, none skipped, each stretched as far as
+            // the node's box allows at most.
             let (lo, hi) = node_aabb(&tree, key, &b);
-            let mut exact = error_px(b.vegetation_error_m, distance_to_aabb(eye, lo, hi), k, 0.0);
+            let node_d = distance_to_aabb(eye, lo, hi);
+            let node_stretch = screen.stretch(lo, hi, node_d);
+            let veg_m = b.vegetation_error_m * node_stretch.any;
+            let mut exact = error_px(veg_m, node_d, k, 0.0);
             for i in 0..b.blocks.len() {
                 let (lo, hi) = block_aabb(&tree, key, &b, i);
                 if f.is_none_or(|f| f.intersects_aabb(lo, hi)) {
                     let d = distance_to_aabb(eye, lo, hi);
-                    exact = exact.max(error_px(b.blocks[i].error_m, d, k, 0.0));
+                    let e = b.blocks[i].error_m;
+                    let own = error_px(e * screen.stretch(lo, hi, d).vertical, d, k, 0.0);
+                    let node = error_px(e * node_stretch.vertical, node_d, k, 0.0);
+                    exact = exact.max(own.min(node));
                 }
             }
             assert_eq!(
-                projected_error_px(&tree, key, &b, eye, k, f, 0.0),
+                projected_error_px(&tree, key, &b, &screen, f, 0.0),
                 exact,
                 "{key:?}"
             );
@@ -638,7 +674,7 @@ mod tests {
                 floor_px: floor,
                 ceiling_px: ceiling,
             };
-            let windowed = projected_error_in_px(&tree, key, &b, eye, k, f, 0.0, window);
+            let windowed = projected_error_in_px(&tree, key, &b, &screen, f, 0.0, window);
             if exact > ceiling {
                 over += 1;
                 assert!(

@@ -12,6 +12,7 @@ mod objects;
 mod pm;
 mod pm_prefix;
 mod render;
+mod screen_error;
 mod soak;
 mod streaming;
 mod terrain;

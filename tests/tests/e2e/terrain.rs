@@ -2,13 +2,12 @@
 //! any level difference, cliffs / spikes / flat sea / borders, far from the origin, determinism.
 
 use engine::camera::Camera;
-use engine::camera::distance_to_aabb;
 use engine::surface::decals::FLAT_MARGIN_M;
 use engine::surface::world::World;
 use engine::terrain::bounds::{BLOCKS, BoundsCache, parent_block};
 use engine::terrain::mesh::NodeMesh;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
-use engine::terrain::select::{SelectParams, block_aabb, select};
+use engine::terrain::select::{SelectParams, select};
 use engine::terrain::tiles::TileCache;
 use glam::DVec3;
 use std::collections::HashMap as Map;
@@ -39,6 +38,26 @@ impl TrueErrors {
         let v = measure_true_block_errors(world, tree, &m);
         self.0.insert((key, decimation), v);
         v
+    }
+}
+
+/// Dense on-screen error samples of a node's mesh, by node and decimation (how it is drawn).
+struct ScreenSamples(Map<(NodeKey, u8), engine::measure::ErrorSamples>);
+
+impl ScreenSamples {
+    fn get(
+        &mut self,
+        world: &World,
+        tree: &QuadTree,
+        cache: &mut BoundsCache,
+        tiles: &mut TileCache,
+        key: NodeKey,
+        decimation: u8,
+    ) -> &engine::measure::ErrorSamples {
+        self.0.entry((key, decimation)).or_insert_with(|| {
+            let m = build_mesh(world, tree, cache, tiles, key).decimated(decimation);
+            engine::measure::node_error_samples(world, tree, &m, 6)
+        })
     }
 }
 
@@ -290,7 +309,7 @@ fn selected_nodes_respect_the_pixel_threshold() {
         let tree = tree_of(&world);
         let mut cache = BoundsCache::new();
         let mut tiles = TileCache::new();
-        let mut truth = TrueErrors(Map::new());
+        let mut truth = ScreenSamples(Map::new());
         let mut worst_ratio: f64 = 0.0;
         let (mut nodes, mut empty, mut finest_over) = (0usize, 0usize, 0usize);
         let mut decimated = [0usize; 3];
@@ -306,7 +325,6 @@ fn selected_nodes_respect_the_pixel_threshold() {
                 );
                 // A camera near the border looking out sees no ground; that is allowed, rarely.
                 empty += usize::from(sel.nodes.is_empty());
-                let (k, frustum) = (cam.k_px(), cam.frustum());
                 let mut over = 0;
                 for s in &sel.nodes {
                     let finest = s.key.level == tree.max_level;
@@ -315,17 +333,11 @@ fn selected_nodes_respect_the_pixel_threshold() {
                         "{name}: a coarser node over tau was kept"
                     );
                     over += u32::from(s.error_px > tau);
-                    // The true error of each block in view, projected from the block's box.
-                    let blocks =
+                    // The node's true error on the screen: dense samples of its mesh as drawn
+                    // and of the surface, projected through the camera's matrices.
+                    let samples =
                         truth.get(&world, &tree, &mut cache, &mut tiles, s.key, s.decimation);
-                    let mut px = 0.0f64;
-                    for (bi, &(true_err, _)) in blocks.iter().enumerate() {
-                        let (lo, hi) = block_aabb(&tree, s.key, &s.bounds, bi);
-                        if frustum.intersects_aabb(lo, hi) {
-                            let d = distance_to_aabb(cam.position_m, lo, hi).max(1e-9);
-                            px = px.max(true_err * k / d);
-                        }
-                    }
+                    let px = engine::measure::view_max_error_px(&[samples], &cam, false).max_px;
                     // Never worse than the engine claims; and the claim is <= tau except at the
                     // finest level, where the engine reports the excess.
                     assert!(

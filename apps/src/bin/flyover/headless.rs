@@ -46,7 +46,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     );
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
-    let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size);
+    let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size, cli.fov_deg);
     let after_gpu_rss_mib = rss_mib_now();
     let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
     let after_viewer_rss_mib = rss_mib_now();
@@ -74,10 +74,10 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     for f in 0..cli.frames {
         let t_s = f as f64 * dt;
         let world = &viewer.streamer.shared.world;
-        let cam = scripted_camera(cli, path.as_ref(), world, t_s, cli.size);
+        let cam = scripted_camera(cli, path.as_ref(), world, t_s, cli.size, cli.fov_deg);
         // The flight is scripted: prefetch follows its path, not the camera's velocity.
         viewer.path_ahead = engine::stream::predict::along(t_s, |t| {
-            scripted_camera(cli, path.as_ref(), world, t, cli.size)
+            scripted_camera(cli, path.as_ref(), world, t, cli.size, cli.fov_deg)
         });
         let mut st = viewer
             .render_offscreen(&gpu, &target, &cam, dt)
@@ -136,6 +136,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         "adapter": gpu.adapter_name(),
         "size": cli.size,
         "tau_px": cli.tau,
+        "fov_deg": cli.fov_deg,
         "map_load_s": map_load_s,
         "peak_rss_mib": peak_rss_mib,
         "end_rss_mib": rss_mib,
@@ -419,7 +420,14 @@ fn warm_start(
     gpu: &Gpu,
     viewer: &mut engine::viewer::Viewer,
 ) -> Result<()> {
-    let cam = scripted_camera(cli, path, &viewer.streamer.shared.world, 0.0, cli.size);
+    let cam = scripted_camera(
+        cli,
+        path,
+        &viewer.streamer.shared.world,
+        0.0,
+        cli.size,
+        cli.fov_deg,
+    );
     let start = Instant::now();
     while !viewer.stream_only(gpu, &cam, 1.0 / 60.0) {
         if start.elapsed().as_secs_f64() > 600.0 {

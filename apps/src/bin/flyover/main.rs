@@ -67,6 +67,10 @@ pub(crate) struct Cli {
     /// Viewport size WxH in pixels.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub(crate) size: [u32; 2],
+    /// Vertical field of view in degrees (20 to 120); the panel has a slider for it. The
+    /// detail level holds on the whole screen at any field of view.
+    #[arg(long, default_value_t = 60.0, value_parser = apps::parse_fov_deg)]
+    pub(crate) fov_deg: f64,
     /// Detail level: the largest projected geometric error in pixels.
     #[arg(long, default_value_t = 2.0, value_parser = positive)]
     pub(crate) tau: f64,
@@ -377,18 +381,22 @@ pub(crate) fn settings(cli: &Cli) -> StreamSettings {
     }
 }
 
-/// The camera at time `t_s`: the replayed path, or the automatic flyover.
+/// The camera at time `t_s`: the replayed path, or the automatic flyover, with a vertical
+/// field of view of `fov_deg`.
 pub(crate) fn scripted_camera(
     cli: &Cli,
     path: Option<&CameraPath>,
     world: &engine::surface::World,
     t_s: f64,
     viewport: [u32; 2],
+    fov_deg: f64,
 ) -> Camera {
-    match path {
+    let mut cam = match path {
         Some(p) => p.at(t_s, viewport),
         None => auto_flyover(world, t_s / cli.duration_s, viewport),
-    }
+    };
+    cam.fovy_rad = fov_deg.to_radians();
+    cam
 }
 
 fn display_available() -> bool {

@@ -8,6 +8,8 @@ use engine::viewer::FrameStats;
 /// The panel's settings, applied to the streamer each frame.
 pub(crate) struct Ui {
     pub(crate) tau: f64,
+    /// Vertical field of view, degrees.
+    pub(crate) fov_deg: f64,
     pub(crate) workers: usize,
     pub(crate) budget_mib: usize,
     pub(crate) fixed_level: Option<u8>,
@@ -34,6 +36,10 @@ pub(crate) fn panel(
             .text("pixel error τ (px)"),
     );
     st_ui.slider_rect = [r.rect.min.x, r.rect.min.y, r.rect.max.x, r.rect.max.y];
+    ui.add(
+        egui::Slider::new(&mut st_ui.fov_deg, apps::FOV_DEG_RANGE)
+            .text("field of view (deg, vertical)"),
+    );
     ui.add(egui::Slider::new(&mut st_ui.workers, 1..=32).text("workers (restarts streaming)"));
     ui.add(egui::Slider::new(&mut st_ui.budget_mib, 32..=8192).text("node cache MiB"));
     ui.separator();

@@ -177,7 +177,7 @@ impl App {
             .take()
             .context("the window was initialised twice")?;
         let vp = [config.width, config.height];
-        let cam = scripted_camera(cli, self.path.as_ref(), &world, 0.0, vp);
+        let cam = scripted_camera(cli, self.path.as_ref(), &world, 0.0, vp, cli.fov_deg);
         let viewer = make_viewer(cli, &gpu, config.format.add_srgb_suffix(), world, &cam)?;
         let egui_ctx = egui::Context::default();
         let egui_state = egui_winit::State::new(
@@ -206,6 +206,7 @@ impl App {
             egui_renderer,
             ui: Ui {
                 tau: cli.tau,
+                fov_deg: cli.fov_deg,
                 workers: ws.workers,
                 budget_mib: cli.budget_mib,
                 fixed_level: None,
@@ -377,7 +378,8 @@ fn free_fly(st: &mut State, dt: f64) {
     v += right * (k(KeyCode::KeyD) - k(KeyCode::KeyA));
     v += DVec3::Z * (k(KeyCode::KeyE) - k(KeyCode::KeyQ));
     let pos = st.cam.position_m + v * st.speed_m_s * dt;
-    st.cam = Camera::look_at(pos, pos + fwd, st.cam.fovy_rad, st.cam.viewport_px);
+    let fovy_rad = st.ui.fov_deg.to_radians();
+    st.cam = Camera::look_at(pos, pos + fwd, fovy_rad, st.cam.viewport_px);
 }
 
 /// Applies the panel's settings to the streamer (a workers change restarts its threads).
@@ -421,10 +423,12 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
     if st.auto {
         st.t_s += dt;
         let world = &st.viewer.streamer.shared.world;
-        st.cam = scripted_camera(cli, path, world, st.t_s, vp);
+        let fov_deg = st.ui.fov_deg;
+        st.cam = scripted_camera(cli, path, world, st.t_s, vp, fov_deg);
         // A scripted flight: prefetch follows its path (free flight extrapolates the velocity).
-        st.viewer.path_ahead =
-            engine::stream::predict::along(st.t_s, |t| scripted_camera(cli, path, world, t, vp));
+        st.viewer.path_ahead = engine::stream::predict::along(st.t_s, |t| {
+            scripted_camera(cli, path, world, t, vp, fov_deg)
+        });
         st.yaw_pitch = (
             st.cam.forward.y.atan2(st.cam.forward.x),
             st.cam.forward.z.asin(),
@@ -546,6 +550,7 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
     if let Some(p) = &cli.stats_file {
         let doc = serde_json::json!({
             "tau_px": st.ui.tau,
+            "fov_deg": st.ui.fov_deg,
             "slider_rect_points": st.ui.slider_rect,
             "pixels_per_point": ppp,
             "screenshots": st.screenshots,

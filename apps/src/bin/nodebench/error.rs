@@ -4,7 +4,7 @@
 use crate::plot::CurvePoint;
 use crate::report::{Report, bar};
 use engine::camera::Camera;
-use engine::measure::{self, ViewError};
+use engine::measure::{self, ScreenRegion, ViewError};
 use engine::surface::World;
 use engine::terrain::bounds::{BoundsCache, NodeBounds};
 use engine::terrain::mesh::{self, NodeMesh};
@@ -78,9 +78,26 @@ impl MeshCache {
     }
 }
 
+/// A view's measured error: on the screen (through the camera's matrices) and in the pixel
+/// metric's on-axis model (the former measure, kept for comparison).
+#[derive(Debug, Clone, Copy, Default)]
+struct Measured {
+    triangles: usize,
+    screen: ViewError,
+    on_axis: ViewError,
+}
+
+/// How much a measurement finds: the on-screen max only (tuning the baseline), or everything.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Detail {
+    MaxOnly,
+    Full,
+}
+
 /// Builds meshes for a selection (optionally as TINs) and measures the view's pixel error: the
-/// max over dense samples ([`MAX_SAMPLES_PER_QUAD`] per quad), the mean over `per_side^2`
-/// points per node.
+/// max over dense samples ([`MAX_SAMPLES_PER_QUAD`] per quad), p99.9 and mean over `per_side^2`
+/// points per node; on the screen, and with [`Detail::Full`] by screen region and in the
+/// on-axis model too.
 fn measure_view(
     world: &World,
     tree: &QuadTree,
@@ -89,7 +106,8 @@ fn measure_view(
     sel: &Selection,
     per_side: u32,
     tin_target: Option<f64>,
-) -> (usize, ViewError) {
+    detail: Detail,
+) -> Measured {
     let (cache, tiles, meshes_cache) = ctx;
     meshes_cache.trim();
     let mut meshes = Vec::with_capacity(sel.nodes.len());
@@ -118,14 +136,29 @@ fn measure_view(
             .or_insert_with(|| measure::node_error_samples(world, tree, &m, MAX_SAMPLES_PER_QUAD));
         meshes.push(m);
     }
-    let mut e = measure::view_error(world, tree, &meshes, cam, per_side);
+    let mut screen = measure::view_error(world, tree, &meshes, cam, per_side);
     let samples: Vec<_> = sel
         .nodes
         .iter()
         .map(|s| &meshes_cache.samples[&(s.key, kind(s))])
         .collect();
-    e.max_px = e.max_px.max(measure::view_max_error_px(&samples, cam));
-    (tris, e)
+    let dense = measure::view_max_error_px(&samples, cam, detail == Detail::Full);
+    screen.max_px = screen.max_px.max(dense.max_px);
+    for (r, d) in screen.region_max_px.iter_mut().zip(dense.region_max_px) {
+        *r = r.max(d);
+    }
+    let mut on_axis = ViewError::default();
+    if detail == Detail::Full {
+        on_axis = measure::view_error_on_axis(world, tree, &meshes, cam, per_side);
+        on_axis.max_px = on_axis
+            .max_px
+            .max(measure::view_max_error_on_axis_px(&samples, cam));
+    }
+    Measured {
+        triangles: tris,
+        screen,
+        on_axis,
+    }
 }
 
 /// Selection where each node's error bound is that of its TIN (grid error + exact TIN delta),
@@ -141,7 +174,10 @@ fn select_tin(
     // Both closures need the caches, one after the other; the TIN is built only for nodes that
     // survive culling.
     let ctx = std::cell::RefCell::new(ctx);
-    let (k, frustum) = (cam.k_px(), cam.frustum());
+    let (screen, frustum) = (
+        engine::terrain::select::ScreenBound::new(cam),
+        cam.frustum(),
+    );
     engine::terrain::select::traverse(
         tree,
         cam,
@@ -151,15 +187,8 @@ fn select_tin(
             let mut c = ctx.borrow_mut();
             let (cache, tiles, meshes) = &mut **c;
             let b = meshes.tin(world, tree, cache, tiles, key, target).bounds;
-            engine::terrain::select::projected_error_px(
-                tree,
-                key,
-                &b,
-                cam.position_m,
-                k,
-                Some(&frustum),
-                0.0,
-            ) > tau
+            engine::terrain::select::projected_error_px(tree, key, &b, &screen, Some(&frustum), 0.0)
+                > tau
         },
     )
 }
@@ -173,7 +202,7 @@ fn terrain_only(
     cam: &Camera,
     tau: f64,
     per_side: u32,
-) -> (usize, ViewError) {
+) -> Measured {
     let mut sel = engine::terrain::select::traverse(
         tree,
         cam,
@@ -185,16 +214,110 @@ fn terrain_only(
         |_, _, _, px| px > tau,
     );
     // Drawn like the full selection: each node as coarsely as its ancestors' bounds allow.
-    engine::terrain::select::decimate(&mut sel, tree, cam, tau, |k| {
+    let screen = engine::terrain::select::ScreenBound::new(cam);
+    engine::terrain::select::decimate(&mut sel, tree, &screen, tau, |k| {
         Some(ctx.0.get(world, tree, k))
     });
-    measure_view(world, tree, ctx, cam, &sel, per_side, None)
+    measure_view(world, tree, ctx, cam, &sel, per_side, None, Detail::Full)
 }
 
+/// What section error measures beyond our grid at the first view setting: the TIN and the tuned
+/// CDLOD-style baseline (the speed-against-error curve); other view settings measure the grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Extent {
+    WithBaselines,
+    GridOnly,
+}
+
+/// The rows of one variant's measured error at one threshold, over the cameras: triangles per
+/// frame, on-screen max / p99.9 / mean and max by region, and (when `on_axis`) the on-axis
+/// model's max and mean.
+#[derive(Debug, Default)]
+struct Totals {
+    triangles: f64,
+    screen_max: f64,
+    screen_p999: f64,
+    screen_mean: f64,
+    region_max: [f64; 3],
+    axis_max: f64,
+    axis_mean: f64,
+}
+
+impl Totals {
+    fn add(&mut self, m: &Measured, cameras: usize) {
+        let n = cameras as f64;
+        self.triangles += m.triangles as f64 / n;
+        self.screen_max = self.screen_max.max(m.screen.max_px);
+        self.screen_p999 = self.screen_p999.max(m.screen.p999_px);
+        self.screen_mean += m.screen.mean_px / n;
+        for (r, v) in self.region_max.iter_mut().zip(m.screen.region_max_px) {
+            *r = r.max(v);
+        }
+        self.axis_max = self.axis_max.max(m.on_axis.max_px);
+        self.axis_mean += m.on_axis.mean_px / n;
+    }
+
+    /// Rows for variant `what` (e.g. "grid"): the on-screen ones, and the on-axis ones when
+    /// `on_axis`.
+    fn rows(&self, r: &mut Report, what: &str, params: &str, on_axis: bool) {
+        r.add(
+            "error",
+            &format!("{what} triangles per frame"),
+            self.triangles,
+            "triangles",
+            params,
+        );
+        for (name, value) in [
+            ("max", self.screen_max),
+            ("p99.9", self.screen_p999),
+            ("mean", self.screen_mean),
+        ] {
+            r.add(
+                "error",
+                &format!("{what} on-screen measured {name} error"),
+                value,
+                "px",
+                params,
+            );
+        }
+        for region in ScreenRegion::ALL {
+            r.add(
+                "error",
+                &format!("{what} on-screen max error, {}", region.name()),
+                self.region_max[region as usize],
+                "px",
+                params,
+            );
+        }
+        if on_axis {
+            r.add(
+                "error",
+                &format!("{what} measured max error (the metric's on-axis model)"),
+                self.axis_max,
+                "px",
+                params,
+            );
+            r.add(
+                "error",
+                &format!("{what} measured mean error (the metric's on-axis model)"),
+                self.axis_mean,
+                "px",
+                params,
+            );
+        }
+    }
+}
+
+/// Section error for the cameras `cams` (whose field of view and aspect `view` names): our grid
+/// selection measured on the screen at each threshold, the former on-axis bound's selection
+/// measured the same way, the terrain-only split, and with [`Extent::WithBaselines`] the TIN and
+/// the tuned CDLOD-style baseline, returning the speed-against-error curve (on-screen max).
 pub(crate) fn section_error(
     world: &World,
     tree: &QuadTree,
     cams: &[Camera],
+    view: &str,
+    extent: Extent,
     r: &mut Report,
     quick: bool,
 ) -> Vec<CurvePoint> {
@@ -218,48 +341,68 @@ pub(crate) fn section_error(
         .collect();
     let per_side = if quick { 12 } else { 24 };
     let tin_target = 0.5;
+    let baselines = extent == Extent::WithBaselines;
     let mut ctx = (BoundsCache::new(), TileCache::new(), MeshCache::default());
     let mut curve = Vec::new();
     let b = bar((taus.len() * cams.len()) as u64, "speed vs error");
     for &tau in taus {
         let params = format!(
-            "tau {tau} px, {} cameras, max over {MAX_SAMPLES_PER_QUAD}² samples per quad, mean over {per_side}² per node",
+            "tau {tau} px, {view}, {} cameras, max over {MAX_SAMPLES_PER_QUAD}² samples per quad, \
+             p99.9 and mean over {per_side}² per node",
             cams.len()
         );
-        let (mut g_tris, mut g_max, mut g_mean) = (0usize, 0.0f64, 0.0f64);
-        let (mut terrain_tris, mut terrain_max) = (0usize, 0.0f64);
-        let (mut t_tris, mut t_max, mut t_mean) = (0usize, 0.0f64, 0.0f64);
+        let (mut grid, mut axis_bound, mut terrain, mut tin) = (
+            Totals::default(),
+            Totals::default(),
+            Totals::default(),
+            Totals::default(),
+        );
+        let full = |world, tree, ctx: &mut _, cam, sel: &Selection, tin| {
+            measure_view(world, tree, ctx, cam, sel, per_side, tin, Detail::Full)
+        };
         for cam in &cams {
-            let sel = select(
-                world,
-                tree,
-                &mut ctx.0,
-                cam,
-                SelectParams::culled(tau, tree),
+            let p = SelectParams::culled(tau, tree);
+            let sel = select(world, tree, &mut ctx.0, cam, p);
+            grid.add(&full(world, tree, &mut ctx, cam, &sel, None), cams.len());
+            let former = SelectParams {
+                off_axis: false,
+                ..p
+            };
+            let sel = select(world, tree, &mut ctx.0, cam, former);
+            axis_bound.add(&full(world, tree, &mut ctx, cam, &sel, None), cams.len());
+            terrain.add(
+                &terrain_only(world, tree, &mut ctx, cam, tau, per_side),
+                cams.len(),
             );
-            let (tris, e) = measure_view(world, tree, &mut ctx, cam, &sel, per_side, None);
-            g_tris += tris;
-            g_max = g_max.max(e.max_px);
-            g_mean += e.mean_px / cams.len() as f64;
-            let (tris, e) = terrain_only(world, tree, &mut ctx, cam, tau, per_side);
-            terrain_tris += tris;
-            terrain_max = terrain_max.max(e.max_px);
-            let sel_t = select_tin(world, tree, &mut ctx, cam, tau, tin_target);
-            let (tris, e) = measure_view(
-                world,
-                tree,
-                &mut ctx,
-                cam,
-                &sel_t,
-                per_side,
-                Some(tin_target),
-            );
-            t_tris += tris;
-            t_max = t_max.max(e.max_px);
-            t_mean += e.mean_px / cams.len() as f64;
+            if baselines {
+                let sel_t = select_tin(world, tree, &mut ctx, cam, tau, tin_target);
+                let m = full(world, tree, &mut ctx, cam, &sel_t, Some(tin_target));
+                tin.add(&m, cams.len());
+            }
             b.inc(1);
         }
+        grid.rows(r, "grid", &params, true);
+        axis_bound.rows(r, "grid with the on-axis bound", &params, true);
+        r.add(
+            "error",
+            "grid, terrain error only: triangles per frame",
+            terrain.triangles,
+            "triangles",
+            &params,
+        );
+        r.add(
+            "error",
+            "grid, terrain error only: on-screen measured max error",
+            terrain.screen_max,
+            "px",
+            &params,
+        );
+        if !baselines {
+            continue;
+        }
+        tin.rows(r, "TIN", &params, false);
         let nc = cams.len() as f64;
+        let g_max = grid.screen_max;
         let baseline = tune_baseline(
             world,
             tree,
@@ -271,26 +414,6 @@ pub(crate) fn section_error(
         );
         let best = baseline.scored;
         let hi = baseline.ratio;
-        for (what, value, unit) in [
-            ("grid triangles per frame", g_tris as f64 / nc, "triangles"),
-            ("grid measured max error", g_max, "px"),
-            ("grid measured mean error", g_mean, "px"),
-            (
-                "grid, terrain error only: triangles per frame",
-                terrain_tris as f64 / nc,
-                "triangles",
-            ),
-            (
-                "grid, terrain error only: measured max error",
-                terrain_max,
-                "px",
-            ),
-            ("TIN triangles per frame", t_tris as f64 / nc, "triangles"),
-            ("TIN measured max error", t_max, "px"),
-            ("TIN measured mean error", t_mean, "px"),
-        ] {
-            r.add("error", what, value, unit, &params);
-        }
         // The baseline's rows claim "at most our measured max error" only where it holds on
         // the scored cameras; otherwise the params say that it misses.
         let verdict = baseline.verdict(g_max);
@@ -298,43 +421,31 @@ pub(crate) fn section_error(
             "{params}, ratio {hi:.2} tuned on {} other cameras, {verdict}",
             tune_cams.len()
         );
-        r.add(
-            "error",
-            "CDLOD-style triangles per frame",
-            best.0 as f64 / nc,
-            "triangles",
-            &bparams,
-        );
-        r.add(
-            "error",
-            "CDLOD-style measured max error",
-            best.1,
-            "px",
-            &bparams,
-        );
-        r.add(
-            "error",
-            "CDLOD-style measured mean error",
-            best.2,
-            "px",
-            &bparams,
-        );
-        r.add(
-            "error",
-            "CDLOD-style meets our measured max error (1 yes, 0 no)",
-            f64::from(u8::from(baseline.bracketed && best.1 <= g_max)),
-            "bool",
-            &bparams,
-        );
+        for (what, value, unit) in [
+            (
+                "CDLOD-style triangles per frame",
+                best.0 as f64 / nc,
+                "triangles",
+            ),
+            ("CDLOD-style on-screen measured max error", best.1, "px"),
+            ("CDLOD-style on-screen measured mean error", best.2, "px"),
+            (
+                "CDLOD-style meets our on-screen measured max error (1 yes, 0 no)",
+                f64::from(u8::from(baseline.bracketed && best.1 <= g_max)),
+                "bool",
+            ),
+        ] {
+            r.add("error", what, value, unit, &bparams);
+        }
         curve.push(CurvePoint {
             method: "grid (ours)",
-            triangles: g_tris as f64 / nc,
+            triangles: grid.triangles,
             max_px: g_max,
         });
         curve.push(CurvePoint {
             method: "TIN (ours)",
-            triangles: t_tris as f64 / nc,
-            max_px: t_max,
+            triangles: tin.triangles,
+            max_px: tin.screen_max,
         });
         curve.push(CurvePoint {
             method: "CDLOD-style distance",
@@ -398,10 +509,10 @@ fn tune_baseline(
             if sel.nodes.len() > node_limit {
                 return None;
             }
-            let (t, e) = measure_view(world, tree, ctx, cam, &sel, per_side, None);
-            tris += t;
-            mx = mx.max(e.max_px);
-            mean += e.mean_px / nc;
+            let m = measure_view(world, tree, ctx, cam, &sel, per_side, None, Detail::MaxOnly);
+            tris += m.triangles;
+            mx = mx.max(m.screen.max_px);
+            mean += m.screen.mean_px / nc;
         }
         Some((tris, mx, mean))
     };

@@ -124,9 +124,111 @@ struct Cli {
     /// Length of the soak section in minutes (--quick: a quarter of a minute).
     #[arg(long, default_value_t = 30.0)]
     soak_minutes: f64,
-    /// Viewport height in pixels for selection and error (width is 16:9).
+    /// Viewport height in pixels for selection and error (the width follows the aspect).
     #[arg(long, default_value_t = 720)]
     viewport_height: u32,
+    /// Sections selection and error: the vertical field of view in degrees (20 to 120). Without
+    /// it and --aspect, they run at 60 degrees 16:9 and again at 90 degrees 21:9.
+    #[arg(long, value_parser = apps::parse_fov_deg)]
+    fov_deg: Option<f64>,
+    /// Sections selection and error: the screen's aspect, W:H such as 16:9 or 21:9.
+    #[arg(long, value_parser = apps::parse_aspect)]
+    aspect: Option<f64>,
+    /// Sections selection and error: measure on these cameras instead of the benchmark flight,
+    /// a camera path as `flyover --record` writes it (each line one camera, all of them used).
+    #[arg(long)]
+    cameras: Option<PathBuf>,
+}
+
+/// A view setting of sections selection and error: its cameras and their name in the rows.
+struct ViewSetting {
+    label: String,
+    cams: Vec<engine::camera::Camera>,
+}
+
+/// Sections selection and error (those `want` names) at each view setting; the
+/// speed-against-error curve of the first.
+fn sections_by_view(
+    cli: &Cli,
+    world: &World,
+    tree: &QuadTree,
+    report: &mut Report,
+    want: &dyn Fn(&str) -> bool,
+) -> Result<Vec<plot::CurvePoint>> {
+    let views = view_settings(cli, world)?;
+    if want("selection") {
+        for v in &views {
+            selection::section_selection(world, tree, &v.cams, &v.label, report, cli.quick);
+        }
+    }
+    let mut curve = Vec::new();
+    if want("error") {
+        for (i, v) in views.iter().enumerate() {
+            let extent = if i == 0 {
+                error::Extent::WithBaselines
+            } else {
+                error::Extent::GridOnly
+            };
+            let c = error::section_error(world, tree, &v.cams, &v.label, extent, report, cli.quick);
+            if i == 0 {
+                curve = c;
+            }
+        }
+    }
+    Ok(curve)
+}
+
+/// The view settings sections selection and error run at: the one the command line names, or
+/// 60 degrees 16:9 and 90 degrees 21:9 on the benchmark flight (or the --cameras file).
+fn view_settings(cli: &Cli, world: &World) -> Result<Vec<ViewSetting>> {
+    let vh = cli.viewport_height.max(16);
+    let settings: Vec<(f64, f64, &str)> = match (cli.fov_deg, cli.aspect) {
+        (None, None) => vec![(60.0, 16.0 / 9.0, "16:9"), (90.0, 21.0 / 9.0, "21:9")],
+        (fov, aspect) => vec![(fov.unwrap_or(60.0), aspect.unwrap_or(16.0 / 9.0), "")],
+    };
+    let path = match &cli.cameras {
+        Some(p) => {
+            let path = engine::flight::CameraPath::load(p)?;
+            if path.keys.is_empty() {
+                bail!("{}: the camera path has no cameras", p.display());
+            }
+            Some(path)
+        }
+        None => None,
+    };
+    Ok(settings
+        .into_iter()
+        .map(|(fov_deg, aspect, name)| {
+            let viewport = [((f64::from(vh) * aspect).round() as u32).max(16), vh];
+            let mut cams = match &path {
+                Some(p) => p
+                    .keys
+                    .iter()
+                    .map(|k| {
+                        let at = k.position_m;
+                        engine::camera::Camera::look_at(at, at + k.forward, 1.0, viewport)
+                    })
+                    .collect(),
+                None => measure::default_flight(world, if cli.quick { 8 } else { 64 }, viewport),
+            };
+            for c in &mut cams {
+                c.fovy_rad = fov_deg.to_radians();
+            }
+            let aspect_name = if name.is_empty() {
+                format!("{aspect:.3}:1")
+            } else {
+                name.to_string()
+            };
+            let source = cli
+                .cameras
+                .as_ref()
+                .map_or(String::new(), |p| format!(", cameras of {}", p.display()));
+            ViewSetting {
+                label: format!("{fov_deg}° {aspect_name}{source}"),
+                cams,
+            }
+        })
+        .collect())
 }
 
 pub(crate) fn open_world(path: &std::path::Path) -> Result<World> {
@@ -184,13 +286,9 @@ fn run(cli: &Cli) -> Result<()> {
         terrain::section_terrain(&world, &tree, &cams, &mut report, cli.quick, workers);
         checkpoint(&report, "terrain", None)?;
     }
-    if want("selection") {
-        selection::section_selection(&world, &tree, &cams, &mut report, cli.quick);
-        checkpoint(&report, "selection", None)?;
-    }
     let mut curve = Vec::new();
-    if want("error") {
-        curve = error::section_error(&world, &tree, &cams, &mut report, cli.quick);
+    if want("selection") || want("error") {
+        curve = sections_by_view(cli, &world, &tree, &mut report, &want)?;
         checkpoint(&report, "error", None)?;
     }
     if want("vegetation") {

@@ -27,6 +27,7 @@ pub(crate) fn section_selection(
     world: &World,
     tree: &QuadTree,
     cams: &[Camera],
+    view: &str,
     r: &mut Report,
     quick: bool,
 ) {
@@ -44,7 +45,7 @@ pub(crate) fn section_selection(
         b.finish_and_clear();
         let cold_s = t0.elapsed().as_secs_f64();
         let params = format!(
-            "tau {tau} px, {} cameras, {}x{}",
+            "tau {tau} px, {view}, {} cameras, {}x{}",
             cams.len(),
             cams[0].viewport_px[0],
             cams[0].viewport_px[1]
@@ -97,6 +98,22 @@ pub(crate) fn section_selection(
             full as f64 / frames,
             "triangles",
             &format!("{params}, every node through all its 33 x 33 vertices"),
+        );
+        // What the off-axis stretch costs: the same cameras with the former on-axis bound.
+        let former = SelectParams {
+            off_axis: false,
+            ..p
+        };
+        let on_axis_tris: usize = cams
+            .iter()
+            .map(|cam| triangles(&select(world, tree, &mut cache, cam, former)))
+            .sum();
+        r.add(
+            "selection",
+            "triangles per frame with the on-axis bound (not held on the screen)",
+            on_axis_tris as f64 / cams.len() as f64,
+            "triangles",
+            &params,
         );
         r.add(
             "selection",

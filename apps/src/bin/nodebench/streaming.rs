@@ -467,7 +467,11 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> FrameDebts {
     // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
     // traversal at tau reaches a non-culled node at or below it (a box test alone
     // passes big boxes behind the camera; the traversal refines them).
-    let (k, tree, frustum) = (cam.k_px(), *s.tree(), cam.frustum());
+    let (screen, tree, frustum) = (
+        engine::terrain::select::ScreenBound::new(cam),
+        *s.tree(),
+        cam.frustum(),
+    );
     let ideal = engine::terrain::select::traverse(
         &tree,
         cam,
@@ -517,8 +521,7 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> FrameDebts {
             &tree,
             d.key,
             &b,
-            cam.position_m,
-            k,
+            &screen,
             Some(&frustum),
             cam.near_m,
         );
