@@ -144,6 +144,25 @@ for bad in "--tau=0" "--fps=0" "--duration-s=-5"; do
   fi
 done
 
+for bad in "--fov-deg=0" "--fov-deg=200" "--fov-deg=nan"; do
+  # shellcheck disable=SC2086
+  if ./target/debug/flyover --headless --map maps/tiny --frames 1 $bad 2> "$smoke/bad-fov.log" >/dev/null; then
+    echo "flyover accepted $bad" >&2; exit 1
+  fi
+  if ! grep -q "field of view" "$smoke/bad-fov.log"; then
+    echo "flyover refused $bad without naming the field of view:" >&2; cat "$smoke/bad-fov.log" >&2; exit 1
+  fi
+done
+if ./target/debug/nodebench --only selection --map maps/tiny --fov-deg 200 2> "$smoke/bad-fov.log" >/dev/null \
+   || ! grep -q "field of view" "$smoke/bad-fov.log"; then
+  echo "nodebench did not refuse --fov-deg 200 naming the field of view" >&2; exit 1
+fi
+# A camera file of one's own views at 90 degrees 21:9 (a recorded path's format).
+printf 'tvs-camera-path 1\n0 100 100 80 1 1 -0.4\n1 300 200 60 -1 0.5 -0.3\n' > "$smoke/cams.txt"
+./target/debug/nodebench --quick --only selection --map maps/tiny --fov-deg 90 --aspect 21:9 \
+  --cameras "$smoke/cams.txt" > "$smoke/own-views.md"
+grep -q "90° 2.333:1, cameras of" "$smoke/own-views.md"
+
 step "smoke: flyover without any Vulkan driver says what to install (no panic)"
 if VK_ICD_FILENAMES=/nonexistent.json VK_DRIVER_FILES=/nonexistent.json \
    ./target/debug/flyover --headless --map maps/tiny --frames 1 --out "$smoke/nodriver" \

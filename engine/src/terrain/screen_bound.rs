@@ -36,10 +36,11 @@
 //! two forms holds. (The first is tighter for a box that reaches beside the eye, whose nearest
 //! depth is off the screen; the second for most others.)
 //!
-//! Those positions: a box wholly in front of the eye projects into the convex hull of its eight
-//! corners' projections (a perspective maps segments to segments there), so into the rectangle
-//! that bounds them, and the screen is the rectangle `|x| <= tan(fovy / 2) aspect`,
-//! `|y| <= tan(fovy / 2)`; a box reaching the eye's plane may cover the whole screen. Over the
+//! Those positions: for a box wholly in front of the eye, each camera coordinate `a`, `b`, `z`
+//! ranges over an interval (linear in the point: its ends are at corners), so `x = a / z` and
+//! `y = b / z` lie in the products of those intervals with the one of `1 / z`: a rectangle; the
+//! screen is the rectangle `|x| <= tan(fovy / 2) aspect`, `|y| <= tan(fovy / 2)`; a box
+//! reaching the eye's plane may cover the whole screen. Over the
 //! intersection of the two rectangles, `g` and `sqrt(1 + x² + y²)` are convex (norms of affine
 //! maps), so each is largest at one of its corners, and the stretch is at most the product of
 //! the two largest. A box off the screen (in a guard band) takes the stretch of the screen's
@@ -72,6 +73,8 @@ pub struct ScreenBound {
     /// position may move, and the largest turn's angle (radians); zero for one view.
     turn_margin: [f64; 2],
     turn_rad: f64,
+    /// The largest stretch of any box (the whole screen's, distance form).
+    most: Stretch,
 }
 
 /// How much a box's errors may be stretched on the screen, relative to the on-axis metric at
@@ -101,7 +104,26 @@ impl ScreenBound {
             on_axis: false,
             turn_margin: [0.0; 2],
             turn_rad: 0.0,
+            most: Stretch {
+                vertical: 1.0,
+                any: 1.0,
+            },
         }
+        .with_most()
+    }
+
+    /// Sets [`Self::most_stretch`]: the stretch over the whole screen (a box that reaches the
+    /// eye's plane may show anywhere on it).
+    fn with_most(mut self) -> Self {
+        let eye = self.eye_m;
+        self.most = self.stretch(eye - DVec3::ONE, eye + DVec3::ONE, 0.0);
+        self
+    }
+
+    /// The largest stretch of an error anywhere on the screen: at least [`Self::stretch`] of
+    /// any box.
+    pub fn most_stretch(&self) -> Stretch {
+        self.most
     }
 
     /// A bound for `cam` turned so far that its screen stays within `guard` times its own
@@ -116,7 +138,7 @@ impl ScreenBound {
         b.turn_margin = [b.half_tan[0] * extra, b.half_tan[1] * extra];
         b.half_tan = [b.half_tan[0] * (1.0 + extra), b.half_tan[1] * (1.0 + extra)];
         b.turn_rad = b.turn_margin[0].max(b.turn_margin[1]).atan();
-        b
+        b.with_most()
     }
 
     /// The on-axis model `error_m * K / dist_m` for `cam` (every stretch 1): exact at the
@@ -126,6 +148,7 @@ impl ScreenBound {
             on_axis: true,
             ..Self::new(cam)
         }
+        .with_most()
     }
 
     /// Pixels per (metre / metre of distance) on the view axis: `K`.
@@ -146,40 +169,41 @@ impl ScreenBound {
             };
         }
         let (lo, hi) = (lo - self.eye_m, hi - self.eye_m);
-        // Each axis's share of a corner's camera coordinates, for the low and the high end.
-        let share = |n: DVec3| {
-            [
-                [lo.x * n.x, hi.x * n.x],
-                [lo.y * n.y, hi.y * n.y],
-                [lo.z * n.z, hi.z * n.z],
-            ]
+        // The range of a camera coordinate over the box: linear in the point, so least and
+        // largest at the corners its axis's signs pick.
+        let range = |n: DVec3| {
+            let pick = |c: f64, l: f64, h: f64| {
+                if c >= 0.0 {
+                    (l * c, h * c)
+                } else {
+                    (h * c, l * c)
+                }
+            };
+            let (x, y, z) = (
+                pick(n.x, lo.x, hi.x),
+                pick(n.y, lo.y, hi.y),
+                pick(n.z, lo.z, hi.z),
+            );
+            (x.0 + y.0 + z.0, x.1 + y.1 + z.1)
         };
-        let (sr, su, sf) = (share(self.right), share(self.up), share(self.forward));
         let [tx, ty] = self.half_tan;
-        let mut rect = [
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        let (mut in_front, mut z_min) = (true, f64::INFINITY);
-        for i in 0..8 {
-            let (a, b, c) = (i & 1, (i >> 1) & 1, (i >> 2) & 1);
-            let z = sf[0][a] + sf[1][b] + sf[2][c];
-            if z <= 0.0 {
-                in_front = false;
-                break;
-            }
-            z_min = z_min.min(z);
-            let x = (sr[0][a] + sr[1][b] + sr[2][c]) / z;
-            let y = (su[0][a] + su[1][b] + su[2][c]) / z;
-            rect = [
-                rect[0].min(x),
-                rect[1].max(x),
-                rect[2].min(y),
-                rect[3].max(y),
-            ];
-        }
+        let (z_min, z_max) = range(self.forward);
+        let in_front = z_min > 0.0;
+        // The box's screen positions (a / z, b / z) lie in the products of its coordinate
+        // ranges with the range of 1 / z: a rectangle.
+        let rect = if in_front {
+            let (near_inv, far_inv) = (1.0 / z_min, 1.0 / z_max);
+            let over = |(a0, a1): (f64, f64)| {
+                (
+                    a0 * if a0 < 0.0 { near_inv } else { far_inv },
+                    a1 * if a1 > 0.0 { near_inv } else { far_inv },
+                )
+            };
+            let ((x0, x1), (y0, y1)) = (over(range(self.right)), over(range(self.up)));
+            [x0, x1, y0, y1]
+        } else {
+            [-tx, tx, -ty, ty]
+        };
         let [mx, my] = self.turn_margin;
         let [x0, x1, y0, y1] = if in_front {
             [

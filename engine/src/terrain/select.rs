@@ -13,7 +13,7 @@ use crate::surface::world::World;
 use crate::terrain::bounds::{BLOCKS_PER_SIDE, BoundsCache, NodeBounds, block_rect};
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
-pub use crate::terrain::screen_bound::ScreenBound;
+pub use crate::terrain::screen_bound::{ScreenBound, Stretch};
 use glam::DVec3;
 use smallvec::SmallVec;
 use std::borrow::Borrow;
@@ -71,8 +71,8 @@ impl PxWindow {
 }
 
 /// [`projected_error_px`] exact only inside `window`: exact when the error is in
-/// (`floor_px`, `ceiling_px`]; at or below the floor some value at or below it (at least the
-/// vegetation term); above the ceiling some value above it (at most the error). Blocks whose
+/// (`floor_px`, `ceiling_px`]; at or below the floor some value at or below it; above the
+/// ceiling some value above it (at most the error). Blocks whose
 /// error cannot pass the floor even at the node box's distance need no box of their own, so
 /// a node well under the threshold costs a few comparisons; the first block over the ceiling
 /// ends the search, so a node well over it costs little more.
@@ -94,10 +94,12 @@ pub fn projected_error_in_px(
         (lo, hi),
         node_dist_m,
         screen,
+        PxPerM::UNBOUNDED,
         frustum.map(|f| (f, ALL_PLANES)),
         near_m,
         window,
     )
+    .0
 }
 
 /// [`projected_error_in_px`] with the node's box (as [`node_aabb`] gives it) and the distance
@@ -112,42 +114,46 @@ fn projected_error_at(
     node_box: (DVec3, DVec3),
     node_dist_m: f64,
     screen: &ScreenBound,
+    upper: PxPerM,
     frustum: Option<(&Frustum, Planes)>,
     near_m: f64,
     window: PxWindow,
-) -> f64 {
+) -> (f64, PxPerM) {
     let k_px = screen.k_px();
-    let px = |error_m: f64, dist_m: f64| error_px(error_m, dist_m, k_px, near_m);
+    let per_m = |stretch: Stretch, dist_m: f64| PxPerM::of(stretch, dist_m, k_px, near_m);
+    // A node that cannot pass the floor even with the screen's largest stretch (or the bound
+    // an ancestor's box gives, which holds for its points too) needs no box of its own.
+    let most = per_m(screen.most_stretch(), node_dist_m).min(upper);
+    let at_most = px(b.error_m, most.vertical).max(px(b.vegetation_error_m, most.any));
+    if at_most <= window.floor_px {
+        return (at_most, most);
+    }
     // The off-axis stretch anywhere in the node's box: no block's is larger (a block's box is
     // within the node's, and its own bound is capped by the node's).
-    let node_stretch = screen.stretch(node_box.0, node_box.1, node_dist_m);
+    let node = per_m(
+        screen.stretch(node_box.0, node_box.1, node_dist_m),
+        node_dist_m,
+    )
+    .min(most);
     // Vegetation's error may point any way: the isotropic stretch.
-    let mut out = px(b.vegetation_error_m * node_stretch.any, node_dist_m);
+    let mut out = px(b.vegetation_error_m, node.any);
     if out > window.ceiling_px {
-        return out;
+        return (out, node);
     }
     // What a block must pass to change the answer: the largest error so far, or the floor.
     let mut cut = out.max(window.floor_px);
-    // A block's box lies inside the node's, so it is at least as far and its stretch is at
-    // most the node's: a block whose error is at most `skip_m` cannot pass the cut and is
-    // skipped without its box (no division per block). `skip_m` is a little below `cut` over
-    // the node's distance and stretch in metres, so a block skipped is one whose error at the
-    // node's distance and stretch is at most the cut; near the boundary the block is taken and
-    // measured exactly, so the answer is the same as without skipping.
-    let node_d_m = node_dist_m.max(near_m);
-    let skip_below = |cut: f64| {
-        if node_d_m > 0.0 {
-            cut * node_d_m / (k_px * node_stretch.vertical) * (1.0 - 8.0 * f64::EPSILON)
-        } else {
-            -1.0
-        }
-    };
+    // A block's box lies inside the node's, so the node's pixels per metre hold for it: a
+    // block whose error is at most `skip_m` cannot pass the cut and is skipped without its box.
+    // `skip_m` is a little below `cut` over the node's pixels per metre, so a block skipped is
+    // one whose error with the node's bound is at most the cut; near the boundary the block is
+    // taken and measured exactly, so the answer is the same as without skipping.
+    let skip_below = |cut: f64| cut / node.vertical * (1.0 - 8.0 * f64::EPSILON);
     let mut skip_m = skip_below(cut);
-    // The node's error is its largest block's: a node that cannot pass at its box's distance
+    // The node's error is its largest block's: a node that cannot pass with its own bound
     // needs no block at all.
     debug_assert!(b.blocks.iter().all(|x| x.error_m <= b.error_m), "{key:?}");
     if b.error_m <= skip_m {
-        return out;
+        return (out, node);
     }
     for (i, block) in b.blocks.iter().enumerate() {
         if block.error_m <= skip_m.max(0.0) {
@@ -157,9 +163,8 @@ fn projected_error_at(
         // The block's own bound, or the node's where that is smaller (it holds for the
         // block's points too).
         let dist_m = distance_to_aabb(screen.eye_m, lo, hi);
-        let stretch = screen.stretch(lo, hi, dist_m);
-        let block_px = px(block.error_m * stretch.vertical, dist_m)
-            .min(px(block.error_m * node_stretch.vertical, node_dist_m));
+        let own = per_m(screen.stretch(lo, hi, dist_m), dist_m);
+        let block_px = px(block.error_m, own.vertical.min(node.vertical));
         // The frustum test (the costlier part) only for blocks that would pass the cut, and
         // only against the planes the node's box crosses when the block's box is within it.
         let outside = |(f, crossed): (&Frustum, Planes)| {
@@ -175,12 +180,51 @@ fn projected_error_at(
         }
         out = block_px;
         if out > window.ceiling_px {
-            return out;
+            return (out, node);
         }
         cut = out;
         skip_m = skip_below(cut);
     }
-    out
+    (out, node)
+}
+
+/// The most pixels a metre of error can show anywhere in a box: for a vertical error and for
+/// one of any direction (a [`Stretch`] over the box's distance, times `K`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PxPerM {
+    pub vertical: f64,
+    pub any: f64,
+}
+
+impl PxPerM {
+    /// No bound known.
+    pub const UNBOUNDED: Self = Self {
+        vertical: f64::INFINITY,
+        any: f64::INFINITY,
+    };
+
+    /// `stretch` over a box `dist_m` away (at least `near_m`; infinite at 0), times `k_px`.
+    fn of(stretch: Stretch, dist_m: f64, k_px: f64, near_m: f64) -> Self {
+        let d = dist_m.max(near_m);
+        let per = |s: f64| if d > 0.0 { s * k_px / d } else { f64::INFINITY };
+        Self {
+            vertical: per(stretch.vertical),
+            any: per(stretch.any),
+        }
+    }
+
+    /// The smaller of two bounds of the same points (both hold, so their minimum does).
+    fn min(self, other: Self) -> Self {
+        Self {
+            vertical: self.vertical.min(other.vertical),
+            any: self.any.min(other.any),
+        }
+    }
+}
+
+/// An error of `error_m` at `per_m` pixels per metre: 0 without error.
+fn px(error_m: f64, per_m: f64) -> f64 {
+    if error_m <= 0.0 { 0.0 } else { error_m * per_m }
 }
 
 /// The frustum planes a box may cross whose plan lies within an outer box's, given the planes
@@ -240,8 +284,11 @@ pub fn decimation<B: Borrow<NodeBounds>>(
                 let i = by * BLOCKS_PER_SIDE + bx;
                 let (lo, hi) = block_aabb(tree, a, b, i);
                 let dist_m = distance_to_aabb(screen.eye_m, lo, hi);
-                let stretch = screen.stretch(lo, hi, dist_m).vertical;
-                error_px(b.blocks[i].error_m * stretch, dist_m, screen.k_px(), near_m) <= tau_px
+                let e = b.blocks[i].error_m;
+                let px = |stretch: f64| error_px(e * stretch, dist_m, screen.k_px(), near_m);
+                // The box's own stretch only where the screen's largest does not do.
+                px(screen.most_stretch().vertical) <= tau_px
+                    || px(screen.stretch(lo, hi, dist_m).vertical) <= tau_px
             })
         });
         if !within {
@@ -258,7 +305,9 @@ pub struct Selected {
     pub key: NodeKey,
     pub bounds: NodeBounds,
     pub dist_m: f64,
-    /// Projected error bound in pixels at `dist_m`.
+    /// Projected error bound in pixels at `dist_m`: exact within the window the selection was
+    /// made with ([`select`]: exact about tau only; at or below tau some value at or below it,
+    /// above tau some value above it).
     pub error_px: f64,
     /// Halvings of the vertex spacing its grid mesh is drawn with ([`decimation`]; 0 unless the
     /// selection was asked for them).
@@ -332,14 +381,23 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
     bounds: impl FnMut(NodeKey) -> B,
     split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
 ) -> Selection {
-    traverse_bounded(tree, &ScreenBound::new(cam), frustum, bounds, split)
+    traverse_bounded(
+        tree,
+        &ScreenBound::new(cam),
+        PxWindow::EXACT,
+        frustum,
+        bounds,
+        split,
+    )
 }
 
 /// [`traverse_in`] with the pixel errors bounded by `screen` (for example the on-axis model,
-/// [`ScreenBound::on_axis`], to measure what the off-axis stretch costs).
+/// [`ScreenBound::on_axis`], to measure what the off-axis stretch costs) and exact only inside
+/// `window` (see [`projected_error_in_px`]).
 pub fn traverse_bounded<B: Into<Option<NodeBounds>>>(
     tree: &QuadTree,
     screen: &ScreenBound,
+    window: PxWindow,
     frustum: Option<Frustum>,
     mut bounds: impl FnMut(NodeKey) -> B,
     split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
@@ -349,7 +407,7 @@ pub fn traverse_bounded<B: Into<Option<NodeBounds>>>(
         tree,
         screen,
         frustum,
-        PxWindow::EXACT,
+        window,
         ByKey(|key| bounds(key).into()),
         split,
         |reached| match reached {
@@ -451,9 +509,14 @@ pub fn walk<S: WalkBounds>(
     // its free lists for the larger blocks, in the frame thread).
     let mut stack: SmallVec<[_; WALK_STACK_INLINE]> = SmallVec::new();
     if tree.overlaps_map(NodeKey::ROOT) {
-        stack.push((NodeKey::ROOT, bounds.get(NodeKey::ROOT), ALL_PLANES));
+        stack.push((
+            NodeKey::ROOT,
+            bounds.get(NodeKey::ROOT),
+            ALL_PLANES,
+            PxPerM::UNBOUNDED,
+        ));
     }
-    while let Some((key, found, planes)) = stack.pop() {
+    while let Some((key, found, planes, upper)) = stack.pop() {
         out.visited += 1;
         let Some(owned) = found else {
             reached(Reached::Unknown(key));
@@ -470,13 +533,14 @@ pub fn walk<S: WalkBounds>(
             continue;
         };
         let dist_m = distance_to_aabb(screen.eye_m, min, max);
-        let error_px = projected_error_at(
+        let (error_px, per_m) = projected_error_at(
             tree,
             key,
             b,
             (min, max),
             dist_m,
             screen,
+            upper,
             frustum.as_ref().map(|f| (f, crossed)),
             0.0,
             window,
@@ -491,7 +555,7 @@ pub fn walk<S: WalkBounds>(
                         let cb = cb.borrow();
                         planes_within(crossed, (b.z_min_m, b.z_max_m), (cb.z_min_m, cb.z_max_m))
                     });
-                    stack.push((c, found, planes));
+                    stack.push((c, found, planes, per_m));
                 }
             }
         } else {
@@ -533,9 +597,20 @@ pub fn select_occluded(
     } else {
         ScreenBound::on_axis(cam)
     };
+    // The split test needs the errors exactly only about tau, and above it where a canopy may
+    // lower them.
+    let window = PxWindow {
+        floor_px: p.tau_px,
+        ceiling_px: if canopy.is_some() {
+            f64::INFINITY
+        } else {
+            p.tau_px
+        },
+    };
     let mut out = traverse_bounded(
         tree,
         &screen,
+        window,
         p.cull.then(|| cam.frustum()),
         |key| cache.get(world, tree, key),
         |key, b, dist, px| {
@@ -549,8 +624,19 @@ pub fn select_occluded(
     );
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     if p.decimate {
+        // The nodes come in depth-first order, so neighbours share their ancestors: the last
+        // bounds looked up at each level are kept and used again while the key is the same.
+        let mut last: [Option<(NodeKey, NodeBounds)>; 2] = [None, None];
         decimate(&mut out, tree, &screen, p.tau_px, |k| {
-            Some(cache.get(world, tree, k))
+            let slot = usize::from(k.level % 2);
+            match &last[slot] {
+                Some((key, b)) if *key == k => Some(*b),
+                _ => {
+                    let b = cache.get(world, tree, k);
+                    last[slot] = Some((k, b));
+                    Some(b)
+                }
+            }
         });
     }
     out
@@ -646,17 +732,17 @@ mod tests {
             // the node's box allows at most.
             let (lo, hi) = node_aabb(&tree, key, &b);
             let node_d = distance_to_aabb(eye, lo, hi);
-            let node_stretch = screen.stretch(lo, hi, node_d);
-            let veg_m = b.vegetation_error_m * node_stretch.any;
-            let mut exact = error_px(veg_m, node_d, k, 0.0);
+            let per_m = |stretch, d| PxPerM::of(stretch, d, k, 0.0);
+            let node = per_m(screen.stretch(lo, hi, node_d), node_d)
+                .min(per_m(screen.most_stretch(), node_d));
+            let mut exact = px(b.vegetation_error_m, node.any);
             for i in 0..b.blocks.len() {
                 let (lo, hi) = block_aabb(&tree, key, &b, i);
                 if f.is_none_or(|f| f.intersects_aabb(lo, hi)) {
                     let d = distance_to_aabb(eye, lo, hi);
+                    let own = per_m(screen.stretch(lo, hi, d), d);
                     let e = b.blocks[i].error_m;
-                    let own = error_px(e * screen.stretch(lo, hi, d).vertical, d, k, 0.0);
-                    let node = error_px(e * node_stretch.vertical, node_d, k, 0.0);
-                    exact = exact.max(own.min(node));
+                    exact = exact.max(px(e, own.vertical.min(node.vertical)));
                 }
             }
             assert_eq!(

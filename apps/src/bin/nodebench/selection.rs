@@ -59,6 +59,7 @@ pub(crate) fn section_selection(
         );
         let mut times = Vec::new();
         let (mut nodes, mut tris, mut full, mut over) = (0usize, 0usize, 0usize, 0u32);
+        let mut visited = 0u64;
         let reps = if quick { 3 } else { 10 };
         for _ in 0..reps {
             for cam in cams {
@@ -66,6 +67,7 @@ pub(crate) fn section_selection(
                 let s = select(world, tree, &mut cache, cam, p);
                 times.push(t.elapsed().as_secs_f64());
                 nodes += s.nodes.len();
+                visited += u64::from(s.visited);
                 tris += triangles(&s);
                 full += triangles_undecimated(&s);
                 over += s.over_tau_at_finest;
@@ -82,6 +84,13 @@ pub(crate) fn section_selection(
             "selection",
             "nodes per frame",
             nodes as f64 / frames,
+            "nodes",
+            &params,
+        );
+        r.add(
+            "selection",
+            "nodes visited per frame",
+            visited as f64 / frames,
             "nodes",
             &params,
         );
@@ -104,14 +113,33 @@ pub(crate) fn section_selection(
             off_axis: false,
             ..p
         };
-        let on_axis_tris: usize = cams
-            .iter()
-            .map(|cam| triangles(&select(world, tree, &mut cache, cam, former)))
-            .sum();
+        let (mut on_axis_tris, mut on_axis_times, mut on_axis_visited) = (0usize, Vec::new(), 0u64);
+        for _ in 0..reps {
+            for cam in cams {
+                let t = Instant::now();
+                let s = select(world, tree, &mut cache, cam, former);
+                on_axis_times.push(t.elapsed().as_secs_f64());
+                on_axis_tris += triangles(&s);
+                on_axis_visited += u64::from(s.visited);
+            }
+        }
+        r.timings(
+            "selection",
+            "selection per frame with the on-axis bound (bounds cached)",
+            on_axis_times,
+            &params,
+        );
+        r.add(
+            "selection",
+            "nodes visited per frame with the on-axis bound",
+            on_axis_visited as f64 / frames,
+            "nodes",
+            &params,
+        );
         r.add(
             "selection",
             "triangles per frame with the on-axis bound (not held on the screen)",
-            on_axis_tris as f64 / cams.len() as f64,
+            on_axis_tris as f64 / frames,
             "triangles",
             &params,
         );
