@@ -788,6 +788,11 @@ impl BoundsCache {
         self.map.get(&key).copied()
     }
 
+    /// The bounds if already measured, lent (no copy).
+    pub fn lend(&self, key: NodeKey) -> Option<&NodeBounds> {
+        self.map.get(&key)
+    }
+
     pub fn len(&self) -> usize {
         self.map.len()
     }

@@ -607,49 +607,67 @@ pub fn select_occluded(
             p.tau_px
         },
     };
-    let mut out = traverse_bounded(
-        tree,
-        &screen,
-        window,
-        p.cull.then(|| cam.frustum()),
-        |key| cache.get(world, tree, key),
-        |key, b, dist, px| {
-            px > p.tau_px
-                && key.level < p.max_level
-                && canopy.is_none_or(|c| {
-                    px * c.error_factor(world, cam.position_m, tree.rect(key), b.z_max_m, dist)
-                        > p.tau_px
-                })
-        },
-    );
+    let mut split = |key: NodeKey, b: &NodeBounds, dist: f64, px: f64| {
+        px > p.tau_px
+            && key.level < p.max_level
+            && canopy.is_none_or(|c| {
+                px * c.error_factor(world, cam.position_m, tree.rect(key), b.z_max_m, dist)
+                    > p.tau_px
+            })
+    };
+    let frustum = p.cull.then(|| cam.frustum());
+    // The walk borrows the cached bounds (no copy per node); nodes it reaches whose bounds are
+    // not measured yet are measured and the walk is made again (a warm cache walks once).
+    let mut out = loop {
+        let mut sel = Selection::default();
+        let walked = walk(
+            tree,
+            &screen,
+            frustum,
+            window,
+            ByKey(|key| cache.lend(key)),
+            &mut split,
+            |reached| match reached {
+                Reached::Selected {
+                    key,
+                    bounds,
+                    dist_m,
+                    error_px,
+                } => sel.nodes.push(Selected {
+                    key,
+                    bounds: *bounds,
+                    dist_m,
+                    error_px,
+                    decimation: 0,
+                }),
+                Reached::Unknown(key) => sel.unknown_bounds.push(key),
+            },
+        );
+        if sel.unknown_bounds.is_empty() {
+            sel.visited = walked.visited;
+            sel.culled = walked.culled;
+            break sel;
+        }
+        for key in sel.unknown_bounds {
+            cache.get(world, tree, key);
+        }
+    };
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     if p.decimate {
-        // The nodes come in depth-first order, so neighbours share their ancestors: the last
-        // bounds looked up at each level are kept and used again while the key is the same.
-        let mut last: [Option<(NodeKey, NodeBounds)>; 2] = [None, None];
-        decimate(&mut out, tree, &screen, p.tau_px, |k| {
-            let slot = usize::from(k.level % 2);
-            match &last[slot] {
-                Some((key, b)) if *key == k => Some(*b),
-                _ => {
-                    let b = cache.get(world, tree, k);
-                    last[slot] = Some((k, b));
-                    Some(b)
-                }
-            }
-        });
+        // Every selected node's ancestors were walked through, so their bounds are measured.
+        decimate(&mut out, tree, &screen, p.tau_px, |k| cache.lend(k));
     }
     out
 }
 
 /// Sets every selected node's [`decimation`] at threshold `tau_px` on the screen of `screen`
 /// (`bounds` gives the ancestors' bounds).
-pub fn decimate(
+pub fn decimate<B: Borrow<NodeBounds>>(
     sel: &mut Selection,
     tree: &QuadTree,
     screen: &ScreenBound,
     tau_px: f64,
-    mut bounds: impl FnMut(NodeKey) -> Option<NodeBounds>,
+    mut bounds: impl FnMut(NodeKey) -> Option<B>,
 ) {
     for s in &mut sel.nodes {
         s.decimation = decimation(tree, s.key, screen, 0.0, tau_px, &mut bounds);
