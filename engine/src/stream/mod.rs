@@ -509,11 +509,9 @@ impl Streamer {
             (false, Some((_, threshold))) => threshold.max(tau_px),
             (false, None) => tau_px,
         };
-        // The bound as the view may be within the guard band (turning that far needs no new
-        // node), not only as it is: the display draws with the view's own.
         crate::terrain::select::walk(
             &self.shared.tree,
-            &crate::terrain::select::ScreenBound::turning(cam, GUARD_BAND),
+            &crate::terrain::select::ScreenBound::new(cam),
             Some(cam.frustum_widened(GUARD_BAND)),
             crate::terrain::select::PxWindow {
                 floor_px: tau_px,

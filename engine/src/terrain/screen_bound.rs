@@ -46,9 +46,12 @@
 //! the two largest. A box off the screen (in a guard band) takes the stretch of the screen's
 //! border nearest to it, so the guard band splits as the screen's edge would.
 //!
-//! The bound depends on the view direction, so turning the camera can change the selection (a
+//! The bound depends on the view direction, so turning the camera can change the selection: a
+//! node near the screen's centre may need to split when a turn takes it towards an edge (a
 //! rotation-invariant choice would have to use the corner's stretch everywhere, up to
-//! `1 / cos²θcorner`: 2.4 at 60 degrees 16:9).
+//! `1 / cos²θcorner`: 2.4 at 60 degrees 16:9). The streamer prepares nodes at a lower threshold
+//! than it draws them (`split_factor` against `show_factor`), which covers the stretch a turn
+//! within its guard band adds.
 
 use crate::camera::Camera;
 use glam::DVec3;
@@ -69,10 +72,6 @@ pub struct ScreenBound {
     near_m: f64,
     /// The on-axis model: every stretch is 1.
     on_axis: bool,
-    /// Tolerate turns ([`ScreenBound::turning`]): how far (tangent units) a point's screen
-    /// position may move, and the largest turn's angle (radians); zero for one view.
-    turn_margin: [f64; 2],
-    turn_rad: f64,
     /// The largest stretch of any box (the whole screen's, distance form).
     most: Stretch,
 }
@@ -102,8 +101,6 @@ impl ScreenBound {
             z_cam: DVec3::new(right.z, cam.up.z, cam.forward.z),
             near_m: cam.near_m,
             on_axis: false,
-            turn_margin: [0.0; 2],
-            turn_rad: 0.0,
             most: Stretch {
                 vertical: 1.0,
                 any: 1.0,
@@ -124,21 +121,6 @@ impl ScreenBound {
     /// any box.
     pub fn most_stretch(&self) -> Stretch {
         self.most
-    }
-
-    /// A bound for `cam` turned so far that its screen stays within `guard` times its own
-    /// (tangents of the half-angles; the streamer's guard band): what to prepare so that turning
-    /// that far needs no new node. Each box's screen rectangle grows by the margin on every side
-    /// within the widened screen, world up may turn by the margin's angle (so `g` may grow by
-    /// that angle times `sqrt(1 + x² + y²)`), and only the distance form is used (a turn moves
-    /// depths, not distances). A model of turning for preparing ahead, not a bound drawn with.
-    pub fn turning(cam: &Camera, guard: f64) -> Self {
-        let mut b = Self::new(cam);
-        let extra = (guard - 1.0).max(0.0);
-        b.turn_margin = [b.half_tan[0] * extra, b.half_tan[1] * extra];
-        b.half_tan = [b.half_tan[0] * (1.0 + extra), b.half_tan[1] * (1.0 + extra)];
-        b.turn_rad = b.turn_margin[0].max(b.turn_margin[1]).atan();
-        b.with_most()
     }
 
     /// The on-axis model `error_m * K / dist_m` for `cam` (every stretch 1): exact at the
@@ -204,13 +186,12 @@ impl ScreenBound {
         } else {
             [-tx, tx, -ty, ty]
         };
-        let [mx, my] = self.turn_margin;
         let [x0, x1, y0, y1] = if in_front {
             [
-                (rect[0] - mx).clamp(-tx, tx),
-                (rect[1] + mx).clamp(-tx, tx),
-                (rect[2] - my).clamp(-ty, ty),
-                (rect[3] + my).clamp(-ty, ty),
+                rect[0].clamp(-tx, tx),
+                rect[1].clamp(-tx, tx),
+                rect[2].clamp(-ty, ty),
+                rect[3].clamp(-ty, ty),
             ]
         } else {
             [-tx, tx, -ty, ty]
@@ -225,12 +206,12 @@ impl ScreenBound {
         // a little so no stretch is under-estimated.
         let q_sqrt = q.sqrt();
         let by_depth = dist_m / z_min.max(self.near_m);
-        let factor = if in_front && self.turn_rad == 0.0 {
+        let factor = if in_front {
             q_sqrt.min(by_depth)
         } else {
             q_sqrt
         };
-        let g = g2.sqrt() + self.turn_rad * q_sqrt;
+        let g = g2.sqrt();
         let up = 1.0 + 8.0 * f64::EPSILON;
         Stretch {
             vertical: g * factor * up,

@@ -129,12 +129,13 @@ fn projected_error_at(
         return (at_most, most);
     }
     // The off-axis stretch anywhere in the node's box: no block's is larger (a block's box is
-    // within the node's, and its own bound is capped by the node's).
+    // within the node's, and its own bound is capped by the node's). Not capped by the
+    // ancestor's bound: an exact error is the node's own, whichever way it is reached.
     let node = per_m(
         screen.stretch(node_box.0, node_box.1, node_dist_m),
         node_dist_m,
     )
-    .min(most);
+    .min(per_m(screen.most_stretch(), node_dist_m));
     // Vegetation's error may point any way: the isotropic stretch.
     let mut out = px(b.vegetation_error_m, node.any);
     if out > window.ceiling_px {
@@ -306,8 +307,7 @@ pub struct Selected {
     pub bounds: NodeBounds,
     pub dist_m: f64,
     /// Projected error bound in pixels at `dist_m`: exact within the window the selection was
-    /// made with ([`select`]: exact about tau only; at or below tau some value at or below it,
-    /// above tau some value above it).
+    /// made with ([`select`]: exact above tau; at or below tau some value at or below it).
     pub error_px: f64,
     /// Halvings of the vertex spacing its grid mesh is drawn with ([`decimation`]; 0 unless the
     /// selection was asked for them).
@@ -652,6 +652,11 @@ pub fn select_occluded(
             cache.get(world, tree, key);
         }
     };
+    // A node kept over tau (at the finest level) reports its whole bound, not only that it is
+    // over tau.
+    for s in out.nodes.iter_mut().filter(|s| s.error_px > p.tau_px) {
+        s.error_px = projected_error_px(tree, s.key, &s.bounds, &screen, frustum.as_ref(), 0.0);
+    }
     out.over_tau_at_finest = out.nodes.iter().filter(|s| s.error_px > p.tau_px).count() as u32;
     if p.decimate {
         // Every selected node's ancestors were walked through, so their bounds are measured.
