@@ -250,6 +250,26 @@ pub fn view_error(
     let screen = ScreenProjection::new(cam);
     let mut px = Vec::new();
     let mut region_max_px = [0.0f64; 3];
+    visit_lattice(world, tree, meshes, per_side, |truth, drawn_z| {
+        let drawn = DVec3::new(truth.x, truth.y, drawn_z);
+        if let Some((len, at)) = screen.segment_px(truth, drawn) {
+            let region = screen.region(at) as usize;
+            region_max_px[region] = region_max_px[region].max(len);
+            px.push(len);
+        }
+    });
+    ViewError::of(px, region_max_px)
+}
+
+/// Visits `per_side` x `per_side` points in every mesh's node (cell centres):
+/// `visit(true surface point, the mesh's height there through its own triangles)`.
+fn visit_lattice(
+    world: &World,
+    tree: &QuadTree,
+    meshes: &[NodeMesh],
+    per_side: u32,
+    mut visit: impl FnMut(DVec3, f64),
+) {
     for m in meshes {
         let r = tree.rect(m.key);
         let step = (r.max[0] - r.min[0]) / f64::from(per_side);
@@ -260,20 +280,13 @@ pub fn view_error(
                     r.min[0] + (f64::from(i) + 0.5) * step,
                     r.min[1] + (f64::from(j) + 0.5) * step,
                 );
-                let f = world.height_m(x, y);
-                let (truth, drawn) = (
-                    DVec3::new(x, y, f),
-                    DVec3::new(x, y, surface.height_at(x, y)),
+                visit(
+                    DVec3::new(x, y, world.height_m(x, y)),
+                    surface.height_at(x, y),
                 );
-                if let Some((len, at)) = screen.segment_px(truth, drawn) {
-                    let region = screen.region(at) as usize;
-                    region_max_px[region] = region_max_px[region].max(len);
-                    px.push(len);
-                }
             }
         }
     }
-    ViewError::of(px, region_max_px)
 }
 
 /// The error of a view in the pixel metric's on-axis model (not on the screen: off axis the
@@ -291,30 +304,15 @@ pub fn view_error_on_axis(
     let k = cam.k_px();
     let frustum = cam.frustum();
     let (mut max_px, mut sum, mut samples) = (0.0f64, 0.0f64, 0u64);
-    for m in meshes {
-        let r = tree.rect(m.key);
-        let step = (r.max[0] - r.min[0]) / f64::from(per_side);
-        let surface = MeshSurface::new(m, tree);
-        for j in 0..per_side {
-            for i in 0..per_side {
-                let (x, y) = (
-                    r.min[0] + (f64::from(i) + 0.5) * step,
-                    r.min[1] + (f64::from(j) + 0.5) * step,
-                );
-                let f = world.height_m(x, y);
-                let p = DVec3::new(x, y, f);
-                // Only points inside the view frustum count (a point is a degenerate box).
-                if !frustum.intersects_aabb(p, p) {
-                    continue;
-                }
-                let px = (surface.height_at(x, y) - f).abs() * k
-                    / (p - cam.position_m).length().max(1e-9);
-                max_px = max_px.max(px);
-                sum += px;
-                samples += 1;
-            }
+    visit_lattice(world, tree, meshes, per_side, |p, drawn_z| {
+        // Only points inside the view frustum count (a point is a degenerate box).
+        if frustum.intersects_aabb(p, p) {
+            let px = (drawn_z - p.z).abs() * k / (p - cam.position_m).length().max(1e-9);
+            max_px = max_px.max(px);
+            sum += px;
+            samples += 1;
         }
-    }
+    });
     ViewError {
         max_px,
         mean_px: if samples > 0 {

@@ -328,6 +328,28 @@ pub struct Selection {
     pub over_tau_at_finest: u32,
 }
 
+impl Selection {
+    /// Adds what a [`walk`] reached: a selected node (its bounds copied), or one whose bounds
+    /// are unknown.
+    fn add<B: Borrow<NodeBounds>>(&mut self, reached: Reached<B>) {
+        match reached {
+            Reached::Selected {
+                key,
+                bounds,
+                dist_m,
+                error_px,
+            } => self.nodes.push(Selected {
+                key,
+                bounds: *bounds.borrow(),
+                dist_m,
+                error_px,
+                decimation: 0,
+            }),
+            Reached::Unknown(key) => self.unknown_bounds.push(key),
+        }
+    }
+}
+
 /// Selection settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SelectParams {
@@ -410,21 +432,7 @@ pub fn traverse_bounded<B: Into<Option<NodeBounds>>>(
         window,
         ByKey(|key| bounds(key).into()),
         split,
-        |reached| match reached {
-            Reached::Selected {
-                key,
-                bounds,
-                dist_m,
-                error_px,
-            } => out.nodes.push(Selected {
-                key,
-                bounds,
-                dist_m,
-                error_px,
-                decimation: 0,
-            }),
-            Reached::Unknown(key) => out.unknown_bounds.push(key),
-        },
+        |reached| out.add(reached),
     );
     out.visited = walked.visited;
     out.culled = walked.culled;
@@ -627,21 +635,7 @@ pub fn select_occluded(
             window,
             ByKey(|key| cache.lend(key)),
             &mut split,
-            |reached| match reached {
-                Reached::Selected {
-                    key,
-                    bounds,
-                    dist_m,
-                    error_px,
-                } => sel.nodes.push(Selected {
-                    key,
-                    bounds: *bounds,
-                    dist_m,
-                    error_px,
-                    decimation: 0,
-                }),
-                Reached::Unknown(key) => sel.unknown_bounds.push(key),
-            },
+            |reached| sel.add(reached),
         );
         if sel.unknown_bounds.is_empty() {
             sel.visited = walked.visited;

@@ -32,7 +32,7 @@ pub(crate) fn write_plot(path: &Path, curve: &[CurvePoint]) -> Result<()> {
         let emax = curve.iter().map(|c| c.max_px).fold(0.1, f64::max) * 1.2;
         let mut chart = ChartBuilder::on(&root)
             .caption(
-                "Triangles against measured max pixel error",
+                "Triangles against measured on-screen max pixel error",
                 ("sans-serif", 22),
             )
             .margin(12)
@@ -42,7 +42,7 @@ pub(crate) fn write_plot(path: &Path, curve: &[CurvePoint]) -> Result<()> {
         chart
             .configure_mesh()
             .x_desc("triangles per frame")
-            .y_desc("measured max error (px)")
+            .y_desc("on-screen max error (px)")
             .draw()?;
         for (i, method) in ["grid (ours)", "TIN (ours)", "CDLOD-style distance"]
             .iter()

@@ -103,9 +103,13 @@ impl Report {
             "# Benchmarks\n\nWritten by `nodebench` from one run; do not edit by hand, run it again:\n\n\
              ```sh\n{command}\n```\n\n{summary}\n\n\
              Machine: {} cores, CPU {}, {} worker thread(s) for throughput rows, adapter {}.\n\n\
-             Per-item times are on one core (p50/p95/p99/max). \"Measured error\" is |mesh - finest \
-             surface| projected to pixels at the sample points of every drawn node (the max over 2 x 2 \
-             samples per quad, the mean over a coarser lattice), never the engine's own bound.\n\n{}",
+             Per-item times are on one core (p50/p95/p99/max). \"Measured error\" is measured on \
+             the screen: the finest surface's point and the drawn mesh's point above or below it, \
+             projected through the camera's matrices, and the length in pixels of the part of the \
+             segment between them on the screen, at the sample points of every drawn node (the max \
+             over 2 x 2 samples per quad, p99.9 and mean over a coarser lattice), never the engine's \
+             own bound. Rows marked \"the metric's on-axis model\" take |mesh - surface| K / distance \
+             instead, which the screen exceeds off its axis.\n\n{}",
             field("cores"),
             field("cpu"),
             field("workers"),
