@@ -372,8 +372,13 @@ pub(crate) fn section_streaming(
         // exceed the cache budget, where nothing else stays and a node leaving the pinned sets
         // is evicted at once.
         let (mut over_budget_frames, mut pinned_peak_bytes) = (0usize, 0usize);
+        // The camera moves by the flight's clock (frame f shows the camera at f dt); a frame
+        // that starts more than a frame after its time is late, and the flight's real length
+        // is reported beside the one it says.
+        let mut late_frames = 0usize;
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
+            late_frames += usize::from(start.elapsed().as_secs_f64() > (f + 1) as f64 * dt);
             frame_times.push(flight_run.frame(cam, dt, &future[f]));
             let s = flight_run.streamer();
             stages.push(s.stats.last_update);
@@ -402,15 +407,22 @@ pub(crate) fn section_streaming(
             }
         }
         b.finish_and_clear();
+        let clock = Clock {
+            planned_s: frames as f64 * dt,
+            real_s: start.elapsed().as_secs_f64(),
+            late_frames,
+            frames,
+        };
         let s = flight_run.streamer_mut();
         let cancelled =
             s.stats.cancelled_queued + s.stats.cancelled_running + s.stats.cancelled_gpu - c0;
-        let params = run.params(
+        let params = clock.mark(&run.params(
             (seconds, tau),
             s.settings.workers,
             houses,
             gpu.map(|(_, adapter)| adapter),
-        );
+        ));
+        clock.report(r, &params);
         let outcome = FlightOutcome {
             requests_deferred: s.stats.requests_deferred - deferred0,
             latencies: s.take_latencies(),
@@ -599,6 +611,49 @@ struct FlightOutcome {
     /// (drawn with their nearest resident ancestor's).
     texture_debt: Option<(f64, f64)>,
     residency: Residency,
+}
+
+/// A flight against its clock: how long it says it lasts, how long it took, and the frames that
+/// started more than a frame after their time.
+struct Clock {
+    planned_s: f64,
+    real_s: f64,
+    late_frames: usize,
+    frames: usize,
+}
+
+impl Clock {
+    /// The real length over which a flight counts as having run slower than it says.
+    const SLOW_FACTOR: f64 = 1.05;
+
+    /// `params`, marked when the flight ran slower than it says (every row of it then shows).
+    fn mark(&self, params: &str) -> String {
+        if self.real_s > self.planned_s * Self::SLOW_FACTOR {
+            format!(
+                "{params}; RAN SLOW: {:.1} s for {:.1} s, {} of {} frames late",
+                self.real_s, self.planned_s, self.late_frames, self.frames
+            )
+        } else {
+            params.to_string()
+        }
+    }
+
+    fn report(&self, r: &mut Report, params: &str) {
+        r.add(
+            "streaming",
+            "flight's real duration",
+            self.real_s,
+            "s",
+            &format!("{params}; the flight says {:.1} s", self.planned_s),
+        );
+        r.add(
+            "streaming",
+            "frames started more than a frame late",
+            self.late_frames as f64 / self.frames.max(1) as f64 * 100.0,
+            "%",
+            params,
+        );
+    }
 }
 
 /// The node cache over one flight.
@@ -931,3 +986,26 @@ fn report_slowest_spans(spans: &[Span], name: &str, r: &mut Report, params: &str
 
 /// The quantiles of the per-frame rows.
 pub(crate) const P50_P99: [f64; 2] = [0.5, 0.99];
+
+#[cfg(test)]
+mod clock_tests {
+    use super::Clock;
+
+    /// A flight that took more than 5 % longer than it says is marked in every row's params,
+    /// with its real length and its late frames; one on time is not.
+    #[test]
+    fn a_flight_that_ran_slow_is_marked() {
+        let clock = |real_s: f64, late_frames: usize| Clock {
+            planned_s: 12.0,
+            real_s,
+            late_frames,
+            frames: 720,
+        };
+        assert_eq!(clock(12.3, 2).mark("300 m/s"), "300 m/s");
+        let slow = clock(14.2, 131).mark("300 m/s");
+        assert!(
+            slow.contains("RAN SLOW: 14.2 s for 12.0 s, 131 of 720 frames late"),
+            "{slow}"
+        );
+    }
+}
