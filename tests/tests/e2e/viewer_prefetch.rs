@@ -47,15 +47,27 @@ fn frames_with_the_path_ahead_set_prefetch_along_it_and_use_it_once() {
     let far = future[future.len() - 1].1;
 
     let mut with_path = tiny_viewer(&g, TAU_PX);
-    let mut settled = false;
+    // Settled: quiet (no job in flight, no request left for a later frame, no pop debt) for as
+    // many frames in a row as the prefetch has parts plus one. A frame recomputes one part
+    // with the bounds known by then, so nodes whose bounds the last jobs brought are asked for
+    // only when their part's turn comes (the deeper selection of the on-screen bound needs more
+    // of these rounds), and a frame whose worker held the job queue leaves its requests to the
+    // next one.
+    let quiet_needed = PREDICT_HORIZONS_S.len() + 2;
+    let (mut quiet, mut settled) = (0, false);
     for _ in 0..20_000 {
         with_path.path_ahead.clone_from(&future);
+        let deferred = with_path.streamer.stats.requests_deferred;
         let st = frame(&g, &mut with_path, &target, &here, 0.05);
         assert!(
             with_path.path_ahead.is_empty(),
             "a frame left the path ahead set for the next one"
         );
-        if with_path.streamer.in_flight() == 0 && st.pop_debt_nodes == 0 {
+        let calm = with_path.streamer.in_flight() == 0
+            && st.pop_debt_nodes == 0
+            && with_path.streamer.stats.requests_deferred == deferred;
+        quiet = if calm { quiet + 1 } else { 0 };
+        if quiet >= quiet_needed {
             settled = true;
             break;
         }
