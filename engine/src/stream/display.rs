@@ -2,10 +2,11 @@
 //! list with dither intervals that partition [0, 1) at every point.
 
 use super::Streamer;
+use crate::camera::Camera;
 use crate::terrain::bounds::NodeBounds;
 use crate::terrain::mesh::MAX_DECIMATION;
 use crate::terrain::quadtree::NodeKey;
-use crate::terrain::select::WALK_STACK_INLINE;
+use crate::terrain::select::{ScreenBound, WALK_STACK_INLINE};
 use rustc_hash::FxHashMap;
 
 /// The bounds of a node's parent, grandparent, ... as far as a decimation looks (`None` where
@@ -55,7 +56,10 @@ impl Streamer {
         let mut fade_px =
             FxHashMap::with_capacity_and_hasher(self.fade_px.len(), rustc_hash::FxBuildHasher);
         let mut drawn = Vec::with_capacity(self.drawn.len());
-        let view = self.camera.map(|cam| (cam, cam.frustum()));
+        // The camera's frustum and pixel bound, made once for the frame's walk.
+        let view = self
+            .camera
+            .map(|cam| (cam, cam.frustum(), ScreenBound::new(&cam)));
         // The new split states: a node the walk does not reach, or whose state reaches 0,
         // has none. (Each node is reached once, after its parent and before its children, so
         // the old states read below are all from the last frame.)
@@ -97,7 +101,7 @@ impl Streamer {
                 if target > s {
                     let step = match view
                         .as_ref()
-                        .and_then(|(cam, f)| self.error_px(key, cam, f))
+                        .and_then(|(cam, f, screen)| self.error_px(key, cam, f, screen))
                     {
                         Some(px) => {
                             fade_px.insert(key, px);
@@ -124,7 +128,7 @@ impl Streamer {
                     key,
                     dither_lo: lo,
                     dither_hi: hi,
-                    decimation: self.decimation(key, &up),
+                    decimation: self.decimation(key, &up, view.as_ref()),
                 });
                 continue;
             }
@@ -136,7 +140,7 @@ impl Streamer {
                     key,
                     dither_lo: mid,
                     dither_hi: hi,
-                    decimation: self.decimation(key, &up),
+                    decimation: self.decimation(key, &up, view.as_ref()),
                 });
             }
             // Popped nearest first, so the list is front to back in plan view.
@@ -155,34 +159,44 @@ impl Streamer {
         self.drawn = drawn;
     }
 
-    /// A resident node's projected error (px) for camera `cam`, inside its view `frustum`.
+    /// A resident node's projected error (px) for camera `cam` (its pixel bound `screen`),
+    /// inside its view `frustum`.
     fn error_px(
         &self,
         key: NodeKey,
-        cam: &crate::camera::Camera,
+        cam: &Camera,
         frustum: &crate::camera::Frustum,
+        screen: &ScreenBound,
     ) -> Option<f64> {
         let b = self.resident.get(&key)?.work.bounds.as_ref()?;
         Some(crate::terrain::select::projected_error_px(
             &self.shared.tree,
             key,
             b,
-            &crate::terrain::select::ScreenBound::new(cam),
+            screen,
             Some(frustum),
             cam.near_m,
         ))
     }
 
     /// How coarsely drawn node `key`'s grid may be drawn: its decimation at the display's split
-    /// threshold (`show_factor * tau`), from its ancestors' bounds (`up`: the parent's, the
-    /// grandparent's, ... as far as known); 0 when off or without a camera.
-    fn decimation(&self, key: NodeKey, up: &Ancestors<'_>) -> u8 {
-        match self.camera {
-            Some(cam) if self.settings.decimate && self.settings.fixed_level.is_none() => {
+    /// threshold (`show_factor * tau`) for the `view` (camera, frustum and pixel bound), from
+    /// its ancestors' bounds (`up`: the parent's, the grandparent's, ... as far as known); 0
+    /// when off or without a camera.
+    fn decimation(
+        &self,
+        key: NodeKey,
+        up: &Ancestors<'_>,
+        view: Option<&(Camera, crate::camera::Frustum, ScreenBound)>,
+    ) -> u8 {
+        match view {
+            Some((cam, _, screen))
+                if self.settings.decimate && self.settings.fixed_level.is_none() =>
+            {
                 crate::terrain::select::decimation(
                     &self.shared.tree,
                     key,
-                    &crate::terrain::select::ScreenBound::new(&cam),
+                    screen,
                     cam.near_m,
                     self.settings.show_factor.max(self.settings.split_factor)
                         * self.settings.tau_px,

@@ -86,12 +86,20 @@ pub struct Stretch {
     pub any: f64,
 }
 
+impl Stretch {
+    /// No stretch: the on-axis model's everywhere.
+    pub const NONE: Self = Self {
+        vertical: 1.0,
+        any: 1.0,
+    };
+}
+
 impl ScreenBound {
     /// The bound on `cam`'s screen, off-axis stretch included.
     pub fn new(cam: &Camera) -> Self {
         let ty = (cam.fovy_rad * 0.5).tan();
         let right = cam.right();
-        Self {
+        let mut bound = Self {
             eye_m: cam.position_m,
             right,
             up: cam.up,
@@ -101,20 +109,12 @@ impl ScreenBound {
             z_cam: DVec3::new(right.z, cam.up.z, cam.forward.z),
             near_m: cam.near_m,
             on_axis: false,
-            most: Stretch {
-                vertical: 1.0,
-                any: 1.0,
-            },
-        }
-        .with_most()
-    }
-
-    /// Sets [`Self::most_stretch`]: the stretch over the whole screen (a box that reaches the
-    /// eye's plane may show anywhere on it).
-    fn with_most(mut self) -> Self {
-        let eye = self.eye_m;
-        self.most = self.stretch(eye - DVec3::ONE, eye + DVec3::ONE, 0.0);
-        self
+            most: Stretch::NONE,
+        };
+        // The stretch over the whole screen: a box around the eye may show anywhere on it.
+        let eye = bound.eye_m;
+        bound.most = bound.stretch(eye - DVec3::ONE, eye + DVec3::ONE, 0.0);
+        bound
     }
 
     /// The largest stretch of an error anywhere on the screen: at least [`Self::stretch`] of
@@ -128,9 +128,9 @@ impl ScreenBound {
     pub fn on_axis(cam: &Camera) -> Self {
         Self {
             on_axis: true,
+            most: Stretch::NONE,
             ..Self::new(cam)
         }
-        .with_most()
     }
 
     /// Pixels per (metre / metre of distance) on the view axis: `K`.
@@ -145,10 +145,7 @@ impl ScreenBound {
     #[inline]
     pub fn stretch(&self, lo: DVec3, hi: DVec3, dist_m: f64) -> Stretch {
         if self.on_axis {
-            return Stretch {
-                vertical: 1.0,
-                any: 1.0,
-            };
+            return Stretch::NONE;
         }
         let (lo, hi) = (lo - self.eye_m, hi - self.eye_m);
         // The range of a camera coordinate over the box: linear in the point, so least and
@@ -303,12 +300,8 @@ mod tests {
         let axis = ScreenBound::on_axis(&cam);
         // A box near the screen's corner (its centre 35.8 degrees off axis).
         let (lo, hi) = (DVec3::new(19.5, 11.5, -8.5), DVec3::new(20.5, 12.5, -7.5));
-        let one = Stretch {
-            vertical: 1.0,
-            any: 1.0,
-        };
         let d = crate::camera::distance_to_aabb(DVec3::ZERO, lo, hi);
-        assert_eq!(axis.stretch(lo, hi, d), one);
+        assert_eq!(axis.stretch(lo, hi, d), Stretch::NONE);
         let s = ScreenBound::new(&cam).stretch(lo, hi, d);
         // Looking level, a vertical error is stretched by about 1 / cosθ, any error by about
         // 1 / cos²θ (relative to the box's nearest point, a little less).

@@ -128,14 +128,14 @@ fn projected_error_at(
     if at_most <= window.floor_px {
         return (at_most, most);
     }
-    // The off-axis stretch anywhere in the node's box: no block's is larger (a block's box is
-    // within the node's, and its own bound is capped by the node's). Not capped by the
-    // ancestor's bound: an exact error is the node's own, whichever way it is reached.
+    // The off-axis stretch anywhere in the node's box (never over the screen's largest): no
+    // block's is larger (a block's box is within the node's, and its own bound is capped by the
+    // node's). Not capped by the ancestor's bound: an exact error is the node's own, whichever
+    // way it is reached.
     let node = per_m(
         screen.stretch(node_box.0, node_box.1, node_dist_m),
         node_dist_m,
-    )
-    .min(per_m(screen.most_stretch(), node_dist_m));
+    );
     // Vegetation's error may point any way: the isotropic stretch.
     let mut out = px(b.vegetation_error_m, node.any);
     if out > window.ceiling_px {
@@ -239,19 +239,6 @@ fn planes_within(crossed: Planes, outer_z_m: (f64, f64), inner_z_m: (f64, f64)) 
     }
 }
 
-/// An error of `error_m` seen `dist_m` away (at least `near_m`) in pixels: 0 without error,
-/// infinite at distance 0.
-fn error_px(error_m: f64, dist_m: f64, k_px: f64, near_m: f64) -> f64 {
-    let d = dist_m.max(near_m);
-    if error_m <= 0.0 {
-        0.0
-    } else if d > 0.0 {
-        error_m * k_px / d
-    } else {
-        f64::INFINITY
-    }
-}
-
 /// How many halvings of its grid mesh's vertex spacing node `key` may be drawn with (at most
 /// [`MAX_DECIMATION`]) at threshold `tau_px` on the screen of `screen`.
 ///
@@ -286,10 +273,15 @@ pub fn decimation<B: Borrow<NodeBounds>>(
                 let (lo, hi) = block_aabb(tree, a, b, i);
                 let dist_m = distance_to_aabb(screen.eye_m, lo, hi);
                 let e = b.blocks[i].error_m;
-                let px = |stretch: f64| error_px(e * stretch, dist_m, screen.k_px(), near_m);
+                let shows = |stretch: Stretch| {
+                    px(
+                        e,
+                        PxPerM::of(stretch, dist_m, screen.k_px(), near_m).vertical,
+                    )
+                };
                 // The box's own stretch only where the screen's largest does not do.
-                px(screen.most_stretch().vertical) <= tau_px
-                    || px(screen.stretch(lo, hi, dist_m).vertical) <= tau_px
+                shows(screen.most_stretch()) <= tau_px
+                    || shows(screen.stretch(lo, hi, dist_m)) <= tau_px
             })
         });
         if !within {
@@ -400,36 +392,15 @@ pub fn traverse_in<B: Into<Option<NodeBounds>>>(
     tree: &QuadTree,
     cam: &Camera,
     frustum: Option<Frustum>,
-    bounds: impl FnMut(NodeKey) -> B,
-    split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
-) -> Selection {
-    traverse_bounded(
-        tree,
-        &ScreenBound::new(cam),
-        PxWindow::EXACT,
-        frustum,
-        bounds,
-        split,
-    )
-}
-
-/// [`traverse_in`] with the pixel errors bounded by `screen` (for example the on-axis model,
-/// [`ScreenBound::on_axis`], to measure what the off-axis stretch costs) and exact only inside
-/// `window` (see [`projected_error_in_px`]).
-pub fn traverse_bounded<B: Into<Option<NodeBounds>>>(
-    tree: &QuadTree,
-    screen: &ScreenBound,
-    window: PxWindow,
-    frustum: Option<Frustum>,
     mut bounds: impl FnMut(NodeKey) -> B,
     split: impl FnMut(NodeKey, &NodeBounds, f64, f64) -> bool,
 ) -> Selection {
     let mut out = Selection::default();
     let walked = walk(
         tree,
-        screen,
+        &ScreenBound::new(cam),
         frustum,
-        window,
+        PxWindow::EXACT,
         ByKey(|key| bounds(key).into()),
         split,
         |reached| out.add(reached),
@@ -750,8 +721,7 @@ mod tests {
             let (lo, hi) = node_aabb(&tree, key, &b);
             let node_d = distance_to_aabb(eye, lo, hi);
             let per_m = |stretch, d| PxPerM::of(stretch, d, k, 0.0);
-            let node = per_m(screen.stretch(lo, hi, node_d), node_d)
-                .min(per_m(screen.most_stretch(), node_d));
+            let node = per_m(screen.stretch(lo, hi, node_d), node_d);
             let mut exact = px(b.vegetation_error_m, node.any);
             for i in 0..b.blocks.len() {
                 let (lo, hi) = block_aabb(&tree, key, &b, i);

@@ -255,7 +255,12 @@ fn the_on_screen_measure_matches_rendered_ridge_silhouettes() {
     let (cam, cam_hi) = (view(base), view([base[0] * scale, base[1] * scale]));
     let frame = engine::render::frame::FrameResources::new(&g.device, engine::render::COLOR_FORMAT);
     let Some(mut reference) = engine::render::reference::GpuReference::new(&g, &frame) else {
+        // The reference's flat pipeline comes with its timer: none without timestamp queries.
         assert!(!tests::in_ci(), "CI's adapter has timestamp queries");
+        tests::skip(
+            "the_on_screen_measure_matches_rendered_ridge_silhouettes",
+            "the adapter has no timestamp queries, so no GPU reference to render with",
+        );
         return;
     };
     let drawn = silhouette_rows(
@@ -287,13 +292,6 @@ fn the_on_screen_measure_matches_rendered_ridge_silhouettes() {
             continue;
         };
         let rendered_px = (d - t).abs() / f64::from(scale);
-        if std::env::var_os("SILHOUETTE_DEBUG").is_some() && c % 64 == 0 {
-            println!(
-                "col {c} y {y:.2}: drawn row {d} true row {t}: rendered {rendered_px:.3} measured \
-                 {measured_px:.3} (crest true {:.3} drawn {:.3})",
-                true_crest.z, drawn_crest.z
-            );
-        }
         worst = worst.max((rendered_px - measured_px).abs());
         largest = largest.max(measured_px);
         checked += 1;

@@ -4,7 +4,7 @@
 use engine::camera::Camera;
 use engine::surface::decals::FLAT_MARGIN_M;
 use engine::surface::world::World;
-use engine::terrain::bounds::{BLOCKS, BoundsCache, parent_block};
+use engine::terrain::bounds::{BoundsCache, parent_block};
 use engine::terrain::mesh::NodeMesh;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
 use engine::terrain::select::{SelectParams, select};
@@ -17,46 +17,19 @@ use tests::terrain::{
 };
 use worldgen::noise::unit3;
 
-/// Dense true error per block of a node, measured once.
-/// Dense true errors per block of a node's mesh, by node and decimation (how it is drawn).
-struct TrueErrors(Map<(NodeKey, u8), [(f64, f64); BLOCKS]>);
+/// A measurement of each node's mesh as drawn (by node and decimation), made once.
+struct PerDrawnMesh<T>(Map<(NodeKey, u8), T>);
 
-impl TrueErrors {
+impl<T> PerDrawnMesh<T> {
     fn get(
         &mut self,
-        world: &World,
-        tree: &QuadTree,
-        cache: &mut BoundsCache,
-        tiles: &mut TileCache,
-        key: NodeKey,
-        decimation: u8,
-    ) -> [(f64, f64); BLOCKS] {
-        if let Some(v) = self.0.get(&(key, decimation)) {
-            return *v;
-        }
-        let m = build_mesh(world, tree, cache, tiles, key).decimated(decimation);
-        let v = measure_true_block_errors(world, tree, &m);
-        self.0.insert((key, decimation), v);
-        v
-    }
-}
-
-/// Dense on-screen error samples of a node's mesh, by node and decimation (how it is drawn).
-struct ScreenSamples(Map<(NodeKey, u8), engine::measure::ErrorSamples>);
-
-impl ScreenSamples {
-    fn get(
-        &mut self,
-        world: &World,
-        tree: &QuadTree,
-        cache: &mut BoundsCache,
-        tiles: &mut TileCache,
-        key: NodeKey,
-        decimation: u8,
-    ) -> &engine::measure::ErrorSamples {
+        (world, tree): (&World, &QuadTree),
+        (cache, tiles): (&mut BoundsCache, &mut TileCache),
+        (key, decimation): (NodeKey, u8),
+        measure: impl FnOnce(&NodeMesh) -> T,
+    ) -> &T {
         self.0.entry((key, decimation)).or_insert_with(|| {
-            let m = build_mesh(world, tree, cache, tiles, key).decimated(decimation);
-            engine::measure::node_error_samples(world, tree, &m, 6)
+            measure(&build_mesh(world, tree, cache, tiles, key).decimated(decimation))
         })
     }
 }
@@ -155,7 +128,7 @@ fn errors_are_monotone_and_bound_every_descendant() {
         let tree = tree_of(&world);
         let mut cache = BoundsCache::new();
         let mut tiles = TileCache::new();
-        let mut truth = TrueErrors(Map::new());
+        let mut truth = PerDrawnMesh(Map::new());
         let (mut pairs, mut descendants, mut clamped) = (0usize, 0usize, 0usize);
         for i in 0..40i64 {
             // A random leaf (half of them on the cliff band, the spikes or a road) and its chain.
@@ -204,7 +177,11 @@ fn errors_are_monotone_and_bound_every_descendant() {
             }
             // The true error of every node on the chain is bounded by each ancestor's error.
             for (d, &desc) in chain.iter().enumerate().step_by(3) {
-                let blocks = truth.get(&world, &tree, &mut cache, &mut tiles, desc, 0);
+                // Dense true errors per block of the descendant's mesh.
+                let blocks =
+                    *truth.get((&world, &tree), (&mut cache, &mut tiles), (desc, 0), |m| {
+                        measure_true_block_errors(&world, &tree, m)
+                    });
                 for &anc in &chain[d..] {
                     let a = cache.get(&world, &tree, anc);
                     for (i, &(true_err, _)) in blocks.iter().enumerate() {
@@ -309,7 +286,7 @@ fn selected_nodes_respect_the_pixel_threshold() {
         let tree = tree_of(&world);
         let mut cache = BoundsCache::new();
         let mut tiles = TileCache::new();
-        let mut truth = ScreenSamples(Map::new());
+        let mut truth = PerDrawnMesh(Map::new());
         let mut worst_ratio: f64 = 0.0;
         let (mut nodes, mut empty, mut finest_over) = (0usize, 0usize, 0usize);
         let mut decimated = [0usize; 3];
@@ -335,8 +312,12 @@ fn selected_nodes_respect_the_pixel_threshold() {
                     over += u32::from(s.error_px > tau);
                     // The node's true error on the screen: dense samples of its mesh as drawn
                     // and of the surface, projected through the camera's matrices.
-                    let samples =
-                        truth.get(&world, &tree, &mut cache, &mut tiles, s.key, s.decimation);
+                    let samples = truth.get(
+                        (&world, &tree),
+                        (&mut cache, &mut tiles),
+                        (s.key, s.decimation),
+                        |m| engine::measure::node_error_samples(&world, &tree, m, 6),
+                    );
                     let px = engine::measure::view_max_error_px(&[samples], &cam, false).max_px;
                     // Never worse than the engine claims; and the claim is <= tau except at the
                     // finest level, where the engine reports the excess.
