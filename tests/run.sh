@@ -61,24 +61,18 @@ rm -rf "$smoke" && mkdir -p "$smoke"
 if ./target/debug/worldgen check "$smoke/does-not-exist" 2>/dev/null; then
   echo "worldgen check accepted a missing map" >&2; exit 1
 fi
-if [ -f ../shared/data/dem/N57E011.hgt ]; then
-  ./target/debug/worldgen import-dem ../shared/data/dem/N57E011.hgt --out "$smoke/n57" --quiet >/dev/null
-  ./target/debug/worldgen check "$smoke/n57" >/dev/null
-elif [ -n "${CI:-}" ]; then
-  echo "../shared/data is missing in CI" >&2; exit 1
-fi
+./target/debug/worldgen import-dem tests/data/dem/N57E011.hgt --out "$smoke/n57" --quiet >/dev/null
+./target/debug/worldgen check "$smoke/n57" >/dev/null
 
-step "smoke: worldgen pm (progressive mesh of a shared model)"
-if [ -f ../shared/data/meshes/spot.obj ]; then
-  ./target/debug/worldgen pm ../shared/data/meshes/spot.obj --out "$smoke/spot.pm" --quiet >/dev/null
-  test -s "$smoke/spot.pm"
-  if ./target/debug/worldgen pm maps/tiny/map.toml --out "$smoke/bad.pm" 2>/dev/null; then
-    echo "worldgen pm accepted a file that is not a mesh" >&2; exit 1
-  fi
-  ./target/debug/lod-error "$smoke/spot.pm" --plot "$smoke/lod_error.png" > "$smoke/lod_error.md"
-  grep -q "stored bound" "$smoke/lod_error.md"
-  test -s "$smoke/lod_error.png"
+step "smoke: worldgen pm (progressive mesh of a test model)"
+./target/debug/worldgen pm tests/data/meshes/spot.obj --out "$smoke/spot.pm" --quiet >/dev/null
+test -s "$smoke/spot.pm"
+if ./target/debug/worldgen pm maps/tiny/map.toml --out "$smoke/bad.pm" 2>/dev/null; then
+  echo "worldgen pm accepted a file that is not a mesh" >&2; exit 1
 fi
+./target/debug/lod-error "$smoke/spot.pm" --plot "$smoke/lod_error.png" > "$smoke/lod_error.md"
+grep -q "stored bound" "$smoke/lod_error.md"
+test -s "$smoke/lod_error.png"
 
 step "smoke: worldgen building (a procedural house as a progressive mesh)"
 ./target/debug/worldgen building --roof hip --out "$smoke/house.obj" --quiet
@@ -98,10 +92,8 @@ grep -q '"section": "gpu"' "$smoke/nodebench.json"
 grep -q '"section": "soak"' "$smoke/nodebench.json"
 grep -q '"section": "bookkeeping"' "$smoke/nodebench.json"
 test -s "$smoke/speed_vs_error.png"
-if [ -d ../shared/data/meshes ]; then
-  grep -q '"section": "pm"' "$smoke/nodebench.json"
-  test -s "$smoke/pm_error.png"
-fi
+grep -q '"section": "pm"' "$smoke/nodebench.json"
+test -s "$smoke/pm_error.png"
 if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
   echo "nodebench accepted an unknown section" >&2; exit 1
 fi

@@ -14,9 +14,10 @@ pub fn workspace_root() -> PathBuf {
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
 }
 
-/// `../shared` beside the workspace: real meshes and elevation data.
-pub fn shared_dir() -> PathBuf {
-    workspace_root().join("..").join("shared")
+/// `tests/data` in the repository: the real elevation data and meshes the tests read (see its
+/// README for where each file comes from and under which terms it is shared).
+pub fn test_data_dir() -> PathBuf {
+    workspace_root().join("tests").join("data")
 }
 
 /// True when running under CI (`CI` set to anything but empty/"false"/"0").
@@ -52,23 +53,16 @@ pub fn skip(test: &str, why: &str) {
     }
 }
 
-/// Path of a file in `../shared/data`, or None (with a printed reason) when the folder is
-/// absent outside CI. In CI the shared folder is always present, so its absence fails the test.
-pub fn shared_data(rel: &str) -> Option<PathBuf> {
-    let p = shared_dir().join("data").join(rel);
-    if p.exists() {
-        return Some(p);
-    }
+/// Path of a file in [`test_data_dir`]. The files are committed, so a missing one fails the
+/// calling test with the path it looked for (a clone without them is broken, not a reason to skip).
+pub fn test_data(rel: &str) -> PathBuf {
+    let p = test_data_dir().join(rel);
     assert!(
-        !in_ci(),
-        "{} is missing, but CI always has ../shared",
+        p.is_file(),
+        "test data {} is missing: it is committed under tests/data",
         p.display()
     );
-    skip(
-        "shared data",
-        &format!("{} not found (../shared is absent outside CI)", p.display()),
-    );
-    None
+    p
 }
 
 /// The committed tiny test map.

@@ -1,7 +1,6 @@
 //! Real elevation data through `worldgen::dem` into a map that loads: the SRTM tile near
 //! Gothenburg (85% flat sea at 0 m, a hard case downstream) and the Puget Sound PNG.
 
-use tests::shared_data;
 use worldgen::Map;
 use worldgen::classify;
 use worldgen::dem::{ImportParams, import};
@@ -12,9 +11,7 @@ fn params(path: std::path::PathBuf) -> ImportParams {
 
 #[test]
 fn srtm_tile_imports_and_loads_with_flat_sea() {
-    let Some(path) = shared_data("dem/N57E011.hgt") else {
-        return;
-    };
+    let path = tests::test_data("dem/N57E011.hgt");
     let (map, report) = import(&params(path), &mut Vec::new()).expect("import");
     assert_eq!(report.source_samples, [1201, 1201]);
     assert_eq!(report.voids_filled, 0);
@@ -66,9 +63,7 @@ fn srtm_tile_imports_and_loads_with_flat_sea() {
 
 #[test]
 fn void_samples_are_filled_and_counted() {
-    let Some(path) = shared_data("dem/N57E011.hgt") else {
-        return;
-    };
+    let path = tests::test_data("dem/N57E011.hgt");
     let tmp = tempfile::tempdir().unwrap();
     let mut bytes = std::fs::read(&path).unwrap();
     // Punch a 10x10 void block into the tile (rows 600.., columns 700..).
@@ -128,9 +123,7 @@ fn out_of_range_latitude_is_refused() {
 
 #[test]
 fn puget_sound_png_imports_with_vertical_scale() {
-    let Some(path) = shared_data("dem/ps_height_1k.png") else {
-        return;
-    };
+    let path = tests::test_data("dem/ps_height_1k.png");
     let mut p = params(path.clone());
     let err = import(&p, &mut Vec::new()).unwrap_err().to_string();
     assert!(err.contains("--spacing-m"), "{err}");

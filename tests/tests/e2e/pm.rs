@@ -489,18 +489,14 @@ fn stored_error_bounds_an_independent_measurement_on_the_shared_meshes() {
         ("meshes/spot.obj", CostKind::Melax, 12, 1500),
         ("meshes/stanford-bunny.obj", CostKind::Quadric, 4, 300),
     ] {
-        let Some(path) = tests::shared_data(mesh) else {
-            return;
-        };
+        let path = tests::test_data(mesh);
         check_bound(&path, cost, levels, points);
     }
 }
 
 #[test]
 fn uv_seams_of_spot_stay_split_and_pm_bytes_are_deterministic() {
-    let Some(path) = tests::shared_data("meshes/spot.obj") else {
-        return;
-    };
+    let path = tests::test_data("meshes/spot.obj");
     let (mesh, report) = obj::load(&path).expect("spot loads");
     assert!(
         mesh.wedge_position.len() > mesh.positions.len(),
@@ -841,9 +837,7 @@ mod silhouette {
         };
         let k_px = f64::from(SIZE) / (2.0 * (FOVY_DEG.to_radians() / 2.0).tan());
         for (name, tau) in [("meshes/stanford-bunny.obj", 1.0), ("meshes/cow.obj", 2.0)] {
-            let Some(path) = tests::shared_data(name) else {
-                return;
-            };
+            let path = tests::test_data(name);
             let (mesh, _) = obj::load(&path).expect("loads");
             let (pm, _) = PmMesh::build(&mesh, CostKind::Quadric, 0.005, &mut |_, _, _| {});
             let index = ErrorIndex::new(&pm);

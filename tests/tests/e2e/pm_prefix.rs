@@ -289,9 +289,7 @@ pub(crate) fn check_every_level_incrementally(
 #[test]
 fn stored_error_bounds_the_measured_error_at_every_level_of_every_shared_mesh() {
     for mesh_name in ["cow.obj", "spot.obj", "stanford-bunny.obj"] {
-        let Some(path) = tests::shared_data(&format!("meshes/{mesh_name}")) else {
-            return;
-        };
+        let path = tests::test_data(&format!("meshes/{mesh_name}"));
         let (mesh, _) = worldgen::pm::obj::load(&path).expect("a shared mesh loads");
         for cost in worldgen::pm::CostKind::ALL {
             let (pm, _) = PmMesh::build(&mesh, cost, 0.005, &mut |_, _, _| {});

@@ -102,7 +102,7 @@ struct Cli {
     #[arg(long, default_value = "target/nodebench/speed_vs_error.png")]
     plot: PathBuf,
     /// Folder of the OBJ meshes for section pm.
-    #[arg(long, default_value = "../shared/data/meshes")]
+    #[arg(long, default_value = "tests/data/meshes")]
     meshes: PathBuf,
     /// Write the progressive-mesh error plot (PNG, the bunny) here.
     #[arg(long, default_value = "target/nodebench/pm_error.png")]
