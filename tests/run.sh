@@ -93,6 +93,12 @@ grep -q '"section": "soak"' "$smoke/nodebench.json"
 grep -q '"section": "bookkeeping"' "$smoke/nodebench.json"
 test -s "$smoke/speed_vs_error.png"
 grep -q '"section": "pm"' "$smoke/nodebench.json"
+for pilot in turning climbing reversing; do
+  grep -q "hidden-future pilot $pilot" "$smoke/nodebench.json"
+done
+if ./target/debug/nodebench --only streaming --pilots barrel-roll --map maps/tiny 2>/dev/null; then
+  echo "nodebench accepted an unknown pilot" >&2; exit 1
+fi
 test -s "$smoke/pm_error.png"
 if ./target/debug/nodebench --only nonsense --map maps/tiny 2>/dev/null; then
   echo "nodebench accepted an unknown section" >&2; exit 1

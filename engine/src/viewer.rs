@@ -130,6 +130,10 @@ pub struct FrameStats {
     pub cache_bytes: usize,
     /// Nodes the display wants not yet shown (a coarser ancestor stands in for them).
     pub pop_debt_nodes: usize,
+    /// The largest excess over tau of a visible drawn node's projected error, px: above 0 the
+    /// frame has pop debt (see [`crate::stream::Streamer::drawn_excess_over_tau_px`]; the
+    /// selection's camera, measured after the CPU frame's timing).
+    pub pop_excess_px: f64,
     /// Drawn nodes whose light grid has not arrived yet and that no ancestor's grid shades
     /// (drawn fully lit); 0 without light grids.
     pub unlit_nodes: usize,
@@ -333,6 +337,10 @@ impl Viewer {
         let st = &self.streamer.stats;
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
         let wanted_missing = self.wanted_not_drawn();
+        let pop_excess_px = self.streamer.drawn_excess_over_tau_px(
+            self.frozen.as_ref().unwrap_or(cam),
+            self.streamer.settings.tau_px,
+        );
         let terrain = self.scene.renderer::<TerrainRenderer>();
         let ground_pool = terrain.map_or((0, 0), TerrainRenderer::ground_pool_use);
         self.frame += 1;
@@ -384,6 +392,7 @@ impl Viewer {
             node_buffers_bytes: node_bytes,
             cache_bytes: st.resident_bytes,
             pop_debt_nodes: wanted_missing,
+            pop_excess_px,
             unlit_nodes: self
                 .scene
                 .renderer::<LightingRenderer>()

@@ -40,6 +40,7 @@ mod display;
 mod dropper;
 mod jobs;
 mod needed;
+mod pop_debt;
 pub use jobs::{idle_priority, lower_priority};
 pub use needed::{DisplayNodes, NeededSet};
 pub mod predict;
@@ -50,6 +51,7 @@ mod residency;
 pub use bounds_store::BoundsStore;
 pub use content::{ContentKind, GpuSlots, NodeWork, Payload, Phase, PhaseFn, PhaseKind};
 pub use display::DrawNode;
+pub use pop_debt::PopDebtWindow;
 
 use crate::camera::Camera;
 use crate::surface::World;
@@ -335,6 +337,9 @@ pub struct Streamer {
     camera: Option<Camera>,
     /// Camera velocity estimated from the last two updates (m/s).
     velocity_m_per_s: glam::DVec3,
+    /// The camera's yaw rate, smoothed over the last updates (rad/s; see
+    /// [`predict::extrapolate_turning`]).
+    yaw_rate_rad_per_s: f64,
     pub stats: StreamStats,
 }
 
@@ -425,6 +430,7 @@ impl Streamer {
             frame: 0,
             camera: None,
             velocity_m_per_s: glam::DVec3::ZERO,
+            yaw_rate_rad_per_s: 0.0,
             // The log's whole capacity at once: growing it in the frame thread reallocated
             // ever larger blocks there (and had glibc consolidate its free lists).
             stats: StreamStats {
@@ -570,21 +576,37 @@ impl Streamer {
 
     /// One frame: new wanted set from the camera, cancel what is no longer needed, request what
     /// is missing, collect worker results, dispatch jobs by priority, advance fades. Prefetch
-    /// follows the camera's current velocity (see [`predict`]).
+    /// follows the camera's current velocity and turn (see [`predict::extrapolate_turning`]).
     pub fn update(&mut self, cam: &Camera, dt_s: f64) {
         if let Some(prev) = self.camera
             && dt_s > 0.0
         {
             self.velocity_m_per_s = (cam.position_m - prev.position_m) / dt_s;
+            let measured = predict::yaw_rate_rad_per_s(&prev, cam, dt_s).unwrap_or(0.0);
+            self.yaw_rate_rad_per_s =
+                predict::smoothed_yaw_rate(self.yaw_rate_rad_per_s, measured, dt_s);
         }
-        let future = predict::extrapolate(cam, self.velocity_m_per_s);
-        self.update_along(cam, dt_s, &future);
+        let future =
+            predict::extrapolate_turning(cam, self.velocity_m_per_s, self.yaw_rate_rad_per_s);
+        self.update_predicted(cam, dt_s, &future, predict::Guess::Extrapolated);
     }
 
     /// [`Self::update`] with the camera's predicted path given by the owner: `future` is
     /// (seconds ahead, camera), sorted by time, at most [`predict::PREDICT_HORIZONS_S`]'s
     /// length (e.g. the automatic flight or a replayed path at those times).
     pub fn update_along(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) {
+        self.update_predicted(cam, dt_s, future, predict::Guess::Known);
+    }
+
+    /// One update with the predicted cameras `future`, known or extrapolated (`guess`: an
+    /// extrapolated future also prefetches the views to either side, see [`predict`]).
+    fn update_predicted(
+        &mut self,
+        cam: &Camera,
+        dt_s: f64,
+        future: &[(f64, Camera)],
+        guess: predict::Guess,
+    ) {
         let mut lap = Lap::start();
         let mut stages = UpdateStages::default();
         self.frame += 1;
@@ -623,7 +645,7 @@ impl Streamer {
         shown.extend(above);
         self.spare_sets = [std::mem::replace(&mut self.show_split, shown), last_wanted];
         stages.selection_s = lap.next();
-        self.parts_to_request |= self.refresh_prefetch(cam, future);
+        self.parts_to_request |= self.refresh_prefetch(cam, future, guess);
         stages.prefetch_s = lap.next();
         // Resident nodes needed, or in a part computed again, are marked used this frame
         // (eviction counts on the needed nodes' mark and marks the other pinned nodes itself,

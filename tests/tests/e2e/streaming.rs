@@ -221,10 +221,11 @@ fn a_new_content_kind_plugs_in_with_one_registration() {
 
 #[test]
 fn a_burst_of_teleports_settles_with_nothing_leaked() {
-    // The burst and tour below leave about 29 MiB of prepared nodes (meshes, vegetation, decal
-    // pieces: no ground texture is made without a renderer) with a budget that never evicts,
-    // and the last view pins about 9 MiB; the tour has to evict to stay within this.
-    let budget = 18 << 20;
+    // The burst and tour below leave more prepared nodes (meshes, vegetation, decal pieces: no
+    // ground texture is made without a renderer) than this budget holds, and the last view
+    // pins about 29 MiB (a camera flown by hand prefetches the views to either side too; 9 MiB
+    // without); the tour has to evict to stay within this.
+    let budget = 40 << 20;
     let mut s = streamer(StreamSettings {
         cache_budget_bytes: budget,
         ..settings(3)

@@ -278,7 +278,11 @@ fn frame_part_rows(all: &[FrameStats]) -> Vec<(String, Vec<f64>)> {
 fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, serde_json::Value> {
     let col = |f: fn(&FrameStats) -> f64| all.iter().map(f).collect::<Vec<f64>>();
     let mut rows = frame_part_rows(all);
-    let more: [(&str, Vec<f64>); 27] = [
+    let more: [(&str, Vec<f64>); 28] = [
+        (
+            "pop debt: excess over tau of the worst visible drawn node, px (0: none over tau)",
+            col(|s| s.pop_excess_px),
+        ),
         ("GPU wait", col(|s| s.gpu_wait_ms)),
         (
             "GPU frame pass (timestamp queries, when supported)",
@@ -392,6 +396,16 @@ fn print_table(all: &[FrameStats], adapter: &str) -> serde_json::Map<String, ser
             serde_json::json!({"median": m, "p95": p, "max": max}),
         );
     }
+    let over = all.iter().filter(|s| s.pop_excess_px > 0.0).count();
+    let pop_debt_percent = 100.0 * over as f64 / all.len().max(1) as f64;
+    println!(
+        "\npop debt: {pop_debt_percent:.1} % of frames show a drawn node over tau ({over} of {})",
+        all.len()
+    );
+    summary.insert(
+        "pop_debt_percent".to_string(),
+        serde_json::json!(pop_debt_percent),
+    );
     // Per frame (both timers report the same earlier frame), over frames that have both.
     let mut ratios: Vec<f64> = all
         .iter()

@@ -3,6 +3,7 @@
 use engine::lighting::Sun;
 use engine::render::Gpu;
 use engine::render::frame::{GroundView, ViewOptions};
+use engine::stream::PopDebtWindow;
 use engine::viewer::FrameStats;
 
 /// The panel's settings, applied to the streamer each frame.
@@ -24,7 +25,7 @@ pub(crate) fn panel(
     ui: &mut egui::Ui,
     st_ui: &mut Ui,
     view: &mut ViewOptions,
-    s: &FrameStats,
+    (s, pop_debt): (&FrameStats, &PopDebtWindow),
     frame_ms: f64,
     gpu: &Gpu,
     extra: &str,
@@ -156,7 +157,11 @@ pub(crate) fn panel(
         s.cache_bytes as f64 / 1_048_576.0
     ));
     ui.label(format!(
-        "pop debt: {} nodes the display wants not shown yet",
+        "pop debt, last {:.0} s: {:.1} % of frames show a drawn node over τ (worst by {:.2} px); \
+         now {} nodes the display wants not shown yet",
+        pop_debt.window_s(),
+        100.0 * pop_debt.share(),
+        pop_debt.worst_px(),
         s.pop_debt_nodes
     ));
     ui.label(format!(

@@ -17,6 +17,9 @@ use winit::event_loop::{ActiveEventLoop, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
+/// The panel's pop debt covers this many seconds of frames.
+const POP_DEBT_WINDOW_S: f64 = 5.0;
+
 pub fn run(cli: &Cli) -> Result<()> {
     // Open the map before the window, so a map error is reported plainly.
     let world = open_world(&cli.map, &worldgen::progress::Bars::new(false))
@@ -62,6 +65,9 @@ struct State {
     t_s: f64,
     frame_ms: f64,
     last_stats: FrameStats,
+    /// Pop debt of the last seconds, for the panel, on the frames' clock.
+    pop_debt: engine::stream::PopDebtWindow,
+    clock_s: f64,
     recording: Option<CameraPath>,
     screenshot: bool,
     screenshots: u32,
@@ -227,6 +233,8 @@ impl App {
             t_s: 0.0,
             frame_ms: 0.0,
             last_stats: FrameStats::default(),
+            pop_debt: engine::stream::PopDebtWindow::new(POP_DEBT_WINDOW_S),
+            clock_s: 0.0,
             recording: None,
             screenshot: false,
             screenshots: 0,
@@ -475,6 +483,8 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
     let mut stats = st
         .viewer
         .frame(&st.gpu, &mut enc, &terrain_view, &st.depth, &st.cam, dt);
+    st.clock_s += elapsed_s;
+    st.pop_debt.push(st.clock_s, stats.pop_excess_px);
     // The UI: two passes on the first frame (egui lays windows out on the first pass).
     let extra = format!(
         "camera ({:.0}, {:.0}, {:.0}) m, speed {:.0} m/s, {}{}",
@@ -502,9 +512,10 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
     for _ in 0..passes {
         let input = st.egui_input.take_egui_input(&st.window);
         let (ui_state, view, gpu, fm) = (&mut st.ui, &mut st.viewer.view, &st.gpu, st.frame_ms);
+        let pop_debt = &st.pop_debt;
         let mut out = st.egui_ctx.run_ui(input, |ui| {
             egui::Panel::left("controls").show(ui, |ui| {
-                panel(ui, ui_state, view, &stats, fm, gpu, &extra);
+                panel(ui, ui_state, view, (&stats, pop_debt), fm, gpu, &extra);
             });
         });
         // Texture changes of an earlier pass still have to reach the renderer.

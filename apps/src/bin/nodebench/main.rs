@@ -6,6 +6,7 @@ mod buildings;
 mod error;
 mod gpu;
 mod lighting;
+mod pilots;
 mod plot;
 mod pm;
 mod report;
@@ -121,6 +122,15 @@ struct Cli {
     /// all). For comparing one flight's rows quickly; a benchmark document has them all.
     #[arg(long, value_delimiter = ',')]
     speeds: Vec<f64>,
+    /// Section streaming: which pilots fly (comma-separated; default all): `known` (the
+    /// replayed loop, prefetch along its known path) and the pilots whose future the streamer
+    /// cannot read, which it gets one frame at a time and must extrapolate: `turning` (30-120°
+    /// turns every 2-6 s), `climbing` (climbs and dives), `reversing` (stops, turns round,
+    /// flies back). The hidden pilots fly at 150, 300 and 1,000 m/s. Naming pilots makes a
+    /// comparison run: the known loop then flies with everything on only (not also from rest
+    /// or with a kind turned off).
+    #[arg(long, value_delimiter = ',', value_parser = pilots::parse_choice)]
+    pilots: Vec<pilots::PilotChoice>,
     /// Length of the soak section in minutes (--quick: a quarter of a minute).
     #[arg(long, default_value_t = 30.0)]
     soak_minutes: f64,
@@ -326,6 +336,7 @@ fn run(cli: &Cli) -> Result<()> {
             [vh * 16 / 9, vh],
             adapter.as_ref().map(|(g, name)| (g, name.as_str())),
             &cli.speeds,
+            &cli.pilots,
         )?;
         checkpoint(&report, "streaming", adapter_name.as_deref())?;
     }

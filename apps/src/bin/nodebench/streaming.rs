@@ -2,6 +2,7 @@
 //! jobs, pop debt, bookkeeping per frame).
 
 use crate::open_world;
+use crate::pilots::{Pilot, PilotChoice};
 use crate::report::{Report, bar};
 use crate::span::Span;
 use anyhow::{Result, bail};
@@ -40,6 +41,12 @@ pub(crate) fn loop_camera(
 /// Flights: (speed m/s, height above the ground m). The last is a jet.
 pub(crate) const FLIGHTS: [(f64, f64); 4] =
     [(50.0, 40.0), (150.0, 40.0), (300.0, 40.0), (1000.0, 1000.0)];
+
+/// The pilots that hide their future fly from this speed on (m/s).
+const HIDDEN_FROM_M_S: f64 = 150.0;
+
+/// The seed of the hidden pilots' manoeuvres (every run flies the same paths).
+const PILOT_SEED: u64 = 1;
 
 /// A flight's streaming: the streamer alone, or with a GPU the viewer's streaming with every
 /// renderer's upload hook (ground textures rendered under the per-frame GPU budget), nothing
@@ -147,11 +154,15 @@ impl<'g> Flight<'g> {
         }
     }
 
-    /// One frame's streaming: the update along the predicted path, then the GPU phases;
-    /// returns the time of each.
-    fn frame(&mut self, cam: &Camera, dt_s: f64, future: &[(f64, Camera)]) -> [Span; 2] {
+    /// One frame's streaming: the update along the known path (`future`), or without one
+    /// extrapolating the camera's velocity as for a pilot by hand; then the GPU phases.
+    /// Returns the time of each.
+    fn frame(&mut self, cam: &Camera, dt_s: f64, future: Option<&[(f64, Camera)]>) -> [Span; 2] {
         let t = Span::start();
-        self.streamer_mut().update_along(cam, dt_s, future);
+        match future {
+            Some(f) => self.streamer_mut().update_along(cam, dt_s, f),
+            None => self.streamer_mut().update(cam, dt_s),
+        }
         let update = t.stop();
         let t = Span::start();
         match self {
@@ -185,6 +196,8 @@ struct Run {
     lighting: bool,
     towns: bool,
     start: WarmStart,
+    /// A pilot whose future the streamer cannot read; none: the loop, its path known.
+    pilot: Option<Pilot>,
 }
 
 impl Run {
@@ -197,40 +210,75 @@ impl Run {
             lighting: true,
             towns: true,
             start: WarmStart::InFlight,
+            pilot: None,
         }
     }
 
-    /// Every flight with each of `worker_counts` and ground textures, light grids and the
-    /// map's houses on; with 1 worker, the same from rest, ground textures off with light
-    /// grids on and off, and (on a map with `houses`) the houses off.
-    fn all(worker_counts: &[usize], houses: usize) -> Vec<Run> {
+    /// Of `pilots` (none named: all): with the known path, every flight with each of
+    /// `worker_counts` and ground textures, light grids and the map's houses on; when no pilot
+    /// is named, with 1 worker also the same from rest, ground textures off with light grids
+    /// on and off, and (on a map with `houses`) the houses off. Then each hidden pilot at the
+    /// flights from [`HIDDEN_FROM_M_S`] with each of `worker_counts`, everything on, and at
+    /// 300 m/s with 1 worker also with ground textures and light grids off (what the geometry
+    /// alone asks of the worker).
+    fn all(worker_counts: &[usize], houses: usize, pilots: &[PilotChoice]) -> Vec<Run> {
+        let flies = |p: PilotChoice| pilots.is_empty() || pilots.contains(&p);
+        let variants = pilots.is_empty();
+        let hidden = Pilot::ALL
+            .into_iter()
+            .filter(|&p| flies(PilotChoice::Hidden(p)))
+            .flat_map(|pilot| {
+                FLIGHTS
+                    .iter()
+                    .filter(|f| f.0 >= HIDDEN_FROM_M_S)
+                    .flat_map(move |&f| {
+                        let geometry_only = Run {
+                            pilot: Some(pilot),
+                            textures: false,
+                            lighting: false,
+                            ..Run::all_on(f, 1)
+                        };
+                        worker_counts
+                            .iter()
+                            .map(move |&w| Run {
+                                pilot: Some(pilot),
+                                ..Run::all_on(f, w)
+                            })
+                            .chain((f.0 == 300.0).then_some(geometry_only))
+                    })
+            });
         FLIGHTS
             .iter()
+            .filter(|_| flies(PilotChoice::Known))
             .flat_map(|&f| {
                 let one = Run::all_on(f, 1);
+                let others = [
+                    Run {
+                        start: WarmStart::AtRest,
+                        ..one
+                    },
+                    Run {
+                        textures: false,
+                        ..one
+                    },
+                    Run {
+                        textures: false,
+                        lighting: false,
+                        ..one
+                    },
+                ]
+                .into_iter()
+                .chain((houses > 0).then_some(Run {
+                    towns: false,
+                    ..one
+                }))
+                .filter(move |_| variants);
                 worker_counts
                     .iter()
                     .map(move |&w| Run::all_on(f, w))
-                    .chain([
-                        Run {
-                            start: WarmStart::AtRest,
-                            ..one
-                        },
-                        Run {
-                            textures: false,
-                            ..one
-                        },
-                        Run {
-                            textures: false,
-                            lighting: false,
-                            ..one
-                        },
-                    ])
-                    .chain((houses > 0).then_some(Run {
-                        towns: false,
-                        ..one
-                    }))
+                    .chain(others)
             })
+            .chain(hidden)
             .collect()
     }
 
@@ -260,15 +308,25 @@ impl Run {
     ) -> String {
         let (speed, above) = self.flight;
         let horizons_s = engine::stream::predict::PREDICT_HORIZONS_S;
+        let pilot = self.pilot.map_or(String::new(), |p| {
+            format!(
+                "hidden-future pilot {}, seed {PILOT_SEED}: the streamer sees each camera as it \
+                 comes and extrapolates its velocity; ",
+                p.describe()
+            )
+        });
         format!(
-            "{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau_px} px, warm start {}, {} \
-             worker(s), houses {}, light grids {}, ground textures {}",
-            match self.start {
-                WarmStart::AtRest => "at rest (the start-up measured)".to_string(),
-                WarmStart::InFlight => format!(
+            "{pilot}{speed} m/s at {above} m, {seconds} s at 60 Hz, tau {tau_px} px, warm start \
+             {}, {} worker(s), houses {}, light grids {}, ground textures {}",
+            match (self.start, self.pilot) {
+                (WarmStart::AtRest, _) => "at rest (the start-up measured)".to_string(),
+                (WarmStart::InFlight, None) => format!(
                     "in flight (what the prefetch along the path's next {} s requests resident)",
                     horizons_s[horizons_s.len() - 1]
                 ),
+                (WarmStart::InFlight, Some(_)) => "in flight (what extrapolating the first \
+                                                    frame's velocity requests resident)"
+                    .to_string(),
             },
             workers,
             if !self.towns {
@@ -301,6 +359,7 @@ pub(crate) fn section_streaming(
     viewport_px: [u32; 2],
     gpu: Option<(&Gpu, &str)>,
     speeds: &[f64],
+    pilots: &[PilotChoice],
 ) -> Result<()> {
     use engine::stream::StreamSettings;
     let dt = 1.0 / 60.0;
@@ -317,7 +376,10 @@ pub(crate) fn section_streaming(
     }
     let houses = open_world(world_path)?.map.buildings.len();
     let flown = |run: &Run| speeds.is_empty() || speeds.contains(&run.flight.0);
-    for run in Run::all(&worker_counts, houses).into_iter().filter(flown) {
+    for run in Run::all(&worker_counts, houses, pilots)
+        .into_iter()
+        .filter(flown)
+    {
         let Run {
             flight,
             workers,
@@ -327,17 +389,7 @@ pub(crate) fn section_streaming(
         } = run;
         let speed = flight.0;
         let world = open_world(world_path)?;
-        let cams: Vec<Camera> = (0..frames)
-            .map(|f| loop_camera(&world, flight, f as f64 * dt, viewport_px))
-            .collect();
-        // The replayed path is known: prefetch follows it.
-        let future: Vec<Vec<(f64, Camera)>> = (0..frames)
-            .map(|f| {
-                engine::stream::predict::along(f as f64 * dt, |t_s| {
-                    loop_camera(&world, flight, t_s, viewport_px)
-                })
-            })
-            .collect();
+        let (warm_cam, cams, future) = flight_cameras(&world, &run, frames, dt, viewport_px);
         let settings = StreamSettings {
             tau_px: tau,
             ..StreamSettings::default()
@@ -347,8 +399,15 @@ pub(crate) fn section_streaming(
         let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
         // Warm start at the first camera, as after loading: in flight along the path, or at
         // rest.
-        let path_ahead = (warm_start == WarmStart::InFlight).then_some(future[0].as_slice());
-        if let Err(left) = flight_run.settle(&cams[0], path_ahead, 600.0) {
+        let extrapolated = engine::stream::predict::extrapolate(
+            &warm_cam,
+            (cams[0].position_m - warm_cam.position_m) / dt,
+        );
+        let path_ahead = (warm_start == WarmStart::InFlight).then(|| match &future {
+            Some(future) => future[0].as_slice(),
+            None => extrapolated.as_slice(),
+        });
+        if let Err(left) = flight_run.settle(&warm_cam, path_ahead, 600.0) {
             bail!("streaming at {speed} m/s: the warm start did not settle within 600 s ({left})");
         }
         flight_run.streamer_mut().take_latencies();
@@ -379,7 +438,7 @@ pub(crate) fn section_streaming(
         let start = Instant::now();
         for (f, cam) in cams.iter().enumerate() {
             late_frames += usize::from(start.elapsed().as_secs_f64() > (f + 1) as f64 * dt);
-            frame_times.push(flight_run.frame(cam, dt, &future[f]));
+            frame_times.push(flight_run.frame(cam, dt, future.as_ref().map(|p| p[f].as_slice())));
             let s = flight_run.streamer();
             stages.push(s.stats.last_update);
             let debts = frame_debts(s, cam, tau);
@@ -457,6 +516,50 @@ pub(crate) fn section_streaming(
     Ok(())
 }
 
+/// A known path: per frame, the path ahead (see [`engine::stream::predict::along`]).
+type PathAhead = Vec<Vec<(f64, Camera)>>;
+
+/// The cameras of `run`'s flight: the warm start's, then one per frame; with the path ahead
+/// of each frame when it is known. The replayed loop's path is known: prefetch follows it. A
+/// hidden pilot's cameras come one a frame, after the warm start at its first.
+fn flight_cameras(
+    world: &World,
+    run: &Run,
+    frames: usize,
+    dt: f64,
+    viewport_px: [u32; 2],
+) -> (Camera, Vec<Camera>, Option<PathAhead>) {
+    let flight = run.flight;
+    match run.pilot {
+        None => {
+            let cams: Vec<Camera> = (0..frames)
+                .map(|f| loop_camera(world, flight, f as f64 * dt, viewport_px))
+                .collect();
+            let future: PathAhead = (0..frames)
+                .map(|f| {
+                    engine::stream::predict::along(f as f64 * dt, |t_s| {
+                        loop_camera(world, flight, t_s, viewport_px)
+                    })
+                })
+                .collect();
+            (cams[0], cams, Some(future))
+        }
+        Some(pilot) => {
+            let mut cams = crate::pilots::fly(
+                world,
+                pilot,
+                flight,
+                frames + 1,
+                dt,
+                viewport_px,
+                PILOT_SEED,
+            );
+            let first = cams.remove(0);
+            (first, cams, None)
+        }
+    }
+}
+
 /// One frame's debts over its visible drawn nodes.
 #[derive(Default)]
 struct FrameDebts {
@@ -474,41 +577,17 @@ struct FrameDebts {
 
 /// One frame's debts (see [`FrameDebts`]).
 fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> FrameDebts {
-    // Pop debt: a visible drawn node whose own error, projected at its own distance,
-    // is over tau (a finer level exists but is not shown yet). Every drawn node is
-    // charged, whether or not the finer nodes' bounds are known yet. Visible: the ideal
-    // traversal at tau reaches a non-culled node at or below it (a box test alone
-    // passes big boxes behind the camera; the traversal refines them).
-    let (screen, tree, frustum) = (
-        engine::terrain::select::ScreenBound::new(cam),
-        *s.tree(),
-        cam.frustum(),
-    );
-    let ideal = engine::terrain::select::traverse(
-        &tree,
-        cam,
-        true,
-        |key| s.shared.bounds.peek(key),
-        |_, _, _, px| px > tau,
-    );
-    let visible: std::collections::HashSet<_> = ideal
-        .nodes
-        .iter()
-        .map(|n| n.key)
-        .chain(ideal.unknown_bounds.iter().copied())
-        .flat_map(|key| std::iter::once(key).chain(key.ancestors()))
-        .collect();
-    let mut out = FrameDebts::default();
-    for d in s.draw_list() {
+    // Pop debt as the viewer's panel counts it; light and texture debt over the same visible
+    // drawn nodes' content.
+    let visible = s.visible_drawn(cam, tau);
+    let mut out = FrameDebts {
+        excess_px: s.excess_over_tau_px(cam, tau, &visible),
+        ..FrameDebts::default()
+    };
+    for d in &visible {
         let Some(res) = s.resident(d.key) else {
             continue; // not resident: nothing drawn
         };
-        let Some(b) = res.work.bounds else {
-            continue;
-        };
-        if d.dither_hi <= d.dither_lo || !visible.contains(&d.key) {
-            continue;
-        }
         if let Some(l) = res.work.get::<NodeLight>() {
             out.lit_checked += 1;
             if l.grid.grid().is_none() {
@@ -526,18 +605,6 @@ fn frame_debts(s: &Streamer, cam: &Camera, tau: f64) -> FrameDebts {
             let own = res.work.gpu.get::<TerrainNodeGpu>();
             out.without_texture += usize::from(own.is_none_or(|t| t.ground_slot().is_none()));
         }
-        if d.key.level == tree.max_level {
-            continue;
-        }
-        let px = engine::terrain::select::projected_error_px(
-            &tree,
-            d.key,
-            &b,
-            &screen,
-            Some(&frustum),
-            cam.near_m,
-        );
-        out.excess_px = out.excess_px.max(px - tau);
     }
     out
 }
