@@ -62,7 +62,7 @@ const STILL_RAD_PER_S: f64 = 0.05;
 
 /// The largest turn a prediction extrapolates (rad): a camera turning round is predicted to
 /// look back, not to come round again.
-const MAX_PREDICTED_TURN_RAD: f64 = std::f64::consts::PI;
+pub const MAX_PREDICTED_TURN_RAD: f64 = std::f64::consts::PI;
 
 /// The camera's yaw rate is smoothed over about this long (s): a hand on the mouse turns in
 /// jerks from one frame to the next.
