@@ -195,6 +195,22 @@ fn viewer_under_xvfb_renders_reacts_to_the_slider_and_writes_a_screenshot() {
     xdotool(&display, &["windowfocus", "--sync", &win]);
     xdotool(&display, &["key", "space"]);
     let before = wait_for(&stats, &log_path, timeout, "streaming to settle", idle);
+    // Flown by hand now (the automatic flyover is off): a settled view shows no node over τ,
+    // and the panel's pop debt of the last seconds is in the stats file.
+    assert_eq!(
+        before["stats"]["pop_excess_px"].as_f64(),
+        Some(0.0),
+        "a settled view shows a node over τ: {before}"
+    );
+    let last = &before["pop_debt_last"];
+    assert!(
+        last["window_s"].as_f64() == Some(5.0)
+            && last["frames"].as_u64().unwrap_or(0) > 0
+            && last["share"]
+                .as_f64()
+                .is_some_and(|s| (0.0..=1.0).contains(&s)),
+        "{last}"
+    );
     let tau0 = before["tau_px"].as_f64().expect("tau");
     let tri0 = before["stats"]["triangles"].as_u64().expect("triangles");
     // Drag the slider from its left end to its right end (τ up: fewer triangles).

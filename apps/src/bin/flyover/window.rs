@@ -559,20 +559,33 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
         screenshot(st, cli, &prims, &screen)?;
     }
     if let Some(p) = &cli.stats_file {
-        let doc = serde_json::json!({
-            "tau_px": st.ui.tau,
-            "fov_deg": st.ui.fov_deg,
-            "slider_rect_points": st.ui.slider_rect,
-            "pixels_per_point": ppp,
-            "screenshots": st.screenshots,
-            "surface_px": [st.config.width, st.config.height],
-            "stats": stats,
-        });
-        let tmp = p.with_extension("tmp");
-        std::fs::write(&tmp, serde_json::to_string(&doc)?)?;
-        std::fs::rename(&tmp, p)?;
+        write_stats_file(p, st, ppp, &stats)?;
     }
     st.last_stats = stats;
+    Ok(())
+}
+
+/// Writes the frame's statistics and the panel's state to `p` (replaced whole, so a reader never
+/// sees half a file).
+fn write_stats_file(p: &std::path::Path, st: &State, ppp: f32, stats: &FrameStats) -> Result<()> {
+    let doc = serde_json::json!({
+        "tau_px": st.ui.tau,
+        "fov_deg": st.ui.fov_deg,
+        "slider_rect_points": st.ui.slider_rect,
+        "pixels_per_point": ppp,
+        "screenshots": st.screenshots,
+        "pop_debt_last": {
+            "window_s": st.pop_debt.window_s(),
+            "frames": st.pop_debt.frames(),
+            "share": st.pop_debt.share(),
+            "worst_px": st.pop_debt.worst_px(),
+        },
+        "surface_px": [st.config.width, st.config.height],
+        "stats": stats,
+    });
+    let tmp = p.with_extension("tmp");
+    std::fs::write(&tmp, serde_json::to_string(&doc)?)?;
+    std::fs::rename(&tmp, p)?;
     Ok(())
 }
 

@@ -63,8 +63,9 @@ const SECTIONS: [&str; 14] = [
 /// flight and an orbit of the largest town), `streaming`
 /// (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
-/// with 1 and N workers, prefetch along the known path: request-to-ready latency, cancelled
-/// jobs, pop debt, bookkeeping per frame), `bookkeeping` (the streamer's update per frame on
+/// with 1 and N workers, prefetch along the known path; then pilots whose future the
+/// streamer cannot read (turning, climbing, reversing; `--pilots`) at 150, 300 and 1000 m/s:
+/// request-to-ready latency, cancelled jobs, pop debt, bookkeeping per frame), `bookkeeping` (the streamer's update per frame on
 /// settled views of those flights, workers idle: its own cost without a flight's scheduling
 /// noise), `gpu` (when an adapter exists: the automatic flight
 /// rendered offscreen at 720p and 1440p, the frame pass timed with timestamp queries next to a
