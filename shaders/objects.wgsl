@@ -22,7 +22,7 @@ struct Draw {
     base_local: vec4<f32>,
     // xyz: the instance's base relative to the camera (m).
     base_rel: vec4<f32>,
-    // Texture cache (issue 19): x, y the mip level resident for the facade and the roof
+    // Texture cache: x, y the mip level resident for the facade and the roof
     // texture (-1: none, the mean colours in `albedo` and `roof_albedo` stand in); z 1 to tint
     // by that level (debug view); w 1 for a merged far mesh (the vertices carry the colour).
     tex: vec4<f32>,

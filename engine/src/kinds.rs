@@ -67,7 +67,7 @@ pub fn registered(world: &World) -> Vec<Registration> {
             Some(crate::render::vegetation::VegetationRenderer::create),
         ),
     ];
-    // The map's houses (issue 19), when it has any.
+    // The map's houses, when it has any.
     if !world.map.buildings.is_empty() {
         kinds.push(entry(
             ObjectsContent {

@@ -1,4 +1,4 @@
-//! Bounded structured fuzzing of every reader of untrusted input (issue 20): thousands of
+//! Bounded structured fuzzing of every reader of untrusted input: thousands of
 //! mutated inputs per reader (`tests::mutate`, seeded, so every run checks the same inputs),
 //! each read in full. Every input must give either a value or an error that names the file and
 //! says more than that; never a panic, never more than a bounded heap peak (counted by this

@@ -1,4 +1,4 @@
-//! Procedural building meshes (issue 19, first part): a rectangular house of storeys with window
+//! Procedural building meshes: a rectangular house of storeys with window
 //! and door insets, a gable or hip roof and a chimney, as one closed, outward-facing triangle
 //! mesh with facade texture coordinates in metres (split at every wall corner: UV seams) and flat
 //! face normals (every crease a normal seam).

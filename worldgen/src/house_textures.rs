@@ -1,4 +1,4 @@
-//! Facade and roof textures of the house types (issue 19): square sRGB RGBA8 images generated
+//! Facade and roof textures of the house types: square sRGB RGBA8 images generated
 //! from a type's seed, with full mip chains (each level the mean of four texels of the level
 //! above, in linear light), tiling with a period of [`TILE_M`] metres of the house's facade and
 //! roof texture coordinates (which are in metres).

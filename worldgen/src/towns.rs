@@ -1,4 +1,4 @@
-//! Towns (issue 19): houses along the roads and paths near each town site, each on a flattened
+//! Towns: houses along the roads and paths near each town site, each on a flattened
 //! pad.
 //!
 //! A map has a few house **types** ([`house_types`]: dimensions, storeys, roof and seed from the

@@ -21,7 +21,7 @@
 //! the background when the sun changes); `render::lighting` uploads them into slots of one 3D
 //! texture that the terrain, vegetation and object shaders sample trilinearly.
 //!
-//! Not done (issue 17): a dominant light direction; the bounce leaves out the shadows cast on
+//! Not done: a dominant light direction; the bounce leaves out the shadows cast on
 //! the terrain that bounces the light.
 
 pub mod content;

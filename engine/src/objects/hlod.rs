@@ -1,4 +1,4 @@
-//! Merged far meshes (HLOD, issue 19): far away, the houses of a node are drawn as one mesh
+//! Merged far meshes (HLOD): far away, the houses of a node are drawn as one mesh
 //! made of each house at a coarse level of its progressive mesh, one draw instead of one per
 //! house.
 //!

@@ -1,4 +1,4 @@
-//! What the texture cache is asked for each drawn textured object (issue 19, seed 000's
+//! What the texture cache is asked for each drawn textured object (seed 000's
 //! MipMapFactor per texture per object): per model the length of one unit of texture
 //! coordinate over its facade faces and over its roof faces, and per drawn instance each
 //! texture's needed level ([`crate::texcache::mip`]) with the instance's on-screen area as its

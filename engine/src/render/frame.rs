@@ -160,7 +160,7 @@ pub struct DrawStats {
     pub object_chain_draws: u32,
     /// Of the object draws: merged far meshes of a node's houses (HLOD).
     pub object_hlod_draws: u32,
-    /// The texture cache (issue 19): bytes of the slots holding textures, bytes the drawn
+    /// The texture cache: bytes of the slots holding textures, bytes the drawn
     /// textures would take at full resolution, drawn textures with no level resident (drawn in
     /// their mean colour), uploads and bytes uploaded this frame.
     pub texture_resident_bytes: u64,

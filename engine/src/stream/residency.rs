@@ -12,7 +12,7 @@ use std::time::Instant;
 
 /// Eviction goes down to the budget less 1/`EVICTION_SLACK` of it (16 MiB of the default
 /// 512 MiB), so that the pass over the resident nodes (2,000 - 5,000 in a 300 m/s flight; about
-/// 0.2 ms a pass on the 2-core VM, session 41) runs once per 16 MiB of new nodes instead of in
+/// 0.2 ms a pass on the 2-core VM) runs once per 16 MiB of new nodes instead of in
 /// every update and every call of the GPU phases that finished a node.
 const EVICTION_SLACK: usize = 32;
 

@@ -1,4 +1,4 @@
-//! The texture cache (seed 000, issue 19): textures live on the GPU only at the resolution the
+//! The texture cache (seed 000): textures live on the GPU only at the resolution the
 //! view needs. CPU logic only; `render` applies its plans.
 //!
 //! - [`mip`]: the MipMapFactor of a texture on an object (the longest texel edge in metres at

@@ -1,4 +1,4 @@
-//! Procedural building meshes (issue 19, first part): closed and outward-facing, enclosing
+//! Procedural building meshes: closed and outward-facing, enclosing
 //! exactly the volume their dimensions give, deterministic, with facade seams, and ready to be
 //! progressive meshes.
 

@@ -1,4 +1,4 @@
-//! Light grids (issue 17) against an independent reference (`engine::lighting::reference`: rays
+//! Light grids against an independent reference (`engine::lighting::reference`: rays
 //! marched on the finest surface `F` through the canopy model, with many more directions than the
 //! grid takes, sharing no code with the grid); and hard cases with known answers (a cliff's shadow length, a flat sea, a valley under a ridge, a forest floor next to
 //! a clearing).
@@ -946,7 +946,7 @@ fn rendered_ground_bounce_is_the_grids() {
     assert!(flat_max <= 0.01, "flat ground shows a bounce of {flat_max}");
 }
 
-/// No step where a node's light grid meets a coarser one (issue 17, "seamless"). The tiny map
+/// No step where a node's light grid meets a coarser one ("seamless"). The tiny map
 /// seen from 420 m up, at a threshold that draws 128 m nodes (the grid level, 4 m columns) next
 /// to 256 m ones (8 m columns), in the light-grid values view (red sky, green sun visibility, blue
 /// bounce; unshaded), under a low sun (10 degrees: shadows of every bump) and a higher one (30). Each

@@ -1,4 +1,4 @@
-//! Progressive-mesh objects as node content (issue 18): streamed with their nodes, drawn at the
+//! Progressive-mesh objects as node content: streamed with their nodes, drawn at the
 //! level the pixel metric chooses, with the debug views (colour by LOD, fixed LOD).
 
 use engine::camera::Camera;

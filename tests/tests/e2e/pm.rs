@@ -1,4 +1,4 @@
-//! Progressive meshes (issue 18): hard meshes collapse to one vertex with valid index lists at
+//! Progressive meshes: hard meshes collapse to one vertex with valid index lists at
 //! every level, per-instance edits agree with the one-pass rebuild, the stored error bounds an
 //! independent measurement on the shared meshes, files are deterministic and malformed inputs
 //! name the file and the problem.

@@ -1,4 +1,4 @@
-//! The texture cache (issue 19): the mip level it picks against a brute-force projection of
+//! The texture cache: the mip level it picks against a brute-force projection of
 //! texels through an independently built view-projection matrix, and the slot pool through a
 //! 10,000-frame teleport storm checked by a mirror of the GPU that applies its plans op by op.
 

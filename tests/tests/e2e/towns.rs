@@ -1,4 +1,4 @@
-//! Towns (issue 19): houses stand clear of roads, water and each other, on ground flattened
+//! Towns: houses stand clear of roads, water and each other, on ground flattened
 //! under their footprint, with nothing growing inside; their meshes fill their footprints; bad
 //! building rows, meshes and textures are refused naming the file, line and field.
 //!

@@ -1,5 +1,5 @@
 //! The house types' progressive meshes and the houses' textures, in the map's `buildings/`
-//! folder: `<type>.pm`, one per type named in `buildings.csv` (issue 19: each type is built
+//! folder: `<type>.pm`, one per type named in `buildings.csv` (each type is built
 //! once, offline, and its instances share it), and the PNG textures the rows name. Meshes are
 //! read with the checksummed, validated `.pm` reader; a mesh that does not match its type's
 //! footprint (a stale mesh after `buildings.csv` was edited) is refused; a texture must be a mip

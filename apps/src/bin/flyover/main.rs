@@ -125,7 +125,7 @@ pub(crate) struct Cli {
     #[arg(long, value_enum, default_value_t = GroundViewArg::Shaded)]
     pub(crate) ground_view: GroundViewArg,
     /// Do not make per-node ground textures (the ground is coloured per vertex from the map's
-    /// ground types, as before issue 16): for comparing cost and looks.
+    /// ground types, as before ground textures existed): for comparing cost and looks.
     #[arg(long)]
     pub(crate) no_ground_textures: bool,
     /// The sun's compass azimuth in degrees (0 north, 90 east). The light grids (terrain and
@@ -137,7 +137,7 @@ pub(crate) struct Cli {
     #[arg(long, default_value_t = Sun::default().elevation_deg, value_parser = elevation)]
     pub(crate) sun_elevation_deg: f64,
     /// Do not make light grids: the sun and sky light everything fully, with no shadows or
-    /// occlusion (as before issue 17), for comparing cost and looks.
+    /// occlusion (as before light grids existed), for comparing cost and looks.
     #[arg(long)]
     pub(crate) no_lighting: bool,
     /// Leave out the map's houses (its towns), for comparing cost and looks.

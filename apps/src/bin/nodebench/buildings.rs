@@ -1,4 +1,4 @@
-//! Section `buildings` (issue 19): town generation time per step; houses per node; house
+//! Section `buildings`: town generation time per step; houses per node; house
 //! triangles per frame at tau 2 against the same houses and all houses at full detail; the
 //! texture cache's resident bytes against the drawn textures at full resolution, its misses and
 //! its levels coarser than needed per frame. Frames come from the benchmark flight and from

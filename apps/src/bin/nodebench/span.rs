@@ -83,7 +83,7 @@ mod tests {
     /// clock, and for longer than it did before they started; on-CPU and waiting together
     /// stay within the wall clock. The span runs in steps of 0.1 s until its wait passes a
     /// quarter of it, within 5 s: the busy threads take the cores at the scheduler's pace (a
-    /// fixed 0.2 s span once waited only 28 ms, in session 55's test run).
+    /// fixed 0.2 s span once waited only 28 ms, in one full test run).
     #[test]
     fn a_thread_among_busy_threads_waits_on_the_run_queue() {
         assert!(run_delay_ns().is_some(), "no schedstat on this Linux");
