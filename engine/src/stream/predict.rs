@@ -11,7 +11,7 @@
 use super::Streamer;
 use crate::camera::Camera;
 use crate::terrain::quadtree::NodeKey;
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use rustc_hash::FxHashSet;
 
 /// How far ahead the camera is predicted (s). Class `1 + i` holds what the camera needs
@@ -47,11 +47,10 @@ pub const SIDE_VIEW_TAU_FACTOR: f64 = 1.0;
 /// The camera turned about the vertical through its position by `angle_rad` (anticlockwise
 /// seen from above).
 pub fn yawed(cam: &Camera, angle_rad: f64) -> Camera {
-    let (sin, cos) = angle_rad.sin_cos();
-    let turned = |d: DVec3| DVec3::new(cos * d.x - sin * d.y, sin * d.x + cos * d.y, d.z);
+    let turn = DMat3::from_rotation_z(angle_rad);
     Camera {
-        forward: turned(cam.forward),
-        up: turned(cam.up),
+        forward: turn * cam.forward,
+        up: turn * cam.up,
         ..*cam
     }
 }
@@ -106,8 +105,8 @@ pub fn extrapolate_turning(
                 (sin / w, (1.0 - cos) / w)
             };
             let on_arc = DVec3::new(along * v.x - across * v.y, across * v.x + along * v.y, 0.0);
-            let turned = |d: DVec3| DVec3::new(cos * d.x - sin * d.y, sin * d.x + cos * d.y, d.z);
-            let straight_after = turned(DVec3::new(v.x, v.y, 0.0)) * (t - turn_s);
+            let straight_after =
+                DMat3::from_rotation_z(a) * DVec3::new(v.x, v.y, 0.0) * (t - turn_s);
             c.position_m += on_arc + straight_after + DVec3::Z * v.z * t;
             (t, yawed(&c, a))
         })

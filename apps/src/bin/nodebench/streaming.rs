@@ -399,14 +399,16 @@ pub(crate) fn section_streaming(
         let mut flight_run = Flight::new(world, settings, &kinds, gpu.map(|(g, _)| g));
         // Warm start at the first camera, as after loading: in flight along the path, or at
         // rest.
-        let extrapolated = engine::stream::predict::extrapolate(
-            &warm_cam,
-            (cams[0].position_m - warm_cam.position_m) / dt,
-        );
-        let path_ahead = (warm_start == WarmStart::InFlight).then(|| match &future {
-            Some(future) => future[0].as_slice(),
-            None => extrapolated.as_slice(),
-        });
+        // In flight: the known path's first look ahead, or for a hidden pilot what its first
+        // frame's velocity extrapolates.
+        let warm_ahead = match &future {
+            Some(future) => future[0].clone(),
+            None => engine::stream::predict::extrapolate(
+                &warm_cam,
+                (cams[0].position_m - warm_cam.position_m) / dt,
+            ),
+        };
+        let path_ahead = (warm_start == WarmStart::InFlight).then_some(warm_ahead.as_slice());
         if let Err(left) = flight_run.settle(&warm_cam, path_ahead, 600.0) {
             bail!("streaming at {speed} m/s: the warm start did not settle within 600 s ({left})");
         }
