@@ -16,8 +16,8 @@
 //! nearly twice as many grids as the drawn ones. Until its grid arrives a node is shaded by its
 //! nearest drawn-through ancestor's computed grid (`render::lighting`), fully lit without one;
 //! [`SharedGrid::version`] tells the renderer when to upload. **Relighting** after a sun change
-//! ([`LightingContent::set_sun`]) is the same work: every live grid is stale, nearest first, and
-//! no frame waits for it.
+//! ([`LightingContent::set_sun`]) is the same work less the sky, which no sun changes
+//! ([`LightGrid::relit`]): every live grid is stale, nearest first, and no frame waits for it.
 
 use super::grid::{COLUMNS, LAYERS, LightGrid, Sun, grid_level};
 use crate::stream::{ContentKind, NodeWork, Payload, Phase, Shared};
@@ -226,13 +226,12 @@ impl Inner {
                 }
             };
             let sun = self.sun();
-            next.store(LightGrid::compute(
-                world,
-                &self.canopy,
-                &self.tree,
-                next.key,
-                sun,
-            ));
+            // A relight keeps the grid's sky (no sun changes it).
+            let grid = match next.grid() {
+                Some(earlier) => earlier.relit(world, &self.canopy, &self.tree, sun),
+                None => LightGrid::compute(world, &self.canopy, &self.tree, next.key, sun),
+            };
+            next.store(grid);
             self.announce_stored(next.key);
             let mut state = self.state.lock().expect("state lock");
             next.computing.store(false, Ordering::Release);

@@ -31,12 +31,20 @@
 //! are interpolated first and multiplied after, so a terrain shadow's edge falls where the
 //! interpolated horizon crosses the sun instead of being smeared over a column spacing.
 //!
+//! **Cost.** The canopy's rays are most of a grid's time where vegetation grows: each layer of a
+//! column sends [`CANOPY_AZIMUTHS`] x [`SKY_BANDS`] sky rays and one sun ray through it. A ray
+//! point near the column reads its ground and the canopy's extinction from one cell of the
+//! height lattice (the canopy's summed layers sampled at the lattice's points,
+//! [`Canopy::band_lattice`]: exact, as the lattice nests in the canopy's cells), rays and columns
+//! with no vegetation within their reach are skipped ([`Canopy::any_in`]), and a relight after a
+//! sun change keeps the sky, which no sun changes ([`LightGrid::relit`]).
+//!
 //! Values are stored as bytes (1/255 steps); the tests compare them with a ray-marched
 //! reference on the finest surface (tests/tests/e2e/lighting.rs).
 
 use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
-use crate::vegetation::canopy::Canopy;
+use crate::vegetation::canopy::{BandLattice, Canopy};
 use glam::DVec3;
 use worldgen::sample::{GridPlacement, bilinear};
 
@@ -175,6 +183,10 @@ struct HorizonHeights<'a> {
     /// Ray points up to this far (horizontally) from their column read the lattice: inside the
     /// window of the block the column belongs to (its margin less one spacing).
     near_reach_m: f64,
+    /// The canopy's extinction per height band at the lattice's points, where the lattice
+    /// nests in the canopy's grid ([`Canopy::band_lattice`]): a canopy ray's point within the
+    /// lattice reads its ground and its extinction from the same cell.
+    extinction: Option<BandLattice>,
 }
 
 impl<'a> HorizonHeights<'a> {
@@ -328,15 +340,27 @@ impl<'a> HorizonHeights<'a> {
 
     /// The lattice of `n` points from global index `first` (from `tree_origin_m`), read within
     /// one spacing less than [`NEAR_MARGIN_M`] of a column.
-    fn new(world: &'a World, tree_origin_m: [f64; 2], first: [i64; 2], n: [usize; 2]) -> Self {
+    fn new(
+        (world, canopy): (&'a World, &Canopy),
+        tree_origin_m: [f64; 2],
+        first: [i64; 2],
+        n: [usize; 2],
+    ) -> Self {
         let axis = |a: usize| -> Vec<f64> {
             (0..n[a] as i64)
                 .map(|i| tree_origin_m[a] + (first[a] + i) as f64 * NEAR_SPACING_M)
                 .collect()
         };
+        let (xs, ys) = (axis(0), axis(1));
+        let extinction = if canopy.lattice_nests(tree_origin_m, NEAR_SPACING_M) {
+            canopy.band_lattice(&xs, &ys)
+        } else {
+            None
+        };
         Self {
             world,
-            near: world.heights_on_lattice(&axis(0), &axis(1)),
+            extinction,
+            near: world.heights_on_lattice(&xs, &ys),
             n,
             first,
             tree_origin_m,
@@ -369,6 +393,41 @@ impl<'a> HorizonHeights<'a> {
         } else {
             bilinear(&self.world.map.heights, self.map_at, x_m, y_m)
         }
+    }
+
+    /// The canopy's extinction (1/m) at ray point `p`, `r_m` (horizontally) from its column:
+    /// [`Canopy::extinction_per_m`] at its height over [`Self::height_m`], the two read from
+    /// one lattice cell where the point lies within the lattice's reach.
+    fn extinction_per_m(&self, canopy: &Canopy, p: DVec3, r_m: f64) -> f64 {
+        if let Some(ext) = self
+            .extinction
+            .as_ref()
+            .filter(|_| r_m <= self.near_reach_m)
+        {
+            let gx = (p.x - self.tree_origin_m[0]) / NEAR_SPACING_M;
+            let gy = (p.y - self.tree_origin_m[1]) / NEAR_SPACING_M;
+            let (fx, fy) = (gx.floor(), gy.floor());
+            let (i, j) = (fx as i64 - self.first[0], fy as i64 - self.first[1]);
+            if (0..self.n[0] as i64 - 1).contains(&i) && (0..self.n[1] as i64 - 1).contains(&j) {
+                let (tx, ty) = (gx - fx, gy - fy);
+                let nx = self.n[0];
+                let k = j as usize * nx + i as usize;
+                // As `height_m` blends, the same operations in the same order.
+                let blend = |v: &[f64]| {
+                    let lo = v[k] + (v[k + 1] - v[k]) * tx;
+                    let hi = v[k + nx] + (v[k + nx + 1] - v[k + nx]) * tx;
+                    lo + (hi - lo) * ty
+                };
+                let above = p.z - blend(&self.near);
+                if !(0.0..=canopy.top_m).contains(&above) {
+                    return 0.0;
+                }
+                let band = ext.tops_m.partition_point(|&t| t < above);
+                return ext.values.get(band).map_or(0.0, |v| blend(v));
+            }
+        }
+        let above = p.z - self.height_m(p.x, p.y, r_m);
+        canopy.extinction_per_m(p.x, p.y, above)
     }
 
     /// The lattice point at global index (`i`, `j`) (inside the window).
@@ -478,6 +537,26 @@ impl LightGrid {
         key: NodeKey,
         sun: Sun,
     ) -> Self {
+        Self::compute_with_sky(world, canopy, tree, key, sun, None)
+    }
+
+    /// The same node's grid for another sun: equal to [`LightGrid::compute`] for `sun`, at less
+    /// cost, since the sky visibility (the terrain's horizons and the canopy's transmittance
+    /// toward the sky) depends on no sun and is taken from this grid.
+    pub fn relit(&self, world: &World, canopy: &Canopy, tree: &QuadTree, sun: Sun) -> Self {
+        Self::compute_with_sky(world, canopy, tree, self.key, sun, Some(&self.sky))
+    }
+
+    /// [`LightGrid::compute`], with the sky bytes taken from `sky` when given (an earlier
+    /// grid of the node: they depend on no sun).
+    fn compute_with_sky(
+        world: &World,
+        canopy: &Canopy,
+        tree: &QuadTree,
+        key: NodeKey,
+        sun: Sun,
+        sky: Option<&[u8]>,
+    ) -> Self {
         // Columns and lattice points by global index from the tree's origin (see
         // `HorizonHeights`): a column shared with a neighbour, or with a grid of another level,
         // has the same coordinates.
@@ -502,22 +581,8 @@ impl LightGrid {
                 (col0[1] + r.start as i64) * ratio - margin,
             ];
             let count = |n: usize| ((n as i64 - 1) * ratio + 2 * margin + 1) as usize;
-            HorizonHeights::new(world, o, first, [count(c.len()), count(r.len())])
+            HorizonHeights::new((world, canopy), o, first, [count(c.len()), count(r.len())])
         };
-        // No canopy anywhere a canopy ray can reach: every transmittance is 1 (open ground,
-        // water, rock; most of many maps). A ray climbs out of the canopy within
-        // `top / tan(elevation)` horizontally (the sun ray is followed twice as far).
-        let lowest_sky = ((0.5 / SKY_BANDS as f64) / (1.0 - 0.5 / SKY_BANDS as f64)).sqrt();
-        let mut reach = canopy.top_m / lowest_sky;
-        if sun.elevation_deg > 0.0 {
-            let sun_tan = sun.elevation_deg.to_radians().tan().max(1e-3);
-            reach = reach.max(2.0 * canopy.top_m / sun_tan);
-        }
-        let reach = reach.min(HORIZON_REACH_M);
-        let canopy_near = canopy.max_extinction_in(
-            [origin[0] - reach, origin[1] - reach],
-            [origin[0] + side_m + reach, origin[1] + side_m + reach],
-        ) > 0.0;
         let distances = march_distances();
         let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
         // Directions: the horizon azimuths, then the sun's.
@@ -530,14 +595,14 @@ impl LightGrid {
             origin_m: origin,
             spacing_m,
             ground_m: vec![0.0; cells],
-            sky: vec![0; LAYERS * cells],
+            sky: sky.map_or_else(|| vec![0; LAYERS * cells], <[u8]>::to_vec),
             sun: vec![0; LAYERS * cells],
             sun_margin: vec![0; LAYERS * cells],
             bounce: vec![0; LAYERS * cells],
             sun_dir: sun,
             layers_m,
         };
-        let per_canopy = HORIZON_AZIMUTHS / CANOPY_AZIMUTHS;
+        let rays = CanopyRays::new(canopy, sun);
         // Highest tangent of the terrain seen from each layer, per direction (per column).
         let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
         let blocks = || {
@@ -563,69 +628,15 @@ impl LightGrid {
                         toward,
                         &mut tan_max,
                     );
-                    // The same test around the column alone (most columns of a grid with
-                    // some canopy have none within their rays' reach).
-                    let canopy_column = canopy_near
-                        && canopy.max_extinction_in([x - reach, y - reach], [x + reach, y + reach])
-                            > 0.0;
-                    for (l, &lh) in layers_m.iter().enumerate() {
-                        let p0 = DVec3::new(x, y, ground + lh);
-                        let under = canopy_column && lh < canopy.top_m;
-                        // Canopy transmittance per canopy azimuth and band.
-                        let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
-                        if under {
-                            for (c, t) in trans.iter_mut().enumerate() {
-                                let dir = dirs[c * per_canopy];
-                                for (b, tb) in t.iter_mut().enumerate() {
-                                    let s = (b as f64 + 0.5) / SKY_BANDS as f64;
-                                    let (sin_e, cos_e) = (s.sqrt(), (1.0 - s).sqrt());
-                                    let w = DVec3::new(dir[0] * cos_e, dir[1] * cos_e, sin_e);
-                                    *tb = canopy_transmittance(
-                                        &heights,
-                                        canopy,
-                                        (p0, w),
-                                        lh,
-                                        (CANOPY_STEPS, 1.0),
-                                    );
-                                }
-                            }
-                        }
-                        let mut sky = 0.0;
-                        for (a, tan) in tan_max.iter().take(HORIZON_AZIMUTHS).enumerate() {
-                            let s_h = sin2_of_tan(tan[l]);
-                            // The canopy azimuth nearest to horizon azimuth `a`.
-                            let c = ((a + per_canopy / 2) / per_canopy) % CANOPY_AZIMUTHS;
-                            for (b, tb) in trans[c].iter().enumerate() {
-                                let (lo, hi) = (
-                                    b as f64 / SKY_BANDS as f64,
-                                    (b + 1) as f64 / SKY_BANDS as f64,
-                                );
-                                sky += tb * (hi - s_h.max(lo)).max(0.0);
-                            }
-                        }
-                        sky /= HORIZON_AZIMUTHS as f64;
-                        // The sun's elevation over the terrain horizon toward it, and the
-                        // canopy's transmittance toward it (wherever the terrain shadows, too:
-                        // both are interpolated before they are combined, `sample`).
-                        let margin =
-                            sun.elevation_deg.to_radians() - tan_max[HORIZON_AZIMUTHS][l].atan();
-                        let transmittance = if sun.elevation_deg <= 0.0 {
-                            0.0
-                        } else if under {
-                            canopy_transmittance(
-                                &heights,
-                                canopy,
-                                (p0, toward),
-                                lh,
-                                (SUN_CANOPY_STEPS, 2.0),
-                            )
-                        } else {
-                            1.0
-                        };
+                    let column =
+                        rays.column(&heights, (x, y, ground), (&dirs, sky.is_none()), &tan_max);
+                    for (l, lit) in column.iter().enumerate() {
                         let i = Self::index(l, row, col);
-                        out.sky[i] = to_byte(sky);
-                        out.sun[i] = to_byte(transmittance);
-                        out.sun_margin[i] = margin_to_byte(margin);
+                        if sky.is_none() {
+                            out.sky[i] = to_byte(lit.sky);
+                        }
+                        out.sun[i] = to_byte(lit.sun_transmittance);
+                        out.sun_margin[i] = margin_to_byte(lit.sun_margin_rad);
                         out.bounce[i] = to_byte(bounce[l] / HORIZON_AZIMUTHS as f64);
                     }
                 }
@@ -722,6 +733,148 @@ fn to_byte(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
+/// One layer's light at a column, before it is stored as bytes.
+#[derive(Clone, Copy, Default)]
+struct ColumnLight {
+    /// Sky visibility (0 when the sky is not computed).
+    sky: f64,
+    /// The canopy's transmittance toward the sun.
+    sun_transmittance: f64,
+    /// The sun's elevation over the terrain horizon toward it (rad).
+    sun_margin_rad: f64,
+}
+
+/// The canopy's part of a grid: its rays toward the sky and the sun from each layer of a
+/// column, and the sums that turn them and the horizons into a column's light.
+struct CanopyRays<'a> {
+    canopy: &'a Canopy,
+    sun: Sun,
+    toward: DVec3,
+    layers_m: [f64; LAYERS],
+    /// How far (horizontally) a sky ray can go before it climbs out of the canopy.
+    sky_reach_m: f64,
+    /// How far the sun ray can (0 with the sun at or under the horizontal).
+    sun_reach_m: f64,
+}
+
+impl<'a> CanopyRays<'a> {
+    fn new(canopy: &'a Canopy, sun: Sun) -> Self {
+        // A sky ray climbs out of the canopy within `top / tan(elevation)` horizontally, at
+        // most the lowest band's; the sun ray is followed twice as far.
+        let lowest_sky = ((0.5 / SKY_BANDS as f64) / (1.0 - 0.5 / SKY_BANDS as f64)).sqrt();
+        let sun_reach_m = if sun.elevation_deg > 0.0 {
+            let sun_tan = sun.elevation_deg.to_radians().tan().max(1e-3);
+            (2.0 * canopy.top_m / sun_tan).min(HORIZON_REACH_M)
+        } else {
+            0.0
+        };
+        Self {
+            canopy,
+            sun,
+            toward: sun.toward(),
+            layers_m: layer_heights_m(canopy),
+            sky_reach_m: (canopy.top_m / lowest_sky).min(HORIZON_REACH_M),
+            sun_reach_m,
+        }
+    }
+
+    /// Whether vegetation stands within `reach_m` of (`x`, `y`) (horizontally) along
+    /// horizontal unit `dir`, or around it when `dir` is `None`.
+    fn canopy_within(&self, (x, y): (f64, f64), dir: Option<[f64; 2]>, reach_m: f64) -> bool {
+        match dir {
+            None => self
+                .canopy
+                .any_in([x - reach_m, y - reach_m], [x + reach_m, y + reach_m]),
+            Some(d) => {
+                let (ex, ey) = (x + d[0] * reach_m, y + d[1] * reach_m);
+                self.canopy
+                    .any_in([x.min(ex), y.min(ey)], [x.max(ex), y.max(ey)])
+            }
+        }
+    }
+
+    /// The light of each layer of the column at (`x`, `y`), ground `ground_m`, whose horizons
+    /// per march direction (`dirs`: the horizon azimuths, then the sun's) are `tan_max`; its
+    /// sky only `with_sky`.
+    fn column(
+        &self,
+        heights: &HorizonHeights<'_>,
+        (x, y, ground_m): (f64, f64, f64),
+        (dirs, with_sky): (&[[f64; 2]], bool),
+        tan_max: &[[f64; LAYERS]],
+    ) -> [ColumnLight; LAYERS] {
+        let canopy = self.canopy;
+        let per_canopy = HORIZON_AZIMUTHS / CANOPY_AZIMUTHS;
+        // The same test around the column alone (most columns of a grid with some canopy have
+        // none within their rays' reach), then along each ray.
+        let sky_canopy = with_sky && self.canopy_within((x, y), None, self.sky_reach_m);
+        let sun_canopy = self.sun_reach_m > 0.0
+            && self.canopy_within((x, y), Some(dirs[HORIZON_AZIMUTHS]), self.sun_reach_m);
+        let mut out = [ColumnLight::default(); LAYERS];
+        for ((lit, &lh), l) in out.iter_mut().zip(&self.layers_m).zip(0..) {
+            let p0 = DVec3::new(x, y, ground_m + lh);
+            let under = lh < canopy.top_m;
+            if with_sky {
+                // Canopy transmittance per canopy azimuth and band.
+                let mut trans = [[1.0f64; SKY_BANDS]; CANOPY_AZIMUTHS];
+                if sky_canopy && under {
+                    for (c, t) in trans.iter_mut().enumerate() {
+                        let dir = dirs[c * per_canopy];
+                        if !self.canopy_within((x, y), Some(dir), self.sky_reach_m) {
+                            continue;
+                        }
+                        for (b, tb) in t.iter_mut().enumerate() {
+                            let s = (b as f64 + 0.5) / SKY_BANDS as f64;
+                            let (sin_e, cos_e) = (s.sqrt(), (1.0 - s).sqrt());
+                            let w = DVec3::new(dir[0] * cos_e, dir[1] * cos_e, sin_e);
+                            *tb = canopy_transmittance(
+                                heights,
+                                canopy,
+                                (p0, w),
+                                lh,
+                                (CANOPY_STEPS, 1.0),
+                            );
+                        }
+                    }
+                }
+                let mut sky = 0.0;
+                for (a, tan) in tan_max.iter().take(HORIZON_AZIMUTHS).enumerate() {
+                    let s_h = sin2_of_tan(tan[l]);
+                    // The canopy azimuth nearest to horizon azimuth `a`.
+                    let c = ((a + per_canopy / 2) / per_canopy) % CANOPY_AZIMUTHS;
+                    for (b, tb) in trans[c].iter().enumerate() {
+                        let (lo, hi) = (
+                            b as f64 / SKY_BANDS as f64,
+                            (b + 1) as f64 / SKY_BANDS as f64,
+                        );
+                        sky += tb * (hi - s_h.max(lo)).max(0.0);
+                    }
+                }
+                lit.sky = sky / HORIZON_AZIMUTHS as f64;
+            }
+            // The sun's elevation over the terrain horizon toward it, and the canopy's
+            // transmittance toward it (wherever the terrain shadows, too: both are interpolated
+            // before they are combined, `LightGrid::sample`).
+            lit.sun_margin_rad =
+                self.sun.elevation_deg.to_radians() - tan_max[HORIZON_AZIMUTHS][l].atan();
+            lit.sun_transmittance = if self.sun.elevation_deg <= 0.0 {
+                0.0
+            } else if sun_canopy && under {
+                canopy_transmittance(
+                    heights,
+                    canopy,
+                    (p0, self.toward),
+                    lh,
+                    (SUN_CANOPY_STEPS, 2.0),
+                )
+            } else {
+                1.0
+            };
+        }
+        out
+    }
+}
+
 /// `exp(-optical depth)` from `p0` (`above_m` over the ground) along unit `w` until the ray
 /// leaves the canopy, at `steps` midpoints (ground from the horizon heights).
 fn canopy_transmittance(
@@ -743,17 +896,19 @@ fn canopy_transmittance(
     let dl = len / steps as f64;
     // Rays that stay well within the lattice's reach read it at every point: no distance
     // needed.
-    let near = len * w.truncate().length() < heights.near_reach_m - 1e-6;
+    let flat = w.truncate().length();
+    let near = len * flat < heights.near_reach_m - 1e-6;
+    // The horizontal distance of a step.
+    let dl_flat = dl * flat;
     let mut depth = 0.0;
     for k in 0..steps {
         let p = p0 + w * ((k as f64 + 0.5) * dl);
         let r = if near {
             0.0
         } else {
-            (p.x - p0.x).hypot(p.y - p0.y)
+            (k as f64 + 0.5) * dl_flat
         };
-        let above = p.z - heights.height_m(p.x, p.y, r);
-        depth += canopy.extinction_per_m(p.x, p.y, above) * dl;
+        depth += heights.extinction_per_m(canopy, p, r) * dl;
         if depth > OPAQUE_DEPTH {
             return 0.0;
         }
@@ -830,7 +985,7 @@ mod tests {
             i64::from(key.iy) * per - margin,
         ];
         let n = (per + 2 * margin + 1) as usize;
-        let h = HorizonHeights::new(&world, tree.origin_m, first, [n, n]);
+        let h = HorizonHeights::new((&world, &canopy), tree.origin_m, first, [n, n]);
         let layers_m = layer_heights_m(&canopy);
         let distances = march_distances();
         let inverse: Vec<f64> = distances.iter().map(|r| 1.0 / r).collect();
@@ -925,6 +1080,34 @@ mod tests {
         }
         // Not a constant field: the test would pass on anything uniform.
         assert!(a.sky.iter().any(|&v| v != a.sky[0]));
+    }
+
+    /// A grid relit for another sun (its sky kept) equals the grid computed for that sun: the
+    /// sky depends on no sun, and everything else is computed anew.
+    #[test]
+    fn a_relit_grid_equals_one_computed_for_its_sun() {
+        let (world, canopy, tree) = shifted_tiny();
+        let key = NodeKey {
+            level: grid_level(&tree),
+            ix: 2,
+            iy: 1,
+        };
+        let low = Sun {
+            azimuth_deg: 250.0,
+            elevation_deg: 8.0,
+        };
+        let high = Sun::default();
+        let first = LightGrid::compute(&world, &canopy, &tree, key, low);
+        let direct = LightGrid::compute(&world, &canopy, &tree, key, high);
+        assert_eq!(first.relit(&world, &canopy, &tree, high), direct);
+        // No sun changes the sky; the rest moves with the sun.
+        assert_eq!(first.sky, direct.sky);
+        assert_ne!(first.sun_margin, direct.sun_margin);
+        assert_ne!(first.bounce, direct.bounce);
+        assert!(
+            first.sky.iter().any(|&v| v < 250),
+            "no sky is hidden on this node"
+        );
     }
 
     /// A grid a level coarser holds exactly the values of its four children's grids at its

@@ -18,6 +18,67 @@ pub struct Canopy {
     heights_spacing_m: f64,
     /// The tallest species' height: lines of sight above the ground by more never hit.
     pub top_m: f64,
+    /// The layers summed per height band, when they all lie on one grid.
+    bands: Option<Bands>,
+}
+
+/// The canopy's layers summed ahead of time, for layers that share one grid (the usual case:
+/// every density layer and the large trees' grid on 8 m cells from the map's origin): one
+/// bilinear look-up per extinction instead of one per layer, and an O(1) test of whether any
+/// vegetation stands in a rectangle.
+#[derive(Debug, Clone)]
+struct Bands {
+    /// The distinct layer tops (m), ascending.
+    tops_m: Vec<f64>,
+    /// Per top: the sum of the layers that reach at least that high.
+    sums: Vec<worldgen::Grid<f32>>,
+    spacing_m: f64,
+    /// Summed-area table of the cells where any layer is above zero (`width + 1` per row).
+    occupied: Vec<u32>,
+}
+
+impl Bands {
+    fn new(layers: &[(worldgen::Grid<f32>, f64, f64)]) -> Option<Self> {
+        let (first, spacing_m, _) = layers.first()?;
+        let (w, h) = (first.width(), first.height());
+        if layers
+            .iter()
+            .any(|(g, s, _)| g.width() != w || g.height() != h || s != spacing_m)
+        {
+            return None;
+        }
+        let mut tops_m: Vec<f64> = layers.iter().map(|l| l.2).collect();
+        tops_m.sort_by(f64::total_cmp);
+        tops_m.dedup();
+        let sums = tops_m
+            .iter()
+            .map(|&top| {
+                let mut sum = worldgen::Grid::new(w, h, 0.0f32);
+                for (g, _, _) in layers.iter().filter(|l| l.2 >= top) {
+                    for (s, v) in sum.data_mut().iter_mut().zip(g.data()) {
+                        *s += v;
+                    }
+                }
+                sum
+            })
+            .collect();
+        let mut occupied = vec![0u32; (w + 1) * (h + 1)];
+        for y in 0..h {
+            for x in 0..w {
+                let any = layers.iter().any(|(g, _, _)| g.get(x, y) > 0.0);
+                occupied[(y + 1) * (w + 1) + x + 1] = u32::from(any)
+                    + occupied[y * (w + 1) + x + 1]
+                    + occupied[(y + 1) * (w + 1) + x]
+                    - occupied[y * (w + 1) + x];
+            }
+        }
+        Some(Self {
+            tops_m,
+            sums,
+            spacing_m: *spacing_m,
+            occupied,
+        })
+    }
 }
 
 impl Canopy {
@@ -61,6 +122,7 @@ impl Canopy {
             layers.push((ext, cell, mean));
         }
         Self {
+            bands: Bands::new(&layers),
             layers,
             origin_m: world.origin_m(),
             heights_spacing_m: world.map.manifest.heights.spacing_m,
@@ -100,6 +162,17 @@ impl Canopy {
         if !(0.0..=self.top_m).contains(&above_m) {
             return 0.0;
         }
+        if let Some(b) = &self.bands {
+            let band = b.tops_m.partition_point(|&t| t < above_m);
+            let at = worldgen::sample::GridPlacement {
+                origin_m: self.origin_m,
+                spacing_m: b.spacing_m,
+            };
+            return b
+                .sums
+                .get(band)
+                .map_or(0.0, |g| worldgen::sample::bilinear(g, at, x_m, y_m));
+        }
         let mut sum = 0.0;
         for (ext, spacing, h) in &self.layers {
             if above_m <= *h {
@@ -127,6 +200,9 @@ impl Canopy {
     /// at any height: per layer the largest grid value whose cell touches the rectangle (a
     /// bilinear value never exceeds its corners; positions outside a grid clamp to its border).
     pub fn max_extinction_in(&self, min: [f64; 2], max: [f64; 2]) -> f64 {
+        if self.bands.is_some() && !self.any_in(min, max) {
+            return 0.0;
+        }
         let mut sum = 0.0;
         for (ext, spacing, _) in &self.layers {
             let range = |axis: usize, len: usize| {
@@ -148,6 +224,73 @@ impl Canopy {
             sum += m;
         }
         sum
+    }
+}
+
+/// [`Canopy::extinction_per_m`] on a lattice of points: per height band (its top) the summed
+/// layers there, for look-ups between the points (see [`Canopy::band_lattice`]).
+#[derive(Debug, Clone, Default)]
+pub struct BandLattice {
+    /// The band tops (m), ascending: a height `above` reads the first band whose top is at
+    /// least `above`.
+    pub tops_m: Vec<f64>,
+    /// Per band, the lattice's values (row-major, as the lattice was given).
+    pub values: Vec<Vec<f64>>,
+}
+
+impl Canopy {
+    /// The canopy's summed layers per height band at every point of the lattice `xs` x `ys`
+    /// (world m), each equal to [`Self::extinction_per_m`] there for the band's heights; `None`
+    /// when the layers lie on different grids. Where every cell of the lattice lies within one
+    /// cell of the canopy's grid (a lattice aligned with it, its spacing dividing the grid's),
+    /// bilinear interpolation between the lattice's points gives the extinction anywhere
+    /// between them, up to rounding: the canopy is bilinear in each of its cells.
+    pub fn band_lattice(&self, xs: &[f64], ys: &[f64]) -> Option<BandLattice> {
+        let b = self.bands.as_ref()?;
+        let at = worldgen::sample::GridPlacement {
+            origin_m: self.origin_m,
+            spacing_m: b.spacing_m,
+        };
+        Some(BandLattice {
+            tops_m: b.tops_m.clone(),
+            values: b
+                .sums
+                .iter()
+                .map(|g| worldgen::sample::bilinear_lattice(g, at, xs, ys))
+                .collect(),
+        })
+    }
+
+    /// Whether a lattice of `spacing_m` whose point (0, 0) is at `origin_m` nests in the
+    /// canopy's grid (see [`Self::band_lattice`]).
+    pub fn lattice_nests(&self, origin_m: [f64; 2], spacing_m: f64) -> bool {
+        let Some(b) = &self.bands else { return false };
+        let whole = |v: f64| (v - v.round()).abs() < 1e-9;
+        whole(b.spacing_m / spacing_m)
+            && (0..2).all(|a| whole((origin_m[a] - self.origin_m[a]) / spacing_m))
+    }
+}
+
+impl Canopy {
+    /// Whether [`Self::extinction_per_m`] can be above zero anywhere in the rectangle
+    /// `min`..`max` (world m) at any height: some layer has a value above zero in a cell that
+    /// touches it, as [`Self::max_extinction_in`] looks. O(1) where the layers share one grid.
+    pub fn any_in(&self, min: [f64; 2], max: [f64; 2]) -> bool {
+        let Some(b) = &self.bands else {
+            return self.max_extinction_in(min, max) > 0.0;
+        };
+        let (w, h) = (b.sums[0].width(), b.sums[0].height());
+        let range = |axis: usize, len: usize| {
+            let to =
+                |v: f64| ((v - self.origin_m[axis]) / b.spacing_m).clamp(0.0, (len - 1) as f64);
+            (
+                to(min[axis]).floor() as usize,
+                to(max[axis]).ceil() as usize,
+            )
+        };
+        let ((x0, x1), (y0, y1)) = (range(0, w), range(1, h));
+        let at = |x: usize, y: usize| b.occupied[y * (w + 1) + x];
+        at(x1 + 1, y1 + 1) + at(x0, y0) > at(x0, y1 + 1) + at(x1 + 1, y0)
     }
 }
 
@@ -185,5 +328,134 @@ impl Canopy {
         // Stop at the node's border (approximately: half its side before the centre).
         let end = eye + d * (1.0 - (half / flat).min(1.0));
         self.visibility(world, eye, end)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The canopy of the tiny map, moved off the round origin, and the same canopy with its
+    /// bands left out (every look-up sums the layers one by one: the model itself).
+    fn canopies() -> (Canopy, Canopy) {
+        let mut map = crate::test_maps::tiny_map();
+        map.manifest.origin_m = [1234.567, -89.0123];
+        let world = World::new(map);
+        let canopy = Canopy::new(&world, &Placer::new(&world));
+        let mut plain = canopy.clone();
+        plain.bands = None;
+        assert!(
+            canopy.bands.is_some(),
+            "the tiny map's layers share one grid"
+        );
+        (canopy, plain)
+    }
+
+    /// Points over the map and a little beyond it, seeded.
+    fn points(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let u = |k: i64| worldgen::noise::unit3(7, i as i64, k);
+                [
+                    1234.567 - 20.0 + 552.0 * u(0),
+                    -89.0123 - 20.0 + 552.0 * u(1),
+                    -1.0 + 26.0 * u(2),
+                ]
+            })
+            .collect()
+    }
+
+    /// The summed bands give each species layer's sum at every height, within f32 rounding.
+    #[test]
+    fn banded_extinction_equals_the_sum_of_the_layers() {
+        let (canopy, plain) = canopies();
+        let mut nonzero = 0;
+        for [x, y, above] in points(4000) {
+            let (a, b) = (
+                canopy.extinction_per_m(x, y, above),
+                plain.extinction_per_m(x, y, above),
+            );
+            assert!(
+                (a - b).abs() <= 1e-6 * (1.0 + b),
+                "({x}, {y}, {above}): {a} vs {b}"
+            );
+            nonzero += usize::from(b > 0.0);
+        }
+        assert!(nonzero > 500, "only {nonzero} points with vegetation");
+        // Heights at the layer tops and just over them pick the right band.
+        for top in plain.layer_tops_m() {
+            for above in [top, top + 1e-6] {
+                for [x, y, _] in points(50) {
+                    let (a, b) = (
+                        canopy.extinction_per_m(x, y, above),
+                        plain.extinction_per_m(x, y, above),
+                    );
+                    assert!(
+                        (a - b).abs() <= 1e-6 * (1.0 + b),
+                        "at {above} m: {a} vs {b}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The O(1) occupancy test answers as the scan of the layers' cells, on rectangles from a
+    /// point to wider than the map.
+    #[test]
+    fn any_in_agrees_with_the_cell_scan() {
+        let (canopy, plain) = canopies();
+        let (mut some, mut none) = (0, 0);
+        for (i, [x, y, z]) in points(3000).into_iter().enumerate() {
+            let half = [0.0, 3.0, 17.0, 60.0, 400.0][i % 5] * (0.5 + z.abs() / 26.0);
+            let (min, max) = ([x - half, y - 0.7 * half], [x + half, y + 0.7 * half]);
+            let scan = plain.max_extinction_in(min, max) > 0.0;
+            assert_eq!(canopy.any_in(min, max), scan, "{min:?}..{max:?}");
+            if scan { some += 1 } else { none += 1 }
+        }
+        assert!(
+            some > 100 && none > 100,
+            "{some} with vegetation, {none} without"
+        );
+    }
+
+    /// Between the points of a lattice that nests in the canopy's grid, bilinear
+    /// interpolation of the band lattice gives the extinction there; a lattice off the grid
+    /// is refused.
+    #[test]
+    fn a_nested_band_lattice_interpolates_to_the_extinction() {
+        let (canopy, plain) = canopies();
+        let origin = [1234.567 + 16.0, -89.0123 + 40.0];
+        assert!(canopy.lattice_nests(origin, 2.0));
+        assert!(!canopy.lattice_nests([origin[0] + 1.0, origin[1]], 2.0));
+        assert!(!canopy.lattice_nests(origin, 3.0));
+        let n = 200;
+        let axis = |a: usize| -> Vec<f64> { (0..n).map(|i| origin[a] + 2.0 * i as f64).collect() };
+        let lattice = canopy.band_lattice(&axis(0), &axis(1)).expect("bands");
+        let mut nonzero = 0;
+        for [u, v, above] in points(3000) {
+            // Lattice coordinates within its last cell.
+            let gx = (u - 1214.567) / 552.0 * (n - 1) as f64 * 0.999;
+            let gy = (v + 109.0123) / 552.0 * (n - 1) as f64 * 0.999;
+            let (x, y) = (origin[0] + 2.0 * gx, origin[1] + 2.0 * gy);
+            let want = plain.extinction_per_m(x, y, above);
+            let band = lattice.tops_m.partition_point(|&t| t < above);
+            let got = match lattice.values.get(band) {
+                Some(values) if above >= 0.0 => {
+                    let k = |i: usize, j: usize| values[j * n + i];
+                    let (i, j) = (gx.floor() as usize, gy.floor() as usize);
+                    let (tx, ty) = (gx - i as f64, gy - j as f64);
+                    let lo = k(i, j) + (k(i + 1, j) - k(i, j)) * tx;
+                    let hi = k(i, j + 1) + (k(i + 1, j + 1) - k(i, j + 1)) * tx;
+                    lo + (hi - lo) * ty
+                }
+                _ => 0.0,
+            };
+            assert!(
+                (got - want).abs() <= 1e-6 * (1.0 + want),
+                "({x}, {y}, {above}): {got} vs {want}"
+            );
+            nonzero += usize::from(want > 0.0);
+        }
+        assert!(nonzero > 200, "only {nonzero} points with vegetation");
     }
 }
