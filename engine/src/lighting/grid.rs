@@ -23,7 +23,10 @@
 //! elevation, as the sky) by `max(0, n . s)` of the terrain seen there: its slope along the ray
 //! from the previous march point (a cliff between two points is seen as its face), across the
 //! ray from central differences. The terrain is taken as lit wherever it faces the sun (the
-//! shadows cast on it are left out).
+//! shadows cast on it are left out). It is marched at the columns whose global index is even
+//! along both axes (every column of a coarser grid); a grid-level grid's other columns take the
+//! mean of their even neighbours: light reflected by the terrain a column sees changes little
+//! over 8 m, and agrees with the reference as well.
 //!
 //! **Sun visibility** is the share of the sun's disc above the terrain horizon along its own
 //! azimuth ([`terrain_lit`]) times the canopy transmittance toward it. A sample stores the two
@@ -223,10 +226,11 @@ impl<'a> HorizonHeights<'a> {
     }
 
     /// Marches the horizons of the column at (`x`, `y`), ground `ground_m`, along `dirs` (the
-    /// horizon azimuths, then the sun's) at `distances` (and their inverses): per direction and
-    /// layer the highest tangent of the terrain into `tan_max`. Returns per layer the ground's
-    /// bounce summed over the horizon azimuths: the cosine-weighted share of the sky hidden by
-    /// terrain, each hidden band weighted by how squarely the terrain seen there faces the sun.
+    /// horizon azimuths, then the sun's; the sun's alone for [`March::Sun`]) at `distances` (and
+    /// their inverses): per direction and layer the highest tangent of the terrain into
+    /// `tan_max`. Returns per layer (zero unless [`March::All`]) the ground's bounce summed over
+    /// the horizon azimuths: the cosine-weighted share of the sky hidden by terrain, each hidden
+    /// band weighted by how squarely the terrain seen there faces the sun.
     ///
     /// Two shortcuts leave every result bit the same: a ray point is compared with the layers
     /// only when the lowest layer's tangent there (the largest: `layers_m` ascend) passes the
@@ -237,7 +241,7 @@ impl<'a> HorizonHeights<'a> {
         &self,
         (x, y, ground): (f64, f64, f64),
         (dirs, distances, inverse): (&[[f64; 2]], &[f64], &[f64]),
-        layers_m: &[f64; LAYERS],
+        (layers_m, what): (&[f64; LAYERS], March),
         toward: DVec3,
         tan_max: &mut [[f64; LAYERS]],
     ) -> [f64; LAYERS] {
@@ -245,6 +249,9 @@ impl<'a> HorizonHeights<'a> {
         let first_far = distances.partition_point(|&r| r <= self.near_reach_m);
         for (d, (best, dir)) in tan_max.iter_mut().zip(dirs).enumerate() {
             let is_azimuth = d < HORIZON_AZIMUTHS;
+            if is_azimuth && what == March::Sun {
+                continue;
+            }
             // Horizons below a floor give the same bytes: a horizon azimuth's tangent counts
             // only above the horizontal (`sin2_of_tan`, and the bounce of terrain above it),
             // the sun's only within the stored margin ([`SUN_MARGIN_RANGE_RAD`], clamped).
@@ -289,7 +296,7 @@ impl<'a> HorizonHeights<'a> {
                     for ((b, lh), add) in best.iter_mut().zip(layers_m).zip(&mut bounce) {
                         let t = (dh - lh) * inv_r;
                         if t > *b {
-                            if is_azimuth && t > 0.0 && toward.z > 0.0 {
+                            if is_azimuth && what == March::All && t > 0.0 && toward.z > 0.0 {
                                 let f = *facing.get_or_insert_with(|| {
                                     let before = match previous {
                                         Previous::At(r0, dh0) => (r0, dh0),
@@ -435,6 +442,17 @@ impl<'a> HorizonHeights<'a> {
         let (a, b) = ((i - self.first[0]) as usize, (j - self.first[1]) as usize);
         self.near[b * self.n[0] + a]
     }
+}
+
+/// What a column's horizon march finds.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum March {
+    /// Every horizon and the ground's bounce.
+    All,
+    /// Every horizon, no bounce.
+    Horizons,
+    /// The horizon toward the sun alone.
+    Sun,
 }
 
 /// Points of a horizon march beyond the lattice's reach that are skipped together when the map
@@ -603,6 +621,13 @@ impl LightGrid {
             layers_m,
         };
         let rays = CanopyRays::new(canopy, sun);
+        // The ground's bounce is computed at the columns whose global index (in grid-level
+        // column spacings) is even along both axes, every column of a coarser grid; at the grid
+        // level the others take the mean of their even neighbours and march no bounce (a relight,
+        // whose sky is given, marches only toward the sun there). The bounce is light reflected
+        // by the terrain the column sees, smooth over a column spacing: it agrees with the
+        // reference as well at 8 m.
+        let level_step = (spacing_m / COLUMN_SPACING_M).round() as i64;
         // Highest tangent of the terrain seen from each layer, per direction (per column).
         let mut tan_max = vec![[f64::NEG_INFINITY; LAYERS]; dirs.len()];
         let blocks = || {
@@ -610,34 +635,55 @@ impl LightGrid {
                 .step_by(block_cols)
                 .map(|s| s..(s + block_cols).min(COLUMNS))
         };
+        // The bounce per sample before rounding, for the columns that interpolate it.
+        let mut bounce_of = vec![0.0f64; LAYERS * cells];
         for (rows, cols) in blocks().flat_map(|r| blocks().map(move |c| (r.clone(), c))) {
             let heights = lattice(cols.clone(), rows.clone());
-            for row in rows {
-                for col in cols.clone() {
-                    let (x, y) = (column_m(0, col), column_m(1, row));
-                    // The column's ground is a lattice point: exactly the finest surface.
-                    let ground = heights.point_m(
-                        (col0[0] + col as i64) * ratio,
-                        (col0[1] + row as i64) * ratio,
-                    );
-                    out.ground_m[row * COLUMNS + col] = ground as f32;
-                    let bounce = heights.march_column(
-                        (x, y, ground),
-                        (&dirs, &distances, &inverse),
-                        &layers_m,
-                        toward,
-                        &mut tan_max,
-                    );
-                    let column =
-                        rays.column(&heights, (x, y, ground), (&dirs, sky.is_none()), &tan_max);
-                    for (l, lit) in column.iter().enumerate() {
-                        let i = Self::index(l, row, col);
-                        if sky.is_none() {
-                            out.sky[i] = to_byte(lit.sky);
+            // The bounce's columns first: the others interpolate it between them.
+            for pass in [true, false] {
+                for row in rows.clone() {
+                    for col in cols.clone() {
+                        let own = [col0[0] + col as i64, col0[1] + row as i64]
+                            .iter()
+                            .all(|&g| (g * level_step) % 2 == 0);
+                        if own != pass {
+                            continue;
                         }
-                        out.sun[i] = to_byte(lit.sun_transmittance);
-                        out.sun_margin[i] = margin_to_byte(lit.sun_margin_rad);
-                        out.bounce[i] = to_byte(bounce[l] / HORIZON_AZIMUTHS as f64);
+                        let (x, y) = (column_m(0, col), column_m(1, row));
+                        // The column's ground is a lattice point: exactly the finest surface.
+                        let ground = heights.point_m(
+                            (col0[0] + col as i64) * ratio,
+                            (col0[1] + row as i64) * ratio,
+                        );
+                        out.ground_m[row * COLUMNS + col] = ground as f32;
+                        let what = match (own, sky.is_none()) {
+                            (true, _) => March::All,
+                            (false, true) => March::Horizons,
+                            (false, false) => March::Sun,
+                        };
+                        let bounce = heights.march_column(
+                            (x, y, ground),
+                            (&dirs, &distances, &inverse),
+                            (&layers_m, what),
+                            toward,
+                            &mut tan_max,
+                        );
+                        let column =
+                            rays.column(&heights, (x, y, ground), (&dirs, sky.is_none()), &tan_max);
+                        for (l, lit) in column.iter().enumerate() {
+                            let i = Self::index(l, row, col);
+                            if own {
+                                bounce_of[i] = bounce[l] / HORIZON_AZIMUTHS as f64;
+                            } else {
+                                bounce_of[i] = interpolated(&bounce_of, l, row, col);
+                            }
+                            if sky.is_none() {
+                                out.sky[i] = to_byte(lit.sky);
+                            }
+                            out.sun[i] = to_byte(lit.sun_transmittance);
+                            out.sun_margin[i] = margin_to_byte(lit.sun_margin_rad);
+                            out.bounce[i] = to_byte(bounce_of[i]);
+                        }
                     }
                 }
             }
@@ -731,6 +777,32 @@ pub fn terrain_lit(margin_rad: f64) -> f64 {
 
 fn to_byte(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Layer `l`'s value at a column with an odd global index, from `values` (`[layer][row][col]`):
+/// the mean of its even neighbours along its odd axes (two, or four diagonally).
+fn interpolated(values: &[f64], l: usize, row: usize, col: usize) -> f64 {
+    // At the grid level a grid's first and last columns are even, so an odd column always has
+    // both neighbours.
+    let (rows, cols) = (
+        if row % 2 == 1 {
+            [row - 1, row + 1]
+        } else {
+            [row, row]
+        },
+        if col % 2 == 1 {
+            [col - 1, col + 1]
+        } else {
+            [col, col]
+        },
+    );
+    let mut sum = 0.0;
+    for r in rows {
+        for c in cols {
+            sum += values[LightGrid::index(l, r, c)];
+        }
+    }
+    0.25 * sum
 }
 
 /// One layer's light at a column, before it is stored as bytes.
@@ -1012,7 +1084,7 @@ mod tests {
                     let bounce = h.march_column(
                         (x, y, ground),
                         (&dirs, &distances, &inverse),
-                        &layers_m,
+                        (&layers_m, March::All),
                         toward,
                         &mut tans,
                     );
@@ -1047,8 +1119,8 @@ mod tests {
         );
     }
 
-    /// Neighbouring grids hold exactly the same values (ground, sky, sun, every layer) in the
-    /// columns they share, on a map moved to an origin with a fraction of a metre.
+    /// Neighbouring grids hold exactly the same values (ground, sky, sun, bounce, every layer)
+    /// in the columns they share, on a map moved to an origin with a fraction of a metre.
     #[test]
     fn shared_border_columns_are_identical() {
         let (world, canopy, tree) = shifted_tiny();
@@ -1067,13 +1139,18 @@ mod tests {
                 let (ae, e) = (LightGrid::index(l, k, last), LightGrid::index(l, k, 0));
                 let (an, n) = (LightGrid::index(l, last, k), LightGrid::index(l, 0, k));
                 assert_eq!(
-                    (a.sky[ae], a.sun[ae], a.sun_margin[ae]),
-                    (east.sky[e], east.sun[e], east.sun_margin[e]),
+                    (a.sky[ae], a.sun[ae], a.sun_margin[ae], a.bounce[ae]),
+                    (east.sky[e], east.sun[e], east.sun_margin[e], east.bounce[e]),
                     "east {l} {k}"
                 );
                 assert_eq!(
-                    (a.sky[an], a.sun[an], a.sun_margin[an]),
-                    (north.sky[n], north.sun[n], north.sun_margin[n]),
+                    (a.sky[an], a.sun[an], a.sun_margin[an], a.bounce[an]),
+                    (
+                        north.sky[n],
+                        north.sun[n],
+                        north.sun_margin[n],
+                        north.bounce[n]
+                    ),
                     "north {l} {k}"
                 );
             }
@@ -1147,8 +1224,13 @@ mod tests {
                         for l in 0..LAYERS {
                             let (i, j) = (LightGrid::index(l, cr, cc), LightGrid::index(l, fr, fc));
                             assert_eq!(
-                                (coarse.sky[i], coarse.sun[i], coarse.sun_margin[i]),
-                                (fine.sky[j], fine.sun[j], fine.sun_margin[j]),
+                                (
+                                    coarse.sky[i],
+                                    coarse.sun[i],
+                                    coarse.sun_margin[i],
+                                    coarse.bounce[i]
+                                ),
+                                (fine.sky[j], fine.sun[j], fine.sun_margin[j], fine.bounce[j]),
                                 "level {coarse_level} child ({dx}, {dy}) layer {l} column ({r}, {c})"
                             );
                             compared += 1;
