@@ -58,7 +58,7 @@ pub fn open_world(
 pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 
 /// Maps with at least this many height cells (a 2 km map at 4 m) keep their surface error
-/// grids in [`SURFACE_ERROR_CACHE`]: the 8 km default map has 4 M and computes them in about a
+/// grids in [`SURFACE_ERROR_CACHE`] and their light grids' sky pages beside it: the 8 km default map has 4 M and computes them in about a
 /// minute on two cores (most of it the 32 m nodes' bounds,
 /// [`engine::terrain::precomputed`]), a 2 km map in seconds; smaller maps compute them in
 /// a fraction of a second and are left untouched.
@@ -67,7 +67,12 @@ pub const CACHE_MIN_CELLS: usize = 1 << 18;
 fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::Progress) -> World {
     let cells = (map.heights.width() - 1) * (map.heights.height() - 1);
     let cache = (cells >= CACHE_MIN_CELLS).then(|| dir.join(SURFACE_ERROR_CACHE));
-    engine::terrain::precomputed::open(map, cache.as_deref(), progress)
+    let mut world = engine::terrain::precomputed::open(map, cache.as_deref(), progress);
+    // The same maps keep the light grids' sky pages (engine::lighting::sky_pages).
+    if cells >= CACHE_MIN_CELLS {
+        world.derived_dir = Some(dir.to_path_buf());
+    }
+    world
 }
 
 /// The vertical fields of view the apps accept, degrees (the default is 60).

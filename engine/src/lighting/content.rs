@@ -20,6 +20,7 @@
 //! ([`LightGrid::relit`]): every live grid is stale, nearest first, and no frame waits for it.
 
 use super::grid::{COLUMNS, LAYERS, LightGrid, Sun, grid_level};
+use super::sky_pages::{SKY_PAGES_DIR, SkyPages};
 use crate::stream::{ContentKind, NodeWork, Payload, Phase, Shared};
 use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -106,6 +107,12 @@ struct Inner {
     /// The streamer's world, attached when the streamer is made (see
     /// [`ContentKind::attach_world`]): shared, never copied (a copy of a 32 km world is 2.8 GB).
     world: std::sync::OnceLock<Arc<World>>,
+    /// The sky pages kept in the world's derived folder, if it has one (made by the first
+    /// light thread that needs them: their key hashes the whole map).
+    pages: std::sync::OnceLock<Option<SkyPages>>,
+    /// Where the sky pages are kept when set ([`LightingContent::keep_sky_pages_in`]), instead
+    /// of the world's derived folder.
+    pages_dir: std::sync::OnceLock<std::path::PathBuf>,
     tree: QuadTree,
     canopy: Arc<Canopy>,
     sun: Mutex<Sun>,
@@ -226,10 +233,20 @@ impl Inner {
                 }
             };
             let sun = self.sun();
-            // A relight keeps the grid's sky (no sun changes it).
-            let grid = match next.grid() {
-                Some(earlier) => earlier.relit(world, &self.canopy, &self.tree, sun),
-                None => LightGrid::compute(world, &self.canopy, &self.tree, next.key, sun),
+            // A relight keeps the grid's sky (no sun changes it); a first computation takes it
+            // from the node's sky page where the map keeps them.
+            let pages = self.pages.get_or_init(|| {
+                let dir = self
+                    .pages_dir
+                    .get()
+                    .cloned()
+                    .or_else(|| world.derived_dir.as_ref().map(|d| d.join(SKY_PAGES_DIR)));
+                dir.map(|dir| SkyPages::new(&dir, world, &self.canopy))
+            });
+            let grid = match (next.grid(), pages) {
+                (Some(earlier), _) => earlier.relit(world, &self.canopy, &self.tree, sun),
+                (None, Some(pages)) => pages.grid((world, &self.canopy, &self.tree), next.key, sun),
+                (None, None) => LightGrid::compute(world, &self.canopy, &self.tree, next.key, sun),
             };
             next.store(grid);
             self.announce_stored(next.key);
@@ -315,6 +332,8 @@ impl LightingContent {
         Self {
             inner: Arc::new(Inner {
                 world: std::sync::OnceLock::new(),
+                pages: std::sync::OnceLock::new(),
+                pages_dir: std::sync::OnceLock::new(),
                 tree: QuadTree::new(world.origin_m(), world.size_m()),
                 canopy,
                 sun: Mutex::new(sun),
@@ -330,6 +349,12 @@ impl LightingContent {
             threads: threads.max(1),
             handles: Mutex::new(Vec::new()),
         }
+    }
+
+    /// Keeps the grids' sky pages in `dir` instead of the world's derived folder (before the
+    /// first grid is computed; later calls change nothing).
+    pub fn keep_sky_pages_in(&self, dir: &std::path::Path) {
+        let _ = self.inner.pages_dir.set(dir.to_path_buf());
     }
 
     /// The light threads it runs.

@@ -562,7 +562,22 @@ impl LightGrid {
     /// cost, since the sky visibility (the terrain's horizons and the canopy's transmittance
     /// toward the sky) depends on no sun and is taken from this grid.
     pub fn relit(&self, world: &World, canopy: &Canopy, tree: &QuadTree, sun: Sun) -> Self {
-        Self::compute_with_sky(world, canopy, tree, self.key, sun, Some(&self.sky))
+        Self::with_sky(world, canopy, tree, self.key, sun, &self.sky)
+    }
+
+    /// Node `key`'s grid for `sun` with its sky given (an earlier computation's, or its sky
+    /// page, [`super::sky_pages`]): [`LightGrid::compute`]'s bytes when `sky` is that node's.
+    /// `sky` must hold [`LAYERS`] x [`COLUMNS`] x [`COLUMNS`] bytes.
+    pub fn with_sky(
+        world: &World,
+        canopy: &Canopy,
+        tree: &QuadTree,
+        key: NodeKey,
+        sun: Sun,
+        sky: &[u8],
+    ) -> Self {
+        assert_eq!(sky.len(), LAYERS * COLUMNS * COLUMNS, "a grid's sky");
+        Self::compute_with_sky(world, canopy, tree, key, sun, Some(sky))
     }
 
     /// [`LightGrid::compute`], with the sky bytes taken from `sky` when given (an earlier

@@ -17,6 +17,9 @@
 //! grids' bytes; [`seams`] finds the drawn nodes that must read their grid at a coarser
 //! neighbour's columns along a side to meet it without a step.
 //!
+//! [`sky_pages`] keeps each grid's sky (no sun changes it, and it is most of a grid's cost)
+//! with the map, so a node's grid is made again from its page at a fraction of the cost.
+//!
 //! [`content`] makes grids a node-content kind (shared by a grid node's descendants, relit in
 //! the background when the sun changes); `render::lighting` uploads them into slots of one 3D
 //! texture that the terrain, vegetation and object shaders sample trilinearly.
@@ -29,5 +32,6 @@ pub mod grid;
 #[cfg(feature = "measure")]
 pub mod reference;
 pub mod seams;
+pub mod sky_pages;
 
 pub use grid::{LightGrid, Sun};

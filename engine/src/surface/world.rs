@@ -49,6 +49,9 @@ pub struct World {
     pub map_error: super::map_error::MapErrorPyramid,
     /// Max-pyramid of the map's height samples.
     pub heights_max: super::height_max::HeightMax,
+    /// A folder where data derived from this map may be kept between runs (the light grids'
+    /// sky pages, [`crate::lighting::sky_pages`]); `None` (the default) keeps none.
+    pub derived_dir: Option<std::path::PathBuf>,
 }
 
 /// How far the finest surface can stray from its linear interpolation over a small region,
@@ -208,6 +211,7 @@ impl World {
             curv_detail,
             amp_max,
             decals,
+            derived_dir: None,
             map_error: super::map_error::MapErrorPyramid::default(),
             heights_max,
         }

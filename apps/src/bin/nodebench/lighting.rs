@@ -1,7 +1,8 @@
 //! Section `lighting`: light grids against the ray-marched reference (the share of points whose
-//! sky, sun visibility and ground bounce agree within the tolerance), computation time per grid, bytes
-//! per grid, and the time the lighting kind's threads take to light, and after a sun change to
-//! relight, every grid the flight's drawn nodes hold.
+//! sky, sun visibility and ground bounce agree within the tolerance), computation time per grid
+//! (in full, and from the grid's sky page), bytes per grid, and the time the lighting kind's
+//! threads take to light every grid the flight's drawn nodes hold: the first time (baking their
+//! sky pages), again from the pages, and after a sun change.
 
 use crate::report::{Report, bar};
 use crate::terrain::flight_nodes;
@@ -9,6 +10,7 @@ use engine::camera::Camera;
 use engine::lighting::content::LightingContent;
 use engine::lighting::grid::{COLUMNS, GROUND_LAYER_M, LightGrid, Sun, grid_level};
 use engine::lighting::reference;
+use engine::lighting::sky_pages::{PAYLOAD_BYTES, SkyPages};
 use engine::stream::ContentKind;
 use engine::surface::World;
 use engine::terrain::quadtree::{NodeKey, QuadTree};
@@ -17,6 +19,23 @@ use engine::vegetation::canopy::Canopy;
 use std::sync::Arc;
 use std::time::Instant;
 use worldgen::noise::unit3;
+
+/// Where the section keeps the sky pages it writes (emptied at its start).
+const PAGES_DIR: &str = "target/nodebench/sky_pages";
+
+/// Bytes of the files under `dir`.
+fn walk_bytes(dir: &std::path::Path) -> u64 {
+    std::fs::read_dir(dir).map_or(0, |entries| {
+        entries
+            .flatten()
+            .map(|e| match e.metadata() {
+                Ok(m) if m.is_dir() => walk_bytes(&e.path()),
+                Ok(m) => m.len(),
+                Err(_) => 0,
+            })
+            .sum()
+    })
+}
 
 /// Agreement tolerance on a visibility (see tests/tests/e2e/lighting.rs for why).
 const TOLERANCE: f64 = 0.05;
@@ -100,6 +119,7 @@ pub(crate) fn section_lighting(
             &format!("one {} m grid, 1 core", tree.node_size_m(key.level)),
         );
     }
+    grids_from_pages(world, &canopy, tree, &grids, r);
     if let Some(g) = grids.first() {
         r.add(
             "lighting",
@@ -112,8 +132,65 @@ pub(crate) fn section_lighting(
 
     reference_agreement(world, &canopy, tree, &grids, r, quick);
 
-    // Relighting after a sun change, by the lighting kind's own threads: every grid the
-    // flight's drawn nodes and their ancestors hold (the coarser nodes own theirs).
+    light_the_flight(world, canopy, tree, cams, r, (quick, workers));
+}
+
+/// The sample `grids` made again from their sky pages (written here from the grids, read back
+/// from the disk), as a node is made once its page is baked: time per grid, and whether each
+/// equals the full computation.
+fn grids_from_pages(
+    world: &Arc<World>,
+    canopy: &Canopy,
+    tree: &QuadTree,
+    grids: &[LightGrid],
+    r: &mut Report,
+) {
+    let pages_dir = std::path::Path::new(PAGES_DIR);
+    let _ = std::fs::remove_dir_all(pages_dir);
+    let pages = SkyPages::new(pages_dir, world, canopy);
+    let b = bar(grids.len() as u64, "light grids from sky pages");
+    let mut page_secs = Vec::new();
+    let mut equal = 0;
+    for g in grids {
+        if let Err(e) = pages.write(g) {
+            eprintln!(
+                "lighting: cannot write {} ({e})",
+                pages.path(g.key).display()
+            );
+        }
+        let t0 = Instant::now();
+        let from_page = pages.grid((world, canopy, tree), g.key, SUN);
+        page_secs.push(t0.elapsed().as_secs_f64());
+        equal += usize::from(from_page == *g);
+        b.inc(1);
+    }
+    b.finish_and_clear();
+    r.timings(
+        "lighting",
+        "grid from its sky page",
+        page_secs,
+        &format!(
+            "the same {} grids, each page read from the disk and the rest computed, 1 core; {equal} \
+             of {} equal to the full computation",
+            grids.len(),
+            grids.len()
+        ),
+    );
+}
+
+/// Lights, by the lighting kind's own threads, every grid the flight's drawn nodes and their
+/// ancestors hold (the coarser nodes own theirs): the first computation (which bakes their sky
+/// pages), a second visit from the pages, and a relight after a sun change.
+fn light_the_flight(
+    world: &Arc<World>,
+    canopy: Canopy,
+    tree: &QuadTree,
+    cams: &[Camera],
+    r: &mut Report,
+    (quick, workers): (bool, usize),
+) {
+    let level = grid_level(tree);
+    let pages_dir = std::path::Path::new(PAGES_DIR);
     let mut all: Vec<NodeKey> = flight_nodes(world, tree, cams, usize::MAX)
         .into_iter()
         .flat_map(|k| std::iter::once(k).chain(k.ancestors()))
@@ -124,13 +201,26 @@ pub(crate) fn section_lighting(
     if quick {
         all.truncate(8);
     }
-    let kind = LightingContent::with_threads(world, Arc::new(canopy), SUN, workers);
+    let canopy = Arc::new(canopy);
+    let _ = std::fs::remove_dir_all(pages_dir);
+    let kind = LightingContent::with_threads(world, Arc::clone(&canopy), SUN, workers);
+    kind.keep_sky_pages_in(pages_dir);
     // No streamer here: the kind shares the benchmark's world.
     kind.attach_world(world);
     let t0 = Instant::now();
     let held: Vec<_> = all.iter().map(|&k| kind.grid_for(k)).collect();
     kind.wait_idle();
     let first_s = t0.elapsed().as_secs_f64();
+    // A second visit: a new kind (no grid held) whose pages the first one baked.
+    let again = LightingContent::with_threads(world, canopy, SUN, workers);
+    again.keep_sky_pages_in(pages_dir);
+    again.attach_world(world);
+    let t0 = Instant::now();
+    let held_again: Vec<_> = all.iter().map(|&k| again.grid_for(k)).collect();
+    again.wait_idle();
+    let again_s = t0.elapsed().as_secs_f64();
+    drop(held_again);
+    let page_bytes: u64 = walk_bytes(pages_dir);
     let sun = Sun {
         azimuth_deg: SUN.azimuth_deg + 30.0,
         ..SUN
@@ -156,7 +246,21 @@ pub(crate) fn section_lighting(
         "light every grid of the flight (first computation)",
         first_s * 1e3,
         "ms",
-        &params,
+        &format!("{params}; each writes its sky page"),
+    );
+    r.add(
+        "lighting",
+        "light every grid of the flight from their sky pages",
+        again_s * 1e3,
+        "ms",
+        &format!("{params}; a second visit: the pages the first computation wrote"),
+    );
+    r.add(
+        "lighting",
+        "sky pages of the flight on disk",
+        page_bytes as f64 / (1024.0 * 1024.0),
+        "MiB",
+        &format!("{} pages of {} B", all.len(), PAYLOAD_BYTES),
     );
     r.add(
         "lighting",

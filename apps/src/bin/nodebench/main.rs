@@ -55,7 +55,8 @@ const SECTIONS: [&str; 14] = [
 /// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
 /// vegetation phase time per node, instances and draw calls per frame on the flight),
 /// `lighting` (light grids: sky and sun visibility against a ray-marched reference, computation
-/// time and bytes per grid, relighting the flight's grids after a sun change), `pm` (progressive
+/// time and bytes per grid in full and from its sky page, lighting the flight's grids the first
+/// time, again from their sky pages and after a sun change), `pm` (progressive
 /// meshes on the shared meshes: build throughput of each cost and of meshoptimizer, measured
 /// error at 50/10/1/0.1 % of the triangles, index rebuild rates, bytes per triangle), `buildings`
 /// (towns: generation time, houses per node, house triangles at tau 2 against full detail, the
@@ -263,7 +264,11 @@ fn run(cli: &Cli) -> Result<()> {
         })
         .max(1);
     // Shared with the light threads of section lighting (never copied).
-    let world = std::sync::Arc::new(open_world(&cli.map)?);
+    let mut world = open_world(&cli.map)?;
+    // Every section runs without the sky pages a viewer keeps in the map folder (its rows do
+    // not depend on earlier runs); section lighting measures them in a folder of its own.
+    world.derived_dir = None;
+    let world = std::sync::Arc::new(world);
     let tree = QuadTree::new(world.origin_m(), world.size_m());
     let vh = cli.viewport_height.max(16);
     let cams = measure::default_flight(&world, if cli.quick { 8 } else { 64 }, [vh * 16 / 9, vh]);
