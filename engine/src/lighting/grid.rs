@@ -18,7 +18,8 @@
 //! of its parent's grid), which is what lets a node blend seamlessly toward a coarser
 //! neighbour's grid (`render::light_pool`). **Canopy transmittance** is `exp(-optical depth)` of
 //! [`Canopy::extinction_per_m`] summed at midpoints along the ray until it leaves the canopy.
-//! **Ground bounce** ([`LightGrid::bounce_at`]): in the same horizon march, each band of
+//! **Ground bounce** ([`LightGrid::bounce_at`]): in the same horizon march (every
+//! [`BOUNCE_EVERY`]-th azimuth), each band of
 //! elevations where the terrain rises above the running horizon is weighted (in `sin^2` of the
 //! elevation, as the sky) by `max(0, n . s)` of the terrain seen there: its slope along the ray
 //! from the previous march point (a cliff between two points is seen as its face), across the
@@ -26,7 +27,7 @@
 //! shadows cast on it are left out). It is marched at the columns whose global index is even
 //! along both axes (every column of a coarser grid); a grid-level grid's other columns take the
 //! mean of their even neighbours: light reflected by the terrain a column sees changes little
-//! over 8 m, and agrees with the reference as well.
+//! over 8 m or between neighbouring azimuths, and agrees with the reference as well.
 //!
 //! **Sun visibility** is the share of the sun's disc above the terrain horizon along its own
 //! azimuth ([`terrain_lit`]) times the canopy transmittance toward it. A sample stores the two
@@ -226,10 +227,10 @@ impl<'a> HorizonHeights<'a> {
     }
 
     /// Marches the horizons of the column at (`x`, `y`), ground `ground_m`, along `dirs` (the
-    /// horizon azimuths, then the sun's; the sun's alone for [`March::Sun`]) at `distances` (and
+    /// horizon azimuths, then the sun's; fewer for [`March::Sun`] and [`March::Bounce`]) at `distances` (and
     /// their inverses): per direction and layer the highest tangent of the terrain into
-    /// `tan_max`. Returns per layer (zero unless [`March::All`]) the ground's bounce summed over
-    /// the horizon azimuths: the cosine-weighted share of the sky hidden by terrain, each hidden
+    /// `tan_max`. Returns per layer (zero for [`March::Horizons`] and [`March::Sun`]) the
+    /// ground's bounce summed over the bounce's azimuths (every [`BOUNCE_EVERY`]-th): the cosine-weighted share of the sky hidden by terrain, each hidden
     /// band weighted by how squarely the terrain seen there faces the sun.
     ///
     /// Two shortcuts leave every result bit the same: a ray point is compared with the layers
@@ -249,9 +250,11 @@ impl<'a> HorizonHeights<'a> {
         let first_far = distances.partition_point(|&r| r <= self.near_reach_m);
         for (d, (best, dir)) in tan_max.iter_mut().zip(dirs).enumerate() {
             let is_azimuth = d < HORIZON_AZIMUTHS;
-            if is_azimuth && what == March::Sun {
+            let bounce_azimuth = is_azimuth && d % BOUNCE_EVERY == 0;
+            if is_azimuth && (what == March::Sun || (what == March::Bounce && !bounce_azimuth)) {
                 continue;
             }
+            let with_bounce = bounce_azimuth && matches!(what, March::All | March::Bounce);
             // Horizons below a floor give the same bytes: a horizon azimuth's tangent counts
             // only above the horizontal (`sin2_of_tan`, and the bounce of terrain above it),
             // the sun's only within the stored margin ([`SUN_MARGIN_RANGE_RAD`], clamped).
@@ -296,7 +299,7 @@ impl<'a> HorizonHeights<'a> {
                     for ((b, lh), add) in best.iter_mut().zip(layers_m).zip(&mut bounce) {
                         let t = (dh - lh) * inv_r;
                         if t > *b {
-                            if is_azimuth && what == March::All && t > 0.0 && toward.z > 0.0 {
+                            if with_bounce && t > 0.0 && toward.z > 0.0 {
                                 let f = *facing.get_or_insert_with(|| {
                                     let before = match previous {
                                         Previous::At(r0, dh0) => (r0, dh0),
@@ -451,9 +454,15 @@ enum March {
     All,
     /// Every horizon, no bounce.
     Horizons,
+    /// The ground's bounce (the horizons of its azimuths) and the horizon toward the sun.
+    Bounce,
     /// The horizon toward the sun alone.
     Sun,
 }
+
+/// The ground's bounce is summed over every this-many-th horizon azimuth: light reflected by
+/// the terrain around, smooth in direction (8 azimuths agree with the reference as well as 16).
+pub const BOUNCE_EVERY: usize = 2;
 
 /// Points of a horizon march beyond the lattice's reach that are skipped together when the map
 /// around them cannot rise above the horizon found so far.
@@ -672,7 +681,8 @@ impl LightGrid {
                         );
                         out.ground_m[row * COLUMNS + col] = ground as f32;
                         let what = match (own, sky.is_none()) {
-                            (true, _) => March::All,
+                            (true, true) => March::All,
+                            (true, false) => March::Bounce,
                             (false, true) => March::Horizons,
                             (false, false) => March::Sun,
                         };
@@ -688,7 +698,7 @@ impl LightGrid {
                         for (l, lit) in column.iter().enumerate() {
                             let i = Self::index(l, row, col);
                             if own {
-                                bounce_of[i] = bounce[l] / HORIZON_AZIMUTHS as f64;
+                                bounce_of[i] = bounce[l] / (HORIZON_AZIMUTHS / BOUNCE_EVERY) as f64;
                             } else {
                                 bounce_of[i] = interpolated(&bounce_of, l, row, col);
                             }
@@ -1037,7 +1047,11 @@ mod tests {
                 for l in 0..LAYERS {
                     let t = (dh - layers_m[l]) * (1.0 / r);
                     if t > best[l] {
-                        if d < HORIZON_AZIMUTHS && t > 0.0 && toward.z > 0.0 {
+                        if d < HORIZON_AZIMUTHS
+                            && d % BOUNCE_EVERY == 0
+                            && t > 0.0
+                            && toward.z > 0.0
+                        {
                             let f = h.facing_sun((px, py), *dir, previous, (r, dh), toward);
                             bounce[l] += f * (sin2_of_tan(t) - sin2_of_tan(best[l]));
                         }
