@@ -68,8 +68,13 @@ fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::P
     let cells = (map.heights.width() - 1) * (map.heights.height() - 1);
     let cache = (cells >= CACHE_MIN_CELLS).then(|| dir.join(SURFACE_ERROR_CACHE));
     let mut world = engine::terrain::precomputed::open(map, cache.as_deref(), progress);
-    // The same maps keep the light grids' sky pages (engine::lighting::sky_pages).
-    if cells >= CACHE_MIN_CELLS {
+    // The same maps keep the light grids' sky pages (engine::lighting::sky_pages), and any
+    // map whose pages were baked (`flyover --bake-sky`).
+    if cells >= CACHE_MIN_CELLS
+        || dir
+            .join(engine::lighting::sky_pages::SKY_PAGES_DIR)
+            .is_dir()
+    {
         world.derived_dir = Some(dir.to_path_buf());
     }
     world

@@ -7,7 +7,7 @@
 //! marched.
 //!
 //! Pages are derived data, baked the first time a node's grid is computed ([`SkyPages::grid`])
-//! and never trusted blindly: a page is used only when its key matches the
+//! or for the whole map ahead of time ([`SkyPages::bake`]), and never trusted blindly: a page is used only when its key matches the
 //! map and the lighting it was computed with, it belongs to the node asked for, and its payload
 //! matches its checksum; otherwise it is refused (logged with its file and the reason) and the
 //! grid computed in full, which writes the page again. The key hashes the surface
@@ -151,10 +151,15 @@ impl SkyPages {
         Ok(payload.to_vec())
     }
 
-    /// Writes `grid`'s sky as its node's page (through a temporary file, so a reader never sees
-    /// a half-written page).
+    /// Writes `grid`'s sky as its node's page.
     pub fn write(&self, grid: &LightGrid) -> std::io::Result<()> {
-        let path = self.path(grid.key);
+        self.write_sky(grid.key, &grid.sky)
+    }
+
+    /// Writes `sky` as node `key`'s page (through a temporary file, so a reader never sees a
+    /// half-written page).
+    fn write_sky(&self, key: NodeKey, sky: &[u8]) -> std::io::Result<()> {
+        let path = self.path(key);
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent)?;
         }
@@ -162,11 +167,11 @@ impl SkyPages {
         bytes.extend_from_slice(MAGIC);
         bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
         bytes.extend_from_slice(&self.key.to_le_bytes());
-        bytes.push(grid.key.level);
-        bytes.extend_from_slice(&grid.key.ix.to_le_bytes());
-        bytes.extend_from_slice(&grid.key.iy.to_le_bytes());
-        bytes.extend_from_slice(&checksum(&grid.sky).to_le_bytes());
-        bytes.extend_from_slice(&grid.sky);
+        bytes.push(key.level);
+        bytes.extend_from_slice(&key.ix.to_le_bytes());
+        bytes.extend_from_slice(&key.iy.to_le_bytes());
+        bytes.extend_from_slice(&checksum(sky).to_le_bytes());
+        bytes.extend_from_slice(sky);
         let tmp = path.with_extension(format!("partial{}", std::process::id()));
         std::fs::write(&tmp, &bytes)?;
         std::fs::rename(&tmp, &path)
@@ -194,6 +199,137 @@ impl SkyPages {
             log::warn!("{}: cannot write ({e})", self.path(key).display());
         }
         grid
+    }
+}
+
+/// What [`SkyPages::bake`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Baked {
+    /// Grid-level pages computed (their grids in full).
+    pub computed: usize,
+    /// Coarser pages taken from the grid-level ones.
+    pub derived: usize,
+    /// Pages already there and valid.
+    pub kept: usize,
+}
+
+impl SkyPages {
+    /// Bakes every page of the map ahead of time, on `threads` threads: each grid-level node's
+    /// grid computed (its page written) unless its page is there and valid, then every coarser
+    /// node's page taken from them (a coarse grid's columns hold the finer grids' bytes, so no
+    /// computation). `progress` sees the grid-level nodes. A page that cannot be written stops
+    /// the bake with the file and the error.
+    pub fn bake(
+        &self,
+        (world, canopy, tree): (&World, &Canopy, &QuadTree),
+        threads: usize,
+        progress: &dyn worldgen::progress::Progress,
+    ) -> std::io::Result<Baked> {
+        let level = grid::grid_level(tree);
+        let side = 1u32 << level;
+        let nodes: Vec<NodeKey> = (0..side)
+            .flat_map(|iy| (0..side).map(move |ix| NodeKey { level, ix, iy }))
+            .collect();
+        progress.begin("sky pages", nodes.len() as u64);
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let failed = std::sync::Mutex::new(None);
+        let (computed, kept) = (
+            std::sync::atomic::AtomicUsize::new(0),
+            std::sync::atomic::AtomicUsize::new(0),
+        );
+        std::thread::scope(|s| {
+            for _ in 0..threads.max(1) {
+                s.spawn(|| {
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&key) = nodes.get(i) else { break };
+                        if self.read(key).is_ok() {
+                            kept.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        } else {
+                            let g = LightGrid::compute(world, canopy, tree, key, Sun::default());
+                            if let Err(e) = self.write(&g) {
+                                let why = std::io::Error::new(
+                                    e.kind(),
+                                    format!("{}: {e}", self.path(key).display()),
+                                );
+                                *failed.lock().expect("failure lock") = Some(why);
+                                next.store(nodes.len(), std::sync::atomic::Ordering::Relaxed);
+                            }
+                            computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        }
+                        progress.advance(1);
+                    }
+                });
+            }
+        });
+        progress.end();
+        if let Some(e) = failed.into_inner().expect("failure lock") {
+            return Err(e);
+        }
+        let mut derived = 0;
+        for coarse in (0..level).rev() {
+            let n = 1u32 << coarse;
+            for iy in 0..n {
+                for ix in 0..n {
+                    self.derive(
+                        tree,
+                        NodeKey {
+                            level: coarse,
+                            ix,
+                            iy,
+                        },
+                    )?;
+                    derived += 1;
+                }
+            }
+        }
+        Ok(Baked {
+            computed: computed.into_inner(),
+            derived,
+            kept: kept.into_inner(),
+        })
+    }
+
+    /// Writes the page of coarse node `key` from its grid-level descendants' pages (which must
+    /// be there): each of its columns is one of theirs.
+    fn derive(&self, tree: &QuadTree, key: NodeKey) -> std::io::Result<()> {
+        let level = grid::grid_level(tree);
+        let step = 1usize << (level - key.level);
+        let per = COLUMNS - 1;
+        let last = (1usize << level) - 1;
+        let mut sky = vec![0u8; PAYLOAD_BYTES];
+        let mut fine: std::collections::HashMap<(usize, usize), Vec<u8>> =
+            std::collections::HashMap::new();
+        for row in 0..COLUMNS {
+            for col in 0..COLUMNS {
+                // Global grid-level column indices, then the grid-level node holding them.
+                let g = [
+                    (key.ix as usize * per + col) * step,
+                    (key.iy as usize * per + row) * step,
+                ];
+                let node = [(g[0] / per).min(last), (g[1] / per).min(last)];
+                let local = [g[0] - node[0] * per, g[1] - node[1] * per];
+                let page = match fine.entry((node[0], node[1])) {
+                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        let k = NodeKey {
+                            level,
+                            ix: node[0] as u32,
+                            iy: node[1] as u32,
+                        };
+                        let page = self.read(k).map_err(|why| {
+                            std::io::Error::other(format!("{}: {why}", self.path(k).display()))
+                        })?;
+                        e.insert(page)
+                    }
+                };
+                for l in 0..LAYERS {
+                    sky[LightGrid::index(l, row, col)] =
+                        page[LightGrid::index(l, local[1], local[0])];
+                }
+            }
+        }
+        self.write_sky(key, &sky)
     }
 }
 
@@ -342,6 +478,56 @@ mod tests {
             (a1.sun.clone(), a1.bounce.clone()),
             (forged.sun.clone(), forged.bounce.clone())
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Baking the whole map writes every page, each equal to its grid's sky at every level
+    /// (the coarse ones taken from the grid-level ones, no computation); a second bake keeps
+    /// them all.
+    #[test]
+    fn a_baked_map_has_every_page_and_each_is_its_grids_sky() {
+        let (world, canopy, tree) = tiny();
+        let dir = temp_dir("bake");
+        let pages = SkyPages::new(&dir, &world, &canopy);
+        let at = (&world, &canopy, &tree);
+        let level = grid::grid_level(&tree);
+        let baked = pages
+            .bake(at, 2, &worldgen::progress::Silent)
+            .expect("bake");
+        let fine = 1usize << (2 * level);
+        let coarse: usize = (0..level).map(|l| 1usize << (2 * l)).sum();
+        assert_eq!(
+            baked,
+            Baked {
+                computed: fine,
+                derived: coarse,
+                kept: 0
+            }
+        );
+        for key in [
+            NodeKey {
+                level,
+                ix: 3,
+                iy: 1,
+            },
+            NodeKey {
+                level: level - 1,
+                ix: 1,
+                iy: 1,
+            },
+            NodeKey {
+                level: 0,
+                ix: 0,
+                iy: 0,
+            },
+        ] {
+            let full = LightGrid::compute(&world, &canopy, &tree, key, Sun::default());
+            assert_eq!(pages.read(key).as_deref(), Ok(&full.sky[..]), "{key:?}");
+        }
+        let again = pages
+            .bake(at, 1, &worldgen::progress::Silent)
+            .expect("bake again");
+        assert_eq!((again.computed, again.kept), (0, fine));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
