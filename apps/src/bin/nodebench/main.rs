@@ -133,6 +133,12 @@ struct Cli {
     /// or with a kind turned off).
     #[arg(long, value_delimiter = ',', value_parser = pilots::parse_choice)]
     pilots: Vec<pilots::PilotChoice>,
+    /// Sections streaming and bookkeeping light grids from the map's baked sky pages
+    /// (`<map>/.sky_pages`, written by `flyover --bake-sky` or by a viewer's earlier visits), as
+    /// the viewer does; without it every grid is computed in full (rows that do not depend on
+    /// what earlier runs left in the map folder). Section lighting measures pages on its own.
+    #[arg(long)]
+    sky_pages: bool,
     /// Length of the soak section in minutes (--quick: a quarter of a minute).
     #[arg(long, default_value_t = 30.0)]
     soak_minutes: f64,
@@ -265,9 +271,21 @@ fn run(cli: &Cli) -> Result<()> {
         .max(1);
     // Shared with the light threads of section lighting (never copied).
     let mut world = open_world(&cli.map)?;
-    // Every section runs without the sky pages a viewer keeps in the map folder (its rows do
-    // not depend on earlier runs); section lighting measures them in a folder of its own.
-    world.derived_dir = None;
+    // Sections run without the sky pages a viewer keeps in the map folder unless asked (the
+    // rows then do not depend on earlier runs); section lighting measures pages on its own.
+    if cli.sky_pages {
+        let dir = cli.map.join(engine::lighting::sky_pages::SKY_PAGES_DIR);
+        if !dir.is_dir() {
+            bail!(
+                "--sky-pages: {} has no sky pages; bake them with `flyover --map {} --bake-sky`",
+                cli.map.display(),
+                cli.map.display()
+            );
+        }
+        world.derived_dir = Some(cli.map.clone());
+    } else {
+        world.derived_dir = None;
+    }
     let world = std::sync::Arc::new(world);
     let tree = QuadTree::new(world.origin_m(), world.size_m());
     let vh = cli.viewport_height.max(16);
