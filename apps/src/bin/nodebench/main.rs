@@ -255,6 +255,27 @@ pub(crate) fn open_world(path: &std::path::Path) -> Result<World> {
         .with_context(|| format!("opening map {}", path.display()))
 }
 
+/// The map of `cli`, as the sections use it: without the sky pages a viewer keeps in the map
+/// folder unless `--sky-pages` asks for them (the rows then do not depend on earlier runs);
+/// section lighting measures pages on its own.
+fn open_for_sections(cli: &Cli) -> Result<World> {
+    let mut world = open_world(&cli.map)?;
+    if cli.sky_pages {
+        let dir = cli.map.join(engine::lighting::sky_pages::SKY_PAGES_DIR);
+        if !dir.is_dir() {
+            bail!(
+                "--sky-pages: {} has no sky pages; bake them with `flyover --map {} --bake-sky`",
+                cli.map.display(),
+                cli.map.display()
+            );
+        }
+        world.derived_dir = Some(cli.map.clone());
+    } else {
+        world.derived_dir = None;
+    }
+    Ok(world)
+}
+
 fn run(cli: &Cli) -> Result<()> {
     for s in &cli.only {
         if !SECTIONS.contains(&s.as_str()) {
@@ -270,23 +291,7 @@ fn run(cli: &Cli) -> Result<()> {
         })
         .max(1);
     // Shared with the light threads of section lighting (never copied).
-    let mut world = open_world(&cli.map)?;
-    // Sections run without the sky pages a viewer keeps in the map folder unless asked (the
-    // rows then do not depend on earlier runs); section lighting measures pages on its own.
-    if cli.sky_pages {
-        let dir = cli.map.join(engine::lighting::sky_pages::SKY_PAGES_DIR);
-        if !dir.is_dir() {
-            bail!(
-                "--sky-pages: {} has no sky pages; bake them with `flyover --map {} --bake-sky`",
-                cli.map.display(),
-                cli.map.display()
-            );
-        }
-        world.derived_dir = Some(cli.map.clone());
-    } else {
-        world.derived_dir = None;
-    }
-    let world = std::sync::Arc::new(world);
+    let world = std::sync::Arc::new(open_for_sections(cli)?);
     let tree = QuadTree::new(world.origin_m(), world.size_m());
     let vh = cli.viewport_height.max(16);
     let cams = measure::default_flight(&world, if cli.quick { 8 } else { 64 }, [vh * 16 / 9, vh]);
