@@ -372,26 +372,30 @@ impl<'a> HorizonHeights<'a> {
         }
     }
 
-    /// The height at a ray point `r_m` (horizontally) from its column.
-    fn height_m(&self, x_m: f64, y_m: f64, r_m: f64) -> f64 {
-        if r_m > self.near_reach_m {
-            return bilinear(&self.world.map.heights, self.map_at, x_m, y_m);
-        }
+    /// The lattice cell holding world (`x_m`, `y_m`), when inside the lattice: the index of its
+    /// south-west point and the fractions past it along x and y.
+    fn cell(&self, x_m: f64, y_m: f64) -> Option<(usize, f64, f64)> {
         let gx = (x_m - self.tree_origin_m[0]) / NEAR_SPACING_M;
         let gy = (y_m - self.tree_origin_m[1]) / NEAR_SPACING_M;
         let (fx, fy) = (gx.floor(), gy.floor());
         let (i, j) = (fx as i64 - self.first[0], fy as i64 - self.first[1]);
-        if (0..self.n[0] as i64 - 1).contains(&i) && (0..self.n[1] as i64 - 1).contains(&j) {
-            let (tx, ty) = (gx - fx, gy - fy);
-            let nx = self.n[0];
-            let k = j as usize * nx + i as usize;
-            let (a, b) = (self.near[k], self.near[k + 1]);
-            let (c, d) = (self.near[k + nx], self.near[k + nx + 1]);
-            let lo = a + (b - a) * tx;
-            let hi = c + (d - c) * tx;
-            lo + (hi - lo) * ty
-        } else {
-            bilinear(&self.world.map.heights, self.map_at, x_m, y_m)
+        ((0..self.n[0] as i64 - 1).contains(&i) && (0..self.n[1] as i64 - 1).contains(&j))
+            .then(|| (j as usize * self.n[0] + i as usize, gx - fx, gy - fy))
+    }
+
+    /// Bilinear interpolation of lattice values `v` in cell `(k, tx, ty)` ([`Self::cell`]).
+    fn blend(&self, v: &[f64], (k, tx, ty): (usize, f64, f64)) -> f64 {
+        let nx = self.n[0];
+        let lo = v[k] + (v[k + 1] - v[k]) * tx;
+        let hi = v[k + nx] + (v[k + nx + 1] - v[k + nx]) * tx;
+        lo + (hi - lo) * ty
+    }
+
+    /// The height at a ray point `r_m` (horizontally) from its column.
+    fn height_m(&self, x_m: f64, y_m: f64, r_m: f64) -> f64 {
+        match self.cell(x_m, y_m).filter(|_| r_m <= self.near_reach_m) {
+            Some(cell) => self.blend(&self.near, cell),
+            None => bilinear(&self.world.map.heights, self.map_at, x_m, y_m),
         }
     }
 
@@ -399,32 +403,17 @@ impl<'a> HorizonHeights<'a> {
     /// [`Canopy::extinction_per_m`] at its height over [`Self::height_m`], the two read from
     /// one lattice cell where the point lies within the lattice's reach.
     fn extinction_per_m(&self, canopy: &Canopy, p: DVec3, r_m: f64) -> f64 {
-        if let Some(ext) = self
+        let near = self
             .extinction
             .as_ref()
-            .filter(|_| r_m <= self.near_reach_m)
-        {
-            let gx = (p.x - self.tree_origin_m[0]) / NEAR_SPACING_M;
-            let gy = (p.y - self.tree_origin_m[1]) / NEAR_SPACING_M;
-            let (fx, fy) = (gx.floor(), gy.floor());
-            let (i, j) = (fx as i64 - self.first[0], fy as i64 - self.first[1]);
-            if (0..self.n[0] as i64 - 1).contains(&i) && (0..self.n[1] as i64 - 1).contains(&j) {
-                let (tx, ty) = (gx - fx, gy - fy);
-                let nx = self.n[0];
-                let k = j as usize * nx + i as usize;
-                // As `height_m` blends, the same operations in the same order.
-                let blend = |v: &[f64]| {
-                    let lo = v[k] + (v[k + 1] - v[k]) * tx;
-                    let hi = v[k + nx] + (v[k + nx + 1] - v[k + nx]) * tx;
-                    lo + (hi - lo) * ty
-                };
-                let above = p.z - blend(&self.near);
-                if !(0.0..=canopy.top_m).contains(&above) {
-                    return 0.0;
-                }
-                let band = ext.tops_m.partition_point(|&t| t < above);
-                return ext.values.get(band).map_or(0.0, |v| blend(v));
+            .filter(|_| r_m <= self.near_reach_m);
+        if let Some((ext, cell)) = near.and_then(|e| Some((e, self.cell(p.x, p.y)?))) {
+            let above = p.z - self.blend(&self.near, cell);
+            if !(0.0..=canopy.top_m).contains(&above) {
+                return 0.0;
             }
+            let band = ext.tops_m.partition_point(|&t| t < above);
+            return ext.values.get(band).map_or(0.0, |v| self.blend(v, cell));
         }
         let above = p.z - self.height_m(p.x, p.y, r_m);
         canopy.extinction_per_m(p.x, p.y, above)
