@@ -143,14 +143,34 @@ fn light_layer_w(above_m: f32) -> f32 {
 }
 
 // The grid values at column coordinates `g` of the grid in pool tile `slot`, layer coordinate
-// `w` (trilinear; clamped to the tile's sample centres, so tiles never bleed).
+// `w` (trilinear; clamped to the tile's sample centres, so tiles never bleed). Filtered here from
+// the eight samples around, with weights from the coordinates inside the tile: the same values
+// whichever tile the grid leased (the sampler's filter weights depend on the texture coordinate,
+// so on the tile).
 fn light_fetch(slot: f32, g: vec2<f32>, w: f32) -> vec4<f32> {
-    let tiles = light_info.tiles.x;
-    let side = f32(LIGHT_COLUMNS);
-    let tile = vec2<f32>(slot % tiles, floor(slot / tiles));
-    let c = clamp(g, vec2<f32>(0.0), vec2<f32>(side - 1.0));
-    let uv = (tile * side + 0.5 + c) / (tiles * side);
-    return textureSampleLevel(light_grids, light_sampler, vec3<f32>(uv, w), 0.0);
+    let tiles = u32(light_info.tiles.x);
+    let s = u32(slot);
+    let origin = vec2<i32>(vec2<u32>(s % tiles, s / tiles) * LIGHT_COLUMNS);
+    let last = f32(LIGHT_COLUMNS - 1u);
+    let c = clamp(g, vec2<f32>(0.0), vec2<f32>(last));
+    let z = clamp(w * f32(LIGHT_LAYERS) - 0.5, 0.0, f32(LIGHT_LAYERS - 1u));
+    let c0 = min(floor(c), vec2<f32>(last - 1.0));
+    let z0 = min(floor(z), f32(LIGHT_LAYERS - 2u));
+    let f = c - c0;
+    let fz = z - z0;
+    let p = origin + vec2<i32>(c0);
+    let l = i32(z0);
+    let s000 = textureLoad(light_grids, vec3<i32>(p, l), 0);
+    let s100 = textureLoad(light_grids, vec3<i32>(p + vec2<i32>(1, 0), l), 0);
+    let s010 = textureLoad(light_grids, vec3<i32>(p + vec2<i32>(0, 1), l), 0);
+    let s110 = textureLoad(light_grids, vec3<i32>(p + vec2<i32>(1, 1), l), 0);
+    let s001 = textureLoad(light_grids, vec3<i32>(p, l + 1), 0);
+    let s101 = textureLoad(light_grids, vec3<i32>(p + vec2<i32>(1, 0), l + 1), 0);
+    let s011 = textureLoad(light_grids, vec3<i32>(p + vec2<i32>(0, 1), l + 1), 0);
+    let s111 = textureLoad(light_grids, vec3<i32>(p + vec2<i32>(1, 1), l + 1), 0);
+    let below = mix(mix(s000, s100, f.x), mix(s010, s110, f.x), f.y);
+    let above = mix(mix(s001, s101, f.x), mix(s011, s111, f.x), f.y);
+    return mix(below, above, fz);
 }
 
 // `light_fetch` reading only every `k.x`-th column along x and every `k.y`-th along y (linear

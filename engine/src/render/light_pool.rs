@@ -4,8 +4,11 @@
 //! [`POOL_TILES`] x [`POOL_TILES`] tiles, each a grid's `COLUMNS x COLUMNS x LAYERS` samples,
 //! bound in the frame group (binding 1, with a clamping linear sampler at 2 and the layer
 //! heights at 3) so that every renderer's shaders sample it (`node_light` in
-//! the prelude). The hardware filters trilinearly inside a tile: coordinates are clamped to the
-//! tile's sample centres, so neighbouring tiles never bleed in.
+//! the prelude). The shaders filter trilinearly inside a tile from eight loaded samples, with
+//! weights from the coordinates inside the tile (clamped to its sample centres, so neighbouring
+//! tiles never bleed in): a grid's values draw the same whichever tile it leased, which the
+//! sampler's filter at normalized coordinates did not quite (its weights depend on where in the
+//! texture the tile lies); the sampler at binding 2 is no longer read.
 //!
 //! A grid's tile is leased by the first node drawn with it ([`LightPool::lease`]) and shared
 //! by every node the grid shades; it returns to the pool when the last [`LightLease`] drops
