@@ -51,7 +51,6 @@ struct LightInfo {
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var light_grids: texture_3d<f32>;
-@group(0) @binding(2) var light_sampler: sampler;
 @group(0) @binding(3) var<uniform> light_info: LightInfo;
 @group(1) @binding(0) var<storage, read> nodes: array<Node>;
 // A by-slot node table's row of each entry (engine::render::node_table); a by-draw table's

@@ -58,10 +58,10 @@ pub fn open_world(
 pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 
 /// Maps with at least this many height cells (a 2 km map at 4 m) keep their surface error
-/// grids in [`SURFACE_ERROR_CACHE`] and their light grids' sky pages beside it: the 8 km default map has 4 M and computes them in about a
-/// minute on two cores (most of it the 32 m nodes' bounds,
-/// [`engine::terrain::precomputed`]), a 2 km map in seconds; smaller maps compute them in
-/// a fraction of a second and are left untouched.
+/// grids in [`SURFACE_ERROR_CACHE`] and their light grids' sky pages beside it: the 8 km
+/// default map has 4 M and computes the grids in about a minute on two cores (most of it the
+/// 32 m nodes' bounds, [`engine::terrain::precomputed`]), a 2 km map in seconds; smaller maps
+/// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
 fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::Progress) -> World {

@@ -634,7 +634,7 @@ impl LightGrid {
             sun_dir: sun,
             layers_m,
         };
-        let rays = CanopyRays::new(canopy, sun);
+        let rays = CanopyRays::new(canopy, sun, layers_m);
         // The ground's bounce is computed at the columns whose global index (in grid-level
         // column spacings) is a multiple of [`BOUNCE_STRIDE`] along both axes (every column of
         // a coarser grid); the others interpolate it between them and march no
@@ -849,7 +849,7 @@ struct CanopyRays<'a> {
 }
 
 impl<'a> CanopyRays<'a> {
-    fn new(canopy: &'a Canopy, sun: Sun) -> Self {
+    fn new(canopy: &'a Canopy, sun: Sun, layers_m: [f64; LAYERS]) -> Self {
         // A sky ray climbs out of the canopy within `top / tan(elevation)` horizontally, at
         // most the lowest band's; the sun ray is followed twice as far.
         let lowest_sky = ((0.5 / SKY_BANDS as f64) / (1.0 - 0.5 / SKY_BANDS as f64)).sqrt();
@@ -863,7 +863,7 @@ impl<'a> CanopyRays<'a> {
             canopy,
             sun,
             toward: sun.toward(),
-            layers_m: layer_heights_m(canopy),
+            layers_m,
             sky_reach_m: (canopy.top_m / lowest_sky).min(HORIZON_REACH_M),
             sun_reach_m,
         }

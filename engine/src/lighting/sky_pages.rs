@@ -237,6 +237,12 @@ impl SkyPages {
             std::sync::atomic::AtomicUsize::new(0),
             std::sync::atomic::AtomicUsize::new(0),
         );
+        // Only the sky is kept, and no sun changes it: under a sun below the horizon the grid
+        // sends no sun rays and weighs no bounce.
+        let night = Sun {
+            azimuth_deg: 0.0,
+            elevation_deg: -45.0,
+        };
         std::thread::scope(|s| {
             for _ in 0..threads.max(1) {
                 s.spawn(|| {
@@ -246,7 +252,7 @@ impl SkyPages {
                         if self.read(key).is_ok() {
                             kept.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         } else {
-                            let g = LightGrid::compute(world, canopy, tree, key, Sun::default());
+                            let g = LightGrid::compute(world, canopy, tree, key, night);
                             if let Err(e) = self.write(&g) {
                                 let why = std::io::Error::new(
                                     e.kind(),
@@ -254,8 +260,9 @@ impl SkyPages {
                                 );
                                 *failed.lock().expect("failure lock") = Some(why);
                                 next.store(nodes.len(), std::sync::atomic::Ordering::Relaxed);
+                            } else {
+                                computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                             }
-                            computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         }
                         progress.advance(1);
                     }

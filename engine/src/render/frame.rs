@@ -295,10 +295,6 @@ impl FrameResources {
                     visibility: vf,
                     ..texture_entry(1, wgpu::TextureViewDimension::D3)
                 },
-                wgpu::BindGroupLayoutEntry {
-                    visibility: vf,
-                    ..sampler_entry(2)
-                },
                 uniform_entry(3, false, vf),
             ],
         });
@@ -327,10 +323,6 @@ impl FrameResources {
                 wgpu::BindGroupEntry {
                     binding: 1,
                     resource: wgpu::BindingResource::TextureView(&light.view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&light.sampler),
                 },
                 wgpu::BindGroupEntry {
                     binding: 3,

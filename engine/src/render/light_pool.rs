@@ -2,13 +2,12 @@
 //! transmittance toward the sun, the sun's margin over the terrain horizon, the ground's
 //! bounce) of
 //! [`POOL_TILES`] x [`POOL_TILES`] tiles, each a grid's `COLUMNS x COLUMNS x LAYERS` samples,
-//! bound in the frame group (binding 1, with a clamping linear sampler at 2 and the layer
-//! heights at 3) so that every renderer's shaders sample it (`node_light` in
-//! the prelude). The shaders filter trilinearly inside a tile from eight loaded samples, with
-//! weights from the coordinates inside the tile (clamped to its sample centres, so neighbouring
-//! tiles never bleed in): a grid's values draw the same whichever tile it leased, which the
-//! sampler's filter at normalized coordinates did not quite (its weights depend on where in the
-//! texture the tile lies); the sampler at binding 2 is no longer read.
+//! bound in the frame group (binding 1, the layer heights at 3) so that every renderer's
+//! shaders read it (`node_light` in the prelude). The shaders filter trilinearly inside a tile
+//! from eight loaded samples, with weights from the coordinates inside the tile (clamped to its
+//! sample centres, so neighbouring tiles never bleed in): a grid's values draw the same
+//! whichever tile it leased, which a sampler's filter at normalized coordinates did not quite
+//! (its weights depend on where in the texture the tile lies).
 //!
 //! A grid's tile is leased by the first node drawn with it ([`LightPool::lease`]) and shared
 //! by every node the grid shades; it returns to the pool when the last [`LightLease`] drops
@@ -119,7 +118,6 @@ pub const NO_LIGHT: LightEntry = LightEntry {
 pub struct LightPool {
     texture: wgpu::Texture,
     pub view: wgpu::TextureView,
-    pub sampler: wgpu::Sampler,
     pub info: wgpu::Buffer,
     free: Arc<Mutex<Vec<u32>>>,
     leases: Mutex<Leases>,
@@ -171,12 +169,6 @@ impl LightPool {
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("light-grid sampler"),
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
         let info = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("light-grid info"),
             size: std::mem::size_of::<LightInfo>() as u64,
@@ -186,7 +178,6 @@ impl LightPool {
         Self {
             texture,
             view,
-            sampler,
             info,
             free: Arc::new(Mutex::new((0..POOL_TILES * POOL_TILES).rev().collect())),
             leases: Mutex::new(Leases::default()),
