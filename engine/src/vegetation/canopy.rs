@@ -271,7 +271,7 @@ impl Canopy {
 impl Canopy {
     /// Whether [`Self::extinction_per_m`] can be above zero anywhere in the rectangle
     /// `min`..`max` (world m) at any height: some layer has a value above zero in a cell that
-    /// touches it, as [`Self::max_extinction_in`] looks. O(1) where the layers share one grid.
+    /// touches it, as the scan of the layers' cells looks. O(1) where the layers share one grid.
     pub fn any_in(&self, min: [f64; 2], max: [f64; 2]) -> bool {
         let Some(b) = &self.bands else {
             return self.max_extinction_in(min, max) > 0.0;
