@@ -9,7 +9,7 @@
 //! lavapipe (`flyover --headless --frames 300`, four rounds, each against the binary without
 //! it): the frame thread's on-CPU time per frame p50 -4 to -13 %, p95 -7 to -12 %, the
 //! streaming update -13 to -22 %, opening the map 3.4 -> 3.0 s; resident memory +12 - 17 MiB
-//! of 2.85 GiB (docs/benchmarks-streaming.md).
+//! of 2.85 GiB (docs/benchmarks/streaming.md).
 
 /// The variable glibc reads its tunables from, and the tunable.
 const TUNABLES: &str = "GLIBC_TUNABLES";

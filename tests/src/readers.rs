@@ -38,7 +38,7 @@ impl Fixture {
         let map = worldgen::Map::load(root).expect("tiny map loads");
         write_material(&root.join("material.png"));
         std::fs::copy(
-            crate::workspace_root().join("docs/paths/town_200m.path"),
+            crate::workspace_root().join("docs/views/town_200m.path"),
             root.join("camera.path"),
         )
         .expect("copy a camera path");

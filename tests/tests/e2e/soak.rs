@@ -1,7 +1,7 @@
 //! A short soak: the viewer flies the automatic flight in loops on the tiny map for
 //! 20 s, sampled every second; afterwards, settled on one view, no job, cancellation or tile is
 //! left over, the cache is within its budget, and the samples carry the GPU memory counters.
-//! The 30-minute soak is `nodebench --only soak --soak-minutes 30` (docs/soak.md).
+//! The 30-minute soak is `nodebench --only soak --soak-minutes 30` (docs/guides/soak.md).
 
 use engine::soak::{SoakParams, run};
 use engine::stream::{MAX_LATENCIES_KEPT, StreamSettings};

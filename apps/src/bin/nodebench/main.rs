@@ -96,9 +96,10 @@ struct Cli {
     #[arg(long)]
     json: Option<PathBuf>,
     /// Write the benchmark document (Markdown: command, machine, every row of this run) here,
-    /// e.g. docs/benchmarks.md. Until it is written at the end, the rows so far are kept after
-    /// every section in `<name>.partial.md` beside it (e.g. docs/benchmarks.partial.md, removed
-    /// when the document is written), so a run that fails late loses nothing.
+    /// e.g. docs/benchmarks/benchmarks.md. Until it is written at the end, the rows so far are
+    /// kept after every section in `<name>.partial.md` beside it (e.g.
+    /// docs/benchmarks/benchmarks.partial.md, removed when the document is written), so a run
+    /// that fails late loses nothing.
     #[arg(long)]
     doc: Option<PathBuf>,
     /// Write the speed-against-error plot (PNG) here.
