@@ -24,7 +24,8 @@
 //! selection, tiles, meshes), [`vegetation`], [`stream`] (jobs, residency, fades), [`render`]
 //! (one renderer per kind of thing drawn), [`camera`], [`flight`] (automatic flyover, camera
 //! paths), [`viewer`] (the frame loop), [`soak`] (long headless flights sampled for growth), and behind the `measure` feature `measure` (dense error
-//! measurement and reference selections for tests and benchmarks).
+//! measurement and reference selections for tests and benchmarks) and `shown_error` (the
+//! terrain error a rendered frame shows).
 
 pub mod camera;
 pub mod color;
@@ -36,6 +37,8 @@ pub mod lighting;
 pub mod measure;
 pub mod objects;
 pub mod render;
+#[cfg(feature = "measure")]
+pub mod shown_error;
 pub mod soak;
 pub mod stream;
 pub mod surface;

@@ -475,6 +475,106 @@ pub fn view_max_error_px(nodes: &[&ErrorSamples], cam: &Camera, by_region: bool)
     }
 }
 
+/// What a rendered frame shows at each pixel: the view depth (metres along the camera's axis)
+/// of the nearest thing drawn there, infinite where nothing was drawn; rows top first. Read from
+/// the renderer's depth buffer, it tells which error samples the frame shows and which something
+/// drawn in front of them (vegetation, a nearer hill) hides.
+#[derive(Debug, Clone)]
+pub struct DepthImage {
+    size: [u32; 2],
+    depth_m: Vec<f32>,
+}
+
+/// How much nearer than a point something drawn must be to hide it: this share of the point's
+/// depth plus [`HIDDEN_MARGIN_M`] (the drawn terrain under a sample, rasterized at pixel
+/// centres, must never count as hiding it).
+pub const HIDDEN_MARGIN: f64 = 0.01;
+/// See [`HIDDEN_MARGIN`].
+pub const HIDDEN_MARGIN_M: f64 = 0.05;
+
+impl DepthImage {
+    /// From a reversed-Z depth buffer with an infinite far plane (`near_m / view depth`, 0
+    /// where nothing was drawn), as `render::Target::read_depth` returns it.
+    pub fn from_reversed_z(size: [u32; 2], z: &[f32], near_m: f64) -> Self {
+        let depth_m = z
+            .iter()
+            .map(|&z| {
+                if z > 0.0 {
+                    (near_m / f64::from(z)) as f32
+                } else {
+                    f32::INFINITY
+                }
+            })
+            .collect();
+        Self { size, depth_m }
+    }
+
+    /// The farthest depth drawn in the 3 x 3 pixels around pixel position `at` (x right, y down),
+    /// so that a point between pixel centres is judged by the least hiding of its neighbours.
+    fn farthest_around_m(&self, at: [f64; 2]) -> f64 {
+        let (w, h) = (i64::from(self.size[0]), i64::from(self.size[1]));
+        let (cx, cy) = (at[0].floor() as i64, at[1].floor() as i64);
+        let mut far = f64::NEG_INFINITY;
+        for y in (cy - 1).max(0)..=(cy + 1).min(h - 1) {
+            for x in (cx - 1).max(0)..=(cx + 1).min(w - 1) {
+                far = far.max(f64::from(self.depth_m[(y * w + x) as usize]));
+            }
+        }
+        far
+    }
+}
+
+/// The on-screen error of the samples a rendered frame shows (as [`view_max_error_px`]
+/// measures each sample), and how many samples on the screen it hides. A sample counts when its
+/// true or its drawn point lies on the screen and is not hidden there (or when both lie off the
+/// screen and the segment between them crosses it): hidden means everything
+/// `depth` shows in the 3 x 3 pixels around the point's pixel is nearer than the point by more
+/// than [`HIDDEN_MARGIN`] of its depth plus [`HIDDEN_MARGIN_M`]. The margins and the
+/// neighbourhood lean towards counting a sample as shown, so the error found can only be larger
+/// than what the frame shows.
+pub fn view_error_shown_px(
+    nodes: &[&ErrorSamples],
+    cam: &Camera,
+    depth: &DepthImage,
+) -> (ViewError, u64) {
+    let screen = ScreenProjection::new(cam);
+    let frustum = cam.frustum();
+    // None when the point is off the screen.
+    let shown = |p: DVec3| {
+        let depth_m = screen.clip(p).w;
+        screen.pixel_of(p).map(|at| {
+            depth.farthest_around_m(at) >= depth_m * (1.0 - HIDDEN_MARGIN) - HIDDEN_MARGIN_M
+        })
+    };
+    let (mut px, mut region_max_px, mut hidden) = (Vec::new(), [0.0f64; 3], 0u64);
+    for s in nodes
+        .iter()
+        .filter(|s| frustum.intersects_aabb(s.min_m, s.max_m))
+    {
+        for p in &s.samples {
+            let (x, y) = (
+                s.origin_m[0] + f64::from(p[0]),
+                s.origin_m[1] + f64::from(p[1]),
+            );
+            let truth = DVec3::new(x, y, f64::from(p[2]));
+            let drawn = DVec3::new(x, y, f64::from(p[2]) + f64::from(p[3]));
+            let Some((len, at)) = screen.segment_px(truth, drawn) else {
+                continue;
+            };
+            // A segment that crosses the screen with both ends off it counts as shown.
+            let ends = [shown(drawn), shown(truth)];
+            if ends.contains(&Some(true)) || ends == [None, None] {
+                let region = screen.region(at) as usize;
+                region_max_px[region] = region_max_px[region].max(len);
+                px.push(len);
+            } else {
+                hidden += 1;
+            }
+        }
+    }
+    (ViewError::of(px, region_max_px), hidden)
+}
+
 /// A CDLOD-style selection: split a node while the camera is closer than
 /// `ratio * node size` to its box (one distance ratio for every level, no error metric), with
 /// the same frustum culling. This is the baseline "uniform distance selection".
@@ -520,8 +620,54 @@ pub fn default_flight(world: &World, frames: usize, viewport_px: [u32; 2]) -> Ve
 
 #[cfg(test)]
 mod tests {
-    use super::SAMPLE_OFFSET;
+    use super::{DepthImage, ErrorSamples, SAMPLE_OFFSET, ScreenProjection, view_error_shown_px};
+    use crate::camera::Camera;
     use crate::terrain::bounds::CHECK_SUBDIV;
+    use glam::DVec3;
+
+    /// A wall drawn 10 m ahead over the screen's left half: a sample 20 m ahead on the left is
+    /// hidden, one on the right and one 5 m ahead on the left are shown, and the shown error is
+    /// the largest of the two shown samples' own projected lengths.
+    #[test]
+    fn samples_behind_something_drawn_are_hidden() {
+        let cam = Camera::look_at(DVec3::ZERO, DVec3::X, 60f64.to_radians(), [64, 32]);
+        // Screen left is +y for a camera looking along +x with z up.
+        let (w, h) = (64usize, 32usize);
+        let wall_z = (cam.near_m / 10.0) as f32;
+        let z: Vec<f32> = (0..w * h)
+            .map(|i| if i % w < w / 2 { wall_z } else { 0.0 })
+            .collect();
+        let depth = DepthImage::from_reversed_z([64, 32], &z, cam.near_m);
+        // (x, y, surface z, error): largest error first, as node_error_samples sorts them.
+        let points = [
+            [20.0f32, 3.0, 0.0, 0.5],
+            [20.0, -3.0, 0.0, 0.2],
+            [5.0, 1.0, 0.0, 0.1],
+        ];
+        let node = ErrorSamples {
+            min_m: DVec3::new(0.0, -5.0, -1.0),
+            max_m: DVec3::new(30.0, 5.0, 1.0),
+            origin_m: [0.0, 0.0],
+            samples: points.to_vec(),
+        };
+        let (shown, hidden) = view_error_shown_px(&[&node], &cam, &depth);
+        assert_eq!(hidden, 1);
+        assert_eq!(shown.samples, 2);
+        let screen = ScreenProjection::new(&cam);
+        let length = |p: [f32; 4]| {
+            let at = DVec3::new(f64::from(p[0]), f64::from(p[1]), 0.0);
+            screen
+                .segment_px(at, at + DVec3::Z * f64::from(p[3]))
+                .expect("on the screen")
+                .0
+        };
+        let expected = length(points[1]).max(length(points[2]));
+        assert!((shown.max_px - expected).abs() < 1e-9);
+        assert!(
+            length(points[0]) > expected,
+            "the hidden sample was the largest"
+        );
+    }
 
     /// Inner samples of `true_node_error` never land on a check-lattice point, for any number
     /// of samples per quad up to 64 (the old half-step offset did at 2 per quad: 0.25, 0.75).

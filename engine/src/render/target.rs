@@ -13,6 +13,9 @@ pub struct Target {
     pub color_view: wgpu::TextureView,
     /// A view in the texture's own format (for overlays such as egui that want a linear one).
     pub plain_view: wgpu::TextureView,
+    /// Reversed-Z depth (1 at the near plane, 0 at infinity), readable with
+    /// [`Target::read_depth`].
+    pub depth: wgpu::Texture,
     pub depth_view: wgpu::TextureView,
 }
 
@@ -50,13 +53,24 @@ impl Target {
             ..Default::default()
         });
         let plain_view = color.create_view(&wgpu::TextureViewDescriptor::default());
-        let depth_view = depth_view(device, size, "offscreen depth");
+        let depth = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("offscreen depth"),
+            size: extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
         Self {
             size,
             format,
             color,
             color_view,
             plain_view,
+            depth,
             depth_view,
         }
     }
@@ -73,6 +87,25 @@ impl Target {
             }
         }
         Ok(out)
+    }
+
+    /// Copies the depth target to the CPU: one reversed-Z value per pixel (1 at the near plane,
+    /// 0 where nothing was drawn), rows top first.
+    pub fn read_depth(&self, gpu: &Gpu) -> Result<Vec<f32>, GpuError> {
+        let bytes = read_texels(
+            gpu,
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.depth,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::DepthOnly,
+            },
+            self.size,
+        )?;
+        Ok(bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect())
     }
 }
 

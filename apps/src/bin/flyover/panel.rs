@@ -87,7 +87,10 @@ pub(crate) fn panel(
         &mut view.merged_draws,
         "merged draws (off: one draw per item)",
     );
-    ui.checkbox(&mut st_ui.occlusion, "split less behind dense vegetation");
+    ui.checkbox(
+        &mut st_ui.occlusion,
+        "split less behind dense vegetation (error may show)",
+    );
     object_controls(ui, view);
     ui.checkbox(&mut st_ui.frozen, "freeze culling camera");
     ui.checkbox(&mut fixed, "fixed level");

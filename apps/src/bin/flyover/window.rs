@@ -217,7 +217,7 @@ impl App {
                 budget_mib: cli.budget_mib,
                 fixed_level: None,
                 frozen: false,
-                occlusion: !cli.no_vegetation_occlusion,
+                occlusion: cli.vegetation_occlusion,
                 slider_rect: [0.0; 4],
                 sun: cli.sun(),
             },

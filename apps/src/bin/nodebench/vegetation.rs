@@ -24,6 +24,7 @@ pub(crate) fn section_vegetation(
     phase_per_node(world, tree, cams, r, quick, &placer);
     instances_per_frame(world, tree, cams, r, quick, &placer);
     occlusion(world, tree, cams, r, quick, &placer);
+    occlusion_rendered(world, cams[0].viewport_px, r, quick);
 }
 
 /// Kept points per second of the ranked tile against Bridson sampling.
@@ -264,6 +265,22 @@ fn instances_per_frame(
     }
 }
 
+/// `n` cameras of the low half of the automatic flyover (25 m above the valley floor), or with
+/// `walk` of the same track at eye height (1.8 m above the ground).
+fn low_cameras(world: &World, viewport_px: [u32; 2], n: u32, walk: bool) -> Vec<Camera> {
+    (0..n)
+        .map(|i| {
+            let mut c =
+                engine::flight::auto_flyover(world, 0.5 * f64::from(i) / f64::from(n), viewport_px);
+            if walk {
+                let p = c.position_m;
+                c.position_m.z = world.height_m(p.x, p.y) + 1.8;
+            }
+            c
+        })
+        .collect()
+}
+
 /// Splitting less behind dense vegetation, on the low valley flight.
 fn occlusion(
     world: &World,
@@ -280,18 +297,7 @@ fn occlusion(
     let vp = cams[0].viewport_px;
     let n_low: u32 = if quick { 4 } else { 48 };
     for walk in [false, true] {
-        let low: Vec<Camera> = (0..n_low)
-            .map(|i| {
-                let mut c =
-                    engine::flight::auto_flyover(world, 0.5 * f64::from(i) / f64::from(n_low), vp);
-                if walk {
-                    // The same track at eye height, 1.8 m above the ground.
-                    let p = c.position_m;
-                    c.position_m.z = world.height_m(p.x, p.y) + 1.8;
-                }
-                c
-            })
-            .collect();
+        let low = low_cameras(world, vp, n_low, walk);
         let p = SelectParams::culled(2.0, tree);
         let (mut plain_nodes, mut occl_nodes, mut hidden, mut t_plain, mut t_occl) =
             (0usize, 0usize, 0usize, 0.0f64, 0.0f64);
@@ -365,9 +371,6 @@ fn occlusion(
             "nodes",
             &params,
         );
-        // No "largest visible error" row: error x visibility is <= tau by construction (the
-        // split test uses the same factor), so it could not fail. An independent check needs
-        // rendered pixels against a full-detail reference (issue: benchmark honesty).
         r.add(
             "vegetation",
             "occlusion: selection time with / without",
@@ -377,6 +380,120 @@ fn occlusion(
                 "{params}; without {:.1} µs per frame",
                 1e6 * t_plain / low.len() as f64
             ),
+        );
+    }
+}
+
+/// Whether splitting less behind dense vegetation shows: at eye height on the low valley flight,
+/// each view settled with the rule off and on, drawn (terrain and vegetation) on the GPU, and the
+/// drawn terrain's on-screen error measured over the samples the frame's depth shows
+/// ([`engine::shown_error`]). Left out without a GPU adapter.
+fn occlusion_rendered(world: &World, viewport_px: [u32; 2], r: &mut Report, quick: bool) {
+    use engine::lighting::content::LightingContent;
+    use engine::objects::content::ObjectsContent;
+    use engine::render::{COLOR_FORMAT, Target};
+    use engine::shown_error::{ShownError, settled_view_error};
+    use engine::stream::StreamSettings;
+    use engine::viewer::Viewer;
+    let Some((g, adapter)) = crate::gpu::adapter() else {
+        eprintln!("no GPU adapter: the rendered occlusion rows left out");
+        return;
+    };
+    let n: u32 = if quick { 1 } else { 6 };
+    // Spread over the low flight's first half, like the selection rows' 48 cameras.
+    let cams = low_cameras(world, viewport_px, n, true);
+    let target = Target::new(&g.device, viewport_px, COLOR_FORMAT);
+    // Lighting and houses change no depth the check reads; leaving them out saves their jobs.
+    let mut kinds = engine::kinds::registered(world);
+    kinds.retain(|k| ![LightingContent::NAME, ObjectsContent::NAME].contains(&k.kind.name()));
+    for tau_px in [2.0, 0.5] {
+        let mut runs: Vec<Vec<ShownError>> = Vec::new();
+        for occlusion in [false, true] {
+            let settings = StreamSettings {
+                workers: 2,
+                tau_px,
+                vegetation_occlusion: occlusion,
+                ..StreamSettings::default()
+            };
+            let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, &kinds);
+            let mut views = Vec::new();
+            let b = bar(
+                cams.len() as u64,
+                &format!(
+                    "occlusion drawn, tau {tau_px}, rule {}",
+                    if occlusion { "on" } else { "off" }
+                ),
+            );
+            for (i, cam) in cams.iter().enumerate() {
+                match settled_view_error(&g, &mut v, &target, cam, 600.0) {
+                    Ok(e) => views.push(e),
+                    Err(e) => b.println(format!("occlusion rendered: camera {i}: {e}")),
+                }
+                b.inc(1);
+            }
+            b.finish_and_clear();
+            runs.push(views);
+        }
+        let (off, on) = (&runs[0], &runs[1]);
+        if off.is_empty() || on.is_empty() {
+            continue;
+        }
+        let params = format!(
+            "tau {tau_px} px, {} of {} cameras of the low valley flight at 1.8 m eye height \
+             settled, drawn on {adapter} (terrain and vegetation) and measured over the drawn \
+             meshes' samples ({} per quad) where the frame's depth shows them",
+            on.len().min(off.len()),
+            cams.len(),
+            engine::shown_error::SAMPLES_PER_QUAD,
+        );
+        let per = |v: &[ShownError], f: fn(&ShownError) -> f64| {
+            v.iter().map(f).sum::<f64>() / v.len() as f64
+        };
+        let most =
+            |v: &[ShownError], f: fn(&ShownError) -> f64| v.iter().map(f).fold(0.0, f64::max);
+        let tris = |e: &ShownError| e.triangles as f64;
+        for (name, v) in [("without", off), ("with", on)] {
+            r.add(
+                "vegetation",
+                &format!("occlusion, rendered: terrain triangles per frame {name} the rule"),
+                per(v, tris),
+                "triangles",
+                &params,
+            );
+            r.add(
+                "vegetation",
+                &format!("occlusion, rendered: on-screen max error shown, {name} the rule"),
+                most(v, |e| e.shown.max_px),
+                "px",
+                &params,
+            );
+            r.add(
+                "vegetation",
+                &format!(
+                    "occlusion, rendered: on-screen max error over every drawn sample, hidden \
+                     too, {name} the rule"
+                ),
+                most(v, |e| e.all.max_px),
+                "px",
+                &params,
+            );
+        }
+        r.add(
+            "vegetation",
+            "occlusion, rendered: terrain triangles saved",
+            100.0 * (1.0 - per(on, tris) / per(off, tris).max(1.0)),
+            "%",
+            &params,
+        );
+        r.add(
+            "vegetation",
+            "occlusion, rendered: drawn samples on the screen hidden, with the rule",
+            100.0
+                * per(on, |e| {
+                    e.hidden_samples as f64 / (e.hidden_samples + e.shown.samples).max(1) as f64
+                }),
+            "%",
+            &params,
         );
     }
 }
