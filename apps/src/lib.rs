@@ -1,10 +1,11 @@
 //! `apps`: support shared by the binaries `flyover` (the viewer) and `nodebench` (the
 //! benchmark): opening (or generating) a map, the one percentile rule their tables use, and
-//! their heap on huge pages ([`heap`]).
+//! their heap on huge pages ([`heap`]); and the README's headline figures ([`headline`]).
 
 use engine::surface::World;
 use std::path::Path;
 
+pub mod headline;
 pub mod heap;
 pub mod plot;
 

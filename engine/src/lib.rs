@@ -11,11 +11,13 @@
 //! - **Conservative, monotone errors.** A node's error is measured on a lattice 4x finer than
 //!   its mesh plus a proven bound for between lattice points, and also bounds its descendants'
 //!   meshes (see [`terrain::bounds`]).
-//! - **One error metric.** `px = err_m * K / dist_m`, `K = viewport_px / (2 tan(fovy / 2))`.
+//! - **One error metric, on the screen.** `px = err_m * K * stretch / dist_m`,
+//!   `K = viewport_px / (2 tan(fovy / 2))`, where the stretch bounds what a flat screen does off
+//!   its axis (see [`terrain::screen_bound`]).
 //! - **Crack-free by skirts of proven depth.** See [`terrain::mesh`].
-//! - **Node content as plug-ins.** Terrain and vegetation are [`stream::ContentKind`]s with
-//!   [`render::scene::NodeRenderer`]s, registered in [`kinds`]; the scheduler and the viewer
-//!   know only the traits.
+//! - **Node content as plug-ins.** Terrain, ground textures, vegetation, light grids and houses
+//!   are [`stream::ContentKind`]s with [`render::scene::NodeRenderer`]s, registered in
+//!   [`kinds`]; the scheduler and the viewer know only the traits.
 //! - **Vegetation from one ranked Poisson tile.** Items are a pure function of the map and their
 //!   position: no seams, the same result in any generation order (see [`vegetation`]).
 //! - World positions are f64; vertices are f32 relative to their node's origin.
