@@ -82,9 +82,9 @@ pub(crate) struct Cli {
     pub(crate) budget_mib: usize,
     /// Split less where dense vegetation blocks the view from a camera inside the canopy: up to
     /// 30 - 43 % fewer terrain triangles at eye height, but the canopy is a density, not the
-    /// drawn trees, so terrain error shows through gaps (measured up to 1.7 px at the default
-    /// 2 px, 2.3x tau at 0.5 px: docs/guides/pixel-error.md). Off by default, so tau holds at
-    /// every pixel.
+    /// drawn trees, so terrain error can show through gaps (on the default map's eye-height
+    /// views within tau at the default 2 px, 2.3x tau at 0.5 px: docs/guides/pixel-error.md).
+    /// Off by default, so tau holds at every pixel.
     #[arg(long)]
     pub(crate) vegetation_occlusion: bool,
     /// Draw every terrain node through all its 33 x 33 vertices (by default a node whose
