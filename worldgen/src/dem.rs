@@ -17,6 +17,9 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone)]
 pub struct ImportParams {
     pub path: PathBuf,
+    /// Further GeoTIFF files joined with `path` into one raster (a mosaic; see
+    /// [`crate::mosaic`]); empty for one file.
+    pub mosaic: Vec<PathBuf>,
     pub name: String,
     /// Sample spacing of the source (m); required for PNG and EXR, derived for `.hgt`.
     pub spacing_m: Option<f64>,
@@ -38,6 +41,7 @@ impl ImportParams {
             .map_or_else(|| "dem".into(), |n| n.to_string_lossy().into_owned());
         Self {
             path,
+            mosaic: Vec::new(),
             name,
             spacing_m: None,
             vertical_scale_m: 1.0,
@@ -121,6 +125,9 @@ pub struct Source {
     pub spacing_m: [f64; 2],
     pub origin_m: [f64; 2],
     pub note: String,
+    /// Whether `origin_m` is the file's own position in projected metres (a GeoTIFF in a
+    /// projected CRS), so that several files can be joined by it.
+    pub projected: bool,
 }
 
 pub(crate) fn check_size(path: &Path, w: u64, h: u64) -> Result<(), DemError> {
@@ -206,6 +213,7 @@ fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
         spacing_m: [dx, dy],
         origin_m: [0.0, 0.0],
         note: format!("SRTM tile, south edge at {lat} N"),
+        projected: false,
     })
 }
 
@@ -273,6 +281,7 @@ fn read_png(p: &ImportParams) -> Result<Source, DemError> {
         spacing_m: [spacing, spacing],
         origin_m: [0.0, 0.0],
         note: String::new(),
+        projected: false,
     })
 }
 
@@ -321,6 +330,7 @@ fn read_exr(p: &ImportParams) -> Result<Source, DemError> {
         spacing_m: [spacing, spacing],
         origin_m: [0.0, 0.0],
         note: String::new(),
+        projected: false,
     })
 }
 
@@ -405,13 +415,22 @@ pub fn import(
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    let mut src = timed(times, "read elevation file", || match ext.as_deref() {
-        Some("tif" | "tiff") => crate::geotiff::read(path, p.spacing_m, p.vertical_scale_m),
-        Some("hgt") => read_hgt(p),
-        Some("png") => read_png(p),
-        Some("exr") => read_exr(p),
-        _ => Err(DemError::UnknownFormat { path: path.clone() }),
-    })?;
+    let mut src = if p.mosaic.is_empty() {
+        timed(times, "read elevation file", || match ext.as_deref() {
+            Some("tif" | "tiff") => crate::geotiff::read(path, p.spacing_m, p.vertical_scale_m),
+            Some("hgt") => read_hgt(p),
+            Some("png") => read_png(p),
+            Some("exr") => read_exr(p),
+            _ => Err(DemError::UnknownFormat { path: path.clone() }),
+        })?
+    } else {
+        let paths: Vec<PathBuf> = std::iter::once(path.clone())
+            .chain(p.mosaic.iter().cloned())
+            .collect();
+        timed(times, "read and join the elevation files", || {
+            crate::mosaic::read(&paths, p.spacing_m, p.vertical_scale_m)
+        })?
+    };
     if let Some(v) = src
         .grid
         .data()

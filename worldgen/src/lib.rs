@@ -26,6 +26,7 @@ pub mod grid;
 pub mod house_textures;
 pub mod map;
 pub mod mip_chain;
+pub mod mosaic;
 pub mod noise;
 pub mod par;
 pub mod patches;

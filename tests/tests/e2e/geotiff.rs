@@ -11,12 +11,12 @@ use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffValue};
 use tiff::tags::Tag;
 use worldgen::dem::{DemError, ImportParams, import};
 
-const W: u32 = 40;
-const H: u32 = 30;
+pub(super) const W: u32 = 40;
+pub(super) const H: u32 = 30;
 
 /// The test raster: sample (col, row from the north), integer-valued so that every sample type
 /// holds it exactly; 20..=219 so that it fits 8 bits.
-fn height(col: u32, row: u32) -> f64 {
+pub(super) fn height(col: u32, row: u32) -> f64 {
     f64::from((col * 5 + row * 3 + (col * row) % 11) % 200 + 20)
 }
 
@@ -28,16 +28,16 @@ fn raster() -> Vec<f64> {
 
 /// GeoTIFF tags to write: pixel size + tie point or a full transform, GeoKeys, nodata.
 #[derive(Clone, Default)]
-struct Geo {
-    scale: Option<[f64; 3]>,
-    tie: Option<Vec<f64>>,
-    transform: Option<[f64; 16]>,
-    keys: Vec<(u16, u16)>,
-    nodata: Option<String>,
+pub(super) struct Geo {
+    pub(super) scale: Option<[f64; 3]>,
+    pub(super) tie: Option<Vec<f64>>,
+    pub(super) transform: Option<[f64; 16]>,
+    pub(super) keys: Vec<(u16, u16)>,
+    pub(super) nodata: Option<String>,
 }
 
 /// 2 m pixels, north-west corner at (500000, 6400000) in projected metres.
-fn utm() -> Geo {
+pub(super) fn utm() -> Geo {
     Geo {
         scale: Some([2.0, 2.0, 0.0]),
         tie: Some(vec![0.0, 0.0, 0.0, 500_000.0, 6_400_000.0, 0.0]),
@@ -72,7 +72,7 @@ fn write_geo<W: std::io::Write + std::io::Seek, K: tiff::encoder::TiffKind>(
 }
 
 /// A strip-organised GeoTIFF (7 rows per strip) through the encoder's image writer.
-fn write_strips<C: ColorType>(
+pub(super) fn write_strips<C: ColorType>(
     path: &Path,
     compression: Compression,
     w: u32,
@@ -157,7 +157,7 @@ fn write_tiles(
     std::fs::write(path, file.into_inner()).unwrap();
 }
 
-fn run(path: &Path) -> Result<(worldgen::Map, worldgen::dem::ImportReport), DemError> {
+pub(super) fn run(path: &Path) -> Result<(worldgen::Map, worldgen::dem::ImportReport), DemError> {
     import(&ImportParams::new(path.to_path_buf()), &mut Vec::new())
 }
 

@@ -5,6 +5,7 @@ mod buildings;
 mod camera_path;
 mod dem_import;
 mod geotiff;
+mod geotiff_mosaic;
 mod ground;
 mod lighting;
 mod map_format;

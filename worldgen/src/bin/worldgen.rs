@@ -57,10 +57,14 @@ enum Command {
     /// .hgt (1201² or 3601², void = -32768), 8/16-bit grayscale PNG (with --spacing-m and
     /// --vertical-scale-m) or single-channel EXR (with --spacing-m; NaN = void). Voids are
     /// filled from neighbours and counted; ground types, densities and trees are derived from
-    /// slope and height. A projected GeoTIFF keeps its position as the map's origin.
+    /// slope and height. A projected GeoTIFF keeps its position as the map's origin. Several
+    /// projected GeoTIFFs of one sample lattice (tiles of one survey) are joined into one map by
+    /// their positions, in any order; where they overlap the first file given keeps its samples,
+    /// and what no file covers is filled like a void.
     ImportDem {
-        /// The elevation file.
-        file: PathBuf,
+        /// The elevation file, or several GeoTIFF files to join (a mosaic).
+        #[arg(required = true, num_args = 1..)]
+        files: Vec<PathBuf>,
         /// Output map folder.
         #[arg(long)]
         out: PathBuf,
@@ -297,7 +301,7 @@ fn run(cli: Cli) -> Result<()> {
             say!("{}", map.summary());
         }
         Command::ImportDem {
-            file,
+            files,
             out,
             spacing_m,
             vertical_scale_m,
@@ -308,12 +312,14 @@ fn run(cli: Cli) -> Result<()> {
             threads,
         } => {
             let t0 = Instant::now();
+            let file = files[0].clone();
             let name = name.unwrap_or_else(|| {
                 file.file_stem()
                     .map_or("dem".into(), |n| n.to_string_lossy().into_owned())
             });
             let params = worldgen::dem::ImportParams {
                 path: file.clone(),
+                mosaic: files[1..].to_vec(),
                 name,
                 spacing_m,
                 vertical_scale_m,
@@ -325,9 +331,13 @@ fn run(cli: Cli) -> Result<()> {
             let mut times = Vec::new();
             let (map, report) = worldgen::dem::import(&params, &mut times)?;
             write_map(&map, &out, &mut times)?;
+            let what = if files.len() > 1 {
+                format!("{} files ({} ...)", files.len(), file.display())
+            } else {
+                file.display().to_string()
+            };
             say!(
-                "imported {} -> {}: source {}x{} samples at {:.2} x {:.2} m, {} voids filled, resampled to {:.3} m spacing",
-                file.display(),
+                "imported {what} -> {}: source {}x{} samples at {:.2} x {:.2} m, {} voids filled, resampled to {:.3} m spacing",
                 out.display(),
                 report.source_samples[0],
                 report.source_samples[1],

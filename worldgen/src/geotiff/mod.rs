@@ -436,6 +436,7 @@ pub fn read(path: &Path, spacing_m: Option<f64>, vertical_scale: f64) -> Result<
                 origin_m: [0.0, 0.0],
                 north_up: true,
                 note: format!("no georeferencing, {s} m from --spacing-m"),
+                projected: false,
             }
         }
         Some(a) => {
@@ -490,6 +491,7 @@ pub fn read(path: &Path, spacing_m: Option<f64>, vertical_scale: f64) -> Result<
         spacing_m: place.spacing_m,
         origin_m: place.origin_m,
         note: place.note,
+        projected: place.projected,
     })
 }
 
@@ -519,6 +521,8 @@ struct Placement {
     /// Whether the file's first row is the northern one.
     north_up: bool,
     note: String,
+    /// Whether `origin_m` is a position in projected metres.
+    projected: bool,
 }
 
 /// Placement of a georeferenced raster of `h` rows from its transform and GeoKeys.
@@ -575,6 +579,7 @@ fn place(path: &Path, a: Affine, keys: &[(u16, u16)], h: u32) -> Result<Placemen
                 origin_m: origin,
                 north_up,
                 note,
+                projected: true,
             })
         }
         2 => {
@@ -615,6 +620,7 @@ fn place(path: &Path, a: Affine, keys: &[(u16, u16)], h: u32) -> Result<Placemen
                 origin_m: [0.0, 0.0],
                 north_up,
                 note,
+                projected: false,
             })
         }
         c => Err(unsupported(
