@@ -144,7 +144,7 @@ pub(crate) fn check_size(path: &Path, w: u64, h: u64) -> Result<(), DemError> {
 }
 
 /// Latitude of the south edge from an SRTM name like `N57E011.hgt` / `S12W077.hgt`.
-fn hgt_latitude(path: &Path) -> Option<f64> {
+pub(crate) fn hgt_latitude(path: &Path) -> Option<f64> {
     let stem = path.file_stem()?.to_str()?;
     let sign = match stem.chars().next()? {
         'N' | 'n' => 1.0,
@@ -156,11 +156,29 @@ fn hgt_latitude(path: &Path) -> Option<f64> {
     (lat <= 90.0).then_some(sign * lat)
 }
 
-fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
-    let path = &p.path;
+/// Longitude of the west edge from an SRTM name like `N57E011.hgt` / `S12W077.hgt`.
+pub(crate) fn hgt_longitude(path: &Path) -> Option<f64> {
+    let stem = path.file_stem()?.to_str()?;
+    let at = stem.find(['E', 'e', 'W', 'w'])?;
+    let sign = if stem[at..].starts_with(['E', 'e']) {
+        1.0
+    } else {
+        -1.0
+    };
+    let digits: String = stem[at + 1..]
+        .chars()
+        .take_while(char::is_ascii_digit)
+        .collect();
+    let lon: f64 = digits.parse().ok()?;
+    (lon <= 180.0).then_some(sign * lon)
+}
+
+/// An SRTM tile's samples (row 0 = south, void = NaN), samples per side and arc-seconds per
+/// sample.
+pub(crate) fn hgt_samples(path: &Path) -> Result<(Grid<f32>, usize, f64), DemError> {
     let len = std::fs::metadata(path)
         .map_err(|e| DemError::Io {
-            path: path.clone(),
+            path: path.to_path_buf(),
             source: e,
         })?
         .len();
@@ -169,23 +187,13 @@ fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
         25_934_402 => (3601usize, 1.0),
         _ => {
             return Err(DemError::HgtSize {
-                path: path.clone(),
+                path: path.to_path_buf(),
                 len,
             });
         }
     };
-    let lat = p
-        .latitude_deg
-        .or_else(|| hgt_latitude(path))
-        .ok_or_else(|| DemError::HgtLatitude { path: path.clone() })?;
-    if !(lat.is_finite() && lat.abs() <= 85.0) {
-        return Err(DemError::Latitude {
-            path: path.clone(),
-            latitude_deg: lat,
-        });
-    }
     let bytes = std::fs::read(path).map_err(|e| DemError::Io {
-        path: path.clone(),
+        path: path.to_path_buf(),
         source: e,
     })?;
     let north_up: Vec<f32> = bytes
@@ -200,17 +208,35 @@ fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
         })
         .collect();
     let grid = Grid::from_north_up(n, n, &north_up).ok_or_else(|| DemError::HgtSize {
-        path: path.clone(),
+        path: path.to_path_buf(),
         len,
     })?;
-    // 1 arc-second of latitude is about 30.87 m; longitude shrinks with cos(latitude) at the
-    // tile's centre.
+    Ok((grid, n, arcsec))
+}
+
+/// Metres between SRTM samples of `arcsec` arc-seconds around latitude `lat_centre_deg`: 1
+/// arc-second of latitude is about 30.87 m; longitude shrinks with its cosine.
+pub(crate) fn hgt_spacing_m(arcsec: f64, lat_centre_deg: f64) -> [f64; 2] {
     let dy = arcsec * 30.87;
-    let lat_centre = (lat + 0.5).to_radians();
-    let dx = dy * lat_centre.cos();
+    [dy * lat_centre_deg.to_radians().cos(), dy]
+}
+
+fn read_hgt(p: &ImportParams) -> Result<Source, DemError> {
+    let path = &p.path;
+    let (grid, _, arcsec) = hgt_samples(path)?;
+    let lat = p
+        .latitude_deg
+        .or_else(|| hgt_latitude(path))
+        .ok_or_else(|| DemError::HgtLatitude { path: path.clone() })?;
+    if !(lat.is_finite() && lat.abs() <= 85.0) {
+        return Err(DemError::Latitude {
+            path: path.clone(),
+            latitude_deg: lat,
+        });
+    }
     Ok(Source {
         grid,
-        spacing_m: [dx, dy],
+        spacing_m: hgt_spacing_m(arcsec, lat + 0.5),
         origin_m: [0.0, 0.0],
         note: format!("SRTM tile, south edge at {lat} N"),
         projected: false,

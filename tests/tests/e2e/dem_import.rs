@@ -176,3 +176,64 @@ fn single_channel_exr_imports_with_nan_voids() {
         "{err}"
     );
 }
+
+/// Two SRTM tiles side by side join into one map: the real tile and, east of it, its mirror
+/// image, which repeats the tile's east column as its own west column as real neighbours do.
+/// The mosaic has 2,401 x 1,201 source samples at the tile's own spacing (both lie at one
+/// latitude), and its western columns are the single tile's import sample for sample (up to
+/// the seam, where the resampling's limiter sees the neighbour). A tile of another resolution
+/// and one whose name carries no position are refused, naming the file.
+#[test]
+fn srtm_tiles_side_by_side_import_as_one_map() {
+    let tmp = tempfile::tempdir().unwrap();
+    let west = tmp.path().join("N57E011.hgt");
+    std::fs::copy(tests::test_data("dem/N57E011.hgt"), &west).unwrap();
+    let bytes = std::fs::read(&west).unwrap();
+    let mirrored: Vec<u8> = bytes
+        .chunks_exact(1201 * 2)
+        .flat_map(|row| {
+            row.chunks_exact(2)
+                .rev()
+                .flatten()
+                .copied()
+                .collect::<Vec<u8>>()
+        })
+        .collect();
+    let east = tmp.path().join("N57E012.hgt");
+    std::fs::write(&east, &mirrored).unwrap();
+    let (one, one_report) = import(&params(west.clone()), &mut Vec::new()).expect("one tile");
+    let mut p = params(west.clone());
+    p.mosaic = vec![east.clone()];
+    let (two, report) = import(&p, &mut Vec::new()).expect("two tiles");
+    assert_eq!(report.source_samples, [2401, 1201]);
+    assert_eq!(report.source_spacing_m, one_report.source_spacing_m);
+    assert_eq!(report.voids_filled, 0);
+    assert!(
+        report.georeference.contains("mosaic of 2 SRTM tiles"),
+        "{}",
+        report.georeference
+    );
+    assert_eq!(two.heights.height(), one.heights.height());
+    assert_eq!(two.heights.width(), 2401);
+    for y in 0..one.heights.height() {
+        for x in 0..1200 {
+            assert_eq!(two.heights.get(x, y), one.heights.get(x, y), "({x}, {y})");
+        }
+    }
+    // Refusals name the file.
+    let fine = tmp.path().join("N57E013.hgt");
+    std::fs::write(&fine, vec![0u8; 3601 * 3601 * 2]).unwrap();
+    let nameless = tmp.path().join("tile.hgt");
+    std::fs::copy(&west, &nameless).unwrap();
+    for (other, expected) in [(&fine, "arc-second"), (&nameless, "no latitude")] {
+        let mut p = params(west.clone());
+        p.mosaic = vec![other.clone()];
+        let err = import(&p, &mut Vec::new())
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            err.contains(&*other.to_string_lossy()) && err.contains(expected),
+            "{err}"
+        );
+    }
+}

@@ -58,11 +58,12 @@ enum Command {
     /// --vertical-scale-m) or single-channel EXR (with --spacing-m; NaN = void). Voids are
     /// filled from neighbours and counted; ground types, densities and trees are derived from
     /// slope and height. A projected GeoTIFF keeps its position as the map's origin. Several
-    /// projected GeoTIFFs of one sample lattice (tiles of one survey) are joined into one map by
-    /// their positions, in any order; where they overlap the first file given keeps its samples,
-    /// and what no file covers is filled like a void.
+    /// files are joined into one map (a mosaic), in any order: projected GeoTIFFs of one sample
+    /// lattice by their positions, or SRTM tiles of one resolution by the positions in their
+    /// names; where they overlap the first file given keeps its samples, and what no file covers
+    /// is filled like a void.
     ImportDem {
-        /// The elevation file, or several GeoTIFF files to join (a mosaic).
+        /// The elevation file, or several GeoTIFF files or SRTM tiles to join (a mosaic).
         #[arg(required = true, num_args = 1..)]
         files: Vec<PathBuf>,
         /// Output map folder.
