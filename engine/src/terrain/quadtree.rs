@@ -207,6 +207,29 @@ impl QuadTree {
 mod tests {
     use super::*;
 
+    /// worldgen resamples imported maps to this tree's mesh spacings (so their nodes read their
+    /// bounds from the map-error grids): its base spacing is the leaves' quad.
+    #[test]
+    fn worldgen_imports_on_the_trees_mesh_spacings() {
+        assert_eq!(
+            worldgen::dem::NODE_SPACING_BASE_M,
+            LEAF_SIZE_M / f64::from(NODE_QUADS)
+        );
+        for (finest, expected) in [
+            (2.0, 2.0),
+            (4.0, 4.0),
+            (49.76, 32.0),
+            (3.048, 2.0),
+            (0.3, 0.25),
+        ] {
+            assert_eq!(
+                worldgen::dem::import_spacing_m(finest),
+                expected,
+                "{finest}"
+            );
+        }
+    }
+
     #[test]
     fn a_child_knows_its_slot_among_its_parents_children() {
         for parent in [

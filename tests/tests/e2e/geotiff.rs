@@ -458,8 +458,11 @@ fn feet_pixel_is_point_and_south_up_transforms_are_honoured() {
         (report.origin_m[1] - south_ft * 0.3048).abs() < 1e-9,
         "{report:?}"
     );
-    for (c, r) in [(0, 0), (17, 9), (W - 1, H - 1)] {
-        let got = f64::from(map.heights.get(c as usize, (H - 1 - r) as usize));
+    // Resampled from 3.048 m to the 2 m lattice over the same extent: the corners are the
+    // corner samples.
+    let (mw, mh) = (map.heights.width() - 1, map.heights.height() - 1);
+    for (c, r, x, y) in [(0, 0, 0, mh), (W - 1, H - 1, mw, 0), (0, H - 1, 0, 0)] {
+        let got = f64::from(map.heights.get(x, y));
         assert!(
             (got - height(c, r) * 0.3048).abs() < 1e-3,
             "({c}, {r}): {got}"
@@ -552,7 +555,8 @@ fn unsupported_rasters_are_refused_naming_the_tag() {
     let mut with_spacing = ImportParams::new(p.clone());
     with_spacing.spacing_m = Some(5.0);
     let (map, _) = import(&with_spacing, &mut Vec::new()).unwrap();
-    assert_eq!(map.manifest.size_m, [195.0, 145.0]);
+    // 195 x 145 m of source, resampled to the 4 m lattice: 50 x 37 samples.
+    assert_eq!(map.manifest.size_m, [196.0, 144.0]);
     // A nodata tag that is not a number.
     strips(&Geo {
         nodata: Some("none".into()),
