@@ -103,18 +103,15 @@ fn read_srtm(paths: &[PathBuf]) -> Result<Source, DemError> {
         })
         .collect();
     let joined = join(&parts)?;
-    let south = tiles.iter().map(|t| t.4[1]).fold(f64::INFINITY, f64::min);
-    let north = tiles
-        .iter()
-        .map(|t| t.4[1])
-        .fold(f64::NEG_INFINITY, f64::max)
-        + 1.0;
-    let west = tiles.iter().map(|t| t.4[0]).fold(f64::INFINITY, f64::min);
-    let east = tiles
-        .iter()
-        .map(|t| t.4[0])
-        .fold(f64::NEG_INFINITY, f64::max)
-        + 1.0;
+    // The degrees the tiles cover along an axis (0: longitude, 1: latitude).
+    let range = |axis: usize| {
+        let starts = tiles.iter().map(|t| t.4[axis]);
+        (
+            starts.clone().fold(f64::INFINITY, f64::min),
+            starts.fold(f64::NEG_INFINITY, f64::max) + 1.0,
+        )
+    };
+    let ((west, east), (south, north)) = (range(0), range(1));
     if south < -85.0 || north > 85.0 {
         return Err(DemError::Latitude {
             path: first_path.to_path_buf(),
