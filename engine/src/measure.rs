@@ -496,6 +496,11 @@ impl DepthImage {
     /// From a reversed-Z depth buffer with an infinite far plane (`near_m / view depth`, 0
     /// where nothing was drawn), as `render::Target::read_depth` returns it.
     pub fn from_reversed_z(size: [u32; 2], z: &[f32], near_m: f64) -> Self {
+        assert_eq!(
+            z.len(),
+            size[0] as usize * size[1] as usize,
+            "one depth value per pixel"
+        );
         let depth_m = z
             .iter()
             .map(|&z| {

@@ -6,8 +6,12 @@
 //! ([`crate::measure::view_error_shown_px`]) and over all samples on the screen.
 
 use crate::camera::Camera;
+use crate::lighting::content::LightingContent;
 use crate::measure::{self, DepthImage, ViewError};
-use crate::render::{Gpu, Target};
+use crate::objects::content::ObjectsContent;
+use crate::render::{COLOR_FORMAT, Gpu, Target};
+use crate::stream::StreamSettings;
+use crate::surface::World;
 use crate::terrain::bounds::BoundsCache;
 use crate::terrain::mesh;
 use crate::terrain::tiles::TileCache;
@@ -29,6 +33,28 @@ pub struct ShownError {
     pub shown: ViewError,
     /// Samples on the screen that something drawn in front hides.
     pub hidden_samples: u64,
+}
+
+/// A viewer of `world` for [`settled_view_error`] at threshold `tau_px` with `workers` node
+/// workers, splitting less behind vegetation when `vegetation_occlusion`: the registered kinds
+/// less the light grids (they change no depth) and the houses (they would hide terrain, so
+/// without them the check can only count more samples as shown).
+pub fn check_viewer(
+    gpu: &Gpu,
+    world: &World,
+    tau_px: f64,
+    workers: usize,
+    vegetation_occlusion: bool,
+) -> Viewer {
+    let mut kinds = crate::kinds::registered(world);
+    kinds.retain(|k| ![LightingContent::NAME, ObjectsContent::NAME].contains(&k.kind.name()));
+    let settings = StreamSettings {
+        vegetation_occlusion,
+        workers,
+        tau_px,
+        ..StreamSettings::default()
+    };
+    Viewer::with_kinds(gpu, COLOR_FORMAT, world.clone(), settings, &kinds)
 }
 
 /// Streams `viewer` at `cam` until its view is settled (every wanted node drawn, no job in

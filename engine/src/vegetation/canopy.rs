@@ -333,11 +333,15 @@ impl Canopy {
             [rect.min[0], rect.max[1]],
             [rect.max[0], rect.max[1]],
         ];
-        corners
-            .iter()
-            .fold(self.visibility(world, eye, end), |v, c| {
-                v.max(self.visibility(world, eye, glam::DVec3::new(c[0], c[1], z_top_m)))
-            })
+        // Clear lines stop the search: no visibility exceeds 1.
+        let mut best = self.visibility(world, eye, end);
+        for c in corners {
+            if best >= 1.0 {
+                break;
+            }
+            best = best.max(self.visibility(world, eye, glam::DVec3::new(c[0], c[1], z_top_m)));
+        }
+        best
     }
 }
 

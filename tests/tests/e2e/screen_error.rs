@@ -321,12 +321,8 @@ fn the_on_screen_measure_matches_rendered_ridge_silhouettes() {
 /// top centre) showed 1.316 px here.
 #[test]
 fn splitting_less_behind_vegetation_shows_no_terrain_error() {
-    use engine::lighting::content::LightingContent;
-    use engine::objects::content::ObjectsContent;
     use engine::render::{COLOR_FORMAT, Target};
-    use engine::shown_error::settled_view_error;
-    use engine::stream::StreamSettings;
-    use engine::viewer::Viewer;
+    use engine::shown_error::{check_viewer, settled_view_error};
     let Some(g) = tests::gpu::device() else {
         return;
     };
@@ -342,18 +338,10 @@ fn splitting_less_behind_vegetation_shows_no_terrain_error() {
         [640, 360],
     );
     let tau_px = 1.0;
-    let mut kinds = engine::kinds::registered(&world);
-    kinds.retain(|k| ![LightingContent::NAME, ObjectsContent::NAME].contains(&k.kind.name()));
     let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
     let mut runs = Vec::new();
     for occlusion in [false, true] {
-        let settings = StreamSettings {
-            workers: 1,
-            tau_px,
-            vegetation_occlusion: occlusion,
-            ..StreamSettings::default()
-        };
-        let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, &kinds);
+        let mut v = check_viewer(&g, &world, tau_px, 1, occlusion);
         let e = settled_view_error(&g, &mut v, &target, &cam, 600.0).expect("settled view");
         println!(
             "rule {}: {} nodes, {} triangles; max on the screen {:.3} px over all samples, \

@@ -389,12 +389,8 @@ fn occlusion(
 /// drawn terrain's on-screen error measured over the samples the frame's depth shows
 /// ([`engine::shown_error`]). Left out without a GPU adapter.
 fn occlusion_rendered(world: &World, viewport_px: [u32; 2], r: &mut Report, quick: bool) {
-    use engine::lighting::content::LightingContent;
-    use engine::objects::content::ObjectsContent;
     use engine::render::{COLOR_FORMAT, Target};
-    use engine::shown_error::{ShownError, settled_view_error};
-    use engine::stream::StreamSettings;
-    use engine::viewer::Viewer;
+    use engine::shown_error::{ShownError, check_viewer, settled_view_error};
     let Some((g, adapter)) = crate::gpu::adapter() else {
         eprintln!("no GPU adapter: the rendered occlusion rows left out");
         return;
@@ -403,19 +399,10 @@ fn occlusion_rendered(world: &World, viewport_px: [u32; 2], r: &mut Report, quic
     // Spread over the low flight's first half, like the selection rows' 48 cameras.
     let cams = low_cameras(world, viewport_px, n, true);
     let target = Target::new(&g.device, viewport_px, COLOR_FORMAT);
-    // Lighting and houses change no depth the check reads; leaving them out saves their jobs.
-    let mut kinds = engine::kinds::registered(world);
-    kinds.retain(|k| ![LightingContent::NAME, ObjectsContent::NAME].contains(&k.kind.name()));
     for tau_px in [2.0, 0.5] {
         let mut runs: Vec<Vec<ShownError>> = Vec::new();
         for occlusion in [false, true] {
-            let settings = StreamSettings {
-                workers: 2,
-                tau_px,
-                vegetation_occlusion: occlusion,
-                ..StreamSettings::default()
-            };
-            let mut v = Viewer::with_kinds(&g, COLOR_FORMAT, world.clone(), settings, &kinds);
+            let mut v = check_viewer(&g, world, tau_px, 2, occlusion);
             let mut views = Vec::new();
             let b = bar(
                 cams.len() as u64,
