@@ -34,8 +34,8 @@ pub fn import_spacing_m(finest_m: f64) -> f64 {
 #[derive(Debug, Clone)]
 pub struct ImportParams {
     pub path: PathBuf,
-    /// Further GeoTIFF files joined with `path` into one raster (a mosaic; see
-    /// [`crate::mosaic`]); empty for one file.
+    /// Further files joined with `path` into one raster (a mosaic of projected GeoTIFFs or of
+    /// SRTM tiles; see [`crate::mosaic`]); empty for one file.
     pub mosaic: Vec<PathBuf>,
     pub name: String,
     /// Sample spacing of the source (m); required for PNG and EXR, derived for `.hgt`.
@@ -160,34 +160,44 @@ pub(crate) fn check_size(path: &Path, w: u64, h: u64) -> Result<(), DemError> {
     Ok(())
 }
 
-/// Latitude of the south edge from an SRTM name like `N57E011.hgt` / `S12W077.hgt`.
-pub(crate) fn hgt_latitude(path: &Path) -> Option<f64> {
+/// An SRTM name's position, `N57E011` / `S12W077`: (sign and digits of the latitude, and the
+/// rest of the name after them).
+fn hgt_name(path: &Path) -> Option<(f64, &str)> {
     let stem = path.file_stem()?.to_str()?;
     let sign = match stem.chars().next()? {
         'N' | 'n' => 1.0,
         'S' | 's' => -1.0,
         _ => return None,
     };
-    let digits: String = stem[1..].chars().take_while(char::is_ascii_digit).collect();
-    let lat: f64 = digits.parse().ok()?;
-    (lat <= 90.0).then_some(sign * lat)
+    let digits = stem[1..].chars().take_while(char::is_ascii_digit).count();
+    let lat: f64 = stem[1..=digits].parse().ok()?;
+    (lat <= 90.0).then_some((sign * lat, &stem[1 + digits..]))
 }
 
-/// Longitude of the west edge from an SRTM name like `N57E011.hgt` / `S12W077.hgt`.
+/// Latitude of the south edge from an SRTM name like `N57E011.hgt` / `S12W077.hgt`.
+pub(crate) fn hgt_latitude(path: &Path) -> Option<f64> {
+    hgt_name(path).map(|(lat, _)| lat)
+}
+
+/// Longitude of the west edge from an SRTM name like `N57E011.hgt` / `S12W077.hgt`: the letter
+/// right after the latitude's digits, then the longitude's digits.
 pub(crate) fn hgt_longitude(path: &Path) -> Option<f64> {
-    let stem = path.file_stem()?.to_str()?;
-    let at = stem.find(['E', 'e', 'W', 'w'])?;
-    let sign = if stem[at..].starts_with(['E', 'e']) {
-        1.0
-    } else {
-        -1.0
+    let (_, rest) = hgt_name(path)?;
+    let sign = match rest.chars().next()? {
+        'E' | 'e' => 1.0,
+        'W' | 'w' => -1.0,
+        _ => return None,
     };
-    let digits: String = stem[at + 1..]
-        .chars()
-        .take_while(char::is_ascii_digit)
-        .collect();
-    let lon: f64 = digits.parse().ok()?;
+    let digits = rest[1..].chars().take_while(char::is_ascii_digit).count();
+    let lon: f64 = rest[1..=digits].parse().ok()?;
     (lon <= 180.0).then_some(sign * lon)
+}
+
+/// A file's extension in lower case.
+pub(crate) fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
 }
 
 /// An SRTM tile's samples (row 0 = south, void = NaN), samples per side and arc-seconds per
@@ -454,10 +464,15 @@ pub fn import(
             ),
         });
     }
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
+    let ext = extension(path);
+    if p.latitude_deg.is_some() && !p.mosaic.is_empty() {
+        return Err(DemError::BadParam {
+            path: path.clone(),
+            message: "--latitude-deg places one .hgt tile whose name lacks its position; a \
+                      mosaic places its tiles by their names"
+                .into(),
+        });
+    }
     let mut src = if p.mosaic.is_empty() {
         timed(times, "read elevation file", || match ext.as_deref() {
             Some("tif" | "tiff") => crate::geotiff::read(path, p.spacing_m, p.vertical_scale_m),
@@ -596,5 +611,17 @@ mod tests {
         assert_eq!(hgt_latitude(Path::new("x/N57E011.hgt")), Some(57.0));
         assert_eq!(hgt_latitude(Path::new("S12W077.hgt")), Some(-12.0));
         assert_eq!(hgt_latitude(Path::new("tile.hgt")), None);
+    }
+
+    #[test]
+    fn longitude_comes_from_srtm_names() {
+        assert_eq!(hgt_longitude(Path::new("x/N57E011.hgt")), Some(11.0));
+        assert_eq!(hgt_longitude(Path::new("S12W077.hgt")), Some(-77.0));
+        assert_eq!(hgt_longitude(Path::new("n05e123.hgt")), Some(123.0));
+        // The letter must follow the latitude: "tile" has an "e" but no position.
+        assert_eq!(hgt_longitude(Path::new("tile.hgt")), None);
+        assert_eq!(hgt_longitude(Path::new("N57X011.hgt")), None);
+        assert_eq!(hgt_longitude(Path::new("N57E.hgt")), None);
+        assert_eq!(hgt_longitude(Path::new("N57E181.hgt")), None);
     }
 }

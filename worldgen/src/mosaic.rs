@@ -10,7 +10,8 @@
 //! filled and counted like a file's own voids.
 
 use crate::dem::{
-    DemError, Source, check_size, hgt_latitude, hgt_longitude, hgt_samples, hgt_spacing_m,
+    DemError, Source, check_size, extension, hgt_latitude, hgt_longitude, hgt_samples,
+    hgt_spacing_m,
 };
 use crate::grid::Grid;
 use std::fmt::Write as _;
@@ -25,13 +26,6 @@ fn refuse(path: &Path, message: String) -> DemError {
         path: path.to_path_buf(),
         message,
     }
-}
-
-/// A file's lower-case extension.
-fn extension(path: &Path) -> Option<String> {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
 }
 
 /// The mosaic of `paths` (at least one): one source grid covering every file, row 0 south.
