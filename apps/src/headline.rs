@@ -180,6 +180,8 @@ pub fn with_table(readme: &str, table: &str) -> Result<String, String> {
 
 #[cfg(test)]
 mod tests {
+    use std::path::Path;
+
     /// The README's headline table is the one the committed benchmark documents give.
     #[test]
     fn readme_table_is_generated_from_the_benchmark_documents() {
@@ -192,6 +194,4 @@ mod tests {
             "README.md's headline table is stale: run `cargo run -p apps --bin headline`"
         );
     }
-
-    use std::path::Path;
 }

@@ -459,7 +459,8 @@ fn feet_pixel_is_point_and_south_up_transforms_are_honoured() {
         "{report:?}"
     );
     // Resampled from 3.048 m to the 2 m lattice over the same extent: the corners are the
-    // corner samples.
+    // corner samples, and every sample lies within the range of the source cell it falls in
+    // (in metres), which the limited bicubic guarantees.
     let (mw, mh) = (map.heights.width() - 1, map.heights.height() - 1);
     for (c, r, x, y) in [(0, 0, 0, mh), (W - 1, H - 1, mw, 0), (0, H - 1, 0, 0)] {
         let got = f64::from(map.heights.get(x, y));
@@ -467,6 +468,33 @@ fn feet_pixel_is_point_and_south_up_transforms_are_honoured() {
             (got - height(c, r) * 0.3048).abs() < 1e-3,
             "({c}, {r}): {got}"
         );
+    }
+    let (fx, fy) = (f64::from(W - 1) / mw as f64, f64::from(H - 1) / mh as f64);
+    for y in 0..=mh {
+        for x in 0..=mw {
+            // The source cell: columns from the west, rows from the south (as the map's).
+            let (c0, s0) = (
+                (x as f64 * fx).floor() as u32,
+                (y as f64 * fy).floor() as u32,
+            );
+            let cell: Vec<f64> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .iter()
+                .map(|&(dc, ds)| {
+                    let south = (s0 + ds).min(H - 1);
+                    height((c0 + dc).min(W - 1), H - 1 - south) * 0.3048
+                })
+                .collect();
+            let (lo, hi) = cell
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                    (l.min(v), h.max(v))
+                });
+            let got = f64::from(map.heights.get(x, y));
+            assert!(
+                (lo - 1e-3..=hi + 1e-3).contains(&got),
+                "map sample ({x}, {y}): {got} outside its source cell's {lo}..{hi}"
+            );
+        }
     }
     // A transform whose rows go north (positive y step): row 0 of the file is the south edge.
     let mut m = [0.0; 16];
