@@ -3,7 +3,16 @@
 //!
 //! Shapes: a conifer (six-sided trunk, two stacked cones), a broadleaf tree (trunk and a
 //! squashed sphere crown), a bush (a sphere touching the ground) and a grass clump (five
-//! crossed, tapered blades). Each has a high- and a low-detail variant (segment counts).
+//! crossed, tapered blades). Each has a high- and a low-detail variant (segment counts). The
+//! high variant's rings are inscribed in the round shape; the low variant's are pushed out so
+//! that its outline lies as far outside the round shape at its corners as inside between them
+//! (a regular n-gon of circumradius `2 r / (1 + cos(pi / n))`), so switching between the two,
+//! and between the low mesh and a billboard baked from the high one, moves the silhouette
+//! least.
+
+/// How far from its axis a unit shape reaches (the low variant's corners; the high variant
+/// stays within 1).
+pub const REACH: f64 = 1.2;
 
 /// The shape an item's species is drawn with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -35,6 +44,14 @@ pub struct PlantMeshes {
 struct Builder {
     v: Vec<PlantVertex>,
     i: Vec<u32>,
+    /// Push rings out to balance their polygon against the round shape (the low variant).
+    balanced: bool,
+}
+
+/// The circumradius of a regular `n`-gon whose outline lies as far outside a unit circle (at
+/// its corners) as inside it (at its edges' middles).
+fn balanced_radius(n: u32) -> f32 {
+    2.0 / (1.0 + (std::f32::consts::PI / n as f32).cos())
 }
 
 impl Builder {
@@ -52,6 +69,12 @@ impl Builder {
     #[allow(clippy::too_many_arguments, reason = "two rings and their shading")]
     fn band(&mut self, seg: u32, z0: f32, r0: f32, z1: f32, r1: f32, part: u32) {
         let slope = (r0 - r1) / (z1 - z0).max(1e-6);
+        let grow = if self.balanced {
+            balanced_radius(seg)
+        } else {
+            1.0
+        };
+        let (r0, r1) = (r0 * grow, r1 * grow);
         let base = self.v.len() as u32;
         for k in 0..=seg {
             let a = std::f32::consts::TAU * k as f32 / seg as f32;
@@ -69,6 +92,13 @@ impl Builder {
 
     /// An ellipsoid centred at (0, 0, zc) with radii (r, r, rz).
     fn ellipsoid(&mut self, seg: u32, rings: u32, zc: f32, r: f32, rz: f32, part: u32) {
+        // Seen from the side the rings' outline is a 2 * rings-gon in the profile (pushed out
+        // sideways only, so the poles stay at the shape's top and bottom).
+        let grow = if self.balanced {
+            balanced_radius(seg) * balanced_radius(2 * rings)
+        } else {
+            1.0
+        };
         let base = self.v.len() as u32;
         for j in 0..=rings {
             let t = std::f32::consts::PI * j as f32 / rings as f32;
@@ -76,7 +106,7 @@ impl Builder {
             for k in 0..=seg {
                 let a = std::f32::consts::TAU * k as f32 / seg as f32;
                 let (s, c) = a.sin_cos();
-                let p = [r * st * c, r * st * s, zc - rz * ct];
+                let p = [grow * r * st * c, grow * r * st * s, zc - rz * ct];
                 let n = [st * c / r, st * s / r, -ct / rz];
                 self.vertex(p, n, part);
             }
@@ -104,7 +134,10 @@ impl Builder {
 }
 
 fn shape(shape: Shape, low: bool) -> Builder {
-    let mut b = Builder::default();
+    let mut b = Builder {
+        balanced: low,
+        ..Builder::default()
+    };
     let seg = if low { 5 } else { 10 };
     match shape {
         Shape::Conifer => {
@@ -172,18 +205,29 @@ mod tests {
     use super::*;
 
     #[test]
+    fn balanced_rings_straddle_the_circle() {
+        for n in [3u32, 5, 6, 10] {
+            let r = balanced_radius(n);
+            let inner = r * (std::f32::consts::PI / n as f32).cos();
+            assert!(((r - 1.0) - (1.0 - inner)).abs() < 1e-6, "{n}: {r} {inner}");
+        }
+    }
+
+    #[test]
     fn shapes_are_unit_sized_and_deterministic() {
         let a = PlantMeshes::generate();
         let b = PlantMeshes::generate();
         assert_eq!(a.vertices, b.vertices);
         assert_eq!(a.indices, b.indices);
         for s in [Shape::Conifer, Shape::Broadleaf, Shape::Bush, Shape::Grass] {
-            let (first, count, base) = a.ranges[s as usize][0];
-            assert!(count > 0 && a.triangles(s, 1) < a.triangles(s, 0));
-            for &i in &a.indices[first as usize..(first + count) as usize] {
-                let p = a.vertices[(base + i as i32) as usize].position;
-                assert!(p[2] >= -1e-6 && p[2] <= 1.0 + 1e-6, "{s:?} z {}", p[2]);
-                assert!(p[0].hypot(p[1]) <= 1.0 + 1e-5, "{s:?} radius");
+            assert!(a.triangles(s, 0) > 0 && a.triangles(s, 1) < a.triangles(s, 0));
+            for (detail, reach) in [(0, 1.0), (1, REACH as f32)] {
+                let (first, count, base) = a.ranges[s as usize][detail];
+                for &i in &a.indices[first as usize..(first + count) as usize] {
+                    let p = a.vertices[(base + i as i32) as usize].position;
+                    assert!(p[2] >= -1e-6 && p[2] <= 1.0 + 1e-6, "{s:?} z {}", p[2]);
+                    assert!(p[0].hypot(p[1]) <= reach + 1e-5, "{s:?} {detail} radius");
+                }
             }
         }
     }

@@ -176,12 +176,12 @@ impl Clusters {
     }
 }
 
-/// The world-space box of the items of `groups` (crown radius around, 1 m below the ground to
-/// the top).
+/// The world-space box of the items of `groups` (as far around as their shapes reach, 1 m below
+/// the ground to the top).
 fn items_box(groups: &[InstanceGroup]) -> Option<(DVec3, DVec3)> {
     let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
     for it in groups.iter().flat_map(|g| &g.items) {
-        let r = f64::from(it.radius_m);
+        let r = f64::from(it.radius_m) * super::plants::REACH;
         lo = lo.min(DVec3::new(it.x_m - r, it.y_m - r, it.z_m - 1.0));
         hi = hi.max(DVec3::new(
             it.x_m + r,
