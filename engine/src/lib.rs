@@ -26,8 +26,9 @@
 //! selection, tiles, meshes), [`vegetation`], [`stream`] (jobs, residency, fades), [`render`]
 //! (one renderer per kind of thing drawn), [`camera`], [`flight`] (automatic flyover, camera
 //! paths), [`viewer`] (the frame loop), [`soak`] (long headless flights sampled for growth), and behind the `measure` feature `measure` (dense error
-//! measurement and reference selections for tests and benchmarks) and `shown_error` (the
-//! terrain error a rendered frame shows).
+//! measurement and reference selections for tests and benchmarks), `shown_error` (the
+//! terrain error a rendered frame shows), `silhouette` and `switch_error` (the image error of
+//! vegetation's representation switches, on rendered frames).
 
 pub mod camera;
 pub mod color;
@@ -41,9 +42,13 @@ pub mod objects;
 pub mod render;
 #[cfg(feature = "measure")]
 pub mod shown_error;
+#[cfg(feature = "measure")]
+pub mod silhouette;
 pub mod soak;
 pub mod stream;
 pub mod surface;
+#[cfg(feature = "measure")]
+pub mod switch_error;
 pub mod terrain;
 #[cfg(test)]
 mod test_maps;

@@ -231,6 +231,27 @@ impl NodeVegetation {
     pub fn gpu_bytes(&self) -> usize {
         self.instances() * INSTANCE_BYTES
     }
+
+    /// The same node's vegetation with only the items `keep` accepts (empty groups dropped;
+    /// box and clusters made again for what is left), for drawing part of a node on its own.
+    pub fn only(&self, rect: Rect, keep: impl Fn(&Item) -> bool) -> Self {
+        let groups: Vec<InstanceGroup> = self
+            .groups
+            .iter()
+            .map(|g| InstanceGroup {
+                species: g.species,
+                representation: g.representation,
+                replaced_on_split: g.replaced_on_split,
+                items: g.items.iter().filter(|it| keep(it)).copied().collect(),
+            })
+            .filter(|g| !g.items.is_empty())
+            .collect();
+        Self {
+            items_box_m: items_box(&groups),
+            clusters: Clusters::of(&groups, rect),
+            groups,
+        }
+    }
 }
 
 /// The vegetation of node `key`: items placed in its rectangle whose representation at this

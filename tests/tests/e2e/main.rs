@@ -20,5 +20,6 @@ mod terrain;
 mod texcache;
 mod towns;
 mod vegetation;
+mod vegetation_switch;
 mod viewer_prefetch;
 mod viewer_xvfb;

@@ -14,6 +14,7 @@ mod selection;
 mod soak;
 mod span;
 mod streaming;
+mod switches;
 mod terrain;
 mod textures;
 mod tiles;

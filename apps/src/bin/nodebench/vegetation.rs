@@ -20,6 +20,8 @@ pub(crate) fn section_vegetation(
     quick: bool,
 ) {
     let placer = Placer::new(world);
+    let walk = low_cameras(world, cams[0].viewport_px, 2, true);
+    crate::switches::switch_rows(world, tree, &walk, r, quick);
     tile_against_bridson(world, r, quick, &placer);
     phase_per_node(world, tree, cams, r, quick, &placer);
     instances_per_frame(world, tree, cams, r, quick, &placer);
