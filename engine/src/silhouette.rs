@@ -155,6 +155,19 @@ pub struct SilhouetteDistance {
     pub covered_px: [usize; 2],
 }
 
+impl SilhouetteDistance {
+    /// The distances in pixels of an image `factor` times as wide and high (a measure made on
+    /// a supersampled frame, given in the pixels of the frame it stands for).
+    pub fn in_pixels_of(self, factor: u32) -> Self {
+        let f = f64::from(factor.max(1));
+        Self {
+            max_px: self.max_px / f,
+            p99_px: self.p99_px / f,
+            ..self
+        }
+    }
+}
+
 /// The symmetric distance between the silhouettes of `a` and `b` (same size): every pixel `a`
 /// covers and `b` does not, measured to the nearest pixel `b` covers, and the other way round.
 pub fn distance(a: &Mask, b: &Mask) -> Result<SilhouetteDistance, String> {

@@ -76,26 +76,44 @@ pub struct SwitchRig {
     scene: Scene,
     target: Target,
     fovy_rad: f64,
+    /// The view measured, and how many times as finely (per side) it is drawn.
+    viewport_px: [u32; 2],
+    supersample: u32,
 }
 
 impl std::fmt::Debug for SwitchRig {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "SwitchRig({:?} px)", self.target.size)
+        write!(
+            f,
+            "SwitchRig({:?} px drawn {}x)",
+            self.viewport_px, self.supersample
+        )
     }
 }
 
 impl SwitchRig {
-    /// A rig drawing `placer`'s species into `viewport_px` at vertical field of view
-    /// `fovy_rad`.
-    pub fn new(gpu: &Gpu, placer: &Placer, viewport_px: [u32; 2], fovy_rad: f64) -> Self {
+    /// A rig measuring `placer`'s species in a view of `viewport_px` at vertical field of view
+    /// `fovy_rad`, drawn `supersample` times as finely per side (distances are given in the
+    /// view's pixels: the raster's quantization is `1 / supersample` of one).
+    pub fn new(
+        gpu: &Gpu,
+        placer: &Placer,
+        viewport_px: [u32; 2],
+        fovy_rad: f64,
+        supersample: u32,
+    ) -> Self {
         let mut scene = Scene::new(gpu, COLOR_FORMAT);
         let names: Vec<String> = placer.species.iter().map(|s| s.name.clone()).collect();
         let renderer = VegetationRenderer::new(gpu, &scene.frame, &names);
         scene.push(Box::new(renderer));
+        let supersample = supersample.max(1);
+        let drawn_px = [viewport_px[0] * supersample, viewport_px[1] * supersample];
         Self {
             scene,
-            target: Target::new(&gpu.device, viewport_px, COLOR_FORMAT),
+            target: Target::new(&gpu.device, drawn_px, COLOR_FORMAT),
             fovy_rad,
+            viewport_px,
+            supersample,
         }
     }
 
@@ -186,7 +204,7 @@ impl SwitchRig {
                     azimuth_deg: az,
                     distance_m,
                     tau_px,
-                    silhouette: silhouette::distance(&a, &b)?,
+                    silhouette: silhouette::distance(&a, &b)?.in_pixels_of(self.supersample),
                 });
             }
         }
@@ -230,7 +248,7 @@ impl SwitchRig {
                 (lo.min(it.z_m), hi.max(it.z_m))
             });
         let z_m = if lo <= hi { (lo + hi) * 0.5 } else { 0.0 };
-        let probe = Camera::look_at(DVec3::ZERO, DVec3::Y, self.fovy_rad, self.target.size);
+        let probe = Camera::look_at(DVec3::ZERO, DVec3::Y, self.fovy_rad, self.viewport_px);
         let want_m = switch_distance_m(tree.spacing_m(key.level), probe.k_px(), tau_px);
         let a = azimuth_deg.to_radians();
         let dir = DVec2::new(a.sin(), -a.cos());

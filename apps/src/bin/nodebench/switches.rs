@@ -11,6 +11,10 @@ use engine::vegetation::Placer;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
+/// Each view is drawn this many times as finely per side (the silhouettes' quantization is a
+/// third of a pixel).
+const SUPERSAMPLE: u32 = 3;
+
 /// Compass directions the camera looks at each node from (0: south, the billboards' view).
 const AZIMUTHS_DEG: [f64; 4] = [0.0, 45.0, 90.0, 180.0];
 
@@ -46,7 +50,7 @@ pub(crate) fn switch_rows(
     let cams = &cams[..cams.len().min(if quick { 1 } else { 2 })];
     let keys = nodes(world, tree, &placer, cams);
     let fovy_rad = cams[0].fovy_rad;
-    let mut rig = SwitchRig::new(&g, &placer, cams[0].viewport_px, fovy_rad);
+    let mut rig = SwitchRig::new(&g, &placer, cams[0].viewport_px, fovy_rad, SUPERSAMPLE);
     let taus: &[f64] = if quick { &[2.0] } else { &[2.0, 1.0] };
     for &tau_px in taus {
         let b = bar(
@@ -79,9 +83,9 @@ pub(crate) fn switch_rows(
                 s
             };
             let mut params = format!(
-                "tau {tau_px} px, {} nodes of spacing {}..{} m x {} directions, {}x{} px, \
-                 {:.0} deg, on {adapter}; worst: spacing {} m, from {} deg at {:.1} m, \
-                 {} / {} items",
+                "tau {tau_px} px, {} nodes of spacing {}..{} m x {} directions, {}x{} px \
+                 drawn {SUPERSAMPLE}x{SUPERSAMPLE} as finely, {:.0} deg, on {adapter}; worst: \
+                 spacing {} m, from {} deg at {:.1} m, {} / {} items",
                 v.len() / AZIMUTHS_DEG.len(),
                 spacings[0],
                 spacings[spacings.len() - 1],
