@@ -27,8 +27,9 @@
 //! (one renderer per kind of thing drawn), [`camera`], [`flight`] (automatic flyover, camera
 //! paths), [`viewer`] (the frame loop), [`soak`] (long headless flights sampled for growth), and behind the `measure` feature `measure` (dense error
 //! measurement and reference selections for tests and benchmarks), `shown_error` (the
-//! terrain error a rendered frame shows), `silhouette` and `switch_error` (the image error of
-//! vegetation's representation switches, on rendered frames).
+//! terrain error a rendered frame shows), `silhouette`, `switch_error` and `pm_image_error` (the
+//! image error of vegetation's representation switches and of objects' chosen levels, on
+//! rendered frames).
 
 pub mod camera;
 pub mod color;
@@ -39,6 +40,8 @@ pub mod lighting;
 #[cfg(feature = "measure")]
 pub mod measure;
 pub mod objects;
+#[cfg(feature = "measure")]
+pub mod pm_image_error;
 pub mod render;
 #[cfg(feature = "measure")]
 pub mod shown_error;

@@ -58,6 +58,35 @@ pub fn check_viewer(
 }
 
 /// Streams `viewer` at `cam` until its view is settled (every wanted node drawn, no job in
+/// flight, node textures made; at most `timeout_s`), then draws a few frames into `target` so
+/// fades end and background light grids arrive.
+pub fn settle(
+    gpu: &Gpu,
+    viewer: &mut Viewer,
+    target: &Target,
+    cam: &Camera,
+    timeout_s: f64,
+) -> Result<(), String> {
+    let t0 = Instant::now();
+    while !viewer.stream_only(gpu, cam, 0.05) {
+        if t0.elapsed().as_secs_f64() > timeout_s {
+            return Err(format!(
+                "the view did not settle in {timeout_s} s: {:?}",
+                viewer.outstanding()
+            ));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    for _ in 0..10 {
+        if let Some(l) = viewer.lighting() {
+            l.wait_idle();
+        }
+        viewer.render_offscreen(gpu, target, cam, 0.1)?;
+    }
+    Ok(())
+}
+
+/// Streams `viewer` at `cam` until its view is settled (every wanted node drawn, no job in
 /// flight, node textures made; at most `timeout_s`), draws a few more frames so fades end and
 /// background light grids arrive, reads the last frame's depth from `target` (which must be
 /// `cam`'s viewport size) and measures the drawn terrain's error on the screen: over all its
@@ -75,22 +104,7 @@ pub fn settled_view_error(
             target.size, cam.viewport_px
         ));
     }
-    let t0 = Instant::now();
-    while !viewer.stream_only(gpu, cam, 0.05) {
-        if t0.elapsed().as_secs_f64() > timeout_s {
-            return Err(format!(
-                "the view did not settle in {timeout_s} s: {:?}",
-                viewer.outstanding()
-            ));
-        }
-        std::thread::sleep(std::time::Duration::from_millis(1));
-    }
-    for _ in 0..10 {
-        if let Some(l) = viewer.lighting() {
-            l.wait_idle();
-        }
-        viewer.render_offscreen(gpu, target, cam, 0.1)?;
-    }
+    settle(gpu, viewer, target, cam, timeout_s)?;
     let z = target
         .read_depth(gpu)
         .map_err(|e| format!("reading the frame's depth: {e}"))?;

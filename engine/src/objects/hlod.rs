@@ -8,13 +8,15 @@
 //! times its scale is within that budget, so the merged mesh is within the budget of every
 //! house at full detail. It is drawn
 //! instead of the single houses when the pixel metric of the objects accepts its error at the
-//! distance of its bounding box: `budget x K x strength / max(d - z_disp, 1 m) <= tau`
-//! ([`accepts`]), the test each house's own level passes. Colours are per vertex: the mean
+//! distance of its bounding box: `budget x K x stretch x strength / max(d - z_disp, 1 m) <= tau`
+//! ([`accepts`]; `stretch` what the flat screen does off its axis,
+//! [`crate::terrain::screen_bound`]), the test each house's own level passes. Colours are per vertex: the mean
 //! colour of the house's facade or roof texture (its 1 x 1 mip level), by the face's normal.
 
 use super::lod::PmLodSettings;
 use super::set::{ObjectSet, PLAIN_ALBEDO, ROOF_NORMAL_UP, model_to_world};
 use crate::terrain::quadtree::NODE_QUADS;
+use crate::terrain::screen_bound::ScreenBound;
 use glam::DVec3;
 use worldgen::pm::ErrorIndex;
 
@@ -40,16 +42,18 @@ pub fn error_budget_m(node_side_m: f64) -> f64 {
     node_side_m / f64::from(NODE_QUADS)
 }
 
-/// Whether the objects' pixel metric accepts `hlod` seen from `eye_m` (module docs).
+/// Whether the objects' pixel metric accepts `hlod` on the screen of `screen` (module docs),
+/// with the stretch the screen gives an error of any direction in the mesh's box.
 pub fn accepts(
     hlod: &NodeHlod,
     settings: &PmLodSettings,
     tau_px: f64,
-    eye_m: DVec3,
-    k_px: f64,
+    screen: &ScreenBound,
 ) -> bool {
-    let d = crate::camera::distance_to_aabb(eye_m, hlod.lo_m, hlod.hi_m);
-    hlod.error_m * k_px * settings.strength / (d - settings.z_disp_m).max(1.0) <= tau_px
+    let d = crate::camera::distance_to_aabb(screen.eye_m, hlod.lo_m, hlod.hi_m);
+    let stretch = screen.stretch(hlod.lo_m, hlod.hi_m, d).any;
+    hlod.error_m * screen.k_px() * stretch * settings.strength / (d - settings.z_disp_m).max(1.0)
+        <= tau_px
 }
 
 /// The coarsest level of a model whose stored error times `scale` is within `budget_m`, at

@@ -3,13 +3,17 @@
 //! The pixel metric of the terrain applied to an object: a level whose stored error (an upper
 //! bound of the two-sided Hausdorff distance to the full mesh, model units) is `e` moves no
 //! surface point by more than `e x scale` metres, which at distance `d` projects to at most
-//! `e x scale x K / d` pixels near the view axis (`K` = [`Camera::k_px`]). The instance draws the
-//! coarsest level with `e x scale x K x strength / max(d - z_disp, 1 m) <= tau`, tau being the
-//! terrain's (one threshold for everything drawn).
+//! `e x scale x K x stretch / d` pixels on the screen (`K` = [`Camera::k_px`], `stretch` what a
+//! flat screen does to a displacement of any direction off its axis, from the object's box:
+//! [`ScreenBound::stretch`]; [`on_screen`] gives `d` and `K x stretch`). The instance draws the
+//! coarsest level with `e x scale x K x stretch x strength / max(d - z_disp, 1 m) <= tau`, tau
+//! being the terrain's (one threshold for everything drawn).
 //!
 //! [`Camera::k_px`]: crate::camera::Camera::k_px
 
 use super::set::PmModel;
+use crate::terrain::screen_bound::ScreenBound;
+use glam::DVec3;
 use worldgen::pm::{ErrorIndex, PmMesh};
 
 /// Run-time level-of-detail settings for progressive meshes (seed 003's names in brackets).
@@ -40,6 +44,19 @@ impl Default for PmLodSettings {
             morph_s: 0.0,
         }
     }
+}
+
+/// The distance and the pixels per (metre / metre of distance) an object inside the sphere
+/// `centre_m`, `radius_m` takes its metric with on the screen of `screen`: the distance to the
+/// sphere's box, and `K` times the stretch an error of any direction in that box may get off
+/// the view axis. Pass both to [`choose`].
+pub fn on_screen(screen: &ScreenBound, centre_m: DVec3, radius_m: f64) -> (f64, f64) {
+    let (lo, hi) = (
+        centre_m - DVec3::splat(radius_m),
+        centre_m + DVec3::splat(radius_m),
+    );
+    let d = crate::camera::distance_to_aabb(screen.eye_m, lo, hi);
+    (d, screen.k_px() * screen.stretch(lo, hi, d).any)
 }
 
 /// The largest stored error (model units) allowed at `distance_m` for an object drawn at

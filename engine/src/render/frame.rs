@@ -31,6 +31,8 @@ pub struct ViewOptions {
     /// Distance fog: density per metre and largest amount (depth cueing, never hiding).
     pub fog_per_m: f32,
     pub fog_max: f32,
+    /// Draw the terrain (off: only what stands on it, for measures of its image).
+    pub terrain: bool,
     /// Draw vegetation.
     pub plants: bool,
     /// Draw progressive-mesh objects (houses, `--object` copies).
@@ -116,6 +118,7 @@ impl Default for ViewOptions {
             clear: [0.0, 0.0, 0.0, 1.0],
             fog_per_m: 1.0 / 25_000.0,
             fog_max: 0.35,
+            terrain: true,
             plants: true,
             objects: true,
             merged_draws: true,

@@ -22,10 +22,11 @@ use super::suballoc::Lease;
 use super::texture_pool::GpuTexturePool;
 use crate::objects::content::{NodeObjects, ObjectsContent};
 use crate::objects::hlod;
-use crate::objects::lod::{Choice, choose};
+use crate::objects::lod::{self, Choice, choose};
 use crate::objects::set::{ObjectSet, PLAIN_ALBEDO, PmModel, ROOF_NORMAL_UP, model_to_world};
 use crate::objects::texturing;
 use crate::stream::Shared;
+use crate::terrain::screen_bound::ScreenBound;
 use crate::texcache::pool::{PoolSettings, SlotId, TexturePool};
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
@@ -598,7 +599,9 @@ impl NodeRenderer for ObjectsRenderer {
             return;
         }
         let camera = draws.camera;
-        let k_px = camera.k_px();
+        // The pixel metric on the screen: an object's error may move its image by up to the
+        // stretch of its box's place on the screen (as a terrain block's).
+        let screen = ScreenBound::new(camera);
         let settings = draws.view.pm_lod;
         let mut uniforms: Vec<DrawUniform> = Vec::new();
         // The instances and models (a second handle, so the texture cache can be asked while
@@ -624,7 +627,7 @@ impl NodeRenderer for ObjectsRenderer {
                 {
                     continue;
                 }
-                let distance_m = (c - camera.position_m).length() - r;
+                let (distance_m, k_on_screen_px) = lod::on_screen(&screen, c, r);
                 texturing::request_instance(
                     &mut self.tex_pool,
                     &set,
@@ -633,7 +636,14 @@ impl NodeRenderer for ObjectsRenderer {
                     id,
                     (c, r),
                 );
-                let choice = choose(model, &settings, draws.tau_px, distance_m, k_px, inst.scale);
+                let choice = choose(
+                    model,
+                    &settings,
+                    draws.tau_px,
+                    distance_m,
+                    k_on_screen_px,
+                    inst.scale,
+                );
                 let full = model.pm.triangles.len();
                 let drawn_model = model.option(choice.option);
                 let Some(shown) = self.update_instance(gpu, draws, id, drawn_model, choice) else {
@@ -890,8 +900,7 @@ impl ObjectsRenderer {
                 h,
                 &draws.view.pm_lod,
                 draws.tau_px,
-                camera.position_m,
-                camera.k_px(),
+                &ScreenBound::new(camera),
             )
         {
             return false;

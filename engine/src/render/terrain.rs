@@ -913,6 +913,9 @@ impl NodeRenderer for TerrainRenderer {
         stats: &mut DrawStats,
     ) {
         stats.culled += self.culled;
+        if !draws.view.terrain {
+            return;
+        }
         let wire = self.wire.as_ref().filter(|_| draws.view.wireframe);
         let (fill, solid) = if draws.view.flat_terrain {
             (&self.flat_fill, &self.flat_solid)

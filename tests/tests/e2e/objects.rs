@@ -486,3 +486,88 @@ fn instances_draw_an_msft_lod_chain_level_where_it_needs_fewer_triangles() {
     assert_eq!(st.object_chain_draws as usize, chain);
     assert!(st.object_triangles < st.object_full_triangles);
 }
+
+/// The image error of the chosen levels, measured on drawn frames against every object at full
+/// detail (`engine::pm_image_error`): within tau at the metric's choice, in the middle of the
+/// view and near the corner of a wide one, and above tau when the metric is made eight times
+/// too lax (so the measure sees coarse levels).
+#[test]
+fn chosen_levels_show_within_tau_of_full_detail() {
+    use engine::pm_image_error::chosen_against_full;
+    let Some(g) = device() else { return };
+    let world = tiny_world();
+    let cam = view_along_row(&world);
+    let model = PmModel::from_pm("box".into(), bumpy_box());
+    let set = ObjectSet::place_row(
+        vec![model],
+        [180.0, 200.0],
+        [1.0, 0.0],
+        5,
+        30.0,
+        8.0,
+        |x: f64, y: f64| world.height_m(x, y),
+    );
+    // Drawn 4 x 4 times as finely with a threshold 4 times as large (the same choices), so the
+    // raster's quantization is a quarter of a pixel of the 320 x 180 view.
+    let (tau_px, ss) = (1.0, 4);
+    let cam = Camera::look_at(
+        cam.position_m,
+        cam.position_m + cam.forward,
+        cam.fovy_rad,
+        [cam.viewport_px[0] * ss, cam.viewport_px[1] * ss],
+    );
+    let mut v = objects_viewer(&g, &world, Arc::new(set), false, tau_px * f64::from(ss));
+    let target = Target::new(&g.device, cam.viewport_px, COLOR_FORMAT);
+    let mut measured = Vec::new();
+    for strength in [1.0, 0.125] {
+        v.view.pm_lod.strength = strength;
+        let mut e = chosen_against_full(&g, &mut v, &target, &cam, 600.0).expect("measured");
+        e.silhouette = e.silhouette.in_pixels_of(ss);
+        println!(
+            "strength {strength}: {} / {} triangles, silhouettes {:.2} px apart (p99 {:.2}), \
+             {} px differ, {:?} covered",
+            e.triangles[0],
+            e.triangles[1],
+            e.silhouette.max_px,
+            e.silhouette.p99_px,
+            e.silhouette.differing_px,
+            e.silhouette.covered_px
+        );
+        assert!(
+            e.silhouette.covered_px[1] > 8000,
+            "the objects are on the screen"
+        );
+        measured.push(e);
+    }
+    let (chosen, lax) = (measured[0], measured[1]);
+    assert!(chosen.triangles[0] < chosen.triangles[1], "{chosen:?}");
+    assert!(chosen.silhouette.max_px <= tau_px, "{chosen:?}");
+    assert!(lax.triangles[0] < chosen.triangles[0], "{lax:?}");
+    assert!(lax.silhouette.max_px > tau_px, "{lax:?}");
+
+    // The row near the lower-right corner of a 90 degree view, where a flat screen stretches a
+    // displacement most: the metric takes the stretch of each object's box, so it holds there
+    // too (with the on-axis metric the default map's town showed 9 px at tau 2 near a corner).
+    v.view.pm_lod.strength = 1.0;
+    let (yaw, pitch) = (50f64.to_radians(), 25f64.to_radians());
+    let dir = DVec3::new(
+        yaw.cos() * pitch.cos(),
+        yaw.sin() * pitch.cos(),
+        pitch.sin() - 0.15,
+    );
+    let corner = Camera::look_at(
+        cam.position_m,
+        cam.position_m + dir,
+        90f64.to_radians(),
+        cam.viewport_px,
+    );
+    let mut e = chosen_against_full(&g, &mut v, &target, &corner, 600.0).expect("measured");
+    e.silhouette = e.silhouette.in_pixels_of(ss);
+    println!("near the corner at 90 degrees: {e:?}");
+    assert!(
+        e.silhouette.covered_px[1] > 2000,
+        "the objects are on the screen: {e:?}"
+    );
+    assert!(e.triangles[0] < e.triangles[1], "{e:?}");
+    assert!(e.silhouette.max_px <= tau_px, "{e:?}");
+}

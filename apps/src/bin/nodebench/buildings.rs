@@ -2,15 +2,17 @@
 //! triangles per frame at tau 2 against the same houses and all houses at full detail; the
 //! texture cache's resident bytes against the drawn textures at full resolution, its misses and
 //! its levels coarser than needed per frame. Frames come from the benchmark flight and from
-//! orbits of the map's largest town at 20, 100, 400 and 1600 m (a fresh cache each).
+//! orbits of the map's largest town at 20, 100, 400 and 1600 m (a fresh cache each); the
+//! image error of the chosen levels on frames drawn from those orbits.
 
 use crate::report::{Report, bar};
 use engine::camera::Camera;
-use engine::objects::lod::{PmLodSettings, choose};
+use engine::objects::lod::{PmLodSettings, choose, on_screen};
 use engine::objects::set::ObjectSet;
 use engine::objects::texturing;
 use engine::surface::World;
 use engine::terrain::quadtree::QuadTree;
+use engine::terrain::screen_bound::ScreenBound;
 use engine::texcache::pool::{PoolSettings, TexturePool};
 use glam::DVec3;
 use std::time::Instant;
@@ -55,6 +57,7 @@ pub(crate) fn section_buildings(
     per_node(world, tree, cams, &set, r);
     let viewport = cams[0].viewport_px;
     frames_rows(&set, cams, "benchmark flight", r);
+    let mut orbits = Vec::new();
     for distance_m in [20.0, 100.0, 400.0, 1600.0] {
         let orbit = town_orbit(
             world,
@@ -64,7 +67,11 @@ pub(crate) fn section_buildings(
             if quick { 4 } else { 16 },
         );
         frames_rows(&set, &orbit, &format!("town orbit at {distance_m} m"), r);
+        // Every fourth camera of the orbit (quick: the first).
+        let drawn = orbit.iter().step_by(4).take(if quick { 1 } else { 4 });
+        orbits.push((distance_m, drawn.copied().collect::<Vec<_>>()));
     }
+    crate::house_image::house_image_rows(world, &orbits, TAU_PX, r);
 }
 
 /// Times the town steps of generating a map (512 m with `quick`, else 2 km; seed 11).
@@ -186,14 +193,15 @@ fn frames_rows(set: &ObjectSet, cams: &[Camera], name: &str, r: &mut Report) {
     let b = bar(cams.len() as u64, &format!("buildings: {name}"));
     for cam in cams {
         let frustum = cam.frustum();
+        let screen = ScreenBound::new(cam);
         for (id, inst) in set.instances.iter().enumerate() {
             let (c, rad) = set.sphere(inst);
             if !frustum.intersects_aabb(c - DVec3::splat(rad), c + DVec3::splat(rad)) {
                 continue;
             }
             let model = &set.models[inst.model as usize];
-            let distance_m = (c - cam.position_m).length() - rad;
-            let choice = choose(model, &settings, TAU_PX, distance_m, cam.k_px(), inst.scale);
+            let (distance_m, k_px) = on_screen(&screen, c, rad);
+            let choice = choose(model, &settings, TAU_PX, distance_m, k_px, inst.scale);
             let pm = &model.option(choice.option).pm;
             drawn += pm
                 .levels

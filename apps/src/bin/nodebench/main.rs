@@ -5,6 +5,7 @@ mod bookkeeping;
 mod buildings;
 mod error;
 mod gpu;
+mod house_image;
 mod lighting;
 mod pilots;
 mod plot;
