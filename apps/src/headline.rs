@@ -110,6 +110,20 @@ const FIGURES: &[Figure] = &[
         params: &["tau 2 px"],
     },
     Figure {
+        label: "worst image error of a vegetation switch at τ = 2 px (group billboard -> billboard)",
+        doc: "vegetation.md",
+        section: "vegetation",
+        metric: "switch image error, group billboard -> billboard: max",
+        params: &["tau 2 px"],
+    },
+    Figure {
+        label: "worst house image error at τ = 2 px (town orbit at 400 m, near a corner)",
+        doc: "buildings.md",
+        section: "buildings",
+        metric: "house image error at 400 m, near its corner: max",
+        params: &["tau 2 px"],
+    },
+    Figure {
         label: "first open of a 32 km map (the world is not paged yet)",
         doc: "benchmarks.md",
         section: "worlds",

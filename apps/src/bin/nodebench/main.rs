@@ -55,7 +55,8 @@ const SECTIONS: [&str; 14] = [
 /// measured on-screen pixel error for tau in {0.5, 1, 2, 4, 8}, for the grid, the TIN and a
 /// CDLOD-style distance selection tuned to the same measured error), `vegetation` (kept points per
 /// second of the ranked Poisson tile against Bridson sampling from the `fast_poisson` crate,
-/// vegetation phase time per node, instances and draw calls per frame on the flight),
+/// vegetation phase time per node, instances and draw calls per frame on the flight, the
+/// image error of each representation switch on frames drawn with an adapter),
 /// `lighting` (light grids: sky and sun visibility against a ray-marched reference, computation
 /// time and bytes per grid in full and from its sky page, lighting the flight's grids the first
 /// time, again from their sky pages and after a sun change), `pm` (progressive
@@ -63,7 +64,8 @@ const SECTIONS: [&str; 14] = [
 /// error at 50/10/1/0.1 % of the triangles, index rebuild rates, bytes per triangle), `buildings`
 /// (towns: generation time, houses per node, house triangles at tau 2 against full detail, the
 /// texture cache's resident bytes against full resolution and its misses, on the benchmark
-/// flight and an orbit of the largest town), `streaming`
+/// flight and an orbit of the largest town, the houses' image error against full detail on
+/// frames drawn with an adapter), `streaming`
 /// (real-time
 /// flights at 50, 150 and 300 m/s at 40 m and 1000 m/s at 1000 m through the streaming system,
 /// with 1 and N workers, prefetch along the known path; then pilots whose future the
