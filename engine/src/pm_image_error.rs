@@ -5,7 +5,7 @@
 //! chosen levels (with merged far meshes where the view options allow them) and once each at
 //! full detail on its own, and the two silhouettes are compared
 //! ([`crate::silhouette::distance`]), each object's centre and the vertices of the levels drawn
-//! counting as covered ([`centres`], [`drawn_vertices`]): a level within its error may fold a
+//! counting as covered (`centres`, `drawn_vertices`): a level within its error may fold a
 //! part into a sliver no pixel centre falls in, and that part has moved by no more than its
 //! error, not vanished.
 

@@ -1,8 +1,8 @@
 //! The image error of vegetation's representation switches, measured on rendered frames. When
 //! a node splits, its items change how they are drawn (mesh, billboard, group billboard, left
-//! out; [`crate::vegetation::representation`]). The selection draws a node with vegetation no
-//! nearer than where its vegetation error `ERROR_PER_SPACING * spacing` projects to tau on the
-//! axis of the view (off the axis the on-screen bound only keeps it farther). So the worst the
+//! out; [the ladder](mod@crate::vegetation::representation)). The selection draws a node with
+//! vegetation no nearer than where its vegetation error `ERROR_PER_SPACING * spacing` projects
+//! to tau on the axis of the view (off the axis the on-screen bound only keeps it farther). So the worst the
 //! switch can show is at that distance: the camera stands there, the node's items of one
 //! transition are drawn as the node draws them and as its four children draw them (the
 //! vegetation renderer alone, on an empty frame), and the two silhouettes are compared
@@ -286,15 +286,7 @@ impl SwitchRig {
         tau_px: f64,
         works: &[NodeWork],
     ) -> Result<Mask, String> {
-        let drawn: Vec<DrawnNode<'_>> = works
-            .iter()
-            .map(|w| DrawnNode {
-                key: w.key,
-                work: w,
-                dither: [0.0, 1.0],
-                decimation: 0,
-            })
-            .collect();
+        let drawn: Vec<DrawnNode<'_>> = works.iter().map(DrawnNode::faded_in).collect();
         let view = ViewOptions {
             sky: false,
             ..ViewOptions::default()

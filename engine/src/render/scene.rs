@@ -20,6 +20,19 @@ pub struct DrawnNode<'a> {
     pub decimation: u8,
 }
 
+impl<'a> DrawnNode<'a> {
+    /// `work`'s node drawn on its own: fully faded in, every vertex (tests and measures that
+    /// draw chosen nodes without a streamer).
+    pub fn faded_in(work: &'a NodeWork) -> Self {
+        Self {
+            key: work.key,
+            work,
+            dither: [0.0, 1.0],
+            decimation: 0,
+        }
+    }
+}
+
 /// What a frame draws: the camera, the view options, the drawn nodes and the resident
 /// ancestors of drawn nodes (content kept through splits is drawn via them), `ancestors`
 /// sorted by key.

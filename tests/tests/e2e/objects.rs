@@ -165,6 +165,20 @@ fn objects_viewer(
     Viewer::with_kinds(g, COLOR_FORMAT, world.clone(), settings, &kinds)
 }
 
+/// Five bumpy boxes 8 m wide in a row eastwards from (180, 200), 30 m apart, on `ground_m`.
+fn box_row(ground_m: impl Fn(f64, f64) -> f64) -> ObjectSet {
+    let model = PmModel::from_pm("box".into(), bumpy_box());
+    ObjectSet::place_row(
+        vec![model],
+        [180.0, 200.0],
+        [1.0, 0.0],
+        5,
+        30.0,
+        8.0,
+        ground_m,
+    )
+}
+
 /// A 320 x 180 camera 12 m above the tiny map at (150, 200), looking east along the rows of
 /// objects the tests place from x = 170-180 m.
 fn view_along_row(world: &World) -> Camera {
@@ -183,17 +197,8 @@ fn objects_stream_with_their_nodes_and_draw_the_level_the_metric_chooses() {
     let world = tiny_world();
     let ground = |x: f64, y: f64| world.height_m(x, y);
     let cam = view_along_row(&world);
-    let model = PmModel::from_pm("box".into(), bumpy_box());
-    let full = model.pm.triangles.len();
-    let set = ObjectSet::place_row(
-        vec![model],
-        [180.0, 200.0],
-        [1.0, 0.0],
-        5,
-        30.0,
-        8.0,
-        ground,
-    );
+    let set = box_row(ground);
+    let full = set.models[0].pm.triangles.len();
     let positions: Vec<DVec3> = set.instances.iter().map(|i| i.position_m).collect();
     let set = Arc::new(set);
     let mut v = objects_viewer(&g, &world, Arc::clone(&set), true, 1.0);
@@ -497,16 +502,7 @@ fn chosen_levels_show_within_tau_of_full_detail() {
     let Some(g) = device() else { return };
     let world = tiny_world();
     let cam = view_along_row(&world);
-    let model = PmModel::from_pm("box".into(), bumpy_box());
-    let set = ObjectSet::place_row(
-        vec![model],
-        [180.0, 200.0],
-        [1.0, 0.0],
-        5,
-        30.0,
-        8.0,
-        |x: f64, y: f64| world.height_m(x, y),
-    );
+    let set = box_row(|x: f64, y: f64| world.height_m(x, y));
     // Drawn 4 x 4 times as finely with a threshold 4 times as large (the same choices), so the
     // raster's quantization is a quarter of a pixel of the 320 x 180 view.
     let (tau_px, ss) = (1.0, 4);

@@ -267,15 +267,7 @@ fn draw_nodes(
     works: &[&NodeWork],
 ) -> Vec<u8> {
     let frustum = cam.frustum();
-    let drawn: Vec<DrawnNode<'_>> = works
-        .iter()
-        .map(|w| DrawnNode {
-            key: w.key,
-            work: w,
-            dither: [0.0, 1.0],
-            decimation: 0,
-        })
-        .collect();
+    let drawn: Vec<DrawnNode<'_>> = works.iter().map(|w| DrawnNode::faded_in(w)).collect();
     let draws = FrameDraws {
         camera: cam,
         frustum: &frustum,
