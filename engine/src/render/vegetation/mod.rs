@@ -4,13 +4,13 @@
 //! drawn node is one indirect record; one multi-draw per render state and page draws them all
 //! (`batches`). An instance finds its node's entry in the node table (two per node: groups
 //! replaced on split, groups kept) through its `entry`. Owns the two bakes: the species atlas (at
-//! start-up, from the high-detail plant meshes) and each node's impostors (in its upload hook).
+//! start-up, from the high-detail plant meshes) and each node's impostors (in its upload hook),
+//! in `bakes`; a node's upload is in `upload`.
 
 use super::Gpu;
-use super::batch_timer::ItemCost;
 use super::batches::{Batches, Item};
 use super::frame::{
-    DrawStats, FrameResources, PipelineSpec, bake_pass, pipeline, sampler_entry, srgb_to_linear,
+    DrawStats, FrameResources, PipelineSpec, pipeline, sampler_entry, srgb_to_linear,
     texture_entry, uniform_entry, uniform_group,
 };
 use super::gpu_data::MeshVertex;
@@ -21,17 +21,21 @@ use super::paged_buffer::PagedBuffer;
 use super::scene::{FrameDraws, NodeRenderer, UploadEncoder, close_staging, staging_belt};
 use super::suballoc::Lease;
 use crate::stream::{NodeWork, Shared};
-use crate::terrain::quadtree::{NodeKey, QuadTree};
+use crate::terrain::quadtree::QuadTree;
+use crate::vegetation::NodeVegetation;
 use crate::vegetation::content::VegetationContent;
 use crate::vegetation::plants::{self, PlantMeshes, Shape};
 use crate::vegetation::representation::{
     CLUSTER_COUNT, CLUSTERS_PER_SIDE, GroupDither, group_dither,
 };
-use crate::vegetation::{NodeVegetation, Representation};
+use bakes::PendingBakes;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use std::time::Instant;
 use wgpu::util::{DeviceExt, DrawIndexedIndirectArgs, DrawIndirectArgs};
+
+mod bakes;
+mod upload;
 
 /// Staging chunks made with the renderer for the instance uploads (a node's instances are a
 /// few KB to a few tens of KB; see [`staging_belt`]).
@@ -205,111 +209,6 @@ pub struct VegetationRenderer {
     bakes: PendingBakes,
     /// The instances' staging memory (copied out of by commands in the upload encoder).
     staging: wgpu::util::StagingBelt,
-}
-
-/// Impostor bakes asked for by this frame's uploads, recorded together when the uploads finish
-/// (into the scene's one submission of deferred work, not one per node). Every bake's clusters
-/// and members go into two buffers shared by all of them, written once per submission: a bake
-/// costs its pass, not two new buffers and a bind group.
-struct PendingBakes {
-    asked: Vec<BakeAsk>,
-    /// One block of [`CLUSTER_COUNT`] clusters per bake, and every bake's members, in order.
-    clusters: Vec<ClusterUniform>,
-    members: Vec<PlantInstance>,
-    /// The shared buffers (grown to the largest submission so far), with the clusters' bind
-    /// group (a dynamic offset picks a bake's block).
-    buffers: Option<BakeBuffers>,
-    /// The frame thread's time per bake when they are recorded: each upload that bakes charges
-    /// it to the frame's budget beforehand.
-    record: ItemCost,
-    /// What the uploads of the bakes asked for since they were last recorded charged the
-    /// budget.
-    charged_s: f64,
-    /// The most bakes recorded together (one submission) so far.
-    most_together: usize,
-}
-
-/// One asked-for bake: the node (for the pass's label), its layer's two views, its members.
-struct BakeAsk {
-    key: NodeKey,
-    views: [wgpu::TextureView; 2],
-    members: std::ops::Range<u32>,
-}
-
-struct BakeBuffers {
-    clusters: wgpu::Buffer,
-    members: wgpu::Buffer,
-    group: wgpu::BindGroup,
-}
-
-/// Bytes of one bake's cluster block (a multiple of every adapter's uniform offset alignment,
-/// 256 at most).
-const CLUSTER_BLOCK_BYTES: u64 = (CLUSTER_COUNT * std::mem::size_of::<ClusterUniform>()) as u64;
-const _: () = assert!(CLUSTER_BLOCK_BYTES.is_multiple_of(256));
-
-impl PendingBakes {
-    fn new() -> Self {
-        Self {
-            asked: Vec::new(),
-            clusters: Vec::new(),
-            members: Vec::new(),
-            buffers: None,
-            record: ItemCost::new(BAKE_RECORD_PRIOR_S),
-            charged_s: 0.0,
-            most_together: 0,
-        }
-    }
-
-    /// Grows the shared buffers (to a power of two) to hold what is asked for now.
-    fn grow_buffers(&mut self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout) {
-        let need = [
-            (self.clusters.len() * std::mem::size_of::<ClusterUniform>()) as u64,
-            (self.members.len() * std::mem::size_of::<PlantInstance>()) as u64,
-        ];
-        let fits = self
-            .buffers
-            .as_ref()
-            .is_some_and(|b| b.clusters.size() >= need[0] && b.members.size() >= need[1].max(1));
-        if !fits {
-            let have = self
-                .buffers
-                .as_ref()
-                .map_or([0, 0], |b| [b.clusters.size(), b.members.size()]);
-            let size = |i: usize| {
-                need[i]
-                    .max(have[i])
-                    .max(CLUSTER_BLOCK_BYTES)
-                    .next_power_of_two()
-            };
-            let buffer = |label, size, usage| {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size,
-                    usage: usage | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            };
-            let clusters = buffer("impostor clusters", size(0), wgpu::BufferUsages::UNIFORM);
-            let members = buffer("impostor members", size(1), wgpu::BufferUsages::VERTEX);
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("impostor clusters"),
-                layout,
-                entries: &[wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &clusters,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(CLUSTER_BLOCK_BYTES),
-                    }),
-                }],
-            });
-            self.buffers = Some(BakeBuffers {
-                clusters,
-                members,
-                group,
-            });
-        }
-    }
 }
 
 impl std::fmt::Debug for VegetationRenderer {
@@ -602,254 +501,6 @@ impl VegetationRenderer {
             .map(|v| v.placer.species.iter().map(|s| s.name.clone()).collect())
             .unwrap_or_default();
         Box::new(Self::new(gpu, frame, &names))
-    }
-
-    /// Renders every look's billboard image from its high-detail mesh into the atlas (seen
-    /// from the south): albedo and normals, lit only when drawn.
-    fn bake_atlas(
-        &self,
-        gpu: &Gpu,
-        frame: &FrameResources,
-        bake: &wgpu::RenderPipeline,
-        looks_group: &wgpu::BindGroup,
-        atlas_views: [&wgpu::TextureView; 2],
-        atlas_size: [u32; 2],
-    ) {
-        let device = &gpu.device;
-        let instances: Vec<PlantInstance> = (0..MAX_LOOKS)
-            .map(|i| PlantInstance {
-                position: [0.0; 3],
-                height_m: 1.0,
-                radius_m: 1.0,
-                yaw_rad: 0.0,
-                look: i,
-                entry: 0,
-            })
-            .collect();
-        let instance_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("billboard bake instances"),
-            contents: bytemuck::cast_slice(&instances),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let depth_view = super::depth_view(device, atlas_size, "billboard bake depth");
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("billboard bake"),
-        });
-        {
-            let mut pass = bake_pass(&mut enc, "billboard bake pass", &atlas_views, &depth_view);
-            pass.set_pipeline(bake);
-            pass.set_bind_group(0, &frame.group, &[]);
-            pass.set_bind_group(2, looks_group, &[]);
-            pass.set_vertex_buffer(0, self.shape_vertices.slice(..));
-            pass.set_vertex_buffer(1, instance_buffer.slice(..));
-            pass.set_index_buffer(self.shape_indices.slice(..), wgpu::IndexFormat::Uint32);
-            for (i, shape) in self.shapes.iter().enumerate() {
-                let [w, h] = ATLAS_TILE_PX;
-                pass.set_viewport((i as u32 * w) as f32, 0.0, w as f32, h as f32, 0.0, 1.0);
-                let (first, count, base) = self.meshes.ranges[*shape as usize][0];
-                pass.draw_indexed(first..first + count, base, i as u32..i as u32 + 1);
-            }
-        }
-        gpu.queue.submit([enc.finish()]);
-    }
-
-    /// Uploads a node's vegetation (None when it has none, or when the instance pool, the
-    /// impostor pages or the node table are full). Group-billboard members are baked, cluster
-    /// by cluster, into the node's impostor layer (a render pass recorded and submitted with the
-    /// frame's other bakes when the uploads finish); the node then draws one quad per cluster
-    /// instead of its members.
-    pub fn upload_node(
-        &mut self,
-        gpu: &Gpu,
-        tree: &QuadTree,
-        key: NodeKey,
-        veg: &NodeVegetation,
-        copies: &mut UploadEncoder<'_>,
-    ) -> Option<PlantsGpu> {
-        let aabb_m = veg.items_box_m?;
-        let o = tree.rect(key).min;
-        let Some(slot) = self.table.lease() else {
-            log::warn!("vegetation node table full: node {key:?} has no plants drawn");
-            return None;
-        };
-        let first_entry = self.table.first_entry(&slot);
-        let instance = |it: &crate::vegetation::Item, entry: u32| PlantInstance {
-            position: [
-                (it.x_m - o[0]) as f32,
-                (it.y_m - o[1]) as f32,
-                it.z_m as f32,
-            ],
-            height_m: it.height_m,
-            radius_m: it.radius_m,
-            yaw_rad: it.yaw_rad,
-            look: u32::from(it.species),
-            entry,
-        };
-        let mut data: Vec<PlantInstance> = Vec::with_capacity(veg.instances());
-        let mut groups = Vec::with_capacity(veg.groups.len());
-        let mut members: Vec<PlantInstance> = Vec::new();
-        for g in &veg.groups {
-            if g.representation == Representation::Group {
-                let at = members.len();
-                members.extend(
-                    g.items
-                        .iter()
-                        .zip(&veg.clusters.member_clusters[at..])
-                        .map(|(it, &c)| instance(it, u32::from(c))),
-                );
-                continue;
-            }
-            let first = data.len() as u32;
-            let entry = first_entry + u32::from(!g.replaced_on_split);
-            data.extend(g.items.iter().map(|it| instance(it, entry)));
-            groups.push(PlantGroupGpu {
-                first,
-                count: g.items.len() as u32,
-                shape: self
-                    .shapes
-                    .get(usize::from(g.species))
-                    .copied()
-                    .unwrap_or(Shape::Bush),
-                kind: if g.representation == Representation::Mesh {
-                    PlantDraw::Mesh
-                } else {
-                    PlantDraw::Billboard
-                },
-                kept: !g.replaced_on_split,
-            });
-        }
-        let mut impostors = None;
-        let mut texture_bytes = 0;
-        if !members.is_empty() {
-            let Some((layer, layer_views)) = self.impostors.lease(&gpu.device, &self.sampler)
-            else {
-                log::warn!("impostor pages full: node {key:?} has no plants drawn");
-                return None;
-            };
-            // Cluster quads: centre, bottom, half width, height; `look` = layer and tile.
-            let mut uniforms = [ClusterUniform::zeroed(); CLUSTER_COUNT];
-            let first = data.len() as u32;
-            let entry = first_entry + u32::from(veg.clusters.kept);
-            for (c, b) in veg.clusters.boxes.iter().enumerate() {
-                let Some(b) = b else { continue };
-                uniforms[c] = ClusterUniform {
-                    centre_bottom_half: [
-                        b.centre_m[0] as f32,
-                        b.centre_m[1] as f32,
-                        b.bottom_m as f32,
-                        b.half_width_m as f32,
-                    ],
-                    height: [b.height_m as f32, 0.0, 0.0, 0.0],
-                };
-                data.push(PlantInstance {
-                    position: [
-                        b.centre_m[0] as f32,
-                        b.centre_m[1] as f32,
-                        b.bottom_m as f32,
-                    ],
-                    height_m: b.height_m as f32,
-                    radius_m: b.half_width_m as f32,
-                    yaw_rad: 0.0,
-                    look: layer.start[0] * CLUSTER_COUNT as u32 + c as u32,
-                    entry,
-                });
-            }
-            groups.push(PlantGroupGpu {
-                first,
-                count: data.len() as u32 - first,
-                shape: Shape::Bush,
-                kind: PlantDraw::Impostor,
-                kept: veg.clusters.kept,
-            });
-            self.bake_impostors(key, &uniforms, &members, layer_views);
-            impostors = Some(layer);
-            texture_bytes = self.impostors.layer_bytes();
-        }
-        let Some(instances) = self.instances.lease(&gpu.device, data.len() as u32) else {
-            log::warn!("plant instance pool full: node {key:?} has no plants drawn");
-            return None;
-        };
-        self.instances.write_staged(
-            &mut self.staging,
-            copies.get(&gpu.device),
-            &instances,
-            0,
-            bytemuck::cast_slice(&data),
-        );
-        Some(PlantsGpu {
-            origin_m: o,
-            instances,
-            slot,
-            impostors,
-            groups,
-            aabb_m,
-            bytes: data.len() * std::mem::size_of::<PlantInstance>() + texture_bytes,
-            low_detail: tree.spacing_m(key.level) >= 1.0,
-        })
-    }
-
-    /// Renders a node's group members into its impostor layer's albedo and normal views
-    /// `layer_views` (one tile per cluster, seen from the south).
-    fn bake_impostors(
-        &mut self,
-        key: NodeKey,
-        clusters: &[ClusterUniform; CLUSTER_COUNT],
-        members: &[PlantInstance],
-        layer_views: [wgpu::TextureView; 2],
-    ) {
-        let b = &mut self.bakes;
-        let first = b.members.len() as u32;
-        b.members.extend_from_slice(members);
-        b.clusters.extend_from_slice(clusters);
-        b.asked.push(BakeAsk {
-            key,
-            views: layer_views,
-            members: first..b.members.len() as u32,
-        });
-    }
-
-    /// The most impostor bakes one submission held so far (they share its cluster and
-    /// member buffers).
-    pub fn most_bakes_submitted_together(&self) -> usize {
-        self.bakes.most_together
-    }
-
-    /// Records into `deferred` the bakes asked for since the last call (see [`PendingBakes`]).
-    fn record_bakes(&mut self, gpu: &Gpu, deferred: &mut UploadEncoder<'_>) {
-        if self.bakes.asked.is_empty() {
-            return;
-        }
-        let device = &gpu.device;
-        let b = &mut self.bakes;
-        b.grow_buffers(device, &self.cluster_layout);
-        let Some(buffers) = &b.buffers else { return };
-        gpu.queue
-            .write_buffer(&buffers.clusters, 0, bytemuck::cast_slice(&b.clusters));
-        gpu.queue
-            .write_buffer(&buffers.members, 0, bytemuck::cast_slice(&b.members));
-        let enc = deferred.get(device);
-        let member_bytes = std::mem::size_of::<PlantInstance>() as u64;
-        for (i, ask) in b.asked.iter().enumerate() {
-            let label = format!(
-                "node {}/{}/{} impostors",
-                ask.key.level, ask.key.ix, ask.key.iy
-            );
-            let targets = [&ask.views[0], &ask.views[1]];
-            let mut pass = bake_pass(enc, &label, &targets, &self.impostors.bake_depth);
-            pass.set_pipeline(&self.group_bake);
-            pass.set_bind_group(0, &self.frame_group, &[]);
-            let offset = i as u64 * CLUSTER_BLOCK_BYTES;
-            pass.set_bind_group(1, &buffers.group, &[offset as u32]);
-            pass.set_bind_group(2, &self.atlas_texture_group, &[]);
-            let bytes = u64::from(ask.members.start) * member_bytes
-                ..u64::from(ask.members.end) * member_bytes;
-            pass.set_vertex_buffer(0, buffers.members.slice(bytes));
-            pass.draw(0..6, 0..ask.members.len() as u32);
-        }
-        b.most_together = b.most_together.max(b.asked.len());
-        b.asked.clear();
-        b.clusters.clear();
-        b.members.clear();
     }
 
     /// Adds the draws of node `p` (at `level`, dither interval `dither`) whose groups' dither
