@@ -90,12 +90,6 @@ pub fn chosen_against_full(
     cam: &Camera,
     timeout_s: f64,
 ) -> Result<ObjectImageError, String> {
-    if target.size != cam.viewport_px {
-        return Err(format!(
-            "the target is {:?} px but the camera's viewport {:?} px",
-            target.size, cam.viewport_px
-        ));
-    }
     settle(gpu, viewer, target, cam, timeout_s)?;
     let kept = viewer.view;
     let draw = |viewer: &mut Viewer, f: &dyn Fn(&mut ViewOptions)| {

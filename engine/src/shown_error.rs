@@ -58,8 +58,8 @@ pub fn check_viewer(
 }
 
 /// Streams `viewer` at `cam` until its view is settled (every wanted node drawn, no job in
-/// flight, node textures made; at most `timeout_s`), then draws a few frames into `target` so
-/// fades end and background light grids arrive.
+/// flight, node textures made; at most `timeout_s`), then draws a few frames into `target`
+/// (which must be `cam`'s viewport size) so fades end and background light grids arrive.
 pub fn settle(
     gpu: &Gpu,
     viewer: &mut Viewer,
@@ -67,6 +67,12 @@ pub fn settle(
     cam: &Camera,
     timeout_s: f64,
 ) -> Result<(), String> {
+    if target.size != cam.viewport_px {
+        return Err(format!(
+            "the target is {:?} px but the camera's viewport {:?} px",
+            target.size, cam.viewport_px
+        ));
+    }
     let t0 = Instant::now();
     while !viewer.stream_only(gpu, cam, 0.05) {
         if t0.elapsed().as_secs_f64() > timeout_s {
@@ -98,12 +104,6 @@ pub fn settled_view_error(
     cam: &Camera,
     timeout_s: f64,
 ) -> Result<ShownError, String> {
-    if target.size != cam.viewport_px {
-        return Err(format!(
-            "the target is {:?} px but the camera's viewport {:?} px",
-            target.size, cam.viewport_px
-        ));
-    }
     settle(gpu, viewer, target, cam, timeout_s)?;
     let z = target
         .read_depth(gpu)

@@ -92,6 +92,7 @@ impl ObjectsRenderer {
     pub(super) fn hlod_item(
         &mut self,
         draws: &FrameDraws<'_>,
+        screen: &ScreenBound,
         node_index: usize,
         objects: &NodeObjects,
         light: [f32; 4],
@@ -102,14 +103,7 @@ impl ObjectsRenderer {
         let (Some(h), Some(gpu_mesh)) = (&objects.hlod, node.work.gpu.get::<HlodGpu>()) else {
             return false;
         };
-        if !draws.view.hlod
-            || !hlod::accepts(
-                h,
-                &draws.view.pm_lod,
-                draws.tau_px,
-                &ScreenBound::new(camera),
-            )
-        {
+        if !draws.view.hlod || !hlod::accepts(h, &draws.view.pm_lod, draws.tau_px, screen) {
             return false;
         }
         if !draws.frustum.intersects_aabb(h.lo_m, h.hi_m) {

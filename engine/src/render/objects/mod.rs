@@ -540,7 +540,7 @@ impl NodeRenderer for ObjectsRenderer {
             };
             // Objects are lit by the drawing node's light grid (sky and sun visibility).
             let light = frame.light.drawn_entry(node_index, node.key).grid;
-            if self.hlod_item(draws, node_index, objects, light, &mut uniforms) {
+            if self.hlod_item(draws, &screen, node_index, objects, light, &mut uniforms) {
                 continue;
             }
             let corner = draws.tree.rect(node.key).min;
