@@ -28,6 +28,7 @@ pub mod map;
 pub mod mip_chain;
 pub mod mosaic;
 pub mod noise;
+pub mod pages;
 pub mod par;
 pub mod patches;
 pub mod pm;

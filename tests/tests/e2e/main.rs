@@ -10,6 +10,7 @@ mod ground;
 mod lighting;
 mod map_format;
 mod objects;
+mod pages;
 mod pm;
 mod pm_prefix;
 mod render;

@@ -92,6 +92,30 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         threads: usize,
     },
+    /// Bake a map's raster layers (heights, ground types, densities) into page files under
+    /// `<map>/pages/`: fixed square pages, each with its own checksum, that the engine reads
+    /// through a page cache. A page depends only on its layer and its index, so the bake can be
+    /// split into shares run in any order, on any machines that share the folder
+    /// (`--share 0/4` ... `--share 3/4`, then `--finish`); the result is the same bytes.
+    /// Without `--share`, `--pages` or `--finish` it bakes every page and finishes. Finishing
+    /// checks every page and only then moves the files into place: an interrupted bake leaves
+    /// only hidden `.partial` files.
+    Bake {
+        /// The map folder.
+        dir: PathBuf,
+        /// Samples per page side.
+        #[arg(long, default_value_t = worldgen::pages::DEFAULT_PAGE_SIDE)]
+        page_side: u32,
+        /// Bake one share of the pages: `K/N` takes the pages whose index modulo N is K.
+        #[arg(long, conflicts_with = "pages")]
+        share: Option<String>,
+        /// Bake these page indices: a comma-separated list of indices and ranges (`0-15,40`).
+        #[arg(long)]
+        pages: Option<String>,
+        /// Only finish: check every page of the partial files and move them into place.
+        #[arg(long, conflicts_with_all = ["share", "pages"])]
+        finish: bool,
+    },
     /// Validate a map folder and print a summary; exit code 0 when valid, 1 with the error.
     Check {
         /// The map folder.
@@ -167,6 +191,106 @@ fn print_times(times: &[StepTime], total_s: f64) {
             b as f64 / f64::from(1 << 20)
         );
     }
+}
+
+fn check(dir: &std::path::Path) -> Result<()> {
+    if !dir.join("map.toml").exists() && !dir.is_dir() {
+        bail!("{}: no such map folder", dir.display());
+    }
+    let map = Map::load(dir)?;
+    say!(
+        "{}: valid map \"{}\" (format {} v{})",
+        dir.display(),
+        map.manifest.name,
+        map.manifest.format,
+        map.manifest.version
+    );
+    say!("{}", map.summary());
+    Ok(())
+}
+
+/// `--share K/N` or `--pages LIST` as a page set (all pages without either).
+fn page_set(share: Option<&str>, pages: Option<&str>) -> Result<worldgen::pages::bake::PageSet> {
+    use worldgen::pages::bake::PageSet;
+    if let Some(s) = share {
+        let parsed = s.split_once('/').and_then(|(k, n)| {
+            Some((k.trim().parse::<u32>().ok()?, n.trim().parse::<u32>().ok()?))
+        });
+        return match parsed {
+            Some((part, count)) if count > 0 && part < count => Ok(PageSet::Share { part, count }),
+            _ => bail!("--share {s:?}: expected K/N with 0 <= K < N, e.g. 0/4"),
+        };
+    }
+    let Some(list) = pages else {
+        return Ok(PageSet::All);
+    };
+    let mut out = Vec::new();
+    for item in list.split(',') {
+        let item = item.trim();
+        let bad =
+            || anyhow::anyhow!("--pages {list:?}: {item:?} is not an index or a range like 3-9");
+        let (a, b) = if let Some((a, b)) = item.split_once('-') {
+            (
+                a.trim().parse::<u32>().map_err(|_| bad())?,
+                b.trim().parse::<u32>().map_err(|_| bad())?,
+            )
+        } else {
+            let i = item.parse::<u32>().map_err(|_| bad())?;
+            (i, i)
+        };
+        if b < a || b - a > 1 << 24 {
+            return Err(bad());
+        }
+        out.extend(a..=b);
+    }
+    Ok(PageSet::Indices(out))
+}
+
+fn bake(
+    dir: &std::path::Path,
+    page_side: u32,
+    share: Option<&str>,
+    pages: Option<&str>,
+    finish_only: bool,
+    bars: &Bars,
+) -> Result<()> {
+    use worldgen::pages::bake;
+    let set = page_set(share, pages)?;
+    let t0 = Instant::now();
+    let map = Map::load(dir)?;
+    if !finish_only {
+        let report = bake::bake(&map, dir, page_side, &set, bars)?;
+        say!(
+            "baked {} pages ({:.1} MiB) of {} in {:.2} s",
+            report.pages_written,
+            report.bytes_written as f64 / f64::from(1 << 20),
+            dir.display(),
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    if finish_only || set == bake::PageSet::All {
+        let missing = bake::missing_pages(&map, dir)?;
+        if !missing.is_empty() {
+            for (layer, pages) in &missing {
+                say!(
+                    "{layer}: {} pages not baked yet (first: {})",
+                    pages.len(),
+                    pages[0]
+                );
+            }
+            bail!(
+                "{}: the bake is not complete; bake the missing pages, then `worldgen bake --finish`",
+                dir.display()
+            );
+        }
+        let n = bake::finish(&map, dir, bars)?;
+        say!(
+            "finished {n} page files in {} ({:.2} s)",
+            bake::pages_dir(dir).display(),
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
 }
 
 fn write_map(map: &Map, out: &std::path::Path, times: &mut Vec<StepTime>) -> Result<()> {
@@ -393,24 +517,21 @@ fn run(cli: Cli) -> Result<()> {
                 mesh.volume_m3
             );
         }
-        Command::Check { dir } => {
-            if !dir.join("map.toml").exists() && !dir.is_dir() {
-                bail!("{}: no such map folder", dir.display());
-            }
-            match Map::load(&dir) {
-                Ok(map) => {
-                    say!(
-                        "{}: valid map \"{}\" (format {} v{})",
-                        dir.display(),
-                        map.manifest.name,
-                        map.manifest.format,
-                        map.manifest.version
-                    );
-                    say!("{}", map.summary());
-                }
-                Err(e) => bail!(e),
-            }
-        }
+        Command::Bake {
+            dir,
+            page_side,
+            share,
+            pages,
+            finish,
+        } => bake(
+            &dir,
+            page_side,
+            share.as_deref(),
+            pages.as_deref(),
+            finish,
+            &bars,
+        )?,
+        Command::Check { dir } => check(&dir)?,
     }
     Ok(())
 }

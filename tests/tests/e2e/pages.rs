@@ -1,0 +1,271 @@
+//! Paged map layers: what the page cache serves equals the map's own layers sample for sample,
+//! before and after eviction; a bake split into shares and subsets in any order writes the same
+//! bytes as one bake; damaged, truncated and missing page files give errors that name the file
+//! and the page, and the other pages still read.
+
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use std::path::Path;
+use tests::tiny_map_dir;
+use worldgen::Map;
+use worldgen::pages::bake::{self, PageSet, Raster};
+use worldgen::pages::{PageCache, PageError, PageFile};
+use worldgen::progress::Silent;
+
+/// Page side for the tests: small, so the 129-sample tiny map has many pages and ragged edges.
+const SIDE: u32 = 16;
+
+fn baked_tiny(into: &Path) -> Map {
+    let map = Map::load(&tiny_map_dir()).expect("tiny map");
+    bake::bake(&map, into, SIDE, &PageSet::All, &Silent).expect("bake");
+    bake::finish(&map, into, &Silent).expect("finish");
+    map
+}
+
+/// Compares a region served by the cache with the same samples of the layer itself.
+fn check_region(
+    cache: &PageCache,
+    layer: worldgen::pages::LayerId,
+    raster: Raster<'_>,
+    r: [u32; 4],
+) {
+    let [x0, y0, w, h] = r;
+    match raster {
+        Raster::F32(g) => {
+            let got = cache.region::<f32>(layer, x0, y0, w, h).expect("region");
+            for y in 0..h as usize {
+                for x in 0..w as usize {
+                    let want = g.get(x0 as usize + x, y0 as usize + y);
+                    assert_eq!(
+                        got.get(x, y).to_bits(),
+                        want.to_bits(),
+                        "sample ({x}, {y}) of {r:?}"
+                    );
+                }
+            }
+        }
+        Raster::U8(g) => {
+            let got = cache.region::<u8>(layer, x0, y0, w, h).expect("region");
+            for y in 0..h as usize {
+                for x in 0..w as usize {
+                    assert_eq!(
+                        got.get(x, y),
+                        g.get(x0 as usize + x, y0 as usize + y),
+                        "sample ({x}, {y}) of {r:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+fn random_region(rng: &mut SmallRng, w: u32, h: u32) -> [u32; 4] {
+    let x0 = rng.random_range(0..w);
+    let y0 = rng.random_range(0..h);
+    let rw = rng.random_range(1..=(w - x0).min(3 * SIDE));
+    let rh = rng.random_range(1..=(h - y0).min(3 * SIDE));
+    [x0, y0, rw, rh]
+}
+
+#[test]
+fn paged_layers_equal_the_map_layers_before_and_after_eviction() {
+    let tmp = tempfile::tempdir().unwrap();
+    let map = baked_tiny(tmp.path());
+    let page_bytes = (SIDE * SIDE * 4) as usize;
+    // A budget of three f32 pages: far less than a layer, so requests evict all the time.
+    let cache = PageCache::new(3 * page_bytes);
+    let mut rng = SmallRng::seed_from_u64(81);
+    let mut layers = Vec::new();
+    for (name, raster) in bake::rasters(&map) {
+        let file = PageFile::open(&bake::page_file_path(tmp.path(), &name)).expect("open");
+        let (w, h) = (file.layout().width, file.layout().height);
+        let id = cache.add(file);
+        check_region(&cache, id, raster, [0, 0, w, h]);
+        layers.push((id, raster, w, h));
+    }
+    let first = cache.stats();
+    for _ in 0..400 {
+        let (id, raster, w, h) = layers[rng.random_range(0..layers.len())];
+        check_region(&cache, id, raster, random_region(&mut rng, w, h));
+    }
+    let s = cache.stats();
+    assert!(
+        s.evictions > 0 && s.page_ins > first.page_ins,
+        "pages were not evicted and read again: {s:?}"
+    );
+    assert!(
+        s.peak_resident_bytes <= 3 * page_bytes,
+        "resident beyond the budget: {s:?}"
+    );
+    assert_eq!(s.failures, 0);
+}
+
+#[test]
+fn a_bake_in_shares_and_subsets_in_any_order_writes_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let whole = tmp.path().join("whole");
+    let split = tmp.path().join("split");
+    let map = baked_tiny(&whole);
+    // Some pages first, then the shares out of order, overlapping what is already baked.
+    bake::bake(
+        &map,
+        &split,
+        SIDE,
+        &PageSet::Indices(vec![40, 3, 17]),
+        &Silent,
+    )
+    .unwrap();
+    bake::bake(
+        &map,
+        &split,
+        SIDE,
+        &PageSet::Share { part: 2, count: 3 },
+        &Silent,
+    )
+    .unwrap();
+    let missing = bake::missing_pages(&map, &split).unwrap();
+    assert!(
+        !missing.is_empty(),
+        "two thirds of the pages cannot cover every layer"
+    );
+    // Finishing too early fails, names a missing page and moves nothing into place.
+    let err = bake::finish(&map, &split, &Silent).expect_err("incomplete bake finished");
+    assert!(matches!(err, PageError::NotBaked { .. }), "{err}");
+    assert!(
+        err.to_string().contains(".partial") && err.to_string().contains("page ("),
+        "{err}"
+    );
+    for (name, _) in bake::rasters(&map) {
+        assert!(
+            !bake::page_file_path(&split, &name).exists(),
+            "{name} moved into place early"
+        );
+    }
+    bake::bake(
+        &map,
+        &split,
+        SIDE,
+        &PageSet::Share { part: 0, count: 3 },
+        &Silent,
+    )
+    .unwrap();
+    bake::bake(
+        &map,
+        &split,
+        SIDE,
+        &PageSet::Share { part: 1, count: 3 },
+        &Silent,
+    )
+    .unwrap();
+    assert!(bake::missing_pages(&map, &split).unwrap().is_empty());
+    assert_eq!(
+        bake::finish(&map, &split, &Silent).unwrap(),
+        bake::rasters(&map).len()
+    );
+    let (a, b) = (bake::pages_dir(&whole), bake::pages_dir(&split));
+    let names = tests::files_under(&a);
+    assert_eq!(names, tests::files_under(&b), "different files");
+    assert_eq!(names.len(), bake::rasters(&map).len());
+    for n in &names {
+        assert!(
+            std::fs::read(a.join(n)).unwrap() == std::fs::read(b.join(n)).unwrap(),
+            "{n:?} differs"
+        );
+    }
+}
+
+#[test]
+fn damaged_page_files_name_the_file_and_page_and_other_pages_still_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    let map = baked_tiny(tmp.path());
+    let heights = bake::page_file_path(tmp.path(), &map.manifest.heights.file);
+    let layout = PageFile::open(&heights).unwrap().layout();
+    let stride = layout.page_stride_bytes();
+    let (pages_x, pages_y) = (layout.pages_per_row(), layout.page_rows());
+    let page_at = |c: u32, r: u32| 64 + u64::from(r * pages_x + c) * stride;
+
+    // A flipped byte inside page (2, 1): that page fails its checksum, its neighbour reads.
+    let cache = PageCache::new(1 << 20);
+    let mut bytes = std::fs::read(&heights).unwrap();
+    bytes[(page_at(2, 1) + 100) as usize] ^= 0x10;
+    std::fs::write(&heights, &bytes).unwrap();
+    let id = cache.add(PageFile::open(&heights).unwrap());
+    let err = cache
+        .region::<f32>(id, 2 * SIDE, SIDE, 4, 4)
+        .expect_err("damaged page read");
+    let text = err.to_string();
+    assert!(
+        matches!(
+            err,
+            PageError::Checksum {
+                column: 2,
+                row: 1,
+                ..
+            }
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains("heights.exr.pages") && text.contains("page (2, 1)"),
+        "{text}"
+    );
+    check_region(
+        &cache,
+        id,
+        Raster::F32(&map.heights),
+        [SIDE, SIDE, SIDE, SIDE],
+    );
+    assert_eq!(cache.stats().failures, 1);
+
+    // Truncated while open: the last page row fails with the file and page named, the first
+    // row still reads; opened again, the file is refused whole with its expected length.
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&heights)
+        .unwrap();
+    file.set_len(page_at(0, pages_y - 1) + 10).unwrap();
+    let err = cache
+        .region::<f32>(id, 0, (pages_y - 1) * SIDE, 1, 1)
+        .expect_err("truncated page read");
+    assert!(
+        matches!(err, PageError::PageIo { column: 0, row, .. } if row == pages_y - 1),
+        "{err}"
+    );
+    assert!(err.to_string().contains("heights.exr.pages"), "{err}");
+    check_region(&cache, id, Raster::F32(&map.heights), [0, 0, SIDE, 2]);
+    let err = PageFile::open(&heights).expect_err("truncated file opened");
+    assert!(
+        matches!(err, PageError::Length { .. }) && err.to_string().contains("truncated"),
+        "{err}"
+    );
+
+    // Missing, and not a page file at all.
+    std::fs::remove_file(&heights).unwrap();
+    let err = PageFile::open(&heights).expect_err("missing file opened");
+    assert!(
+        matches!(err, PageError::Io { .. }) && err.to_string().contains("heights.exr.pages"),
+        "{err}"
+    );
+    let ground = bake::page_file_path(tmp.path(), &map.manifest.ground.file);
+    let mut bytes = std::fs::read(&ground).unwrap();
+    bytes[9] ^= 1; // the version field: caught by the header checksum
+    std::fs::write(&ground, &bytes).unwrap();
+    let err = PageFile::open(&ground).expect_err("bad header opened");
+    assert!(
+        matches!(err, PageError::Header { .. }) && err.to_string().contains("ground.png.pages"),
+        "{err}"
+    );
+
+    // A region of the wrong sample kind or outside the raster is refused, not served.
+    let density = &map.densities[0].spec.file;
+    let id = cache.add(PageFile::open(&bake::page_file_path(tmp.path(), density)).unwrap());
+    assert!(matches!(
+        cache.region::<f32>(id, 0, 0, 1, 1),
+        Err(PageError::Request { .. })
+    ));
+    let w = map.densities[0].density.width() as u32;
+    assert!(matches!(
+        cache.region::<u8>(id, w - 1, 0, 2, 1),
+        Err(PageError::Request { .. })
+    ));
+}

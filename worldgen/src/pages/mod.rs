@@ -1,0 +1,72 @@
+//! Paged rasters: a map layer stored as fixed square pages, read at run time through a page
+//! cache with a memory budget, so what is resident follows the view rather than the map's area.
+//!
+//! - [`file`] the page file: a checked header, then every page at a fixed offset with its own
+//!   checksum. A page's bytes are a pure function of the raster and the page's index, so pages
+//!   can be baked in any order and any subset, on any machine, into the same bytes.
+//! - [`cache`] the page cache: pages are read on first use (checksum verified then), shared
+//!   between readers, and evicted least recently used beyond the budget.
+//! - [`bake`] writes a map's raster layers as page files (all pages, or any subset of them).
+//!
+//! Files are read with positioned reads, never memory-mapped: a file truncated or damaged while
+//! it is in use gives an error naming the file and the page, never a crash.
+
+pub mod bake;
+pub mod cache;
+pub mod file;
+
+pub use cache::{CacheSample, LayerId, PageCache, PageStats};
+pub use file::{PageFile, PageLayout, SampleKind};
+
+use std::path::PathBuf;
+
+/// Samples per page side. 256 x 256 f32 samples are 256 KiB, a few disk blocks' worth of
+/// positioned reads and about a kilometre of a 4 m map.
+pub const DEFAULT_PAGE_SIDE: u32 = 256;
+
+/// Why a page file or a page could not be used. Every variant names the file; those about one
+/// page name it by its column and row of pages (from the south-west).
+#[derive(Debug, thiserror::Error)]
+pub enum PageError {
+    #[error("{path}: cannot {action}: {source}")]
+    Io {
+        path: PathBuf,
+        action: &'static str,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a page file of this version: {problem}")]
+    Header { path: PathBuf, problem: String },
+    #[error(
+        "{path}: the file is {found} bytes but its header describes {expected}; it was truncated or is still being written"
+    )]
+    Length {
+        path: PathBuf,
+        found: u64,
+        expected: u64,
+    },
+    #[error("{path}: page ({column}, {row}) cannot be read: {source}")]
+    PageIo {
+        path: PathBuf,
+        column: u32,
+        row: u32,
+        source: std::io::Error,
+    },
+    #[error(
+        "{path}: page ({column}, {row}) does not match its checksum (the file is damaged or was changed)"
+    )]
+    Checksum {
+        path: PathBuf,
+        column: u32,
+        row: u32,
+    },
+    #[error(
+        "{path}: page ({column}, {row}) has not been baked (run `worldgen bake` for it, then `worldgen bake --finish`)"
+    )]
+    NotBaked {
+        path: PathBuf,
+        column: u32,
+        row: u32,
+    },
+    #[error("{path}: {problem}")]
+    Request { path: PathBuf, problem: String },
+}
