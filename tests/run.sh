@@ -8,7 +8,7 @@ step() { printf '\n==> %s\n' "$*"; }
 
 # --- system packages (lavapipe for GPU tests, Xvfb + X libraries for the viewer smoke run) ---
 packages=(mesa-vulkan-drivers libvulkan1 xvfb libx11-6 libx11-xcb1 libxcb1 libxcursor1 libxi6
-          libxkbcommon-x11-0 xdotool pkg-config fonts-dejavu-core)
+          libxkbcommon-x11-0 xdotool pkg-config fonts-dejavu-core python3 python3-venv)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -63,6 +63,25 @@ if ./target/debug/worldgen check "$smoke/does-not-exist" 2>/dev/null; then
 fi
 ./target/debug/worldgen import-dem tests/data/dem/N57E011.hgt --out "$smoke/n57" --quiet >/dev/null
 ./target/debug/worldgen check "$smoke/n57" >/dev/null
+
+step "distributed bake: Dask on a local cluster of two workers equals the local bake"
+# Dask in a virtual environment of its own under target/ (kept between runs).
+pyenv=target/pyenv
+if ! "$pyenv/bin/python" -c "import dask.distributed" 2>/dev/null; then
+  /usr/bin/python3 -m venv "$pyenv"
+  "$pyenv/bin/pip" install -q "dask[distributed]==2026.8.0"
+fi
+cp -r "$smoke/gen" "$smoke/bake-local" && cp -r "$smoke/gen" "$smoke/bake-dask"
+./target/debug/worldgen bake "$smoke/bake-local" --page-side 64 --quiet >/dev/null
+"$pyenv/bin/python" apps/dask/bake.py "$smoke/bake-dask" --worldgen ./target/debug/worldgen \
+  --local-workers 2 --shares 6 --page-side 64 > "$smoke/bake-dask.log"
+test "$(grep -oE "on worker tcp://[0-9.]+:[0-9]+" "$smoke/bake-dask.log" | sort -u | wc -l)" -eq 2
+ls "$smoke/bake-local/pages" > "$smoke/bake-local.files"
+test "$(wc -l < "$smoke/bake-local.files")" -ge 3
+while read -r f; do
+  cmp "$smoke/bake-local/pages/$f" "$smoke/bake-dask/pages/$f"
+done < "$smoke/bake-local.files"
+test -z "$(ls -A "$smoke/bake-dask/pages" | grep -v -x -F -f "$smoke/bake-local.files")"
 
 step "smoke: worldgen pm (progressive mesh of a test model)"
 ./target/debug/worldgen pm tests/data/meshes/spot.obj --out "$smoke/spot.pm" --quiet >/dev/null

@@ -399,6 +399,9 @@ pub struct PageWriter {
 
 impl PageWriter {
     /// Creates `path` for `layout` and `key`, or continues it if it already describes them.
+    /// Bakes of several processes may start at once: the file is made whole (length and header)
+    /// under a name of this process's own, then linked into place, which fails if another
+    /// process was first; that file is then continued.
     pub fn create_or_continue(
         path: &Path,
         layout: PageLayout,
@@ -409,33 +412,36 @@ impl PageWriter {
             action,
             source,
         };
-        if path.exists() {
-            let existing = PageFile::open(path)?;
-            if existing.layout != layout || existing.key != key {
-                return Err(PageError::Header {
-                    path: path.to_path_buf(),
-                    problem: "an unfinished bake of another layout or another map is in the way; remove it or finish that bake".into(),
-                });
-            }
-            let file = std::fs::OpenOptions::new()
-                .write(true)
-                .open(path)
-                .map_err(|e| io("open the page file for writing", e))?;
-            return Ok(Self {
+        if !path.exists() {
+            let own = path.with_extension(format!("new-{}", std::process::id()));
+            let made = (|| {
+                let file = std::fs::OpenOptions::new()
+                    .write(true)
+                    .create(true)
+                    .truncate(true)
+                    .open(&own)?;
+                file.set_len(layout.file_bytes())?;
+                file.write_all_at(&header_bytes(&layout, key), 0)?;
+                file.sync_all()?;
+                match std::fs::hard_link(&own, path) {
+                    Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => Err(e),
+                    _ => Ok(()),
+                }
+            })();
+            let _ = std::fs::remove_file(&own);
+            made.map_err(|e| io("create the page file", e))?;
+        }
+        let existing = PageFile::open(path)?;
+        if existing.layout != layout || existing.key != key {
+            return Err(PageError::Header {
                 path: path.to_path_buf(),
-                file,
-                layout,
+                problem: "an unfinished bake of another layout or another map is in the way; remove it or finish that bake".into(),
             });
         }
         let file = std::fs::OpenOptions::new()
             .write(true)
-            .create_new(true)
             .open(path)
-            .map_err(|e| io("create the page file", e))?;
-        file.set_len(layout.file_bytes())
-            .map_err(|e| io("size the page file", e))?;
-        file.write_all_at(&header_bytes(&layout, key), 0)
-            .map_err(|e| io("write the page file's header", e))?;
+            .map_err(|e| io("open the page file for writing", e))?;
         Ok(Self {
             path: path.to_path_buf(),
             file,
