@@ -82,6 +82,14 @@ while read -r f; do
   cmp "$smoke/bake-local/pages/$f" "$smoke/bake-dask/pages/$f"
 done < "$smoke/bake-local.files"
 test -z "$(ls -A "$smoke/bake-dask/pages" | grep -v -x -F -f "$smoke/bake-local.files")"
+./target/debug/worldgen check "$smoke/bake-dask" | grep -q "every one matches its checksum"
+# A flipped byte in the first page: check fails naming the file and the page.
+/usr/bin/python3 -c 'import sys; p = sys.argv[1]; b = bytearray(open(p, "rb").read()); b[164] ^= 1; open(p, "wb").write(b)' \
+  "$smoke/bake-dask/pages/heights.exr.pages"
+if ./target/debug/worldgen check "$smoke/bake-dask" 2> "$smoke/bad-page.log" >/dev/null; then
+  echo "worldgen check accepted a damaged page" >&2; exit 1
+fi
+grep -q "heights.exr.pages: page (0, 0) does not match its checksum" "$smoke/bad-page.log"
 
 step "smoke: worldgen pm (progressive mesh of a test model)"
 ./target/debug/worldgen pm tests/data/meshes/spot.obj --out "$smoke/spot.pm" --quiet >/dev/null

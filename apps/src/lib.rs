@@ -65,10 +65,49 @@ pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 /// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
+/// Bytes of max-pyramid pages a baked map keeps resident (the page cache's budget).
+pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;
+
+/// Bakes what the engine derives from the map in `dir` (`worldgen bake`), so that no open of
+/// the map computes it: the max-pyramids of the region bounds as page files under `pages/`,
+/// and the surface error grids and the 32 m nodes' bounds into [`SURFACE_ERROR_CACHE`] (kept
+/// when it already holds them for this map and this engine). Returns whether the error grids
+/// were computed (false: the file was already right).
+pub fn bake_derived(
+    map: worldgen::Map,
+    dir: &Path,
+    progress: &dyn worldgen::progress::Progress,
+) -> std::io::Result<bool> {
+    use engine::surface::map_error_cache;
+    use engine::terrain::precomputed;
+    let mut world = World::new_without_error_grids(map);
+    let pages = worldgen::pages::bake::pages_dir(dir);
+    world
+        .write_pyramid_pages(&pages, worldgen::pages::DEFAULT_PAGE_SIDE)
+        .map_err(std::io::Error::other)?;
+    let path = dir.join(SURFACE_ERROR_CACHE);
+    let key = map_error_cache::surface_key(&world, precomputed::MEASUREMENT_VERSION);
+    if map_error_cache::read(&path, key).is_ok() {
+        return Ok(false);
+    }
+    precomputed::compute(&mut world, progress);
+    map_error_cache::write(&path, key, &world.map_error)?;
+    Ok(true)
+}
+
 fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::Progress) -> World {
     let cells = (map.heights.width() - 1) * (map.heights.height() - 1);
-    let cache = (cells >= CACHE_MIN_CELLS).then(|| dir.join(SURFACE_ERROR_CACHE));
-    let mut world = engine::terrain::precomputed::open(map, cache.as_deref(), progress);
+    // Large maps keep the grids they compute; any map keeps what `worldgen bake` wrote.
+    let cache = (cells >= CACHE_MIN_CELLS || dir.join(SURFACE_ERROR_CACHE).is_file())
+        .then(|| dir.join(SURFACE_ERROR_CACHE));
+    // A baked map's max-pyramids are read page by page instead of computed.
+    let pages = worldgen::pages::bake::pages_dir(dir);
+    let world = if pages.join("derived").is_dir() {
+        World::new_paged_without_error_grids(map, &pages, PAGE_CACHE_BUDGET_BYTES)
+    } else {
+        World::new_without_error_grids(map)
+    };
+    let mut world = engine::terrain::precomputed::open_world(world, cache.as_deref(), progress);
     // The same maps keep the light grids' sky pages (engine::lighting::sky_pages), and any
     // map whose pages were baked (`flyover --bake-sky`).
     if cells >= CACHE_MIN_CELLS

@@ -4,13 +4,14 @@
 //! region bounds the map heights read anywhere in it (the light grids' horizon marches skip
 //! stretches of a ray that cannot rise above the horizon already found).
 
+use super::levels::Level;
 use worldgen::Grid;
 
 /// Max-pyramid of a grid's samples: level `k` holds the maximum over blocks of `2^(k+1)` x
 /// `2^(k+1)` samples (clamped at the far borders).
 #[derive(Debug, Clone)]
 pub struct HeightMax {
-    levels: Vec<Grid<f32>>,
+    pub(crate) levels: Vec<Level>,
     /// Samples along x and y of the base grid.
     samples: [usize; 2],
 }
@@ -43,12 +44,25 @@ impl HeightMax {
             let next = halve(last);
             levels.push(next);
         }
+        Self {
+            levels: levels.into_iter().map(Level::Memory).collect(),
+            samples,
+        }
+    }
+
+    /// The pyramid of a grid of `samples` from its `levels` (as [`Self::new`] makes them).
+    pub(crate) fn from_levels(levels: Vec<Level>, samples: [usize; 2]) -> Self {
         Self { levels, samples }
     }
 
-    /// Bytes held.
+    /// The sizes of the levels of the pyramid of a grid of `samples`.
+    pub(crate) fn level_sizes(samples: [usize; 2]) -> Vec<(usize, usize)> {
+        super::levels::level_sizes(samples[0].div_ceil(2), samples[1].div_ceil(2))
+    }
+
+    /// Bytes held in memory.
     pub fn bytes(&self) -> usize {
-        self.levels.iter().map(|l| l.data().len() * 4).sum()
+        self.levels.iter().map(Level::bytes).sum()
     }
 
     /// An upper bound of the samples `[x0, x1] x [y0, y1]` (inclusive sample indices, clamped

@@ -60,11 +60,13 @@ pub fn surface_key(world: &World, method: u64) -> u64 {
     hs.to_bits().hash(&mut h);
     gs.to_bits().hash(&mut h);
     format!("{:?}", map.decals).hash(&mut h);
-    // The surface function: F and the between-points bound at fixed points of the map.
+    // The surface function: F and the between-points bound at fixed points of a square of at
+    // most 256 m in the middle of the map (few pages of a baked map's paged pyramids).
     let (o, s) = (world.origin_m(), world.size_m());
+    let side = [s[0].min(256.0), s[1].min(256.0)];
     for i in 0..256i64 {
-        let x = o[0] + s[0] * worldgen::noise::unit3(0x5E77, i, 0);
-        let y = o[1] + s[1] * worldgen::noise::unit3(0x5E77, i, 1);
+        let x = o[0] + (s[0] - side[0]) * 0.5 + side[0] * worldgen::noise::unit3(0x5E77, i, 0);
+        let y = o[1] + (s[1] - side[1]) * 0.5 + side[1] * worldgen::noise::unit3(0x5E77, i, 1);
         world.height_m(x, y).to_bits().hash(&mut h);
         let cell = Rect {
             min: [x, y],
@@ -124,16 +126,15 @@ pub fn write(path: &Path, key: u64, pyramid: &MapErrorPyramid) -> std::io::Resul
 }
 
 impl World {
-    /// The world with the map-error grids read from `cache_file` when it holds them for this
-    /// surface and this `method` (the version of `compute`), else computed by `compute` and
-    /// written there (a write failure is logged, not fatal).
+    /// `world` (without error grids) with the map-error grids read from `cache_file` when it
+    /// holds them for this surface and this `method` (the version of `compute`), else computed
+    /// by `compute` and written there (a write failure is logged, not fatal).
     pub fn with_error_cache(
-        map: worldgen::Map,
+        mut world: World,
         cache_file: &Path,
         method: u64,
         compute: impl FnOnce(&mut World),
     ) -> Self {
-        let mut world = Self::without_error_grids(map);
         let key = surface_key(&world, method);
         match read(cache_file, key) {
             Ok(p) => world.map_error = p,

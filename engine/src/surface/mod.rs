@@ -4,14 +4,19 @@
 //! - [`world`]: [`World`] wraps a loaded map and defines `F = G + H + E`.
 //! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised).
 //! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
-//! - [`height_max`]: a max-pyramid of the map's height samples (upper bounds over regions).
+//! - [`height_max`]: a max-pyramid of the map's height samples (upper bounds over regions);
+//!   `max_pyramid` the per-cell max-pyramids of the slope, curvature and amplitude bounds.
+//! - [`levels`]: the pyramids' levels in memory or paged (a baked map), and the page faults.
 //! - [`map_error`]: the map part's interpolation error per block of the coarse grids, computed
 //!   once at load; [`map_error_cache`] keeps it in a file between runs.
 
 pub mod decals;
 pub mod height_max;
+pub mod levels;
 pub mod map_error;
 pub mod map_error_cache;
+mod max_pyramid;
+mod pyramids;
 pub mod spline;
 pub mod world;
 

@@ -8,10 +8,15 @@
 //! Detail is evaluated in map-local coordinates, so the same map placed at another origin gives
 //! the same surface.
 
-use super::spline::{catmull_rom_cell_curvature, catmull_rom_cell_slope};
+use super::levels::PageFaults;
+use super::max_pyramid::MaxPyramid;
+use super::pyramids::Pyramids;
 use crate::surface::decals::{DecalBounds, DecalField};
+use std::path::Path;
+use std::sync::Arc;
 use worldgen::Map;
 use worldgen::noise;
+use worldgen::pages::{PageCache, PageError};
 
 /// Detail-noise octaves: (wavelength m, weight). The weights sum to 1, so |D| <= 1.
 pub const DETAIL_OCTAVES: [(f64, f64); 3] = [(8.0, 4.0 / 7.0), (4.0, 2.0 / 7.0), (2.0, 1.0 / 7.0)];
@@ -32,17 +37,11 @@ pub struct World {
     /// Detail amplitude (m) at each ground sample, from the legend.
     amplitude_m: worldgen::Grid<f32>,
     detail_seed: u64,
-    /// Slope bound of the bicubic map surface per height cell.
-    slope_g: MaxPyramid,
-    /// Slope bound of the detail term per ground cell.
-    slope_detail: MaxPyramid,
-    /// Hessian-norm bound of the bicubic map surface per height cell.
-    curv_g: MaxPyramid,
-    /// Hessian-norm bound of the detail term inside each ground cell (it is only C0 across
-    /// ground-cell borders, where the bilinear amplitude has kinks).
-    curv_detail: MaxPyramid,
-    /// Largest detail amplitude at the corners of each ground cell.
-    amp_max: MaxPyramid,
+    /// The per-cell max-pyramids of the region bounds (computed, or paged from a bake).
+    pyramids: Pyramids,
+    /// The page cache of the paged pyramid levels (a baked map), and the page faults met.
+    pub page_cache: Option<Arc<PageCache>>,
+    pub page_faults: Arc<PageFaults>,
     /// Decal shaping E.
     pub decals: DecalField,
     /// Interpolation error of F per block of the grids of spacing `hs 2^k` (computed at load).
@@ -119,17 +118,11 @@ impl World {
                 .iter()
                 .map(|d| grid(d.density.width(), d.density.height(), 1))
                 .sum::<usize>();
-        let pyramids = [
-            &self.slope_g,
-            &self.slope_detail,
-            &self.curv_g,
-            &self.curv_detail,
-            &self.amp_max,
-        ]
-        .iter()
-        .map(|p| p.bytes())
-        .sum::<usize>()
-            + self.heights_max.bytes();
+        let pyramids = self.pyramids.bytes() + self.heights_max.bytes();
+        let resident_pages = self
+            .page_cache
+            .as_ref()
+            .map_or(0, |c| c.stats().resident_bytes);
         vec![
             ("map layers (heights, ground, densities)", layers),
             (
@@ -140,6 +133,7 @@ impl World {
                 "slope, curvature, amplitude and height max-pyramids",
                 pyramids,
             ),
+            ("max-pyramid pages resident", resident_pages),
             ("decal field", self.decals.heap_bytes()),
             ("surface error grids", self.map_error.bytes()),
         ]
@@ -165,8 +159,41 @@ impl World {
         );
     }
 
+    /// The world with empty map-error grids (every node's bounds measured at run time), for a
+    /// caller that fills them ([`crate::terrain::precomputed::compute`]).
+    pub fn new_without_error_grids(map: Map) -> Self {
+        Self::without_error_grids(map)
+    }
+
     /// The world with empty map-error grids (every node's bounds measured at run time).
     pub(crate) fn without_error_grids(map: Map) -> Self {
+        Self::build(map, None)
+    }
+
+    /// The world with empty map-error grids whose max-pyramids are read from the page files
+    /// of a baked map in `pages_dir` through a page cache of `budget_bytes`; computed as
+    /// without pages (and the reason logged) where those files are missing or do not match.
+    pub fn new_paged_without_error_grids(map: Map, pages_dir: &Path, budget_bytes: usize) -> Self {
+        Self::build(map, Some((pages_dir, budget_bytes)))
+    }
+
+    /// Writes this world's max-pyramids as page files under `pages_dir` (`worldgen bake`).
+    pub fn write_pyramid_pages(&self, pages_dir: &Path, page_side: u32) -> Result<(), PageError> {
+        let key = self.pyramids_key();
+        self.pyramids
+            .write(&self.heights_max, pages_dir, page_side, key)
+    }
+
+    fn pyramids_key(&self) -> u64 {
+        Pyramids::key(
+            &self.map.heights,
+            self.map.manifest.heights.spacing_m,
+            &self.amplitude_m,
+            self.map.manifest.ground.spacing_m,
+        )
+    }
+
+    fn build(map: Map, pages: Option<(&Path, usize)>) -> Self {
         let legend: Vec<f32> = map
             .manifest
             .ground
@@ -183,33 +210,37 @@ impl World {
         let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
         suppress_detail_on_roads(&mut amplitude_m, &map, &decals);
         let detail_seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0) ^ 0xDE7A_11ED;
-        let slope_g = MaxPyramid::new(bicubic_cell_slopes(
-            &map.heights,
+        let (hs, gs) = (
             map.manifest.heights.spacing_m,
-        ));
-        let slope_detail = MaxPyramid::new(detail_cell_slopes(
-            &amplitude_m,
             map.manifest.ground.spacing_m,
-        ));
-        let curv_g = MaxPyramid::new(bicubic_cell_curvatures(
-            &map.heights,
-            map.manifest.heights.spacing_m,
-        ));
-        let curv_detail = MaxPyramid::new(detail_cell_curvatures(
-            &amplitude_m,
-            map.manifest.ground.spacing_m,
-        ));
-        let amp_max = MaxPyramid::new(cell_corner_max(&amplitude_m));
-        let heights_max = super::height_max::HeightMax::new(&map.heights);
+        );
+        let page_faults = Arc::new(PageFaults::default());
+        let mut page_cache = None;
+        let paged = pages.and_then(|(dir, budget_bytes)| {
+            let key = Pyramids::key(&map.heights, hs, &amplitude_m, gs);
+            let cache = Arc::new(PageCache::new(budget_bytes));
+            let heights = [map.heights.width(), map.heights.height()];
+            let ground = [amplitude_m.width(), amplitude_m.height()];
+            match Pyramids::open(dir, heights, ground, key, &cache, &page_faults) {
+                Ok(p) => {
+                    page_cache = Some(cache);
+                    Some(p)
+                }
+                Err(e) => {
+                    log::warn!("{e}: computing the max-pyramids instead");
+                    None
+                }
+            }
+        });
+        let (pyramids, heights_max) =
+            paged.unwrap_or_else(|| Pyramids::compute(&map.heights, hs, &amplitude_m, gs));
         Self {
             map,
             amplitude_m,
             detail_seed,
-            slope_g,
-            slope_detail,
-            curv_g,
-            curv_detail,
-            amp_max,
+            pyramids,
+            page_cache,
+            page_faults,
             decals,
             derived_dir: None,
             map_error: super::map_error::MapErrorPyramid::default(),
@@ -347,12 +378,12 @@ impl World {
         let in_one_ground_cell =
             one_cell(rect.min[0], rect.max[0], o[0]) && one_cell(rect.min[1], rect.max[1], o[1]);
         RegionBounds {
-            slope_g: f64::from(self.cells_max(rect, hs, &self.slope_g)),
-            slope_h: f64::from(self.cells_max(rect, gs, &self.slope_detail)),
-            curvature_g: inside.then(|| f64::from(self.cells_max(rect, hs, &self.curv_g))),
+            slope_g: f64::from(self.cells_max(rect, hs, &self.pyramids.slope_g)),
+            slope_h: f64::from(self.cells_max(rect, gs, &self.pyramids.slope_detail)),
+            curvature_g: inside.then(|| f64::from(self.cells_max(rect, hs, &self.pyramids.curv_g))),
             curvature_h: (inside && in_one_ground_cell)
-                .then(|| f64::from(self.cells_max(rect, gs, &self.curv_detail))),
-            amplitude_max_m: f64::from(self.cells_max(rect, gs, &self.amp_max)),
+                .then(|| f64::from(self.cells_max(rect, gs, &self.pyramids.curv_detail))),
+            amplitude_max_m: f64::from(self.cells_max(rect, gs, &self.pyramids.amp_max)),
             decal: self.decals.region_bounds(rect.min, rect.max),
         }
     }
@@ -381,11 +412,11 @@ impl World {
             f64::from(p.levels[0].get(x.min(p.width() - 1), y.min(p.height() - 1)))
         };
         RegionBounds {
-            slope_g: l0(&self.slope_g, hx, hy),
-            slope_h: l0(&self.slope_detail, gx, gy),
-            curvature_g: Some(l0(&self.curv_g, hx, hy)),
-            curvature_h: Some(l0(&self.curv_detail, gx, gy)),
-            amplitude_max_m: l0(&self.amp_max, gx, gy),
+            slope_g: l0(&self.pyramids.slope_g, hx, hy),
+            slope_h: l0(&self.pyramids.slope_detail, gx, gy),
+            curvature_g: Some(l0(&self.pyramids.curv_g, hx, hy)),
+            curvature_h: Some(l0(&self.pyramids.curv_detail, gx, gy)),
+            amplitude_max_m: l0(&self.pyramids.amp_max, gx, gy),
             decal: self.decals.region_bounds(rect.min, rect.max),
         }
     }
@@ -444,158 +475,10 @@ fn suppress_detail_on_roads(amplitude_m: &mut worldgen::Grid<f32>, map: &Map, de
     }
 }
 
-/// A grid with one value per cell of `src` (between samples x..x+1, y..y+1), rounded up so
-/// the f32 value stays an upper bound of the f64 one.
-fn per_cell(src: &worldgen::Grid<f32>, value: impl Fn(usize, usize) -> f64) -> worldgen::Grid<f32> {
-    let (w, h) = ((src.width() - 1).max(1), (src.height() - 1).max(1));
-    let mut out = worldgen::Grid::new(w, h, 0.0f32);
-    for y in 0..h {
-        for x in 0..w {
-            out.set(x, y, (value(x, y) * (1.0 + 1e-6)) as f32);
-        }
-    }
-    out
-}
-
-/// The four corner samples of cell (x, y), clamped at the far border.
-fn cell_corners(a: &worldgen::Grid<f32>, x: usize, y: usize) -> [f64; 4] {
-    let (x1, y1) = ((x + 1).min(a.width() - 1), (y + 1).min(a.height() - 1));
-    [a.get(x, y), a.get(x1, y), a.get(x, y1), a.get(x1, y1)].map(f64::from)
-}
-
-/// Bound of |grad| of the bilinear interpolation of a cell's corners `c` (x-neighbours 0-1 and
-/// 2-3, y-neighbours 0-2 and 1-3).
-fn bilinear_gradient_bound(c: &[f64; 4], spacing_m: f64) -> f64 {
-    let gx = (c[1] - c[0]).abs().max((c[3] - c[2]).abs());
-    let gy = (c[2] - c[0]).abs().max((c[3] - c[1]).abs());
-    gx.hypot(gy) / spacing_m
-}
-
-/// Bound of |grad D| for the detail noise (|D| <= 1).
-fn detail_gradient_bound() -> f64 {
-    DETAIL_OCTAVES
-        .iter()
-        .map(|&(wl, w)| w * GRADIENT_NOISE_LIPSCHITZ / wl)
-        .sum()
-}
-
-/// Per height cell: a bound of |grad G| over the cell (clamped at the map border like G).
-fn bicubic_cell_slopes(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    per_cell(h, |x, y| {
-        let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
-        catmull_rom_cell_slope(&p, spacing_m)
-    })
-}
-
-/// Per height cell: a bound of the Frobenius norm of the Hessian of G over the cell.
-fn bicubic_cell_curvatures(h: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    per_cell(h, |x, y| {
-        let p = |a: i64, b: i64| f64::from(h.get_clamped(x as i64 + a, y as i64 + b));
-        catmull_rom_cell_curvature(&p, spacing_m)
-    })
-}
-
-/// Per ground cell: a bound of the Hessian norm of A D inside the cell:
-/// `A_max |H(D)| + 2 |grad A| |grad D| + |A_xy|` (A is bilinear, so A_xx = A_yy = 0).
-fn detail_cell_curvatures(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let grad_d = detail_gradient_bound();
-    let hess_d: f64 = DETAIL_OCTAVES
-        .iter()
-        .map(|&(wl, w)| w * GRADIENT_NOISE_HESSIAN / (wl * wl))
-        .sum();
-    per_cell(a, |x, y| {
-        let c = cell_corners(a, x, y);
-        let a_max = c.iter().copied().fold(0.0, f64::max);
-        let grad_a = bilinear_gradient_bound(&c, spacing_m);
-        let a_xy = (c[3] - c[2] - c[1] + c[0]).abs() / (spacing_m * spacing_m);
-        a_max * hess_d + 2.0 * grad_a * grad_d + a_xy
-    })
-}
-
-/// Per cell: the largest of its four corner samples.
-fn cell_corner_max(a: &worldgen::Grid<f32>) -> worldgen::Grid<f32> {
-    per_cell(a, |x, y| {
-        cell_corners(a, x, y)
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max)
-    })
-}
-
-/// Per ground cell: a bound of |grad (A D)| <= A_max |grad D| + |grad A| (|D| <= 1), with A
-/// bilinear between the cell's corners.
-fn detail_cell_slopes(a: &worldgen::Grid<f32>, spacing_m: f64) -> worldgen::Grid<f32> {
-    let grad_d = detail_gradient_bound();
-    per_cell(a, |x, y| {
-        let c = cell_corners(a, x, y);
-        let a_max = c.iter().copied().fold(0.0, f64::max);
-        let grad_a = bilinear_gradient_bound(&c, spacing_m);
-        a_max * grad_d + grad_a
-    })
-}
-
-/// A max-mipmap over a grid: level k holds the max over 2^k x 2^k blocks.
-#[derive(Debug, Clone)]
-struct MaxPyramid {
-    levels: Vec<worldgen::Grid<f32>>,
-}
-
-impl MaxPyramid {
-    fn bytes(&self) -> usize {
-        self.levels.iter().map(|l| l.data().len() * 4).sum()
-    }
-
-    fn new(base: worldgen::Grid<f32>) -> Self {
-        let mut levels = vec![base];
-        while let Some(prev) = levels.last() {
-            if prev.width() == 1 && prev.height() == 1 {
-                break;
-            }
-            let (w, h) = (prev.width().div_ceil(2), prev.height().div_ceil(2));
-            let mut next = worldgen::Grid::new(w, h, 0.0f32);
-            for y in 0..h {
-                for x in 0..w {
-                    let m = prev
-                        .get(2 * x, 2 * y)
-                        .max(prev.get_clamped(2 * x as i64 + 1, 2 * y as i64))
-                        .max(prev.get_clamped(2 * x as i64, 2 * y as i64 + 1))
-                        .max(prev.get_clamped(2 * x as i64 + 1, 2 * y as i64 + 1));
-                    next.set(x, y, m);
-                }
-            }
-            levels.push(next);
-        }
-        Self { levels }
-    }
-
-    fn width(&self) -> usize {
-        self.levels[0].width()
-    }
-
-    fn height(&self) -> usize {
-        self.levels[0].height()
-    }
-
-    /// Max over cells [x0, x1] x [y0, y1] (inclusive), possibly over a few more cells around
-    /// (still an upper bound), in at most 9 lookups.
-    fn max_in(&self, x0: usize, x1: usize, y0: usize, y1: usize) -> f32 {
-        let span = (x1 - x0 + 1).max(y1 - y0 + 1);
-        let k = (usize::BITS - 1 - span.leading_zeros()) as usize;
-        let g = &self.levels[k.min(self.levels.len() - 1)];
-        let k = k.min(self.levels.len() - 1);
-        let mut m = 0.0f32;
-        for y in (y0 >> k)..=(y1 >> k).min(g.height() - 1) {
-            for x in (x0 >> k)..=(x1 >> k).min(g.width() - 1) {
-                m = m.max(g.get(x, y));
-            }
-        }
-        m
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::surface::spline::{catmull_rom_cell_curvature, catmull_rom_cell_slope};
 
     /// The lattice evaluation equals the point evaluation exactly: on a road (decals active),
     /// across the map's corners (clamped samples, positions outside), with uneven spacing, and

@@ -107,18 +107,27 @@ fn add_to(world: &mut World, progress: &dyn Progress) {
     }
 }
 
+/// Computes `world`'s map-error grids and adds this module's finest grid: what [`open`] keeps
+/// in its cache file (the key of that file: [`MEASUREMENT_VERSION`]).
+pub fn compute(world: &mut World, progress: &dyn Progress) {
+    world.compute_error_grids();
+    add_to(world, progress);
+}
+
 /// Opens `map` as the stream uses it: the map-error grids ([`World::new`]) and this module's
 /// finest grid, kept in `cache_file` between runs when one is given (read back when it holds them
 /// for this surface and this measurement, else computed and written).
 pub fn open(map: worldgen::Map, cache_file: Option<&Path>, progress: &dyn Progress) -> World {
-    let compute = |w: &mut World| {
-        w.compute_error_grids();
-        add_to(w, progress);
-    };
+    open_world(World::without_error_grids(map), cache_file, progress)
+}
+
+/// [`open`] for a world already made without its error grids (for example with paged
+/// max-pyramids, [`World::new_paged_without_error_grids`]).
+pub fn open_world(mut world: World, cache_file: Option<&Path>, progress: &dyn Progress) -> World {
+    let compute = |w: &mut World| compute(w, progress);
     if let Some(path) = cache_file {
-        return World::with_error_cache(map, path, MEASUREMENT_VERSION, compute);
+        return World::with_error_cache(world, path, MEASUREMENT_VERSION, compute);
     }
-    let mut world = World::without_error_grids(map);
     compute(&mut world);
     world
 }

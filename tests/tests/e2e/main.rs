@@ -10,6 +10,7 @@ mod ground;
 mod lighting;
 mod map_format;
 mod objects;
+mod paged_world;
 mod pages;
 mod pm;
 mod pm_prefix;

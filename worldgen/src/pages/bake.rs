@@ -203,14 +203,46 @@ pub fn missing_pages(map: &Map, map_dir: &Path) -> Result<Vec<(String, Vec<u32>)
     Ok(out)
 }
 
+/// Opens `path` and checks that it was baked from `raster` (`name` in messages).
+fn open_checked(path: PathBuf, name: &str, raster: &Raster<'_>) -> Result<PageFile, PageError> {
+    let file = PageFile::open(&path)?;
+    if file.key() != raster.key() {
+        return Err(PageError::Header {
+            path,
+            problem: format!("baked from another `{name}` layer than this map's; bake it again"),
+        });
+    }
+    Ok(file)
+}
+
+/// Reads every page of `files` (mark and checksum), one unit of `progress` per page.
+fn read_every_page(files: &[(String, PageFile)], progress: &dyn Progress) -> Result<(), PageError> {
+    let total = files
+        .iter()
+        .map(|(_, f)| u64::from(f.layout().page_count()))
+        .sum();
+    progress.begin("check pages", total);
+    for (_, file) in files {
+        let l = file.layout();
+        for i in 0..l.page_count() {
+            let (column, row) = l.column_row(i);
+            match l.kind {
+                super::SampleKind::F32 => file.read_page::<f32>(column, row).map(drop)?,
+                super::SampleKind::U8 => file.read_page::<u8>(column, row).map(drop)?,
+            }
+            progress.advance(1);
+        }
+    }
+    progress.end();
+    Ok(())
+}
+
 /// Checks every page of every partial file of `map` (mark and checksum, and that the file was
 /// baked from this map's layer) and renames the files into place. Fails, renaming nothing, when
 /// a page is missing or damaged.
 pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usize, PageError> {
-    let layers = rasters(map);
     let mut ready = Vec::new();
-    let mut total = 0u64;
-    for (name, raster) in &layers {
+    for (name, raster) in &rasters(map) {
         let path = partial_path(map_dir, name);
         if !path.exists() {
             if page_file_path(map_dir, name).exists() {
@@ -223,31 +255,9 @@ pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usiz
                 ),
             });
         }
-        let file = PageFile::open(&path)?;
-        if file.key() != raster.key() {
-            return Err(PageError::Header {
-                path,
-                problem: format!(
-                    "baked from another `{name}` layer than this map's; bake it again"
-                ),
-            });
-        }
-        total += u64::from(file.layout().page_count());
-        ready.push((name.clone(), file));
+        ready.push((name.clone(), open_checked(path, name, raster)?));
     }
-    progress.begin("check pages", total);
-    for (_, file) in &ready {
-        let l = file.layout();
-        for i in 0..l.page_count() {
-            let (column, row) = l.column_row(i);
-            match l.kind {
-                super::SampleKind::F32 => file.read_page::<f32>(column, row).map(drop)?,
-                super::SampleKind::U8 => file.read_page::<u8>(column, row).map(drop)?,
-            }
-            progress.advance(1);
-        }
-    }
-    progress.end();
+    read_every_page(&ready, progress)?;
     for (name, file) in &ready {
         let to = page_file_path(map_dir, name);
         std::fs::rename(file.path(), &to).map_err(|source| PageError::Io {
@@ -257,6 +267,65 @@ pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usiz
         })?;
     }
     Ok(ready.len())
+}
+
+/// Checks the finished page files of `map`: every layer has one, baked from this map's layer,
+/// and every page reads (mark and checksum). Returns the number of pages.
+pub fn verify(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<u64, PageError> {
+    let mut files = Vec::new();
+    for (name, raster) in &rasters(map) {
+        files.push((
+            name.clone(),
+            open_checked(page_file_path(map_dir, name), name, raster)?,
+        ));
+    }
+    read_every_page(&files, progress)?;
+    Ok(files
+        .iter()
+        .map(|(_, f)| u64::from(f.layout().page_count()))
+        .sum())
+}
+
+/// Writes `grid` as the page file `path` (through a hidden partial file beside it, renamed when
+/// every page is written and flushed): for rasters derived from a map, baked whole.
+pub fn write_grid<T: Sample>(
+    path: &Path,
+    grid: &Grid<T>,
+    page_side: u32,
+    key: u64,
+) -> Result<(), PageError> {
+    let io = |action, source| PageError::Io {
+        path: path.to_path_buf(),
+        action,
+        source,
+    };
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| io("create the folder of the page file", e))?;
+    }
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let partial = path.with_file_name(format!(".{name}.partial"));
+    if partial.exists() {
+        std::fs::remove_file(&partial).map_err(|e| io("remove an old partial page file", e))?;
+    }
+    let layout = PageLayout::new(
+        T::KIND,
+        grid.width() as u32,
+        grid.height() as u32,
+        page_side,
+    )
+    .map_err(|problem| PageError::Request {
+        path: path.to_path_buf(),
+        problem,
+    })?;
+    let writer = PageWriter::create_or_continue(&partial, layout, key)?;
+    for index in 0..layout.page_count() {
+        let (column, row) = layout.column_row(index);
+        writer.write_page(grid, column, row)?;
+    }
+    writer.sync()?;
+    std::fs::rename(&partial, path).map_err(|e| io("move the page file into place", e))
 }
 
 /// Bakes every page of `map` and finishes: the whole bake on one machine.

@@ -220,6 +220,29 @@ impl PageCache {
         }
     }
 
+    /// Sample (`x`, `y`) of `layer` (row 0 = south), read through the cache: one lock and a
+    /// hash lookup when its page is resident.
+    pub fn sample<T: CacheSample>(&self, layer: LayerId, x: u32, y: u32) -> Result<T, PageError> {
+        let file = self.file(layer);
+        let l = file.layout();
+        if T::KIND != l.kind || x >= l.width || y >= l.height {
+            return Err(PageError::Request {
+                path: file.path().to_path_buf(),
+                problem: format!(
+                    "sample ({x}, {y}) of {:?} asked of a raster of {}x{} {:?} samples",
+                    T::KIND,
+                    l.width,
+                    l.height,
+                    l.kind
+                ),
+            });
+        }
+        let side = l.page_side;
+        let data = self.page::<T>(layer, l.index(x / side, y / side))?;
+        let samples = T::slice(&data).expect("a layer's pages hold its sample kind");
+        Ok(samples[((y % side) * side + x % side) as usize])
+    }
+
     /// The samples of `layer` in columns `x0..x0 + width` and rows `y0..y0 + height` (row 0 =
     /// south), read through the cache. The region must lie inside the raster.
     pub fn region<T: CacheSample>(

@@ -15,6 +15,9 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let map_load_s = load.elapsed().as_secs_f64();
     let world_memory: Vec<(&str, usize)> = world.memory_bytes();
+    // A baked map's paged max-pyramids: their cache and faults, reported at the end.
+    let (page_cache, page_faults) = (world.page_cache.clone(), world.page_faults.clone());
+    let flight = Instant::now();
     let rss_mib_now = || worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
     let after_load_rss_mib = rss_mib_now();
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
@@ -129,6 +132,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .collect();
     let world_bytes: usize = world_memory.iter().map(|(_, b)| b).sum();
     let resident = resident_breakdown(&gpu, &viewer, world_bytes);
+    let pages = page_cache.map(|c| page_report(&c, flight.elapsed().as_secs_f64(), &page_faults));
     let json = cli.out.join("stats.json");
     let doc = serde_json::json!({
         "world_memory_mib": world_memory_mib,
@@ -138,6 +142,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         "tau_px": cli.tau,
         "fov_deg": cli.fov_deg,
         "map_load_s": map_load_s,
+        "page_cache": pages,
+        "page_faults": page_faults.list(),
         "peak_rss_mib": peak_rss_mib,
         "end_rss_mib": rss_mib,
         "after_load_rss_mib": after_load_rss_mib,
@@ -155,6 +161,38 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         json.display()
     );
     Ok(())
+}
+
+/// The page cache of a baked map's max-pyramids over a run of `secs`: printed, and as JSON.
+fn page_report(
+    c: &worldgen::pages::PageCache,
+    secs: f64,
+    faults: &engine::surface::levels::PageFaults,
+) -> serde_json::Value {
+    let mib = |b: usize| b as f64 / f64::from(1 << 20);
+    let s = c.stats();
+    println!(
+        "max-pyramid pages: {} page-ins ({:.1} per second), {} hits, {} evictions, {:.0} MiB \
+         resident at the peak of a {:.0} MiB budget, {} page faults",
+        s.page_ins,
+        s.page_ins as f64 / secs,
+        s.hits,
+        s.evictions,
+        mib(s.peak_resident_bytes),
+        mib(c.budget_bytes()),
+        faults.list().len()
+    );
+    for fault in faults.list() {
+        println!("page fault: {fault}");
+    }
+    serde_json::json!({
+        "page_ins": s.page_ins,
+        "page_ins_per_s": s.page_ins as f64 / secs,
+        "hits": s.hits,
+        "evictions": s.evictions,
+        "peak_resident_mib": mib(s.peak_resident_bytes),
+        "budget_mib": mib(c.budget_bytes()),
+    })
 }
 
 /// Where the resident memory is at the end (Linux): by kind of mapping, and how much of it the

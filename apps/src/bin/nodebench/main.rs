@@ -78,8 +78,8 @@ const SECTIONS: [&str; 14] = [
 /// ground texture per sampled node, CPU and GPU time, bytes), `soak` (when an adapter exists:
 /// the automatic flight in laps for `--soak-minutes`, resident and GPU memory, caches, jobs and
 /// tiles sampled every second; their growth, and what is left over at the end), `worlds` (only
-/// when named in --only: `worldgen generate` and `flyover --headless` at each of
-/// `--world-sizes`, as child processes: step times, peak memory, bytes on disk, load and
+/// when named in --only: `worldgen generate`, `worldgen bake` and `flyover --headless` at each
+/// of `--world-sizes`, as child processes: step times, peak memory, bytes on disk, load and
 /// selection time). Per-item times are on one
 /// core (p50/p95/p99/max); throughput is given for 1 and N worker threads.
 #[derive(Parser)]

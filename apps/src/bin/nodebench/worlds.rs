@@ -1,8 +1,9 @@
 //! Section `worlds` (only with `--only worlds`: minutes to hours, gigabytes of scratch maps):
 //! how cost grows with the world. For each side in `--world-sizes` it runs the `worldgen` binary
-//! beside this one (`generate --size S`, 4 m spacing) and then `flyover --headless` on the map,
-//! each as its own process, and reads back what they print: time per generation step, peak
-//! resident memory, bytes on disk, the map's load time, and the per-frame selection time.
+//! beside this one (`generate --size S`, 4 m spacing, then `bake`) and then `flyover --headless`
+//! on the map, each as its own process, and reads back what they print: time per generation
+//! step, the bake's time and peak memory, bytes on disk, the map's load time, and the per-frame
+//! selection time.
 
 use crate::report::Report;
 use anyhow::{Context, Result, bail};
@@ -10,14 +11,14 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-/// A binary built beside this one (`cargo build --release -p worldgen -p apps`).
+/// A binary built beside this one (`cargo build --release -p apps`).
 fn sibling(name: &str) -> Result<PathBuf> {
     let me = std::env::current_exe().context("locating nodebench")?;
     let p = me.with_file_name(name);
     if !p.exists() {
         bail!(
             "section worlds needs the {name} binary beside nodebench ({}); build it with \
-             `cargo build --release -p worldgen -p apps`",
+             `cargo build --release -p apps`",
             p.display()
         );
     }
@@ -125,12 +126,52 @@ pub(crate) fn section_worlds(sizes_m: &[f64], scratch: &Path, r: &mut Report) ->
             "MiB",
             &p,
         );
-        // The first open computes the surface error grids and keeps them in the map folder;
-        // the second reads them back.
+        bake(&worldgen, &map, &km, &p, r)?;
+        // The bake wrote the surface error grids: the first open after it reads them, like
+        // every later one.
         for open in ["first open", "second open"] {
             fly_once(&flyover, &map, scratch, size, &km, open, &p, r)?;
         }
     }
+    Ok(())
+}
+
+/// `worldgen bake` of `map`: its wall time, peak memory and the pages' bytes on disk.
+fn bake(worldgen: &Path, map: &Path, km: &str, p: &str, r: &mut Report) -> Result<()> {
+    eprintln!("worlds: baking {km}");
+    let t0 = Instant::now();
+    let out = run(
+        Command::new(worldgen).args(["bake", "--quiet"]).arg(map),
+        "worldgen bake",
+    )?;
+    let name = |what: &str| format!("bake {km}: {what}");
+    r.add(
+        "worlds",
+        &name("wall time"),
+        t0.elapsed().as_secs_f64(),
+        "s",
+        p,
+    );
+    if let Some(v) = number_after(&out, "surface error grids and 32 m node bounds: baked (") {
+        r.add(
+            "worlds",
+            &name("surface error grids and 32 m node bounds"),
+            v,
+            "s",
+            p,
+        );
+    }
+    if let Some(m) = number_after(&out, "peak resident memory:") {
+        r.add("worlds", &name("peak resident memory"), m, "MiB", p);
+    }
+    let pages = worldgen::pages::bake::pages_dir(map);
+    r.add(
+        "worlds",
+        &name("page files on disk"),
+        dir_bytes(&pages) as f64 / f64::from(1 << 20),
+        "MiB",
+        p,
+    );
     Ok(())
 }
 

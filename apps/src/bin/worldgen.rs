@@ -1,4 +1,4 @@
-//! `worldgen`: generate, import and check maps (map format v1).
+//! `worldgen`: generate, import, bake and check maps; build progressive meshes.
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
@@ -10,7 +10,7 @@ use worldgen::progress::{Bars, Progress, StepTime};
 
 /// Map tools for the terrain streaming engine.
 ///
-/// A map is a folder: `map.toml` (manifest: format "tvs-map" version 2, world size, origin, seed,
+/// A map is a folder: `map.toml` (manifest: format "tvs-map" version 3, world size, origin, seed,
 /// layer files), `heights.exr` (f32 metres), `ground.png` (indexed ground types), one
 /// `density_<species>.png` per vegetation species, `trees.csv`, `decals.toml`, `buildings.csv`
 /// and `poisson.csv` (the ranked, periodic Poisson-disc tile that places vegetation). All
@@ -93,8 +93,11 @@ enum Command {
         threads: usize,
     },
     /// Bake a map's raster layers (heights, ground types, densities) into page files under
-    /// `<map>/pages/`: fixed square pages, each with its own checksum, that the engine reads
-    /// through a page cache. A page depends only on its layer and its index, so the bake can be
+    /// `<map>/pages/`: fixed square pages, each with its own checksum, read through a page
+    /// cache; and, when the bake finishes, what the engine derives from the map: the
+    /// max-pyramids of its bounds (`pages/derived/`, read page by page at run time) and the
+    /// surface error grids with the 32 m nodes' bounds (`.surface_error.bin`), so that no open
+    /// of the map computes them (half a minute on the 8 km map). A page depends only on its layer and its index, so the bake can be
     /// split into shares run in any order, on any machines that share the folder
     /// (`--share 0/4` ... `--share 3/4`, then `--finish`); the result is the same bytes.
     /// Without `--share`, `--pages` or `--finish` it bakes every page and finishes. Finishing
@@ -117,6 +120,7 @@ enum Command {
         finish: bool,
     },
     /// Validate a map folder and print a summary; exit code 0 when valid, 1 with the error.
+    /// A baked map's page files are read whole and every page's checksum checked.
     Check {
         /// The map folder.
         dir: PathBuf,
@@ -206,6 +210,10 @@ fn check(dir: &std::path::Path) -> Result<()> {
         map.manifest.version
     );
     say!("{}", map.summary());
+    if worldgen::pages::bake::pages_dir(dir).is_dir() {
+        let pages = worldgen::pages::bake::verify(&map, dir, &worldgen::progress::Silent)?;
+        say!("page files: {pages} pages, every one matches its checksum and this map");
+    }
     Ok(())
 }
 
@@ -288,6 +296,26 @@ fn bake(
             "finished {n} page files in {} ({:.2} s)",
             bake::pages_dir(dir).display(),
             t0.elapsed().as_secs_f64()
+        );
+        let t1 = Instant::now();
+        let computed = apps::bake_derived(map, dir, bars).with_context(|| {
+            format!("writing {}", dir.join(apps::SURFACE_ERROR_CACHE).display())
+        })?;
+        if computed {
+            say!(
+                "max-pyramids, surface error grids and 32 m node bounds: baked ({:.2} s)",
+                t1.elapsed().as_secs_f64()
+            );
+        } else {
+            say!(
+                "max-pyramids: baked; surface error grids and 32 m node bounds: already baked for this map"
+            );
+        }
+    }
+    if let Some(b) = worldgen::progress::peak_rss_bytes() {
+        say!(
+            "peak resident memory: {:.0} MiB",
+            b as f64 / f64::from(1 << 20)
         );
     }
     Ok(())

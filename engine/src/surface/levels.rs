@@ -1,0 +1,188 @@
+//! Levels of the surface's max-pyramids, held in memory or read through the page cache.
+//!
+//! A baked map (`worldgen bake`) stores every level of the world's max-pyramids as a page file
+//! under `pages/derived/` ([`level_path`]); opening it reads each file's header only, keeps
+//! levels of one page in memory and serves the others page by page from a
+//! [`PageCache`] under a byte budget. Every use of a level is an upper bound (a maximum over
+//! cells), so a page that cannot be read is served as `+inf`: the bounds that need it stay
+//! true, only looser, and the fault is recorded once per file and page ([`PageFaults`]) for the
+//! log and the viewer.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use worldgen::Grid;
+use worldgen::pages::{LayerId, PageCache, PageError, PageFile, SampleKind};
+
+/// Page faults met while reading paged levels, each once.
+#[derive(Debug, Default)]
+pub struct PageFaults {
+    seen: Mutex<Vec<String>>,
+}
+
+impl PageFaults {
+    /// Records `e` (logged the first time it is seen).
+    pub fn record(&self, e: &PageError) {
+        let text = e.to_string();
+        let mut seen = self
+            .seen
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if !seen.contains(&text) {
+            log::error!("{text}; the bounds that read it are taken as unbounded there");
+            seen.push(text);
+        }
+    }
+
+    /// The faults seen so far, in order.
+    pub fn list(&self) -> Vec<String> {
+        self.seen
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+    }
+}
+
+/// One level of a max-pyramid.
+#[derive(Debug, Clone)]
+pub(crate) enum Level {
+    Memory(Grid<f32>),
+    Paged {
+        cache: Arc<PageCache>,
+        layer: LayerId,
+        width: usize,
+        height: usize,
+        faults: Arc<PageFaults>,
+    },
+}
+
+impl Level {
+    pub(crate) fn width(&self) -> usize {
+        match self {
+            Level::Memory(g) => g.width(),
+            Level::Paged { width, .. } => *width,
+        }
+    }
+
+    pub(crate) fn height(&self) -> usize {
+        match self {
+            Level::Memory(g) => g.height(),
+            Level::Paged { height, .. } => *height,
+        }
+    }
+
+    /// Sample (`x`, `y`); `+inf` where its page cannot be read (recorded).
+    #[inline]
+    pub(crate) fn get(&self, x: usize, y: usize) -> f32 {
+        match self {
+            Level::Memory(g) => g.get(x, y),
+            Level::Paged {
+                cache,
+                layer,
+                faults,
+                ..
+            } => cache
+                .sample::<f32>(*layer, x as u32, y as u32)
+                .unwrap_or_else(|e| {
+                    faults.record(&e);
+                    f32::INFINITY
+                }),
+        }
+    }
+
+    /// Bytes held in memory by this level itself (a paged level's resident pages are the
+    /// cache's).
+    pub(crate) fn bytes(&self) -> usize {
+        match self {
+            Level::Memory(g) => g.data().len() * 4,
+            Level::Paged { .. } => 0,
+        }
+    }
+}
+
+/// The page file of level `k` of the pyramid `name` in a map's `pages` folder.
+pub fn level_path(pages_dir: &Path, name: &str, k: usize) -> PathBuf {
+    pages_dir.join("derived").join(format!("{name}.{k}.pages"))
+}
+
+/// The sizes of a max-pyramid's levels from a base of `width` x `height`: halved (rounded up)
+/// until 1 x 1.
+pub(crate) fn level_sizes(width: usize, height: usize) -> Vec<(usize, usize)> {
+    let mut sizes = vec![(width, height)];
+    while let Some(&(w, h)) = sizes.last() {
+        if w <= 1 && h <= 1 {
+            break;
+        }
+        sizes.push((w.div_ceil(2), h.div_ceil(2)));
+    }
+    sizes
+}
+
+/// Writes every level of the pyramid `name` (all in memory) as page files.
+pub(crate) fn write_levels(
+    pages_dir: &Path,
+    name: &str,
+    levels: &[Level],
+    page_side: u32,
+    key: u64,
+) -> Result<(), PageError> {
+    for (k, level) in levels.iter().enumerate() {
+        let Level::Memory(grid) = level else {
+            return Err(PageError::Request {
+                path: level_path(pages_dir, name, k),
+                problem: "a paged level cannot be baked again; open the map without its pages"
+                    .into(),
+            });
+        };
+        worldgen::pages::bake::write_grid(&level_path(pages_dir, name, k), grid, page_side, key)?;
+    }
+    Ok(())
+}
+
+/// Opens the levels of the pyramid `name` of the given `sizes`, baked with `key`: a level of
+/// one page is read into memory, the others are registered with `cache`.
+pub(crate) fn open_levels(
+    pages_dir: &Path,
+    name: &str,
+    sizes: &[(usize, usize)],
+    key: u64,
+    cache: &Arc<PageCache>,
+    faults: &Arc<PageFaults>,
+) -> Result<Vec<Level>, PageError> {
+    let mut levels = Vec::with_capacity(sizes.len());
+    for (k, &(width, height)) in sizes.iter().enumerate() {
+        let path = level_path(pages_dir, name, k);
+        let file = PageFile::open(&path)?;
+        let l = file.layout();
+        if file.key() != key
+            || l.kind != SampleKind::F32
+            || (l.width as usize, l.height as usize) != (width, height)
+        {
+            return Err(PageError::Header {
+                path,
+                problem: format!(
+                    "baked from another map or another engine (expected {width}x{height} f32 samples and this map's key); bake the map again"
+                ),
+            });
+        }
+        if l.page_count() == 1 {
+            let page = file.read_page::<f32>(0, 0)?;
+            let side = l.page_side as usize;
+            let mut grid = Grid::new(width, height, 0.0f32);
+            for y in 0..height {
+                for x in 0..width {
+                    grid.set(x, y, page[y * side + x]);
+                }
+            }
+            levels.push(Level::Memory(grid));
+        } else {
+            levels.push(Level::Paged {
+                cache: Arc::clone(cache),
+                layer: cache.add(file),
+                width,
+                height,
+                faults: Arc::clone(faults),
+            });
+        }
+    }
+    Ok(levels)
+}

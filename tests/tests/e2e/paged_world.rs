@@ -1,0 +1,150 @@
+//! A baked map's max-pyramids read page by page: the same region bounds, height maxima and
+//! node meshes as the pyramids computed at open, bit for bit, under a page budget far below
+//! their size; a damaged page loosens only the bounds that read it, is reported with its file
+//! and page, and never panics; pages of another map are refused and computed instead.
+
+use engine::surface::{Rect, World};
+use engine::terrain::bounds::BoundsCache;
+use engine::terrain::quadtree::NodeKey;
+use engine::terrain::tiles::TileCache;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use tests::terrain::{build_mesh, tree_of};
+
+fn random_rect(rng: &mut SmallRng, w: &World, max_side_m: f64) -> Rect {
+    let (o, s) = (w.origin_m(), w.size_m());
+    let side = [
+        max_side_m * rng.random::<f64>(),
+        max_side_m * rng.random::<f64>(),
+    ];
+    let x = o[0] + (s[0] - side[0]).max(0.0) * rng.random::<f64>();
+    let y = o[1] + (s[1] - side[1]).max(0.0) * rng.random::<f64>();
+    Rect {
+        min: [x, y],
+        max: [
+            (x + side[0]).min(o[0] + s[0]),
+            (y + side[1]).min(o[1] + s[1]),
+        ],
+    }
+}
+
+#[test]
+fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
+    let map = tests::generated(&tests::patches_map_params());
+    let tmp = tempfile::tempdir().unwrap();
+    let pages = tmp.path().join("pages");
+    let whole = World::new_without_error_grids(map.clone());
+    whole.write_pyramid_pages(&pages, 64).unwrap();
+    // Eight pages of 64 x 64 f32: 128 KiB against 7 MiB of pyramids on this 2 km map.
+    let budget = 8 * 64 * 64 * 4;
+    let paged = World::new_paged_without_error_grids(map, &pages, budget);
+    let cache = paged.page_cache.clone().expect("the pyramids were paged");
+    let mut rng = SmallRng::seed_from_u64(81);
+    for i in 0..20_000 {
+        let max_side = [1.0, 8.0, 64.0, 600.0, 2048.0][i % 5];
+        let r = random_rect(&mut rng, &whole, max_side);
+        assert_eq!(whole.region_bounds(r), paged.region_bounds(r), "{r:?}");
+        let (hs, _) = whole.cell_spacings_m();
+        let (cx, cy) = (
+            (r.min[0] / hs).floor() * hs + hs * 0.25,
+            (r.min[1] / hs).floor() * hs + hs * 0.25,
+        );
+        let cell = Rect {
+            min: [cx, cy],
+            max: [cx + hs * 0.25, cy + hs * 0.25],
+        };
+        assert_eq!(
+            whole.cell_region_bounds(cell),
+            paged.cell_region_bounds(cell)
+        );
+        let xs = [rng.random_range(-5..520), rng.random_range(-5..520)];
+        let ys = [rng.random_range(-5..520), rng.random_range(-5..520)];
+        assert_eq!(
+            whole.heights_max.max_in(xs, ys).to_bits(),
+            paged.heights_max.max_in(xs, ys).to_bits()
+        );
+    }
+    // Node meshes with their bounds measured at run time (no error grids): every level, a
+    // sample of nodes per level.
+    let tree = tree_of(&whole);
+    let (mut ca, mut cb) = (BoundsCache::new(), BoundsCache::new());
+    let (mut ta, mut tb) = (TileCache::new(), TileCache::new());
+    for level in 0..=tree.max_level {
+        let n = 1u32 << level;
+        for _ in 0..4.min(n * n) {
+            let key = NodeKey {
+                level,
+                ix: rng.random_range(0..n),
+                iy: rng.random_range(0..n),
+            };
+            let a = build_mesh(&whole, &tree, &mut ca, &mut ta, key);
+            let b = build_mesh(&paged, &tree, &mut cb, &mut tb, key);
+            assert!(a == b, "{key:?}: the paged world's mesh differs");
+        }
+    }
+    let s = cache.stats();
+    assert!(s.evictions > 0 && s.peak_resident_bytes <= budget, "{s:?}");
+    assert!(paged.page_faults.list().is_empty());
+    let parts = paged.memory_bytes();
+    let part = |name: &str| parts.iter().find(|p| p.0.starts_with(name)).unwrap().1;
+    let (whole_parts, paged_pyramids) = (whole.memory_bytes(), part("slope, curvature"));
+    let whole_pyramids = whole_parts
+        .iter()
+        .find(|p| p.0.starts_with("slope, curvature"))
+        .unwrap()
+        .1;
+    assert!(
+        paged_pyramids * 20 < whole_pyramids,
+        "paged pyramids keep {paged_pyramids} bytes in memory against {whole_pyramids}"
+    );
+}
+
+#[test]
+fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
+    let map = worldgen::Map::load(&tests::tiny_map_dir()).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let pages = tmp.path().join("pages");
+    let whole = World::new_without_error_grids(map.clone());
+    whole.write_pyramid_pages(&pages, 16).unwrap();
+    // Flip a sample of page (0, 0) of the finest slope level.
+    let file = engine::surface::levels::level_path(&pages, "slope_g", 0);
+    let mut bytes = std::fs::read(&file).unwrap();
+    bytes[64 + 40] ^= 0x40;
+    std::fs::write(&file, &bytes).unwrap();
+    let paged = World::new_paged_without_error_grids(map.clone(), &pages, 1 << 20);
+    assert!(paged.page_cache.is_some());
+    let cell = |x: f64, y: f64| Rect {
+        min: [x, y],
+        max: [x + 1.0, y + 1.0],
+    };
+    // A cell in page (0, 0): its map-slope bound is unbounded, the other bounds as before.
+    let (a, b) = (
+        whole.cell_region_bounds(cell(5.0, 5.0)),
+        paged.cell_region_bounds(cell(5.0, 5.0)),
+    );
+    assert!(b.slope_g.is_infinite() && a.slope_g.is_finite(), "{b:?}");
+    assert_eq!((a.curvature_g, a.slope_h), (b.curvature_g, b.slope_h));
+    assert!(
+        b.between_m(1.0) >= a.between_m(1.0),
+        "the loosened bound is below the true one"
+    );
+    // A cell in another page is untouched.
+    let far = cell(300.0, 300.0);
+    assert_eq!(whole.cell_region_bounds(far), paged.cell_region_bounds(far));
+    let faults = paged.page_faults.list();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    assert!(
+        faults[0].contains("slope_g.0.pages") && faults[0].contains("page (0, 0)"),
+        "{faults:?}"
+    );
+
+    // Pages baked from another map are refused at open: the pyramids are computed instead.
+    let mut other = map;
+    let v = other.heights.get(20, 20);
+    other.heights.set(20, 20, v + 5.0);
+    let reopened = World::new_paged_without_error_grids(other.clone(), &pages, 1 << 20);
+    assert!(reopened.page_cache.is_none(), "stale pages were used");
+    let fresh = World::new_without_error_grids(other);
+    let r = cell(80.0, 80.0);
+    assert_eq!(fresh.cell_region_bounds(r), reopened.cell_region_bounds(r));
+}
