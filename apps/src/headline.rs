@@ -124,8 +124,8 @@ const FIGURES: &[Figure] = &[
         params: &["tau 2 px"],
     },
     Figure {
-        label: "first open of a 32 km map (the world is not paged yet)",
-        doc: "benchmarks.md",
+        label: "first open of a 32 km map after `worldgen bake` (layers still read whole)",
+        doc: "worlds.md",
         section: "worlds",
         metric: "flyover 32768 m, first open: map load",
         params: &[],

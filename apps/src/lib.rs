@@ -30,7 +30,9 @@ pub fn open_world(
 ) -> Result<World, OpenError> {
     let is_default = dir == Path::new(DEFAULT_MAP);
     let generate = |why: &str| -> Result<(), OpenError> {
-        eprintln!("{DEFAULT_MAP} {why}: generating the default map (8 km, seed 1, ~10 s) ...");
+        eprintln!(
+            "{DEFAULT_MAP} {why}: generating the default map (8 km, seed 1, ~10 s) and baking it (~30 s) ..."
+        );
         let map = worldgen::generate::generate(
             &worldgen::generate::GenerateParams::default(),
             progress,
@@ -38,6 +40,10 @@ pub fn open_world(
         )
         .map_err(|e| OpenError::Generate(e.to_string()))?;
         map.write(dir)?;
+        // Baked like `worldgen bake`: no open of it derives anything.
+        let bake = |e: String| OpenError::Generate(format!("baking {}: {e}", dir.display()));
+        worldgen::pages::bake::bake_all(&map, dir, progress).map_err(|e| bake(e.to_string()))?;
+        bake_derived(map, dir, progress).map_err(|e| bake(e.to_string()))?;
         Ok(())
     };
     if is_default && !dir.join("map.toml").exists() {

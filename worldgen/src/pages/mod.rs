@@ -1,7 +1,7 @@
 //! Paged rasters: a map layer stored as fixed square pages, read at run time through a page
 //! cache with a memory budget, so what is resident follows the view rather than the map's area.
 //!
-//! - [`file`] the page file: a checked header, then every page at a fixed offset with its own
+//! - [`file`](mod@file) the page file: a checked header, then every page at a fixed offset with its own
 //!   checksum. A page's bytes are a pure function of the raster and the page's index, so pages
 //!   can be baked in any order and any subset, on any machine, into the same bytes.
 //! - [`cache`] the page cache: pages are read on first use (checksum verified then), shared

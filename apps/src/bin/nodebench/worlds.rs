@@ -152,14 +152,9 @@ fn bake(worldgen: &Path, map: &Path, km: &str, p: &str, r: &mut Report) -> Resul
         "s",
         p,
     );
-    if let Some(v) = number_after(&out, "surface error grids and 32 m node bounds: baked (") {
-        r.add(
-            "worlds",
-            &name("surface error grids and 32 m node bounds"),
-            v,
-            "s",
-            p,
-        );
+    let derived = "max-pyramids, surface error grids and 32 m node bounds";
+    if let Some(v) = number_after(&out, &format!("{derived}: baked (")) {
+        r.add("worlds", &name(derived), v, "s", p);
     }
     if let Some(m) = number_after(&out, "peak resident memory:") {
         r.add("worlds", &name("peak resident memory"), m, "MiB", p);
