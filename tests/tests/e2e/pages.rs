@@ -141,22 +141,10 @@ fn a_bake_in_shares_and_subsets_in_any_order_writes_the_same_bytes() {
             "{name} moved into place early"
         );
     }
-    bake::bake(
-        &map,
-        &split,
-        SIDE,
-        &PageSet::Share { part: 0, count: 3 },
-        &Silent,
-    )
-    .unwrap();
-    bake::bake(
-        &map,
-        &split,
-        SIDE,
-        &PageSet::Share { part: 1, count: 3 },
-        &Silent,
-    )
-    .unwrap();
+    for part in [0, 1] {
+        let share = PageSet::Share { part, count: 3 };
+        bake::bake(&map, &split, SIDE, &share, &Silent).unwrap();
+    }
     assert!(bake::missing_pages(&map, &split).unwrap().is_empty());
     assert_eq!(
         bake::finish(&map, &split, &Silent).unwrap(),

@@ -334,12 +334,7 @@ impl PageFile {
         let mut buf = vec![0u8; l.page_stride_bytes() as usize];
         self.file
             .read_exact_at(&mut buf, l.page_offset(index))
-            .map_err(|source| PageError::PageIo {
-                path: self.path.clone(),
-                column,
-                row,
-                source,
-            })?;
+            .map_err(self.page_io(column, row))?;
         let n = buf.len();
         let stored_crc = u32::from_le_bytes([buf[n - 8], buf[n - 7], buf[n - 6], buf[n - 5]]);
         if buf[n - 4..] != PAGE_MARK {
@@ -370,6 +365,16 @@ impl PageFile {
         Ok(samples.chunks_exact(l.kind.bytes()).map(T::take).collect())
     }
 
+    /// The error of a failed read of page (`column`, `row`).
+    fn page_io(&self, column: u32, row: u32) -> impl FnOnce(std::io::Error) -> PageError + '_ {
+        move |source| PageError::PageIo {
+            path: self.path.clone(),
+            column,
+            row,
+            source,
+        }
+    }
+
     /// Whether page `index` carries its mark (baked), without checking its checksum.
     pub fn is_baked(&self, index: u32) -> Result<bool, PageError> {
         let l = &self.layout;
@@ -378,12 +383,7 @@ impl PageFile {
         let (column, row) = l.column_row(index);
         self.file
             .read_exact_at(&mut mark, at)
-            .map_err(|source| PageError::PageIo {
-                path: self.path.clone(),
-                column,
-                row,
-                source,
-            })?;
+            .map_err(self.page_io(column, row))?;
         Ok(mark == PAGE_MARK)
     }
 }
