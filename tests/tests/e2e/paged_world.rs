@@ -148,3 +148,87 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     let r = cell(80.0, 80.0);
     assert_eq!(fresh.cell_region_bounds(r), reopened.cell_region_bounds(r));
 }
+
+/// A camera `above` metres over the ground of `w` at (x, y), looking along `yaw` and down.
+fn camera(w: &World, x: f64, y: f64, above: f64, yaw: f64) -> engine::camera::Camera {
+    let p = glam::DVec3::new(x, y, w.height_m(x, y) + above);
+    let dir = glam::DVec3::new(yaw.cos() * 0.8, yaw.sin() * 0.8, -0.6);
+    engine::camera::Camera::look_at(p, p + dir, 60f64.to_radians(), [640, 360])
+}
+
+#[test]
+fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
+    use engine::stream::{StreamSettings, Streamer};
+    let map = worldgen::Map::load(&tests::tiny_map_dir()).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let pages = tmp.path().join("pages");
+    World::new_without_error_grids(map.clone())
+        .write_pyramid_pages(&pages, 16)
+        .unwrap();
+    // A budget of four 16 x 16 pages: the flight reads pages again all the time.
+    let paged = World::new_paged_without_error_grids(map, &pages, 4 * 16 * 16 * 4);
+    let world = engine::terrain::precomputed::open_world(paged, None, &worldgen::progress::Silent);
+    let reference = World::new_without_error_grids(world.map.clone());
+    let (cache, faults) = (world.page_cache.clone().unwrap(), world.page_faults.clone());
+    let kinds = engine::kinds::content_kinds(&world);
+    let settings = StreamSettings {
+        workers: 2,
+        fade_s: 0.1,
+        tau_px: 0.5,
+        ..StreamSettings::default()
+    };
+    let mut s = Streamer::new(world, settings, kinds);
+    assert!(s.settle(&camera(&reference, 60.0, 80.0, 30.0, 0.6), 120.0));
+    assert!(faults.list().is_empty());
+
+    // Mid-flight: the finest map-slope level loses its second half, a byte of the finest
+    // height-maximum level flips, and nothing stays resident.
+    let slope = engine::surface::levels::level_path(&pages, "slope_g", 0);
+    let len = std::fs::metadata(&slope).unwrap().len();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&slope)
+        .unwrap()
+        .set_len(len / 2)
+        .unwrap();
+    let hmax = engine::surface::levels::level_path(&pages, "height_max", 0);
+    let mut bytes = std::fs::read(&hmax).unwrap();
+    bytes[64 + 8] ^= 0x20;
+    std::fs::write(&hmax, &bytes).unwrap();
+    cache.clear();
+
+    // Fly on across the map, low (fine nodes measure their bounds from the slope level).
+    for i in 0..240 {
+        let t = f64::from(i) / 240.0;
+        let cam = camera(
+            &reference,
+            60.0 + 390.0 * t,
+            80.0 + 350.0 * t,
+            25.0 - 15.0 * t,
+            0.6 + t,
+        );
+        s.update(&cam, 1.0 / 60.0);
+        s.run_gpu_phases();
+    }
+    let last = camera(&reference, 440.0, 440.0, 8.0, 0.9);
+    assert!(
+        s.settle(&last, 120.0),
+        "the flight did not settle: {:?}",
+        s.stats
+    );
+    for k in s.wanted() {
+        assert!(s.is_ready(*k), "{k:?} is wanted and not ready");
+    }
+    let seen = faults.list();
+    assert!(
+        seen.iter()
+            .any(|f| f.contains("slope_g.0.pages") && f.contains("page (")),
+        "the truncated level was not reported: {seen:?}"
+    );
+    assert!(
+        seen.iter()
+            .all(|f| f.contains(".pages") && f.contains("page (")),
+        "a fault names no file and page: {seen:?}"
+    );
+    assert!(cache.stats().failures > 0);
+}
