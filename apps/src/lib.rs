@@ -86,7 +86,7 @@ pub fn bake_derived(
 ) -> std::io::Result<bool> {
     use engine::surface::map_error_cache;
     use engine::terrain::precomputed;
-    let mut world = World::new_without_error_grids(map);
+    let mut world = World::without_error_grids(map);
     let pages = worldgen::pages::bake::pages_dir(dir);
     world
         .write_pyramid_pages(&pages, worldgen::pages::DEFAULT_PAGE_SIDE)
@@ -109,9 +109,9 @@ fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::P
     // A baked map's max-pyramids are read page by page instead of computed.
     let pages = worldgen::pages::bake::pages_dir(dir);
     let world = if pages.join("derived").is_dir() {
-        World::new_paged_without_error_grids(map, &pages, PAGE_CACHE_BUDGET_BYTES)
+        World::paged_without_error_grids(map, &pages, PAGE_CACHE_BUDGET_BYTES)
     } else {
-        World::new_without_error_grids(map)
+        World::without_error_grids(map)
     };
     let mut world = engine::terrain::precomputed::open_world(world, cache.as_deref(), progress);
     // The same maps keep the light grids' sky pages (engine::lighting::sky_pages), and any

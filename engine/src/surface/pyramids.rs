@@ -66,12 +66,11 @@ impl Pyramids {
         ]
     }
 
-    /// The key of the pyramids' inputs and of this code: two CRC-32s over the heights, the
-    /// amplitude grid, their spacings and [`PYRAMIDS_VERSION`] (stable across builds).
+    /// The key of the pyramids' inputs and of this code: a [`worldgen::pages::SourceKey`] of
+    /// the keys of the heights and the amplitude grid, their spacings and [`PYRAMIDS_VERSION`].
     pub(crate) fn key(heights: &Grid<f32>, hs: f64, amplitude_m: &Grid<f32>, gs: f64) -> u64 {
         use worldgen::pages::bake::Raster;
-        let mut h = crc32fast::Hasher::new_with_initial(0x9E7A_0001);
-        let mut g = crc32fast::Hasher::new_with_initial(0x9E7A_0002);
+        let mut key = worldgen::pages::SourceKey::new(0x9E7A_0000);
         for part in [
             Raster::F32(heights).key(),
             Raster::F32(amplitude_m).key(),
@@ -79,10 +78,9 @@ impl Pyramids {
             gs.to_bits(),
             PYRAMIDS_VERSION,
         ] {
-            h.update(&part.to_le_bytes());
-            g.update(&part.rotate_left(17).to_le_bytes());
+            key.update(&part.to_le_bytes());
         }
-        (u64::from(h.finalize()) << 32) | u64::from(g.finalize())
+        key.finish()
     }
 
     /// Writes every level of these pyramids and of `heights_max` as page files under

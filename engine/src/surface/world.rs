@@ -160,20 +160,15 @@ impl World {
     }
 
     /// The world with empty map-error grids (every node's bounds measured at run time), for a
-    /// caller that fills them ([`crate::terrain::precomputed::compute`]).
-    pub fn new_without_error_grids(map: Map) -> Self {
-        Self::without_error_grids(map)
-    }
-
-    /// The world with empty map-error grids (every node's bounds measured at run time).
-    pub(crate) fn without_error_grids(map: Map) -> Self {
+    /// caller that fills them ([`crate::terrain::precomputed::compute`]) or needs none.
+    pub fn without_error_grids(map: Map) -> Self {
         Self::build(map, None)
     }
 
     /// The world with empty map-error grids whose max-pyramids are read from the page files
     /// of a baked map in `pages_dir` through a page cache of `budget_bytes`; computed as
     /// without pages (and the reason logged) where those files are missing or do not match.
-    pub fn new_paged_without_error_grids(map: Map, pages_dir: &Path, budget_bytes: usize) -> Self {
+    pub fn paged_without_error_grids(map: Map, pages_dir: &Path, budget_bytes: usize) -> Self {
         Self::build(map, Some((pages_dir, budget_bytes)))
     }
 

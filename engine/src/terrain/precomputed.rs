@@ -122,7 +122,7 @@ pub fn open(map: worldgen::Map, cache_file: Option<&Path>, progress: &dyn Progre
 }
 
 /// [`open`] for a world already made without its error grids (for example with paged
-/// max-pyramids, [`World::new_paged_without_error_grids`]).
+/// max-pyramids, [`World::paged_without_error_grids`]).
 pub fn open_world(mut world: World, cache_file: Option<&Path>, progress: &dyn Progress) -> World {
     let compute = |w: &mut World| compute(w, progress);
     if let Some(path) = cache_file {

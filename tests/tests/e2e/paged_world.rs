@@ -33,11 +33,11 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
     let map = tests::generated(&tests::patches_map_params());
     let tmp = tempfile::tempdir().unwrap();
     let pages = tmp.path().join("pages");
-    let whole = World::new_without_error_grids(map.clone());
+    let whole = World::without_error_grids(map.clone());
     whole.write_pyramid_pages(&pages, 64).unwrap();
     // Eight pages of 64 x 64 f32: 128 KiB against 7 MiB of pyramids on this 2 km map.
     let budget = 8 * 64 * 64 * 4;
-    let paged = World::new_paged_without_error_grids(map, &pages, budget);
+    let paged = World::paged_without_error_grids(map, &pages, budget);
     let cache = paged.page_cache.clone().expect("the pyramids were paged");
     let mut rng = SmallRng::seed_from_u64(81);
     for i in 0..20_000 {
@@ -104,14 +104,14 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     let map = worldgen::Map::load(&tests::tiny_map_dir()).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let pages = tmp.path().join("pages");
-    let whole = World::new_without_error_grids(map.clone());
+    let whole = World::without_error_grids(map.clone());
     whole.write_pyramid_pages(&pages, 16).unwrap();
     // Flip a sample of page (0, 0) of the finest slope level.
     let file = engine::surface::levels::level_path(&pages, "slope_g", 0);
     let mut bytes = std::fs::read(&file).unwrap();
     bytes[64 + 40] ^= 0x40;
     std::fs::write(&file, &bytes).unwrap();
-    let paged = World::new_paged_without_error_grids(map.clone(), &pages, 1 << 20);
+    let paged = World::paged_without_error_grids(map.clone(), &pages, 1 << 20);
     assert!(paged.page_cache.is_some());
     let cell = |x: f64, y: f64| Rect {
         min: [x, y],
@@ -142,9 +142,9 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     let mut other = map;
     let v = other.heights.get(20, 20);
     other.heights.set(20, 20, v + 5.0);
-    let reopened = World::new_paged_without_error_grids(other.clone(), &pages, 1 << 20);
+    let reopened = World::paged_without_error_grids(other.clone(), &pages, 1 << 20);
     assert!(reopened.page_cache.is_none(), "stale pages were used");
-    let fresh = World::new_without_error_grids(other);
+    let fresh = World::without_error_grids(other);
     let r = cell(80.0, 80.0);
     assert_eq!(fresh.cell_region_bounds(r), reopened.cell_region_bounds(r));
 }
@@ -162,13 +162,13 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     let map = worldgen::Map::load(&tests::tiny_map_dir()).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let pages = tmp.path().join("pages");
-    World::new_without_error_grids(map.clone())
+    World::without_error_grids(map.clone())
         .write_pyramid_pages(&pages, 16)
         .unwrap();
     // A budget of four 16 x 16 pages: the flight reads pages again all the time.
-    let paged = World::new_paged_without_error_grids(map, &pages, 4 * 16 * 16 * 4);
+    let paged = World::paged_without_error_grids(map, &pages, 4 * 16 * 16 * 4);
     let world = engine::terrain::precomputed::open_world(paged, None, &worldgen::progress::Silent);
-    let reference = World::new_without_error_grids(world.map.clone());
+    let reference = World::without_error_grids(world.map.clone());
     let (cache, faults) = (world.page_cache.clone().unwrap(), world.page_faults.clone());
     let kinds = engine::kinds::content_kinds(&world);
     let settings = StreamSettings {

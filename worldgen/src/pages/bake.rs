@@ -52,30 +52,22 @@ impl Raster<'_> {
         }
     }
 
-    /// A key of the layer's size and samples: two CRC-32s with different starts (stable across
-    /// builds, unlike the standard hasher), so a page file can be matched to its source.
+    /// A [`super::SourceKey`] of the layer's size and samples.
     pub fn key(&self) -> u64 {
         let (w, h) = self.size();
-        let mut a = crc32fast::Hasher::new_with_initial(0x5EED_0001);
-        let mut b = crc32fast::Hasher::new_with_initial(0x5EED_0002);
-        for hasher in [&mut a, &mut b] {
-            hasher.update(&(w as u64).to_le_bytes());
-            hasher.update(&(h as u64).to_le_bytes());
-        }
+        let mut key = super::SourceKey::new(0x5EED_0000);
+        key.update(&(w as u64).to_le_bytes());
+        key.update(&(h as u64).to_le_bytes());
         match self {
             Raster::F32(g) => {
                 for row in g.data().chunks(4096) {
                     let bytes: Vec<u8> = row.iter().flat_map(|v| v.to_le_bytes()).collect();
-                    a.update(&bytes);
-                    b.update(&bytes);
+                    key.update(&bytes);
                 }
             }
-            Raster::U8(g) => {
-                a.update(g.data());
-                b.update(g.data());
-            }
+            Raster::U8(g) => key.update(g.data()),
         }
-        (u64::from(a.finalize()) << 32) | u64::from(b.finalize())
+        key.finish()
     }
 
     fn layout(&self, page_side: u32) -> Result<PageLayout, String> {

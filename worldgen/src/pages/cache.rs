@@ -8,7 +8,7 @@
 //! not stall readers of resident pages.
 
 use super::PageError;
-use super::file::{PageFile, Sample};
+use super::file::{PageFile, PageLayout, Sample, SampleKind};
 use crate::Grid;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -93,6 +93,8 @@ struct Entry {
 
 #[derive(Debug, Default)]
 struct State {
+    /// The layout of each registered file, by layer (read under the one lock of a lookup).
+    layouts: Vec<PageLayout>,
     entries: HashMap<(LayerId, u32), Entry>,
     /// Last use -> page, for eviction in least-recently-used order.
     by_use: BTreeMap<u64, (LayerId, u32)>,
@@ -132,8 +134,22 @@ impl PageCache {
     /// Registers an opened page file.
     pub fn add(&self, file: PageFile) -> LayerId {
         let mut files = lock(&self.files);
+        lock(&self.state).layouts.push(file.layout());
         files.push(Arc::new(file));
         LayerId(files.len() as u32 - 1)
+    }
+
+    /// The error for a request `layer` cannot answer: `what` of samples of `kind`.
+    fn refused(&self, layer: LayerId, what: &str, kind: SampleKind) -> PageError {
+        let file = self.file(layer);
+        let l = file.layout();
+        PageError::Request {
+            path: file.path().to_path_buf(),
+            problem: format!(
+                "{what} of {kind:?} samples asked of a raster of {}x{} {:?} samples",
+                l.width, l.height, l.kind
+            ),
+        }
     }
 
     /// The file of `layer`.
@@ -220,27 +236,27 @@ impl PageCache {
         }
     }
 
-    /// Sample (`x`, `y`) of `layer` (row 0 = south), read through the cache: one lock and a
-    /// hash lookup when its page is resident.
+    /// Sample (`x`, `y`) of `layer` (row 0 = south), read through the cache: one lock, a hash
+    /// lookup and the page's use recorded when its page is resident.
     pub fn sample<T: CacheSample>(&self, layer: LayerId, x: u32, y: u32) -> Result<T, PageError> {
-        let file = self.file(layer);
-        let l = file.layout();
-        if T::KIND != l.kind || x >= l.width || y >= l.height {
-            return Err(PageError::Request {
-                path: file.path().to_path_buf(),
-                problem: format!(
-                    "sample ({x}, {y}) of {:?} asked of a raster of {}x{} {:?} samples",
-                    T::KIND,
-                    l.width,
-                    l.height,
-                    l.kind
-                ),
-            });
-        }
-        let side = l.page_side;
-        let data = self.page::<T>(layer, l.index(x / side, y / side))?;
-        let samples = T::slice(&data).expect("a layer's pages hold its sample kind");
-        Ok(samples[((y % side) * side + x % side) as usize])
+        let (index, at) = {
+            let mut s = lock(&self.state);
+            let l = s.layouts[layer.0 as usize];
+            if T::KIND != l.kind || x >= l.width || y >= l.height {
+                drop(s);
+                return Err(self.refused(layer, &format!("sample ({x}, {y})"), T::KIND));
+            }
+            let side = l.page_side;
+            let index = l.index(x / side, y / side);
+            let at = ((y % side) * side + x % side) as usize;
+            if let Some(data) = Self::touch(&mut s, (layer, index)) {
+                s.stats.hits += 1;
+                return Ok(T::slice(&data).expect("a layer's pages hold its sample kind")[at]);
+            }
+            (index, at)
+        };
+        let data = self.page::<T>(layer, index)?;
+        Ok(T::slice(&data).expect("a layer's pages hold its sample kind")[at])
     }
 
     /// The samples of `layer` in columns `x0..x0 + width` and rows `y0..y0 + height` (row 0 =
@@ -261,16 +277,8 @@ impl PageCache {
             && u64::from(x0) + u64::from(width) <= u64::from(l.width)
             && u64::from(y0) + u64::from(height) <= u64::from(l.height);
         if !inside {
-            return Err(PageError::Request {
-                path: file.path().to_path_buf(),
-                problem: format!(
-                    "region of {width}x{height} {:?} samples at ({x0}, {y0}) asked of a raster of {}x{} {:?} samples",
-                    T::KIND,
-                    l.width,
-                    l.height,
-                    l.kind
-                ),
-            });
+            let what = format!("region of {width}x{height} at ({x0}, {y0})");
+            return Err(self.refused(layer, &what, T::KIND));
         }
         let side = l.page_side;
         let mut out = vec![T::zero(); width as usize * height as usize];

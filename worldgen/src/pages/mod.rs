@@ -24,6 +24,33 @@ use std::path::PathBuf;
 /// positioned reads and about a kilometre of a 4 m map.
 pub const DEFAULT_PAGE_SIDE: u32 = 256;
 
+/// A 64-bit key of a stream of bytes: two CRC-32s started from `seed + 1` and `seed + 2`. Stable
+/// across builds (unlike the standard hasher), it matches a page file to the source it was
+/// baked from.
+#[derive(Clone, Debug)]
+pub struct SourceKey {
+    a: crc32fast::Hasher,
+    b: crc32fast::Hasher,
+}
+
+impl SourceKey {
+    pub fn new(seed: u32) -> Self {
+        Self {
+            a: crc32fast::Hasher::new_with_initial(seed.wrapping_add(1)),
+            b: crc32fast::Hasher::new_with_initial(seed.wrapping_add(2)),
+        }
+    }
+
+    pub fn update(&mut self, bytes: &[u8]) {
+        self.a.update(bytes);
+        self.b.update(bytes);
+    }
+
+    pub fn finish(self) -> u64 {
+        (u64::from(self.a.finalize()) << 32) | u64::from(self.b.finalize())
+    }
+}
+
 /// Why a page file or a page could not be used. Every variant names the file; those about one
 /// page name it by its column and row of pages (from the south-west).
 #[derive(Debug, thiserror::Error)]
