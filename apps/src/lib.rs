@@ -49,6 +49,7 @@ pub fn open_world(
     if is_default && !dir.join("map.toml").exists() {
         generate("not found")?;
     }
+    let t0 = std::time::Instant::now();
     match worldgen::Map::load(dir) {
         Err(worldgen::MapError::UnknownVersion {
             found, supported, ..
@@ -56,7 +57,13 @@ pub fn open_world(
             generate("is from an older map format")?;
             Ok(world_of(worldgen::Map::load(dir)?, dir, progress))
         }
-        r => Ok(world_of(r?, dir, progress)),
+        r => {
+            log::info!(
+                "map layers and lists read in {:.2} s",
+                t0.elapsed().as_secs_f64()
+            );
+            Ok(world_of(r?, dir, progress))
+        }
     }
 }
 
@@ -71,12 +78,13 @@ pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 /// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
-/// Bytes of max-pyramid pages a baked map keeps resident (the page cache's budget).
+/// Bytes of max-pyramid pages a baked map keeps resident (the page cache's budget), and,
+/// under a budget of their own of the same size, bytes of decal tiles.
 pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;
 
 /// Bakes what the engine derives from the map in `dir` (`worldgen bake`), so that no open of
-/// the map computes it: the max-pyramids of the region bounds as page files under `pages/`,
-/// and the surface error grids and the 32 m nodes' bounds into [`SURFACE_ERROR_CACHE`] (kept
+/// the map computes it: the max-pyramids of the region bounds and the ground amplitude grid as
+/// page files under `pages/derived`, the decal field as a tile file there, and the surface error grids and the 32 m nodes' bounds into [`SURFACE_ERROR_CACHE`] (kept
 /// when it already holds them for this map and this engine). Returns whether the error grids
 /// were computed (false: the file was already right).
 pub fn bake_derived(
@@ -89,7 +97,7 @@ pub fn bake_derived(
     let mut world = World::without_error_grids(map);
     let pages = worldgen::pages::bake::pages_dir(dir);
     world
-        .write_pyramid_pages(&pages, worldgen::pages::DEFAULT_PAGE_SIDE)
+        .write_derived_pages(&pages, worldgen::pages::DEFAULT_PAGE_SIDE)
         .map_err(std::io::Error::other)?;
     let path = dir.join(SURFACE_ERROR_CACHE);
     let key = map_error_cache::surface_key(&world, precomputed::MEASUREMENT_VERSION);
@@ -106,7 +114,7 @@ fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::P
     // Large maps keep the grids they compute; any map keeps what `worldgen bake` wrote.
     let cache = (cells >= CACHE_MIN_CELLS || dir.join(SURFACE_ERROR_CACHE).is_file())
         .then(|| dir.join(SURFACE_ERROR_CACHE));
-    // A baked map's max-pyramids are read page by page instead of computed.
+    // A baked map's max-pyramids, decal field and amplitude grid are read instead of computed.
     let pages = worldgen::pages::bake::pages_dir(dir);
     let world = if pages.join("derived").is_dir() {
         World::paged_without_error_grids(map, &pages, PAGE_CACHE_BUDGET_BYTES)

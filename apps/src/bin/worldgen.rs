@@ -95,8 +95,9 @@ enum Command {
     /// Bake a map's raster layers (heights, ground types, densities) into page files under
     /// `<map>/pages/`: fixed square pages, each with its own checksum, read through a page
     /// cache; and, when the bake finishes, what the engine derives from the map: the
-    /// max-pyramids of its bounds (`pages/derived/`, read page by page at run time) and the
-    /// surface error grids with the 32 m nodes' bounds (`.surface_error.bin`), so that no open
+    /// max-pyramids of its bounds and the ground amplitude grid (`pages/derived/*.pages`), the
+    /// decal field by 256 m tile (`pages/derived/decals.tiles`, read tile by tile at run time)
+    /// and the surface error grids with the 32 m nodes' bounds (`.surface_error.bin`), so that no open
     /// of the map computes them (half a minute on the 8 km map). A page depends only on its layer and its index, so the bake can be
     /// split into shares run in any order, on any machines that share the folder
     /// (`--share 0/4` ... `--share 3/4`, then `--finish`); the result is the same bytes.
@@ -303,12 +304,12 @@ fn bake(
         })?;
         if computed {
             say!(
-                "max-pyramids, surface error grids and 32 m node bounds: baked ({:.2} s)",
+                "max-pyramids, ground amplitude, decal tiles, surface error grids and 32 m node bounds: baked ({:.2} s)",
                 t1.elapsed().as_secs_f64()
             );
         } else {
             say!(
-                "max-pyramids: baked; surface error grids and 32 m node bounds: already baked for this map"
+                "max-pyramids, ground amplitude and decal tiles: baked; surface error grids and 32 m node bounds: already baked for this map"
             );
         }
     }

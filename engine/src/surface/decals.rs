@@ -17,9 +17,12 @@
 //! Samples are stored sparsely in 8 x 8 blocks, so a map with 28 km of roads holds about 9 MB;
 //! the per-block slope and curvature bounds live in a sparse max pyramid.
 
+use super::decal_tiles::{
+    BLOCK, BLOCK_SAMPLES, TILE_BLOCKS, TILE_LEVELS, TILE_SAMPLES, Tile, TileFile, split,
+};
 use rustc_hash::FxHashMap;
+use std::sync::Arc;
 use worldgen::map::{Decal, DecalKind};
-use worldgen::roads::{inside_polygon, segment_closest};
 use worldgen::sample::catmull_rom_weights;
 
 /// Spacing (m) of the decal offset lattice.
@@ -28,16 +31,22 @@ pub const DECAL_SPACING_M: f64 = 0.5;
 /// sample of the 4 x 4 interpolation stencil of a point within the half width is in the core
 /// (the stencil's farthest sample is `2 sqrt(2)` spacings away): the visible road is flat.
 pub const FLAT_MARGIN_M: f64 = 2.0 * std::f64::consts::SQRT_2 * DECAL_SPACING_M;
-/// Samples per block side.
-const BLOCK: i64 = 8;
 /// Samples per side of the stencils of one block's cells (one before, two after).
-const STENCIL_SIDE: i64 = BLOCK + 3;
+pub(super) const STENCIL_SIDE: i64 = BLOCK + 3;
 /// Block side (m): bounds are kept per block.
 pub const DECAL_BLOCK_M: f64 = DECAL_SPACING_M * BLOCK as f64;
 
 /// Packs signed block coordinates into a hash key.
-fn key(bx: i64, by: i64) -> u64 {
+pub(super) fn key(bx: i64, by: i64) -> u64 {
     ((bx as u32 as u64) << 32) | u64::from(by as u32)
+}
+
+/// The block coordinates of a hash key.
+pub(super) fn unkey(k: u64) -> (i64, i64) {
+    (
+        i64::from((k >> 32) as u32 as i32),
+        i64::from(k as u32 as i32),
+    )
 }
 
 /// Slope, curvature and magnitude bounds (|grad E|, Hessian norm of E, |E|) per block.
@@ -51,20 +60,93 @@ pub struct DecalBounds {
 /// The decal displacement field of a map (see the module docs).
 #[derive(Debug, Default, Clone)]
 pub struct DecalField {
-    origin_m: [f64; 2],
-    /// Block key -> samples, row-major from the block's south-west sample.
-    blocks: FxHashMap<u64, Box<[f32; (BLOCK * BLOCK) as usize]>>,
-    /// Level k: bounds over 2^k x 2^k blocks; absent = zero.
-    bounds: Vec<FxHashMap<u64, [f32; 3]>>,
-    /// Largest road/path weight per sample (for suppressing procedural detail on roads).
-    road_weight: FxHashMap<(i64, i64), f32>,
+    pub(super) origin_m: [f64; 2],
+    /// The blocks of samples (row-major from a block's south-west sample), the bound levels
+    /// below [`TILE_LEVELS`] and the largest road/path weight per sample (for suppressing
+    /// procedural detail on roads), by tile: all in memory, or read from a bake.
+    pub(super) tiles: Tiles,
+    /// Bound levels from [`TILE_LEVELS`] on: level k holds bounds over 2^k x 2^k blocks;
+    /// absent = zero.
+    pub(super) upper_bounds: Vec<FxHashMap<u64, [f32; 3]>>,
+    /// How many bound levels there are in all (levels are made until one cell is left).
+    pub(super) bound_levels: usize,
+    pub(super) block_count: usize,
+    pub(super) road_count: usize,
     /// Per coarse cell: whether any road/path sample lies in it (samples outside the coarse
-    /// grid are always looked up), so most lookups away from roads skip the hash map.
-    road_cells: Vec<bool>,
+    /// grid are always looked up), so most lookups away from roads skip the tiles.
+    pub(super) road_cells: Vec<bool>,
     /// Coarse occupancy over the map: false where no stored block can reach (fast zero).
-    coarse: Vec<bool>,
-    coarse_dims: [usize; 2],
-    coarse_cell_m: f64,
+    pub(super) coarse: Vec<bool>,
+    pub(super) coarse_dims: [usize; 2],
+    pub(super) coarse_cell_m: f64,
+}
+
+/// A tile's column and row (from the tile holding the field's origin).
+pub(super) type TileKey = (i64, i64);
+
+/// The field's tiles by key.
+pub(super) type TileMap = FxHashMap<TileKey, Arc<Tile>>;
+
+/// Where a field's tiles are.
+#[derive(Debug, Clone)]
+pub(super) enum Tiles {
+    Memory(Arc<TileMap>),
+    /// Read on first use from a baked tile file.
+    File(Arc<TileFile>),
+}
+
+impl Default for Tiles {
+    fn default() -> Self {
+        Tiles::Memory(Arc::default())
+    }
+}
+
+/// Reads a field's tiles for one query, keeping the last tile it fetched (most queries stay
+/// in one tile).
+struct Reader<'a> {
+    field: &'a DecalField,
+    last: Option<(TileKey, Option<Arc<Tile>>)>,
+    /// Whether a tile could not be read (the fault is recorded).
+    failed: bool,
+}
+
+impl<'a> Reader<'a> {
+    fn new(field: &'a DecalField) -> Self {
+        Self {
+            field,
+            last: None,
+            failed: false,
+        }
+    }
+
+    fn tile(&mut self, t: (i64, i64)) -> Option<&Tile> {
+        if self.last.as_ref().is_none_or(|(k, _)| *k != t) {
+            let got = match &self.field.tiles {
+                Tiles::Memory(m) => m.get(&t).cloned(),
+                Tiles::File(f) => f.tile(t).unwrap_or_else(|()| {
+                    self.failed = true;
+                    None
+                }),
+            };
+            self.last = Some((t, got));
+        }
+        self.last.as_ref().and_then(|(_, tile)| tile.as_deref())
+    }
+
+    fn block(&mut self, bx: i64, by: i64) -> Option<&[f32; BLOCK_SAMPLES]> {
+        let ((tx, lx), (ty, ly)) = (split(bx, TILE_BLOCKS), split(by, TILE_BLOCKS));
+        self.tile((tx, ty))?
+            .blocks
+            .get(&((ly * TILE_BLOCKS + lx) as u16))
+            .map(|b| &**b)
+    }
+
+    fn sample(&mut self, ix: i64, iy: i64) -> f64 {
+        self.block(ix.div_euclid(BLOCK), iy.div_euclid(BLOCK))
+            .map_or(0.0, |b| {
+                f64::from(b[(iy.rem_euclid(BLOCK) * BLOCK + ix.rem_euclid(BLOCK)) as usize])
+            })
+    }
 }
 
 /// One lattice coordinate's share of [`DecalField::offset_m`], relative to the field's origin:
@@ -138,7 +220,7 @@ pub fn decal_weight(d: &Decal, d_m: f64) -> f64 {
 }
 
 /// Half the width of the part at full weight (roads and paths get [`FLAT_MARGIN_M`] more).
-fn flat_half_width_m(d: &Decal) -> f64 {
+pub(super) fn flat_half_width_m(d: &Decal) -> f64 {
     let half = f64::from(d.width_m) * 0.5;
     match d.kind {
         DecalKind::Road | DecalKind::Path => half + FLAT_MARGIN_M,
@@ -153,189 +235,28 @@ pub fn decal_reach_m(d: &Decal) -> f64 {
     flat_half_width_m(d) + f64::from(d.falloff_m) + 2.0 * std::f64::consts::SQRT_2 * DECAL_SPACING_M
 }
 
-/// Per lattice sample within reach of one decal: (distance m, centre-line z at the closest point).
-fn decal_footprint(d: &Decal, origin_m: [f64; 2]) -> FxHashMap<(i64, i64), (f64, f64)> {
-    let reach = flat_half_width_m(d) + f64::from(d.falloff_m);
-    let s = DECAL_SPACING_M;
-    let mut out: FxHashMap<(i64, i64), (f64, f64)> = FxHashMap::default();
-    let lattice_box = |lo: [f64; 2], hi: [f64; 2]| {
-        (
-            ((lo[0] - reach - origin_m[0]) / s).floor() as i64,
-            ((hi[0] + reach - origin_m[0]) / s).ceil() as i64,
-            ((lo[1] - reach - origin_m[1]) / s).floor() as i64,
-            ((hi[1] + reach - origin_m[1]) / s).ceil() as i64,
-        )
-    };
-    let n = d.points.len();
-    let segments = if d.closed { n } else { n - 1 };
-    for k in 0..segments {
-        let (pa, pb) = (d.points[k], d.points[(k + 1) % n]);
-        let (a, b) = ([pa[0], pa[1]], [pb[0], pb[1]]);
-        let (x0, x1, y0, y1) = lattice_box(
-            [a[0].min(b[0]), a[1].min(b[1])],
-            [a[0].max(b[0]), a[1].max(b[1])],
-        );
-        for iy in y0..=y1 {
-            for ix in x0..=x1 {
-                let p = [origin_m[0] + ix as f64 * s, origin_m[1] + iy as f64 * s];
-                let (dist, t) = segment_closest(p, a, b);
-                if dist > reach {
-                    continue;
-                }
-                let z = pa[2] + t * (pb[2] - pa[2]);
-                let e = out.entry((ix, iy)).or_insert((f64::INFINITY, z));
-                if dist < e.0 {
-                    *e = (dist, z);
-                }
-            }
-        }
-    }
-    if d.closed {
-        // Inside the area the distance is zero.
-        let lo = d
-            .points
-            .iter()
-            .fold([f64::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]);
-        let hi = d.points.iter().fold([f64::NEG_INFINITY; 2], |m, p| {
-            [m[0].max(p[0]), m[1].max(p[1])]
-        });
-        let (x0, x1, y0, y1) = lattice_box(lo, hi);
-        for iy in y0..=y1 {
-            for ix in x0..=x1 {
-                let p = [origin_m[0] + ix as f64 * s, origin_m[1] + iy as f64 * s];
-                if inside_polygon(p, &d.points) {
-                    // A pad's z is its points' (one z); other areas do not use it.
-                    out.insert((ix, iy), (0.0, d.points[0][2]));
-                }
-            }
-        }
-    }
-    out
-}
-
 impl DecalField {
     /// Heap bytes, approximately: hash-map entries times their size (key, value, a control
     /// byte), boxed blocks, the occupancy grids.
     pub fn heap_bytes(&self) -> usize {
-        let block = (BLOCK * BLOCK) as usize * 4;
-        self.blocks.capacity() * (8 + 8 + 1)
-            + self.blocks.len() * block
+        let tiles = match &self.tiles {
+            Tiles::Memory(m) => {
+                m.capacity() * (16 + 8 + 1) + m.values().map(|t| t.bytes()).sum::<usize>()
+            }
+            Tiles::File(f) => f.bytes(),
+        };
+        tiles
             + self
-                .bounds
+                .upper_bounds
                 .iter()
                 .map(|b| b.capacity() * (8 + 12 + 1))
                 .sum::<usize>()
-            + self.road_weight.capacity() * (16 + 4 + 1)
             + self.road_cells.len()
             + self.coarse.len()
     }
 
-    /// Rasterizes the decals. `ground_height_m` is the map's bicubic height (without detail).
-    pub fn new(
-        decals: &[Decal],
-        origin_m: [f64; 2],
-        size_m: [f64; 2],
-        ground_height_m: impl Fn(f64, f64) -> f64,
-    ) -> Self {
-        // Per sample: (weight, offset); the larger weight wins, the earlier decal on ties.
-        let mut samples: FxHashMap<(i64, i64), (f64, f64)> = FxHashMap::default();
-        let mut road_weight: FxHashMap<(i64, i64), f32> = FxHashMap::default();
-        for d in decals {
-            for ((ix, iy), (dist, z)) in decal_footprint(d, origin_m) {
-                let w = decal_weight(d, dist);
-                if w <= 0.0 {
-                    continue;
-                }
-                let offset = match d.kind {
-                    DecalKind::Road | DecalKind::Path | DecalKind::Pad => {
-                        let p = [
-                            origin_m[0] + ix as f64 * DECAL_SPACING_M,
-                            origin_m[1] + iy as f64 * DECAL_SPACING_M,
-                        ];
-                        let rw = road_weight.entry((ix, iy)).or_insert(0.0);
-                        *rw = rw.max(w as f32);
-                        w * (z + f64::from(d.height_offset_m) - ground_height_m(p[0], p[1]))
-                    }
-                    DecalKind::RockPatch | DecalKind::Field | DecalKind::Dirt => {
-                        w * f64::from(d.height_offset_m)
-                    }
-                };
-                let e = samples.entry((ix, iy)).or_insert((0.0, 0.0));
-                if w > e.0 {
-                    *e = (w, offset);
-                }
-            }
-        }
-        let mut field = Self {
-            origin_m,
-            blocks: FxHashMap::default(),
-            bounds: Vec::new(),
-            road_weight,
-            road_cells: Vec::new(),
-            coarse: Vec::new(),
-            coarse_dims: [0, 0],
-            coarse_cell_m: 1.0,
-        };
-        for ((ix, iy), (_, offset)) in samples {
-            if offset == 0.0 {
-                continue;
-            }
-            let (bx, by) = (ix.div_euclid(BLOCK), iy.div_euclid(BLOCK));
-            let block = field
-                .blocks
-                .entry(key(bx, by))
-                .or_insert_with(|| Box::new([0.0; (BLOCK * BLOCK) as usize]));
-            block[(iy.rem_euclid(BLOCK) * BLOCK + ix.rem_euclid(BLOCK)) as usize] = offset as f32;
-        }
-        field.build_bounds();
-        field.build_coarse(size_m);
-        field
-    }
-
-    /// Marks the coarse cells (at least 32 m, at most 1024 x 1024 over the map) that a stored
-    /// block's interpolation stencil can reach.
-    fn build_coarse(&mut self, size_m: [f64; 2]) {
-        let cell = 32f64.max(size_m[0].max(size_m[1]) / 1024.0);
-        let dims = [
-            (size_m[0] / cell).ceil() as usize + 1,
-            (size_m[1] / cell).ceil() as usize + 1,
-        ];
-        let mut coarse = vec![false; dims[0] * dims[1]];
-        let margin = 2.0 * DECAL_SPACING_M;
-        for &k in self.blocks.keys() {
-            let (bx, by) = (
-                i64::from((k >> 32) as u32 as i32),
-                i64::from(k as u32 as i32),
-            );
-            let cells = |b: i64, n: usize| {
-                let lo = ((b as f64 * DECAL_BLOCK_M - margin) / cell)
-                    .floor()
-                    .max(0.0) as usize;
-                let hi = (((b + 1) as f64 * DECAL_BLOCK_M + margin) / cell)
-                    .floor()
-                    .max(0.0) as usize;
-                lo.min(n - 1)..=hi.min(n - 1)
-            };
-            for cy in cells(by, dims[1]) {
-                for cx in cells(bx, dims[0]) {
-                    coarse[cy * dims[0] + cx] = true;
-                }
-            }
-        }
-        let mut road_cells = vec![false; dims[0] * dims[1]];
-        for &(ix, iy) in self.road_weight.keys() {
-            if let Some(c) = Self::cell_of(dims, cell, ix, iy) {
-                road_cells[c] = true;
-            }
-        }
-        self.coarse = coarse;
-        self.road_cells = road_cells;
-        self.coarse_dims = dims;
-        self.coarse_cell_m = cell;
-    }
-
     /// The coarse cell holding lattice sample (ix, iy), None outside the coarse grid.
-    fn cell_of(dims: [usize; 2], cell_m: f64, ix: i64, iy: i64) -> Option<usize> {
+    pub(super) fn cell_of(dims: [usize; 2], cell_m: f64, ix: i64, iy: i64) -> Option<usize> {
         let c = |i: i64, n: usize| {
             let v = (i as f64 * DECAL_SPACING_M / cell_m).floor();
             (v >= 0.0 && v < n as f64).then_some(v as usize)
@@ -344,26 +265,23 @@ impl DecalField {
     }
 
     pub fn is_empty(&self) -> bool {
-        self.blocks.is_empty()
+        self.block_count == 0
     }
 
     /// Stored samples (blocks x 64).
     pub fn bytes(&self) -> usize {
-        self.blocks.len() * (BLOCK * BLOCK) as usize * 4
+        self.block_count * BLOCK_SAMPLES * 4
     }
 
-    /// Offset (m) stored at lattice sample (ix, iy); zero where no decal reaches.
+    /// Offset (m) stored at lattice sample (ix, iy); zero where no decal reaches (or where
+    /// its tile cannot be read).
     pub fn sample(&self, ix: i64, iy: i64) -> f64 {
-        self.blocks
-            .get(&key(ix.div_euclid(BLOCK), iy.div_euclid(BLOCK)))
-            .map_or(0.0, |b| {
-                f64::from(b[(iy.rem_euclid(BLOCK) * BLOCK + ix.rem_euclid(BLOCK)) as usize])
-            })
+        Reader::new(self).sample(ix, iy)
     }
 
     /// The displacement `E` (m) at a world position.
     pub fn offset_m(&self, x_m: f64, y_m: f64) -> f64 {
-        if self.blocks.is_empty() {
+        if self.block_count == 0 {
             return 0.0;
         }
         let x = self.lattice_axis(x_m, 0);
@@ -375,14 +293,15 @@ impl DecalField {
         // The 4 x 4 stencil touches at most 2 x 2 blocks; none stored means zero.
         let (bx0, bx1) = ((ix - 1).div_euclid(BLOCK), (ix + 2).div_euclid(BLOCK));
         let (by0, by1) = ((iy - 1).div_euclid(BLOCK), (iy + 2).div_euclid(BLOCK));
-        if !(by0..=by1).any(|by| (bx0..=bx1).any(|bx| self.blocks.contains_key(&key(bx, by)))) {
+        let mut reader = Reader::new(self);
+        if !(by0..=by1).any(|by| (bx0..=bx1).any(|bx| reader.block(bx, by).is_some())) {
             return 0.0;
         }
         let mut sum = 0.0;
         for (j, wyj) in y.weights.iter().enumerate() {
             let mut row = 0.0;
             for (i, wxi) in x.weights.iter().enumerate() {
-                row += wxi * self.sample(ix + i as i64 - 1, iy + j as i64 - 1);
+                row += wxi * reader.sample(ix + i as i64 - 1, iy + j as i64 - 1);
             }
             sum += wyj * row;
         }
@@ -412,7 +331,7 @@ impl DecalField {
     /// are the point version's, per column and row.
     pub fn offsets_on_lattice(&self, xs: &[f64], ys: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; xs.len() * ys.len()];
-        if self.blocks.is_empty() || xs.is_empty() || ys.is_empty() {
+        if self.block_count == 0 || xs.is_empty() || ys.is_empty() {
             return out;
         }
         let axis = |v: &[f64], a: usize| -> Vec<LatticeAxis> {
@@ -446,11 +365,12 @@ impl DecalField {
         // samples are copied into the patch then (absent samples are 0, as `sample` says).
         let mut state = vec![0u8; nrx * runs_y.blocks.len()];
         let mut patch = vec![0.0f64; pw * ph];
+        let mut reader = Reader::new(self);
         let mut present = |rx: usize, ry: usize| -> bool {
             let k = ry * nrx + rx;
             if state[k] == 0 {
                 state[k] = 1;
-                if let Some(b) = self.blocks.get(&key(runs_x.blocks[rx], runs_y.blocks[ry])) {
+                if let Some(b) = reader.block(runs_x.blocks[rx], runs_y.blocks[ry]) {
                     state[k] = 2;
                     for y in runs_y.entries(ry) {
                         for x in runs_x.entries(rx) {
@@ -509,7 +429,7 @@ impl DecalField {
         let r = margin_m + DECAL_SPACING_M;
         let (x0, y0) = (x_m - r - self.origin_m[0], y_m - r - self.origin_m[1]);
         if self.road_cells.is_empty() || x0 < 0.0 || y0 < 0.0 {
-            return !self.road_weight.is_empty();
+            return self.road_count > 0;
         }
         let c = self.coarse_cell_m;
         // Non-negative: truncation is the floor.
@@ -517,7 +437,7 @@ impl DecalField {
         let (cx1, cy1) = (((x0 + 2.0 * r) / c) as usize, ((y0 + 2.0 * r) / c) as usize);
         let [w, h] = self.coarse_dims;
         if cx1 >= w || cy1 >= h {
-            return !self.road_weight.is_empty();
+            return self.road_count > 0;
         }
         (cy0..=cy1).any(|cy| (cx0..=cx1).any(|cx| self.road_cells[cy * w + cx]))
     }
@@ -531,97 +451,44 @@ impl DecalField {
         {
             return 0.0;
         }
-        self.road_weight
-            .get(&(ix, iy))
+        let ((tx, lx), (ty, ly)) = (split(ix, TILE_SAMPLES), split(iy, TILE_SAMPLES));
+        Reader::new(self)
+            .tile((tx, ty))
+            .and_then(|t| t.road_weight.get(&((ly * TILE_SAMPLES + lx) as u32)))
             .map_or(0.0, |&w| f64::from(w))
     }
 
     /// Road/path lattice samples with their weight (for suppressing detail on roads).
-    pub fn road_samples(&self) -> impl Iterator<Item = ([f64; 2], f64)> + '_ {
-        self.road_weight.iter().map(|(&(ix, iy), &w)| {
-            (
-                [
-                    self.origin_m[0] + ix as f64 * DECAL_SPACING_M,
-                    self.origin_m[1] + iy as f64 * DECAL_SPACING_M,
-                ],
-                f64::from(w),
-            )
-        })
-    }
-
-    /// Per-block bounds from the samples: a cell (ix, iy) reads samples ix-1..ix+2, so a stored
-    /// block affects cells of its own block and of its eight neighbours.
-    fn build_bounds(&mut self) {
-        let mut level0: FxHashMap<u64, [f32; 3]> = FxHashMap::default();
-        let mut candidates: Vec<(i64, i64)> = Vec::new();
-        for &k in self.blocks.keys() {
-            let (bx, by) = (
-                i64::from((k >> 32) as u32 as i32),
-                i64::from(k as u32 as i32),
-            );
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    candidates.push((bx + dx, by + dy));
-                }
-            }
+    /// Reads every tile of a baked field (the ones that cannot be read give none).
+    pub fn road_samples(&self) -> Vec<([f64; 2], f64)> {
+        let tiles: Vec<(i64, i64)> = match &self.tiles {
+            Tiles::Memory(m) => m.keys().copied().collect(),
+            Tiles::File(f) => f.tiles(),
+        };
+        let mut reader = Reader::new(self);
+        let mut out = Vec::with_capacity(self.road_count);
+        for (tx, ty) in tiles {
+            let Some(tile) = reader.tile((tx, ty)) else {
+                continue;
+            };
+            out.extend(tile.road_weight.iter().map(|(&i, &w)| {
+                let ix = tx * TILE_SAMPLES + i64::from(i) % TILE_SAMPLES;
+                let iy = ty * TILE_SAMPLES + i64::from(i) / TILE_SAMPLES;
+                (
+                    [
+                        self.origin_m[0] + ix as f64 * DECAL_SPACING_M,
+                        self.origin_m[1] + iy as f64 * DECAL_SPACING_M,
+                    ],
+                    f64::from(w),
+                )
+            }));
         }
-        candidates.sort_unstable();
-        candidates.dedup();
-        // The block's cells read samples -1..=BLOCK + 1 around it: gathered once per block.
-        let mut local = [0.0f64; (STENCIL_SIDE * STENCIL_SIDE) as usize];
-        for (bx, by) in candidates {
-            let mut b = DecalBounds::default();
-            for (k, v) in local.iter_mut().enumerate() {
-                let (i, j) = (k as i64 % STENCIL_SIDE - 1, k as i64 / STENCIL_SIDE - 1);
-                *v = self.sample(bx * BLOCK + i, by * BLOCK + j);
-            }
-            for cy in 0..BLOCK {
-                for cx in 0..BLOCK {
-                    let p =
-                        |a: i64, c: i64| local[((cy + c + 1) * STENCIL_SIDE + cx + a + 1) as usize];
-                    b.slope = b
-                        .slope
-                        .max(super::spline::catmull_rom_cell_slope(&p, DECAL_SPACING_M));
-                    b.curvature = b.curvature.max(super::spline::catmull_rom_cell_curvature(
-                        &p,
-                        DECAL_SPACING_M,
-                    ));
-                    b.magnitude_m = b
-                        .magnitude_m
-                        .max(super::spline::catmull_rom_cell_magnitude(&p));
-                }
-            }
-            if b.slope > 0.0 || b.curvature > 0.0 || b.magnitude_m > 0.0 {
-                // Rounded up so the f32 value stays an upper bound.
-                let up = |v: f64| (v * (1.0 + 1e-6)) as f32;
-                level0.insert(
-                    key(bx, by),
-                    [up(b.slope), up(b.curvature), up(b.magnitude_m)],
-                );
-            }
-        }
-        let mut levels = vec![level0];
-        while levels.last().is_some_and(|l| l.len() > 1) && levels.len() < 40 {
-            let prev = levels.last().expect("non-empty");
-            let mut next: FxHashMap<u64, [f32; 3]> = FxHashMap::default();
-            for (&k, v) in prev {
-                let (bx, by) = (
-                    i64::from((k >> 32) as u32 as i32),
-                    i64::from(k as u32 as i32),
-                );
-                let e = next.entry(key(bx >> 1, by >> 1)).or_insert([0.0; 3]);
-                for (a, b) in e.iter_mut().zip(v) {
-                    *a = a.max(*b);
-                }
-            }
-            levels.push(next);
-        }
-        self.bounds = levels;
+        out
     }
 
     /// Bounds of `E` over a world rectangle (possibly over a little more: still an upper bound).
     pub fn region_bounds(&self, min_m: [f64; 2], max_m: [f64; 2]) -> DecalBounds {
-        if self.bounds.is_empty() {
+        if self.bound_levels == 0 {
             return DecalBounds::default();
         }
         let cell = DECAL_SPACING_M * BLOCK as f64;
@@ -637,17 +504,36 @@ impl DecalField {
             to(max_m[1] + e, self.origin_m[1]),
         );
         let span = (x1 - x0 + 1).max(y1 - y0 + 1) as u64;
-        let k = ((u64::BITS - 1 - span.leading_zeros()) as usize).min(self.bounds.len() - 1);
-        let level = &self.bounds[k];
+        let k = ((u64::BITS - 1 - span.leading_zeros()) as usize).min(self.bound_levels - 1);
+        let mut reader = Reader::new(self);
         let mut m = [0.0f32; 3];
         for by in (y0 >> k)..=(y1 >> k) {
             for bx in (x0 >> k)..=(x1 >> k) {
-                if let Some(v) = level.get(&key(bx, by)) {
+                let cell = if k < TILE_LEVELS {
+                    let per = TILE_BLOCKS >> k;
+                    let ((tx, lx), (ty, ly)) = (split(bx, per), split(by, per));
+                    reader
+                        .tile((tx, ty))
+                        .and_then(|t| t.bounds[k].get(&((ly * per + lx) as u16)).copied())
+                } else {
+                    self.upper_bounds[k - TILE_LEVELS]
+                        .get(&key(bx, by))
+                        .copied()
+                };
+                if let Some(v) = cell {
                     for (a, b) in m.iter_mut().zip(v) {
-                        *a = a.max(*b);
+                        *a = a.max(b);
                     }
                 }
             }
+        }
+        if reader.failed {
+            // A tile that cannot be read bounds nothing: its bounds are unbounded.
+            return DecalBounds {
+                slope: f64::INFINITY,
+                curvature: f64::INFINITY,
+                magnitude_m: f64::INFINITY,
+            };
         }
         DecalBounds {
             slope: f64::from(m[0]),
@@ -709,6 +595,7 @@ mod tests {
         );
         let stored: FxHashMap<(i64, i64), f64> = f
             .road_samples()
+            .into_iter()
             .map(|(p, w)| {
                 let i = |v: f64| (v / DECAL_SPACING_M).round() as i64;
                 ((i(p[0]), i(p[1])), w)

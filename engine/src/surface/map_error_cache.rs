@@ -135,9 +135,18 @@ impl World {
         method: u64,
         compute: impl FnOnce(&mut World),
     ) -> Self {
+        let t0 = std::time::Instant::now();
         let key = surface_key(&world, method);
+        let t1 = std::time::Instant::now();
         match read(cache_file, key) {
-            Ok(p) => world.map_error = p,
+            Ok(p) => {
+                world.map_error = p;
+                log::info!(
+                    "surface error grids: key {:.2} s, read {:.2} s",
+                    (t1 - t0).as_secs_f64(),
+                    t1.elapsed().as_secs_f64()
+                );
+            }
             Err(why) => {
                 if !matches!(why, CacheMiss::Missing) {
                     log::warn!(

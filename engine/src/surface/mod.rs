@@ -2,7 +2,9 @@
 //! in f64 at any world position, with proven per-region bounds of its slope and curvature.
 //!
 //! - [`world`]: [`World`] wraps a loaded map and defines `F = G + H + E`.
-//! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised).
+//! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised);
+//!   `decal_build` makes it from the decal list, [`decal_tiles`] holds its data by 256 m tile,
+//!   [`decal_bake`] bakes it into a tile file.
 //! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
 //! - [`height_max`]: a max-pyramid of the map's height samples (upper bounds over regions);
 //!   `max_pyramid` the per-cell max-pyramids of the slope, curvature and amplitude bounds.
@@ -10,6 +12,9 @@
 //! - [`map_error`]: the map part's interpolation error per block of the coarse grids, computed
 //!   once at load; [`map_error_cache`] keeps it in a file between runs.
 
+pub mod decal_bake;
+mod decal_build;
+pub mod decal_tiles;
 pub mod decals;
 pub mod height_max;
 pub mod levels;

@@ -67,13 +67,12 @@ impl Pyramids {
     }
 
     /// The key of the pyramids' inputs and of this code: a [`worldgen::pages::SourceKey`] of
-    /// the keys of the heights and the amplitude grid, their spacings and [`PYRAMIDS_VERSION`].
-    pub(crate) fn key(heights: &Grid<f32>, hs: f64, amplitude_m: &Grid<f32>, gs: f64) -> u64 {
-        use worldgen::pages::bake::Raster;
+    /// the keys ([`worldgen::pages::bake::Raster::key`]) of the heights and the amplitude grid, their spacings and [`PYRAMIDS_VERSION`].
+    pub(crate) fn key(heights_key: u64, hs: f64, amplitude_key: u64, gs: f64) -> u64 {
         let mut key = worldgen::pages::SourceKey::new(0x9E7A_0000);
         for part in [
-            Raster::F32(heights).key(),
-            Raster::F32(amplitude_m).key(),
+            heights_key,
+            amplitude_key,
             hs.to_bits(),
             gs.to_bits(),
             PYRAMIDS_VERSION,

@@ -44,6 +44,8 @@ pub struct World {
     pub page_faults: Arc<PageFaults>,
     /// Decal shaping E.
     pub decals: DecalField,
+    /// Keys of what is derived from the map (what a bake is checked against).
+    keys: DerivedKeys,
     /// Interpolation error of F per block of the grids of spacing `hs 2^k` (computed at load).
     pub map_error: super::map_error::MapErrorPyramid,
     /// Max-pyramid of the map's height samples.
@@ -51,6 +53,20 @@ pub struct World {
     /// A folder where data derived from this map may be kept between runs (the light grids'
     /// sky pages, [`crate::lighting::sky_pages`]); `None` (the default) keeps none.
     pub derived_dir: Option<std::path::PathBuf>,
+}
+
+/// Keys of the data derived from a map, each a [`worldgen::pages::SourceKey`] of its inputs
+/// and of the code that derives it.
+#[derive(Debug, Clone, Copy, Default)]
+struct DerivedKeys {
+    decals: u64,
+    amplitude: u64,
+    pyramids: u64,
+}
+
+/// The page file of the baked ground amplitude grid in a map's `pages` folder.
+pub fn amplitude_path(pages_dir: &Path) -> std::path::PathBuf {
+    pages_dir.join("derived").join("amplitude.pages")
 }
 
 /// How far the finest surface can stray from its linear interpolation over a small region,
@@ -134,7 +150,10 @@ impl World {
                 pyramids,
             ),
             ("max-pyramid pages resident", resident_pages),
-            ("decal field", self.decals.heap_bytes()),
+            (
+                "decal field (a baked map's: index and resident tiles)",
+                self.decals.heap_bytes(),
+            ),
             ("surface error grids", self.map_error.bytes()),
         ]
     }
@@ -165,70 +184,92 @@ impl World {
         Self::build(map, None)
     }
 
-    /// The world with empty map-error grids whose max-pyramids are read from the page files
-    /// of a baked map in `pages_dir` through a page cache of `budget_bytes`; computed as
-    /// without pages (and the reason logged) where those files are missing or do not match.
+    /// The world with empty map-error grids whose derived data is read from the bake of the
+    /// map in `pages_dir`: the max-pyramids page by page through a page cache of
+    /// `budget_bytes`, the decal field tile by tile under a budget of its own of
+    /// `budget_bytes`, the ground amplitude grid whole. Each is computed as without pages (and
+    /// the reason logged) where its file is missing or does not match.
     pub fn paged_without_error_grids(map: Map, pages_dir: &Path, budget_bytes: usize) -> Self {
         Self::build(map, Some((pages_dir, budget_bytes)))
     }
 
-    /// Writes this world's max-pyramids as page files under `pages_dir` (`worldgen bake`).
-    pub fn write_pyramid_pages(&self, pages_dir: &Path, page_side: u32) -> Result<(), PageError> {
-        let key = self.pyramids_key();
+    /// Writes what this world derives from its map under `pages_dir/derived` (`worldgen
+    /// bake`): the max-pyramids and the ground amplitude grid as page files of `page_side`, the
+    /// decal field as a tile file.
+    pub fn write_derived_pages(&self, pages_dir: &Path, page_side: u32) -> Result<(), PageError> {
         self.pyramids
-            .write(&self.heights_max, pages_dir, page_side, key)
-    }
-
-    fn pyramids_key(&self) -> u64 {
-        Pyramids::key(
-            &self.map.heights,
-            self.map.manifest.heights.spacing_m,
+            .write(&self.heights_max, pages_dir, page_side, self.keys.pyramids)?;
+        worldgen::pages::bake::write_grid(
+            &amplitude_path(pages_dir),
             &self.amplitude_m,
-            self.map.manifest.ground.spacing_m,
-        )
+            page_side,
+            self.keys.amplitude,
+        )?;
+        self.decals
+            .write_tiles(&super::decal_bake::tiles_path(pages_dir), self.keys.decals)
     }
 
     fn build(map: Map, pages: Option<(&Path, usize)>) -> Self {
-        let legend: Vec<f32> = map
-            .manifest
-            .ground
-            .legend
-            .iter()
-            .map(|t| t.detail_amplitude_m)
-            .collect();
-        let decals = DecalField::new(
-            &map.decals,
-            map.manifest.origin_m,
-            map.manifest.size_m,
-            |x, y| map.height_bicubic_m(x, y),
-        );
-        let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
-        suppress_detail_on_roads(&mut amplitude_m, &map, &decals);
+        use worldgen::pages::bake::Raster;
+        let t0 = std::time::Instant::now();
+        let heights_key = Raster::F32(&map.heights).key();
+        let mut keys = DerivedKeys {
+            decals: DecalField::bake_key(&map, heights_key),
+            ..DerivedKeys::default()
+        };
+        let page_faults = Arc::new(PageFaults::default());
+        let decals = pages
+            .and_then(|(dir, budget_bytes)| {
+                let path = super::decal_bake::tiles_path(dir);
+                let origin = map.manifest.origin_m;
+                let faults = Arc::clone(&page_faults);
+                let opened =
+                    DecalField::open_tiles(&path, keys.decals, origin, budget_bytes, faults);
+                baked("decal field", opened)
+            })
+            .unwrap_or_else(|| {
+                DecalField::new(
+                    &map.decals,
+                    map.manifest.origin_m,
+                    map.manifest.size_m,
+                    |x, y| map.height_bicubic_m(x, y),
+                )
+            });
+        let t1 = std::time::Instant::now();
+        keys.amplitude = amplitude_key(&map, keys.decals);
+        let amplitude_m = pages
+            .and_then(|(dir, _)| {
+                let (w, h) = (map.ground.width(), map.ground.height());
+                let read =
+                    worldgen::pages::bake::read_grid(&amplitude_path(dir), w, h, keys.amplitude);
+                baked("ground amplitude grid", read)
+            })
+            .unwrap_or_else(|| amplitude_grid(&map, &decals));
+        let t2 = std::time::Instant::now();
         let detail_seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0) ^ 0xDE7A_11ED;
         let (hs, gs) = (
             map.manifest.heights.spacing_m,
             map.manifest.ground.spacing_m,
         );
-        let page_faults = Arc::new(PageFaults::default());
+        keys.pyramids = Pyramids::key(heights_key, hs, Raster::F32(&amplitude_m).key(), gs);
         let mut page_cache = None;
         let paged = pages.and_then(|(dir, budget_bytes)| {
-            let key = Pyramids::key(&map.heights, hs, &amplitude_m, gs);
             let cache = Arc::new(PageCache::new(budget_bytes));
             let heights = [map.heights.width(), map.heights.height()];
             let ground = [amplitude_m.width(), amplitude_m.height()];
-            match Pyramids::open(dir, heights, ground, key, &cache, &page_faults) {
-                Ok(p) => {
-                    page_cache = Some(cache);
-                    Some(p)
-                }
-                Err(e) => {
-                    log::warn!("{e}: computing the max-pyramids instead");
-                    None
-                }
-            }
+            let opened = Pyramids::open(dir, heights, ground, keys.pyramids, &cache, &page_faults);
+            let p = baked("max-pyramids", opened)?;
+            page_cache = Some(cache);
+            Some(p)
         });
         let (pyramids, heights_max) =
             paged.unwrap_or_else(|| Pyramids::compute(&map.heights, hs, &amplitude_m, gs));
+        log::info!(
+            "world opened: decal field {:.2} s, ground amplitude grid {:.2} s, max-pyramids {:.2} s",
+            (t1 - t0).as_secs_f64(),
+            (t2 - t1).as_secs_f64(),
+            t2.elapsed().as_secs_f64()
+        );
         Self {
             map,
             amplitude_m,
@@ -237,6 +278,7 @@ impl World {
             page_cache,
             page_faults,
             decals,
+            keys,
             derived_dir: None,
             map_error: super::map_error::MapErrorPyramid::default(),
             heights_max,
@@ -431,6 +473,42 @@ impl World {
             to(rect.max[1] + e, o[1], p.height()),
         )
     }
+}
+
+/// What a bake gave: `Some` if it could be used, else `None` with the reason logged.
+fn baked<T>(what: &str, r: Result<T, PageError>) -> Option<T> {
+    r.map_err(|e| log::warn!("{e}: computing the {what} instead"))
+        .ok()
+}
+
+/// The key of the ground amplitude grid's inputs: the ground types, the legend's amplitudes,
+/// the decal field's key (roads suppress detail) and the code's version.
+fn amplitude_key(map: &Map, decals_key: u64) -> u64 {
+    let mut k = worldgen::pages::SourceKey::new(0xA3B1_0001);
+    k.update(
+        &worldgen::pages::bake::Raster::U8(&map.ground)
+            .key()
+            .to_le_bytes(),
+    );
+    k.update(&decals_key.to_le_bytes());
+    for t in &map.manifest.ground.legend {
+        k.update(&t.detail_amplitude_m.to_le_bytes());
+    }
+    k.finish()
+}
+
+/// The detail amplitude (m) at each ground sample: the legend's, suppressed on roads.
+fn amplitude_grid(map: &Map, decals: &DecalField) -> worldgen::Grid<f32> {
+    let legend: Vec<f32> = map
+        .manifest
+        .ground
+        .legend
+        .iter()
+        .map(|t| t.detail_amplitude_m)
+        .collect();
+    let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
+    suppress_detail_on_roads(&mut amplitude_m, map, decals);
+    amplitude_m
 }
 
 /// Scales the detail amplitude down to zero at ground samples near roads and paths, so the

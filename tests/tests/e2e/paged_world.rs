@@ -1,6 +1,6 @@
-//! A baked map's max-pyramids read page by page: the same region bounds, height maxima and
-//! node meshes as the pyramids computed at open, bit for bit, under a page budget far below
-//! their size; a damaged page loosens only the bounds that read it, is reported with its file
+//! A baked map's derived data (max-pyramids read page by page, the decal field tile by tile,
+//! the ground amplitude grid): the same region bounds, height maxima, decal offsets and node
+//! meshes as computed at open, bit for bit, under budgets far below their size; a damaged page loosens only the bounds that read it, is reported with its file
 //! and page, and never panics; pages of another map are refused and computed instead.
 
 use engine::surface::{Rect, World};
@@ -34,11 +34,15 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
     let tmp = tempfile::tempdir().unwrap();
     let pages = tmp.path().join("pages");
     let whole = World::without_error_grids(map.clone());
-    whole.write_pyramid_pages(&pages, 64).unwrap();
+    whole.write_derived_pages(&pages, 64).unwrap();
     // Eight pages of 64 x 64 f32: 128 KiB against 7 MiB of pyramids on this 2 km map.
     let budget = 8 * 64 * 64 * 4;
     let paged = World::paged_without_error_grids(map, &pages, budget);
     let cache = paged.page_cache.clone().expect("the pyramids were paged");
+    assert!(
+        paged.decals.tile_stats().is_some() && !paged.decals.is_empty(),
+        "the decal field was read from its tiles"
+    );
     let mut rng = SmallRng::seed_from_u64(81);
     for i in 0..20_000 {
         let max_side = [1.0, 8.0, 64.0, 600.0, 2048.0][i % 5];
@@ -84,6 +88,8 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
     }
     let s = cache.stats();
     assert!(s.evictions > 0 && s.peak_resident_bytes <= budget, "{s:?}");
+    let d = paged.decals.tile_stats().expect("a baked decal field");
+    assert!(d.tile_ins > 0 && d.evictions > 0, "{d:?}");
     assert!(paged.page_faults.list().is_empty());
     let parts = paged.memory_bytes();
     let part = |name: &str| parts.iter().find(|p| p.0.starts_with(name)).unwrap().1;
@@ -105,7 +111,7 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     let tmp = tempfile::tempdir().unwrap();
     let pages = tmp.path().join("pages");
     let whole = World::without_error_grids(map.clone());
-    whole.write_pyramid_pages(&pages, 16).unwrap();
+    whole.write_derived_pages(&pages, 16).unwrap();
     // Flip a sample of page (0, 0) of the finest slope level.
     let file = engine::surface::levels::level_path(&pages, "slope_g", 0);
     let mut bytes = std::fs::read(&file).unwrap();
@@ -163,7 +169,7 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     let tmp = tempfile::tempdir().unwrap();
     let pages = tmp.path().join("pages");
     World::without_error_grids(map.clone())
-        .write_pyramid_pages(&pages, 16)
+        .write_derived_pages(&pages, 16)
         .unwrap();
     // A budget of four 16 x 16 pages: the flight reads pages again all the time.
     let paged = World::paged_without_error_grids(map, &pages, 4 * 16 * 16 * 4);

@@ -16,37 +16,18 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let map_load_s = load.elapsed().as_secs_f64();
     let world_memory: Vec<(&str, usize)> = world.memory_bytes();
     // A baked map's paged max-pyramids: their cache and faults, reported at the end.
-    let (page_cache, page_faults) = (world.page_cache.clone(), world.page_faults.clone());
+    // And its decal field read tile by tile (a clone shares the tiles and their cache).
+    let paged = (
+        world.page_cache.clone(),
+        world.page_faults.clone(),
+        world.decals.clone(),
+    );
     let flight = Instant::now();
     let rss_mib_now = || worldgen::progress::rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
     let after_load_rss_mib = rss_mib_now();
     let path = cli.path.as_deref().map(CameraPath::load).transpose()?;
     let gpu = Gpu::new_headless()?;
-    eprintln!(
-        "headless on {} ({} draws, ground textures filtered with anisotropy {}x), sun azimuth \
-         {} deg, elevation {} deg{}{}",
-        gpu.adapter_name(),
-        if cli.per_item_draws {
-            "per-item"
-        } else if gpu.multi_draw {
-            "merged, multi-draw indirect"
-        } else {
-            "merged batches as plain loops: no multi-draw indirect on this adapter"
-        },
-        gpu.anisotropy,
-        cli.sun_azimuth_deg,
-        cli.sun_elevation_deg,
-        if cli.no_lighting {
-            ", no light grids"
-        } else {
-            ""
-        },
-        if cli.flat_terrain {
-            ", terrain with a flat fragment shader (diagnostic)"
-        } else {
-            ""
-        }
-    );
+    print_setup(cli, &gpu);
     std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
     let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size, cli.fov_deg);
@@ -132,7 +113,10 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .collect();
     let world_bytes: usize = world_memory.iter().map(|(_, b)| b).sum();
     let resident = resident_breakdown(&gpu, &viewer, world_bytes);
-    let pages = page_cache.map(|c| page_report(&c, flight.elapsed().as_secs_f64(), &page_faults));
+    let secs = flight.elapsed().as_secs_f64();
+    let (page_cache, page_faults, decals) = paged;
+    let pages = page_cache.map(|c| page_report(&c, secs, &page_faults));
+    let decal_tiles = decals.tile_stats().map(|s| decal_tile_report(&s, secs));
     let json = cli.out.join("stats.json");
     let doc = serde_json::json!({
         "world_memory_mib": world_memory_mib,
@@ -143,6 +127,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         "fov_deg": cli.fov_deg,
         "map_load_s": map_load_s,
         "page_cache": pages,
+        "decal_tiles": decal_tiles,
         "page_faults": page_faults.list(),
         "peak_rss_mib": peak_rss_mib,
         "end_rss_mib": rss_mib,
@@ -192,6 +177,56 @@ fn page_report(
         "evictions": s.evictions,
         "peak_resident_mib": mib(s.peak_resident_bytes),
         "budget_mib": mib(c.budget_bytes()),
+    })
+}
+
+/// The adapter, the draw path and the light the run uses (stderr).
+fn print_setup(cli: &Cli, gpu: &Gpu) {
+    eprintln!(
+        "headless on {} ({} draws, ground textures filtered with anisotropy {}x), sun azimuth \
+         {} deg, elevation {} deg{}{}",
+        gpu.adapter_name(),
+        if cli.per_item_draws {
+            "per-item"
+        } else if gpu.multi_draw {
+            "merged, multi-draw indirect"
+        } else {
+            "merged batches as plain loops: no multi-draw indirect on this adapter"
+        },
+        gpu.anisotropy,
+        cli.sun_azimuth_deg,
+        cli.sun_elevation_deg,
+        if cli.no_lighting {
+            ", no light grids"
+        } else {
+            ""
+        },
+        if cli.flat_terrain {
+            ", terrain with a flat fragment shader (diagnostic)"
+        } else {
+            ""
+        }
+    );
+}
+
+/// The decal tiles of a baked map read over a run of `secs`: printed, and as JSON.
+fn decal_tile_report(s: &engine::surface::decal_tiles::TileStats, secs: f64) -> serde_json::Value {
+    let mib = |b: usize| b as f64 / f64::from(1 << 20);
+    println!(
+        "decal tiles: {} tile-ins ({:.1} per second), {} hits, {} evictions, {:.1} MiB resident \
+         at the peak",
+        s.tile_ins,
+        s.tile_ins as f64 / secs,
+        s.hits,
+        s.evictions,
+        mib(s.peak_resident_bytes)
+    );
+    serde_json::json!({
+        "tile_ins": s.tile_ins,
+        "tile_ins_per_s": s.tile_ins as f64 / secs,
+        "hits": s.hits,
+        "evictions": s.evictions,
+        "peak_resident_mib": mib(s.peak_resident_bytes),
     })
 }
 
