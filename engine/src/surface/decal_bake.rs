@@ -15,7 +15,7 @@ use worldgen::pages::{PageError, SourceKey};
 
 /// Changes whenever the decal field's construction or its file's encoding changes, so files
 /// baked by another engine are refused.
-const DECAL_FIELD_VERSION: u64 = 1;
+const DECAL_FIELD_VERSION: u64 = 2;
 
 /// The decal tile file of a map's `pages` folder.
 pub fn tiles_path(pages_dir: &Path) -> PathBuf {
@@ -277,8 +277,8 @@ mod tests {
         assert!(faults.list().is_empty(), "{:?}", faults.list());
     }
 
-    /// A damaged tile: its offsets are zero and its bounds unbounded, the fault names the
-    /// file and the tile, every other tile still answers as computed. A truncated file, or one
+    /// A damaged tile (the largest): its offsets are zero and its bounds unbounded, the fault
+    /// names the file and the tile, every other tile still answers as computed. A truncated file, or one
     /// baked with another key, is refused at the open with the file's name.
     #[test]
     fn a_damaged_tile_is_reported_and_the_others_still_answer() {
@@ -286,18 +286,23 @@ mod tests {
         let computed = &world.decals;
         let path = temp_path("damaged");
         computed.write_tiles(&path, 9).expect("written");
-        let mut bytes = std::fs::read(&path).expect("read back");
-        // The first tile (the lowest column and row) starts right after the header.
-        bytes[32 + 100] ^= 0x40;
-        std::fs::write(&path, &bytes).expect("damaged");
         let faults = Arc::new(PageFaults::default());
         let origin = world.origin_m();
-        let baked = DecalField::open_tiles(&path, 9, origin, 1 << 20, Arc::clone(&faults))
-            .expect("the index is intact");
-        let Tiles::File(file) = &baked.tiles else {
+        let open = || DecalField::open_tiles(&path, 9, origin, 1 << 20, Arc::clone(&faults));
+        let Tiles::File(file) = &open().expect("opened").tiles else {
             panic!("a baked field reads its file");
         };
-        let first = file.tiles()[0];
+        // The largest tile gets a flipped byte in its middle.
+        let (first, (offset, len)) = file
+            .tiles()
+            .into_iter()
+            .filter_map(|t| Some((t, file.span(t)?)))
+            .max_by_key(|(_, span)| span.1)
+            .expect("tiles");
+        let mut bytes = std::fs::read(&path).expect("read back");
+        bytes[(offset + u64::from(len / 2)) as usize] ^= 0x40;
+        std::fs::write(&path, &bytes).expect("damaged");
+        let baked = open().expect("the index is intact");
         let tile_m = DECAL_SPACING_M * decal_tiles::TILE_SAMPLES as f64;
         let in_first = |p: &[f64; 2]| {
             let t = |v: f64, o: f64| ((v - o) / tile_m).floor() as i64;
@@ -306,7 +311,7 @@ mod tests {
         let (mut zeroed, mut others) = (0, 0);
         for p in points(&world) {
             let (want, got) = (computed.offset_m(p[0], p[1]), baked.offset_m(p[0], p[1]));
-            // Points whose stencil reaches into the first tile may read it; the rest never do.
+            // Points whose stencil reaches into the damaged tile may read it; the rest never do.
             let near_first = [[-2.0, -2.0], [2.0, -2.0], [-2.0, 2.0], [2.0, 2.0]]
                 .iter()
                 .any(|d| in_first(&[p[0] + d[0], p[1] + d[1]]));

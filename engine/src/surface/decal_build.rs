@@ -4,7 +4,7 @@
 //! it is read: [`super::decals`].
 
 use super::decal_tiles::{
-    BLOCK, BLOCK_SAMPLES, TILE_BLOCKS, TILE_LEVELS, TILE_SAMPLES, Tile, split,
+    BLOCK, BLOCK_SAMPLES, Sorted, TILE_BLOCKS, TILE_LEVELS, TILE_SAMPLES, Tile, split,
 };
 use super::decals::{
     DECAL_BLOCK_M, DECAL_SPACING_M, DecalBounds, DecalField, STENCIL_SIDE, TileMap, Tiles,
@@ -261,12 +261,19 @@ pub(super) fn into_tiles(
     mut levels: Vec<FxHashMap<u64, [f32; 3]>>,
     road_weight: FxHashMap<(i64, i64), f32>,
 ) -> (TileMap, Vec<FxHashMap<u64, [f32; 3]>>) {
-    let mut tiles: FxHashMap<(i64, i64), Tile> = FxHashMap::default();
+    /// A tile's parts by local index while they are gathered.
+    #[derive(Default)]
+    struct Parts {
+        blocks: FxHashMap<u16, [f32; BLOCK_SAMPLES]>,
+        bounds: [FxHashMap<u16, [f32; 3]>; TILE_LEVELS],
+        road_weight: FxHashMap<u32, f32>,
+    }
+    let mut tiles: FxHashMap<(i64, i64), Parts> = FxHashMap::default();
     for (k, b) in blocks {
         let (bx, by) = unkey(k);
         let ((tx, lx), (ty, ly)) = (split(bx, TILE_BLOCKS), split(by, TILE_BLOCKS));
         let local = (ly * TILE_BLOCKS + lx) as u16;
-        tiles.entry((tx, ty)).or_default().blocks.insert(local, b);
+        tiles.entry((tx, ty)).or_default().blocks.insert(local, *b);
     }
     let upper = levels.split_off(TILE_LEVELS.min(levels.len()));
     for (k, level) in levels.into_iter().enumerate() {
@@ -281,15 +288,19 @@ pub(super) fn into_tiles(
     for ((ix, iy), w) in road_weight {
         let ((tx, lx), (ty, ly)) = (split(ix, TILE_SAMPLES), split(iy, TILE_SAMPLES));
         let local = (ly * TILE_SAMPLES + lx) as u32;
-        tiles
-            .entry((tx, ty))
-            .or_default()
-            .road_weight
-            .insert(local, w);
+        let parts = tiles.entry((tx, ty)).or_default();
+        parts.road_weight.insert(local, w);
     }
     let tiles = tiles
         .into_iter()
-        .map(|(t, tile)| (t, Arc::new(tile)))
+        .map(|(t, p)| {
+            let tile = Tile {
+                blocks: Sorted::from_map(p.blocks),
+                bounds: p.bounds.map(Sorted::from_map),
+                road_weight: Sorted::from_map(p.road_weight),
+            };
+            (t, Arc::new(tile))
+        })
         .collect();
     (tiles, upper)
 }

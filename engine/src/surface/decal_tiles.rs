@@ -1,5 +1,5 @@
 //! The decal field's data by tile: its samples, its fine bounds and its road weights cut into
-//! tiles of [`TILE_BLOCKS`] x [`TILE_BLOCKS`] blocks (256 m), held in memory or read tile by tile
+//! tiles of [`TILE_BLOCKS`] x [`TILE_BLOCKS`] blocks (64 m), held in memory or read tile by tile
 //! from the file `worldgen bake` writes ([`write`], [`TileFile`]).
 //!
 //! The file: a 32-byte header (`TVSDECAL`, version, the key of the map and code it was baked
@@ -23,29 +23,87 @@ use worldgen::pages::{PageError, SourceKey};
 pub(crate) const BLOCK: i64 = 8;
 /// Samples per block.
 pub(crate) const BLOCK_SAMPLES: usize = (BLOCK * BLOCK) as usize;
-/// Blocks per tile side.
-pub(crate) const TILE_BLOCKS: i64 = 64;
+/// Blocks per tile side: a tile is 64 m. Small tiles keep what a coarse node's sparse lattice
+/// reads small: each of its points near a road reads the tile under it (with 256 m tiles the
+/// 32 km map's coarse levels read every tile again and again, beyond any sensible budget).
+pub(crate) const TILE_BLOCKS: i64 = 16;
 /// Samples per tile side.
 pub(crate) const TILE_SAMPLES: i64 = TILE_BLOCKS * BLOCK;
-/// Bound levels kept in the tiles (levels `0..TILE_LEVELS`, cells of `2^k` blocks); coarser
-/// levels are the field's global part.
-pub(crate) const TILE_LEVELS: usize = 6;
+/// Bound levels kept in the tiles (levels `0..TILE_LEVELS`, cells of `2^k` blocks, level
+/// `TILE_LEVELS` one cell per tile); coarser levels are the field's global part.
+pub(crate) const TILE_LEVELS: usize = 4;
 
 const MAGIC: &[u8; 8] = b"TVSDECAL";
 const VERSION: u32 = 1;
 const HEADER_BYTES: u64 = 32;
 const INDEX_ENTRY_BYTES: usize = 36;
 
+/// Values by key, the keys sorted and unique: looked up by binary search. A tile is kept in
+/// this form so that reading one from its file is a copy, with no hashing or allocation per
+/// entry (the coarse nodes' sparse lattices read a tile for a few points).
+#[derive(Debug, PartialEq)]
+pub(crate) struct Sorted<K, V> {
+    keys: Vec<K>,
+    values: Vec<V>,
+}
+
+impl<K, V> Default for Sorted<K, V> {
+    fn default() -> Self {
+        Self {
+            keys: Vec::new(),
+            values: Vec::new(),
+        }
+    }
+}
+
+impl<K: Ord + Copy, V> Sorted<K, V> {
+    /// The entries of `map` in key order.
+    pub(crate) fn from_map(map: FxHashMap<K, V>) -> Self {
+        let mut entries: Vec<(K, V)> = map.into_iter().collect();
+        entries.sort_unstable_by_key(|e| e.0);
+        let (keys, values) = entries.into_iter().unzip();
+        Self { keys, values }
+    }
+
+    #[inline]
+    pub(crate) fn get(&self, key: K) -> Option<&V> {
+        self.keys.binary_search(&key).ok().map(|i| &self.values[i])
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    pub(crate) fn iter(&self) -> impl Iterator<Item = (K, &V)> + '_ {
+        self.keys.iter().copied().zip(&self.values)
+    }
+
+    /// Appends an entry; false (nothing added) unless its key is above every key so far.
+    fn push(&mut self, key: K, value: V) -> bool {
+        if self.keys.last().is_some_and(|&k| k >= key) {
+            return false;
+        }
+        self.keys.push(key);
+        self.values.push(value);
+        true
+    }
+
+    fn bytes(&self) -> usize {
+        self.keys.capacity() * std::mem::size_of::<K>()
+            + self.values.capacity() * std::mem::size_of::<V>()
+    }
+}
+
 /// A tile: blocks, bound cells and road weights by their index inside the tile (row-major from
 /// its south-west corner).
 #[derive(Debug, Default, PartialEq)]
 pub(crate) struct Tile {
-    pub blocks: FxHashMap<u16, Box<[f32; BLOCK_SAMPLES]>>,
+    pub blocks: Sorted<u16, [f32; BLOCK_SAMPLES]>,
     /// Level k: cells of 2^k x 2^k blocks, `TILE_BLOCKS >> k` per tile side; slope, curvature,
     /// magnitude.
-    pub bounds: [FxHashMap<u16, [f32; 3]>; TILE_LEVELS],
+    pub bounds: [Sorted<u16, [f32; 3]>; TILE_LEVELS],
     /// Per sample (index `y * TILE_SAMPLES + x`) with a road, path or pad: its largest weight.
-    pub road_weight: FxHashMap<u32, f32>,
+    pub road_weight: Sorted<u32, f32>,
 }
 
 /// The tile of a coordinate and the coordinate inside it, for tiles `per_tile` units wide.
@@ -55,47 +113,34 @@ pub(crate) fn split(v: i64, per_tile: i64) -> (i64, i64) {
 }
 
 impl Tile {
-    /// Heap bytes (approximate for the hash maps: entries times their size).
+    /// Heap bytes.
     pub(crate) fn bytes(&self) -> usize {
-        self.blocks.capacity() * (2 + 8 + 1)
-            + self.blocks.len() * BLOCK_SAMPLES * 4
-            + self
-                .bounds
-                .iter()
-                .map(|b| b.capacity() * (2 + 12 + 1))
-                .sum::<usize>()
-            + self.road_weight.capacity() * (4 + 4 + 1)
+        self.blocks.bytes()
+            + self.bounds.iter().map(Sorted::bytes).sum::<usize>()
+            + self.road_weight.bytes()
     }
 
-    /// The tile's bytes in the file, in a fixed order (sorted indices), so a bake gives the same
-    /// bytes every time.
+    /// The tile's bytes in the file, entries in key order.
     fn encode(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.bytes());
-        let sorted = |keys: Vec<u16>| {
-            let mut k = keys;
-            k.sort_unstable();
-            k
-        };
+        let mut out = Vec::with_capacity(self.bytes() + 64);
         out.extend_from_slice(&(self.blocks.len() as u32).to_le_bytes());
-        for i in sorted(self.blocks.keys().copied().collect()) {
+        for (i, b) in self.blocks.iter() {
             out.extend_from_slice(&i.to_le_bytes());
-            for v in self.blocks[&i].iter() {
+            for v in b {
                 out.extend_from_slice(&v.to_le_bytes());
             }
         }
         for level in &self.bounds {
             out.extend_from_slice(&(level.len() as u32).to_le_bytes());
-            for i in sorted(level.keys().copied().collect()) {
+            for (i, c) in level.iter() {
                 out.extend_from_slice(&i.to_le_bytes());
-                for v in level[&i] {
+                for v in c {
                     out.extend_from_slice(&v.to_le_bytes());
                 }
             }
         }
-        let mut roads: Vec<(u32, f32)> = self.road_weight.iter().map(|(&i, &w)| (i, w)).collect();
-        roads.sort_unstable_by_key(|r| r.0);
-        out.extend_from_slice(&(roads.len() as u32).to_le_bytes());
-        for (i, w) in roads {
+        out.extend_from_slice(&(self.road_weight.len() as u32).to_le_bytes());
+        for (i, w) in self.road_weight.iter() {
             out.extend_from_slice(&i.to_le_bytes());
             out.extend_from_slice(&w.to_le_bytes());
         }
@@ -103,38 +148,47 @@ impl Tile {
     }
 
     /// The tile from its bytes; `None` where they do not parse (counts beyond the bytes,
-    /// indices outside the tile) or bytes are left over.
+    /// indices outside the tile or out of order) or bytes are left over.
     fn decode(bytes: &[u8]) -> Option<Tile> {
         let mut r = Bytes(bytes);
         let mut tile = Tile::default();
-        let tile_blocks = (TILE_BLOCKS * TILE_BLOCKS) as u16;
-        for _ in 0..r.u32()? {
+        let count = |r: &mut Bytes<'_>, entry_bytes: usize| -> Option<usize> {
+            let n = r.u32()? as usize;
+            // A count the remaining bytes cannot hold is refused before reserving for it.
+            (n.checked_mul(entry_bytes)? <= r.0.len()).then_some(n)
+        };
+        let n = count(&mut r, 2 + BLOCK_SAMPLES * 4)?;
+        tile.blocks.keys.reserve_exact(n);
+        tile.blocks.values.reserve_exact(n);
+        for _ in 0..n {
             let index = r.u16()?;
-            if index >= tile_blocks {
-                return None;
-            }
-            let mut b = Box::new([0.0f32; BLOCK_SAMPLES]);
-            for v in b.iter_mut() {
+            let mut b = [0.0f32; BLOCK_SAMPLES];
+            for v in &mut b {
                 *v = r.f32()?;
             }
-            tile.blocks.insert(index, b);
+            if index >= (TILE_BLOCKS * TILE_BLOCKS) as u16 || !tile.blocks.push(index, b) {
+                return None;
+            }
         }
         for (k, level) in tile.bounds.iter_mut().enumerate() {
             let side = (TILE_BLOCKS >> k) as u32;
-            for _ in 0..r.u32()? {
+            for _ in 0..count(&mut r, 2 + 12)? {
                 let i = r.u16()?;
-                if u32::from(i) >= side * side {
+                let cell = [r.f32()?, r.f32()?, r.f32()?];
+                if u32::from(i) >= side * side || !level.push(i, cell) {
                     return None;
                 }
-                level.insert(i, [r.f32()?, r.f32()?, r.f32()?]);
             }
         }
-        for _ in 0..r.u32()? {
-            let i = r.u32()?;
-            if u64::from(i) >= (TILE_SAMPLES * TILE_SAMPLES) as u64 {
+        let n = count(&mut r, 8)?;
+        tile.road_weight.keys.reserve_exact(n);
+        tile.road_weight.values.reserve_exact(n);
+        for _ in 0..n {
+            let (i, w) = (r.u32()?, r.f32()?);
+            if u64::from(i) >= (TILE_SAMPLES * TILE_SAMPLES) as u64 || !tile.road_weight.push(i, w)
+            {
                 return None;
             }
-            tile.road_weight.insert(i, r.f32()?);
         }
         r.0.is_empty().then_some(tile)
     }
@@ -444,6 +498,12 @@ impl TileFile {
     /// Heap bytes of the index and the resident tiles.
     pub(crate) fn bytes(&self) -> usize {
         self.index.capacity() * (16 + 24 + 1) + self.stats().resident_bytes
+    }
+
+    /// Where tile `t` lies in the file: its offset and length in bytes (tests).
+    #[cfg(test)]
+    pub(crate) fn span(&self, t: (i64, i64)) -> Option<(u64, u32)> {
+        self.index.get(&t).map(|e| (e.offset, e.len))
     }
 
     /// The tiles the file holds.

@@ -137,8 +137,7 @@ impl<'a> Reader<'a> {
         let ((tx, lx), (ty, ly)) = (split(bx, TILE_BLOCKS), split(by, TILE_BLOCKS));
         self.tile((tx, ty))?
             .blocks
-            .get(&((ly * TILE_BLOCKS + lx) as u16))
-            .map(|b| &**b)
+            .get((ly * TILE_BLOCKS + lx) as u16)
     }
 
     fn sample(&mut self, ix: i64, iy: i64) -> f64 {
@@ -454,7 +453,7 @@ impl DecalField {
         let ((tx, lx), (ty, ly)) = (split(ix, TILE_SAMPLES), split(iy, TILE_SAMPLES));
         Reader::new(self)
             .tile((tx, ty))
-            .and_then(|t| t.road_weight.get(&((ly * TILE_SAMPLES + lx) as u32)))
+            .and_then(|t| t.road_weight.get((ly * TILE_SAMPLES + lx) as u32))
             .map_or(0.0, |&w| f64::from(w))
     }
 
@@ -471,7 +470,7 @@ impl DecalField {
             let Some(tile) = reader.tile((tx, ty)) else {
                 continue;
             };
-            out.extend(tile.road_weight.iter().map(|(&i, &w)| {
+            out.extend(tile.road_weight.iter().map(|(i, &w)| {
                 let ix = tx * TILE_SAMPLES + i64::from(i) % TILE_SAMPLES;
                 let iy = ty * TILE_SAMPLES + i64::from(i) / TILE_SAMPLES;
                 (
@@ -514,7 +513,7 @@ impl DecalField {
                     let ((tx, lx), (ty, ly)) = (split(bx, per), split(by, per));
                     reader
                         .tile((tx, ty))
-                        .and_then(|t| t.bounds[k].get(&((ly * per + lx) as u16)).copied())
+                        .and_then(|t| t.bounds[k].get((ly * per + lx) as u16).copied())
                 } else {
                     self.upper_bounds[k - TILE_LEVELS]
                         .get(&key(bx, by))

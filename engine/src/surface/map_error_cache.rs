@@ -45,13 +45,9 @@ pub fn surface_key(world: &World, method: u64) -> u64 {
     FORMAT_VERSION.hash(&mut h);
     method.hash(&mut h);
     let map = &world.map;
-    for v in map.heights.data() {
-        v.to_bits().hash(&mut h);
-    }
-    map.ground.data().hash(&mut h);
-    for t in &map.manifest.ground.legend {
-        t.detail_amplitude_m.to_bits().hash(&mut h);
-    }
+    // The heights, the ground types, the legend's amplitudes, the decals and the map's
+    // placement, through the keys of what the world derives from them (CRCs already taken).
+    world.derived_key().hash(&mut h);
     map.manifest.seed.hash(&mut h);
     for v in map.manifest.origin_m.iter().chain(&map.manifest.size_m) {
         v.to_bits().hash(&mut h);
@@ -59,7 +55,6 @@ pub fn surface_key(world: &World, method: u64) -> u64 {
     let (hs, gs) = world.cell_spacings_m();
     hs.to_bits().hash(&mut h);
     gs.to_bits().hash(&mut h);
-    format!("{:?}", map.decals).hash(&mut h);
     // The surface function: F and the between-points bound at fixed points of a square of at
     // most 256 m in the middle of the map (few pages of a baked map's paged pyramids).
     let (o, s) = (world.origin_m(), world.size_m());

@@ -67,7 +67,8 @@ impl Pyramids {
     }
 
     /// The key of the pyramids' inputs and of this code: a [`worldgen::pages::SourceKey`] of
-    /// the keys ([`worldgen::pages::bake::Raster::key`]) of the heights and the amplitude grid, their spacings and [`PYRAMIDS_VERSION`].
+    /// the key of the heights ([`worldgen::pages::bake::Raster::key`]), the key of the
+    /// amplitude grid's inputs, their spacings and [`PYRAMIDS_VERSION`].
     pub(crate) fn key(heights_key: u64, hs: f64, amplitude_key: u64, gs: f64) -> u64 {
         let mut key = worldgen::pages::SourceKey::new(0x9E7A_0000);
         for part in [

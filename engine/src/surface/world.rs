@@ -193,6 +193,16 @@ impl World {
         Self::build(map, Some((pages_dir, budget_bytes)))
     }
 
+    /// A key of the map's content as the surface reads it (heights, ground types, the
+    /// legend's amplitudes, decals, placement), from the keys taken at open.
+    pub(crate) fn derived_key(&self) -> u64 {
+        let mut k = worldgen::pages::SourceKey::new(0x5E77_0000);
+        for v in [self.keys.decals, self.keys.amplitude] {
+            k.update(&v.to_le_bytes());
+        }
+        k.finish()
+    }
+
     /// Writes what this world derives from its map under `pages_dir/derived` (`worldgen
     /// bake`): the max-pyramids and the ground amplitude grid as page files of `page_side`, the
     /// decal field as a tile file.
@@ -251,7 +261,7 @@ impl World {
             map.manifest.heights.spacing_m,
             map.manifest.ground.spacing_m,
         );
-        keys.pyramids = Pyramids::key(heights_key, hs, Raster::F32(&amplitude_m).key(), gs);
+        keys.pyramids = Pyramids::key(heights_key, hs, keys.amplitude, gs);
         let mut page_cache = None;
         let paged = pages.and_then(|(dir, budget_bytes)| {
             let cache = Arc::new(PageCache::new(budget_bytes));
