@@ -1,7 +1,8 @@
 //! The decal field baked by `worldgen bake` and opened without deriving it: its tiles in a tile
-//! file ([`super::decal_tiles`]), its small global part (coarse bounds, occupancy, counts) in
+//! file (`decal_tiles`), its small global part (coarse bounds, occupancy, counts) in
 //! that file's tail, all keyed by [`DecalField::bake_key`].
 
+pub use super::decal_tiles::TileStats;
 use super::decal_tiles::{self, Bytes, TILE_LEVELS, TileFile};
 #[cfg(test)]
 use super::decals::DECAL_SPACING_M;
@@ -87,7 +88,7 @@ impl DecalField {
     }
 
     /// Tiles read from the file, hits, evictions and resident bytes, for a baked field.
-    pub fn tile_stats(&self) -> Option<decal_tiles::TileStats> {
+    pub fn tile_stats(&self) -> Option<TileStats> {
         match &self.tiles {
             Tiles::File(f) => Some(f.stats()),
             Tiles::Memory(_) => None,
@@ -189,10 +190,14 @@ mod tests {
     use crate::surface::World;
     use crate::test_maps::tiny_map;
 
-    fn temp_path(name: &str) -> PathBuf {
+    /// The tiny map's world and its decal field written as a tile file keyed `key`.
+    fn baked_tiny(name: &str, key: u64) -> (World, PathBuf) {
         let dir = std::env::temp_dir().join(format!("tvs-decal-{}-{name}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp folder");
-        dir.join("decals.tiles")
+        let path = dir.join("decals.tiles");
+        let world = World::without_error_grids(tiny_map());
+        world.decals.write_tiles(&path, key).expect("written");
+        (world, path)
     }
 
     /// Points of the tiny map's decal lattice region on a step that is no multiple of the
@@ -216,10 +221,8 @@ mod tests {
     /// one tile (every change of tile reads it again from the file).
     #[test]
     fn a_baked_field_answers_like_the_computed_one_through_evictions() {
-        let world = World::without_error_grids(tiny_map());
+        let (world, path) = baked_tiny("same", 7);
         let computed = &world.decals;
-        let path = temp_path("same");
-        computed.write_tiles(&path, 7).expect("written");
         let faults = Arc::new(PageFaults::default());
         let baked = DecalField::open_tiles(&path, 7, world.origin_m(), 1, Arc::clone(&faults))
             .expect("opened");
@@ -282,10 +285,8 @@ mod tests {
     /// baked with another key, is refused at the open with the file's name.
     #[test]
     fn a_damaged_tile_is_reported_and_the_others_still_answer() {
-        let world = World::without_error_grids(tiny_map());
+        let (world, path) = baked_tiny("damaged", 9);
         let computed = &world.decals;
-        let path = temp_path("damaged");
-        computed.write_tiles(&path, 9).expect("written");
         let faults = Arc::new(PageFaults::default());
         let origin = world.origin_m();
         let open = || DecalField::open_tiles(&path, 9, origin, 1 << 20, Arc::clone(&faults));

@@ -248,9 +248,7 @@ pub(crate) fn write(
         action,
         source,
     };
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| io("create the folder of the tile file", e))?;
-    }
+    let partial = worldgen::pages::fresh_partial_path(path)?;
     let mut order: Vec<(i64, i64)> = tiles.keys().copied().collect();
     order.sort_unstable();
     let mut body = Vec::new();
@@ -274,10 +272,6 @@ pub(crate) fn write(
     header.extend_from_slice(&key.to_le_bytes());
     header.extend_from_slice(&(HEADER_BYTES + body.len() as u64).to_le_bytes());
     header.extend_from_slice(&(order.len() as u32).to_le_bytes());
-    let name = path
-        .file_name()
-        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let partial = path.with_file_name(format!(".{name}.partial"));
     {
         use std::io::Write;
         let file = std::fs::File::create(&partial).map_err(|e| io("create", e))?;

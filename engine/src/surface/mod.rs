@@ -3,7 +3,7 @@
 //!
 //! - [`world`]: [`World`] wraps a loaded map and defines `F = G + H + E`.
 //! - [`decals`]: the decal shaping `E` (roads and paths flattened, rock patches raised);
-//!   `decal_build` makes it from the decal list, [`decal_tiles`] holds its data by 64 m tile,
+//!   `decal_build` makes it from the decal list, `decal_tiles` holds its data by 64 m tile,
 //!   [`decal_bake`] bakes it into a tile file.
 //! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
 //! - [`height_max`]: a max-pyramid of the map's height samples (upper bounds over regions);
@@ -14,7 +14,7 @@
 
 pub mod decal_bake;
 mod decal_build;
-pub mod decal_tiles;
+mod decal_tiles;
 pub mod decals;
 pub mod height_max;
 pub mod levels;

@@ -291,16 +291,7 @@ pub fn write_grid<T: Sample>(
         action,
         source,
     };
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| io("create the folder of the page file", e))?;
-    }
-    let name = path
-        .file_name()
-        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let partial = path.with_file_name(format!(".{name}.partial"));
-    if partial.exists() {
-        std::fs::remove_file(&partial).map_err(|e| io("remove an old partial page file", e))?;
-    }
+    let partial = super::fresh_partial_path(path)?;
     let layout = PageLayout::new(
         T::KIND,
         grid.width() as u32,

@@ -24,6 +24,27 @@ use std::path::PathBuf;
 /// positioned reads and about a kilometre of a 4 m map.
 pub const DEFAULT_PAGE_SIDE: u32 = 256;
 
+/// The hidden partial file `.<name>.partial` beside `path`, through which a derived file is
+/// written and then renamed into place: its folder created, an old partial file removed.
+pub fn fresh_partial_path(path: &std::path::Path) -> Result<PathBuf, PageError> {
+    let io = |action, source| PageError::Io {
+        path: path.to_path_buf(),
+        action,
+        source,
+    };
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| io("create the folder of", e))?;
+    }
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let partial = path.with_file_name(format!(".{name}.partial"));
+    if partial.exists() {
+        std::fs::remove_file(&partial).map_err(|e| io("remove an old partial file of", e))?;
+    }
+    Ok(partial)
+}
+
 /// A 64-bit key of a stream of bytes: two CRC-32s started from `seed + 1` and `seed + 2`. Stable
 /// across builds (unlike the standard hasher), it matches a page file to the source it was
 /// baked from.

@@ -210,7 +210,7 @@ fn print_setup(cli: &Cli, gpu: &Gpu) {
 }
 
 /// The decal tiles of a baked map read over a run of `secs`: printed, and as JSON.
-fn decal_tile_report(s: &engine::surface::decal_tiles::TileStats, secs: f64) -> serde_json::Value {
+fn decal_tile_report(s: &engine::surface::decal_bake::TileStats, secs: f64) -> serde_json::Value {
     let mib = |b: usize| b as f64 / f64::from(1 << 20);
     println!(
         "decal tiles: {} tile-ins ({:.1} per second), {} hits, {} evictions, {:.1} MiB resident \
