@@ -103,13 +103,6 @@ impl DecalField {
         }
     }
 
-    /// Drops a baked field's resident tiles, so the next reads come from the file.
-    pub fn drop_resident_tiles(&self) {
-        if let Tiles::File(f) = &self.tiles {
-            f.clear();
-        }
-    }
-
     /// The counts, the coarse grids and the bound levels from [`TILE_LEVELS`] on, in a fixed
     /// order (sorted keys).
     fn encode_global(&self) -> Vec<u8> {

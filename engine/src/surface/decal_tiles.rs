@@ -506,12 +506,4 @@ impl TileFile {
         t.sort_unstable();
         t
     }
-
-    /// Drops every resident tile (tests: the next reads come from the file).
-    pub(crate) fn clear(&self) {
-        let mut s = lock(&self.lru);
-        s.resident.clear();
-        s.by_use.clear();
-        s.stats.resident_bytes = 0;
-    }
 }

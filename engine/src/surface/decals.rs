@@ -105,9 +105,16 @@ impl Default for Tiles {
 /// in one tile).
 struct Reader<'a> {
     field: &'a DecalField,
-    last: Option<(TileKey, Option<Arc<Tile>>)>,
+    last: Option<(TileKey, Option<Held<'a>>)>,
     /// Whether a tile could not be read (the fault is recorded).
     failed: bool,
+}
+
+/// A tile a reader holds: borrowed from a field in memory (no reference count touched on the
+/// per-point path), or shared with a tile file's cache.
+enum Held<'a> {
+    Borrowed(&'a Tile),
+    Shared(Arc<Tile>),
 }
 
 impl<'a> Reader<'a> {
@@ -121,16 +128,23 @@ impl<'a> Reader<'a> {
 
     fn tile(&mut self, t: (i64, i64)) -> Option<&Tile> {
         if self.last.as_ref().is_none_or(|(k, _)| *k != t) {
-            let got = match &self.field.tiles {
-                Tiles::Memory(m) => m.get(&t).cloned(),
-                Tiles::File(f) => f.tile(t).unwrap_or_else(|()| {
-                    self.failed = true;
-                    None
-                }),
+            let field = self.field;
+            let got = match &field.tiles {
+                Tiles::Memory(m) => m.get(&t).map(|tile| Held::Borrowed(tile)),
+                Tiles::File(f) => f
+                    .tile(t)
+                    .unwrap_or_else(|()| {
+                        self.failed = true;
+                        None
+                    })
+                    .map(Held::Shared),
             };
             self.last = Some((t, got));
         }
-        self.last.as_ref().and_then(|(_, tile)| tile.as_deref())
+        match self.last.as_ref()?.1.as_ref()? {
+            Held::Borrowed(tile) => Some(tile),
+            Held::Shared(tile) => Some(tile),
+        }
     }
 
     fn block(&mut self, bx: i64, by: i64) -> Option<&[f32; BLOCK_SAMPLES]> {

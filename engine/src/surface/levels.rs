@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use worldgen::Grid;
-use worldgen::pages::{LayerId, PageCache, PageError, PageFile, SampleKind};
+use worldgen::pages::{LayerId, PageCache, PageError, SampleKind};
 
 /// Page faults met while reading paged levels, each once.
 #[derive(Debug, Default)]
@@ -151,29 +151,9 @@ pub(crate) fn open_levels(
     let mut levels = Vec::with_capacity(sizes.len());
     for (k, &(width, height)) in sizes.iter().enumerate() {
         let path = level_path(pages_dir, name, k);
-        let file = PageFile::open(&path)?;
-        let l = file.layout();
-        if file.key() != key
-            || l.kind != SampleKind::F32
-            || (l.width as usize, l.height as usize) != (width, height)
-        {
-            return Err(PageError::Header {
-                path,
-                problem: format!(
-                    "baked from another map or another engine (expected {width}x{height} f32 samples and this map's key); bake the map again"
-                ),
-            });
-        }
-        if l.page_count() == 1 {
-            let page = file.read_page::<f32>(0, 0)?;
-            let side = l.page_side as usize;
-            let mut grid = Grid::new(width, height, 0.0f32);
-            for y in 0..height {
-                for x in 0..width {
-                    grid.set(x, y, page[y * side + x]);
-                }
-            }
-            levels.push(Level::Memory(grid));
+        let file = worldgen::pages::bake::open_derived(&path, SampleKind::F32, width, height, key)?;
+        if file.layout().page_count() == 1 {
+            levels.push(Level::Memory(file.read_all()?));
         } else {
             levels.push(Level::Paged {
                 cache: Arc::clone(cache),

@@ -11,7 +11,7 @@
 //! the ground types (u8) and each species' density (u8).
 
 use super::file::{PageLayout, PageWriter, Sample};
-use super::{DEFAULT_PAGE_SIDE, PageError, PageFile};
+use super::{DEFAULT_PAGE_SIDE, PageError, PageFile, SampleKind};
 use crate::progress::Progress;
 use crate::{Grid, Map};
 use std::path::{Path, PathBuf};
@@ -311,43 +311,40 @@ pub fn write_grid<T: Sample>(
     std::fs::rename(&partial, path).map_err(|e| io("move the page file into place", e))
 }
 
-/// Reads the page file `path` whole as a `width` x `height` grid; refused (naming the file)
-/// unless it holds that many samples of `T` and was baked with `key`.
+/// Opens the page file `path` of data derived from a map; refused (naming the file) unless it
+/// holds `width` x `height` samples of `kind` and was baked with `key`.
+pub fn open_derived(
+    path: &Path,
+    kind: SampleKind,
+    width: usize,
+    height: usize,
+    key: u64,
+) -> Result<PageFile, PageError> {
+    let file = PageFile::open(path)?;
+    let l = file.layout();
+    if file.key() != key
+        || l.kind != kind
+        || (l.width as usize, l.height as usize) != (width, height)
+    {
+        return Err(PageError::Header {
+            path: path.to_path_buf(),
+            problem: format!(
+                "baked from another map or another engine (expected {width}x{height} samples of {kind:?} and this map's key); bake the map again"
+            ),
+        });
+    }
+    Ok(file)
+}
+
+/// Reads the page file `path` whole as a `width` x `height` grid, checked as by
+/// [`open_derived`].
 pub fn read_grid<T: Sample>(
     path: &Path,
     width: usize,
     height: usize,
     key: u64,
 ) -> Result<Grid<T>, PageError> {
-    let file = PageFile::open(path)?;
-    let l = file.layout();
-    if file.key() != key
-        || l.kind != T::KIND
-        || (l.width as usize, l.height as usize) != (width, height)
-    {
-        return Err(PageError::Header {
-            path: path.to_path_buf(),
-            problem: format!(
-                "baked from another map or another engine (expected {width}x{height} samples of {:?} and this map's key); bake the map again",
-                T::KIND
-            ),
-        });
-    }
-    let side = l.page_side as usize;
-    let mut data = Vec::with_capacity(width * height);
-    let mut pages: Vec<Vec<T>> = Vec::with_capacity(l.pages_per_row() as usize);
-    for y in 0..height {
-        if y % side == 0 {
-            pages.clear();
-            for column in 0..l.pages_per_row() {
-                pages.push(file.read_page::<T>(column, (y / side) as u32)?);
-            }
-        }
-        for x in 0..width {
-            data.push(pages[x / side][(y % side) * side + x % side]);
-        }
-    }
-    Ok(Grid::from_vec(width, height, data).expect("sized above"))
+    open_derived(path, T::KIND, width, height, key)?.read_all()
 }
 
 /// Bakes every page of `map` and finishes: the whole bake on one machine.

@@ -315,6 +315,26 @@ impl PageFile {
         self.key
     }
 
+    /// Every page, checked, assembled into the whole raster.
+    pub fn read_all<T: Sample>(&self) -> Result<Grid<T>, PageError> {
+        let l = self.layout();
+        let (width, height, side) = (l.width as usize, l.height as usize, l.page_side as usize);
+        let mut data = Vec::with_capacity(width * height);
+        let mut pages: Vec<Vec<T>> = Vec::with_capacity(l.pages_per_row() as usize);
+        for y in 0..height {
+            if y % side == 0 {
+                pages.clear();
+                for column in 0..l.pages_per_row() {
+                    pages.push(self.read_page::<T>(column, (y / side) as u32)?);
+                }
+            }
+            for x in 0..width {
+                data.push(pages[x / side][(y % side) * side + x % side]);
+            }
+        }
+        Ok(Grid::from_vec(width, height, data).expect("sized by the layout"))
+    }
+
     /// Reads page (`column`, `row`) and checks its mark and checksum.
     pub fn read_page<T: Sample>(&self, column: u32, row: u32) -> Result<Vec<T>, PageError> {
         let l = &self.layout;
