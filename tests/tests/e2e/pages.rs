@@ -153,7 +153,8 @@ fn a_bake_in_shares_and_subsets_in_any_order_writes_the_same_bytes() {
     let (a, b) = (bake::pages_dir(&whole), bake::pages_dir(&split));
     let names = tests::files_under(&a);
     assert_eq!(names, tests::files_under(&b), "different files");
-    assert_eq!(names.len(), bake::rasters(&map).len());
+    // The layers, the binary decal list and the record of sources.
+    assert_eq!(names.len(), bake::rasters(&map).len() + 2);
     for n in &names {
         assert!(
             std::fs::read(a.join(n)).unwrap() == std::fs::read(b.join(n)).unwrap(),
@@ -256,4 +257,86 @@ fn damaged_page_files_name_the_file_and_page_and_other_pages_still_read() {
         cache.region::<u8>(id, w - 1, 0, 2, 1),
         Err(PageError::Request { .. })
     ));
+}
+
+/// Rewrites `path` with `bytes`, keeping its modification time: a change that only a read of
+/// the content can see.
+fn rewrite_keeping_time(path: &Path, bytes: &[u8]) {
+    let modified = std::fs::metadata(path).unwrap().modified().unwrap();
+    std::fs::write(path, bytes).unwrap();
+    let file = std::fs::File::options().write(true).open(path).unwrap();
+    file.set_modified(modified).unwrap();
+}
+
+/// An open of a baked map reads its raster layers from their pages and its decal list from
+/// the binary copy while the map's files hold what was baked, and decodes the files themselves
+/// once they change or a page is damaged. That the bake is what is read is shown by damaging the
+/// heights image and the decal list behind an unchanged length and time: decoding them would
+/// fail, yet the open gives the map as baked.
+#[test]
+fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("map");
+    tests::copy_dir(&tiny_map_dir(), &dir);
+    let map = Map::load(&dir).expect("tiny map");
+    bake::bake(&map, &dir, SIDE, &PageSet::All, &Silent).unwrap();
+    bake::finish(&map, &dir, &Silent).unwrap();
+    let exr = dir.join(&map.manifest.heights.file);
+    let decals = dir.join(&map.manifest.decals.file);
+    let (exr_bytes, decal_bytes) = (
+        std::fs::read(&exr).unwrap(),
+        std::fs::read(&decals).unwrap(),
+    );
+    let scrambled = |b: &[u8]| -> Vec<u8> {
+        let mut out = b.to_vec();
+        let mid = out.len() / 2;
+        for v in &mut out[mid - 40..mid + 40] {
+            *v ^= 0x5A;
+        }
+        out
+    };
+
+    // Damaged behind the same length and time: both are read from the bake.
+    rewrite_keeping_time(&exr, &scrambled(&exr_bytes));
+    rewrite_keeping_time(&decals, &scrambled(&decal_bytes));
+    assert!(
+        worldgen::map::layers::read_heights(&dir, &map.manifest).is_err()
+            && worldgen::map::lists::read_decals(&decals, &map.manifest).is_err(),
+        "the damage must be visible to a decode"
+    );
+    assert!(
+        Map::load(&dir).expect("opened from the bake") == map,
+        "the open from the bake differs from the map"
+    );
+
+    // The same bytes with a new time (a copy): the content is read once, matches, and the new
+    // time is remembered for the next open.
+    std::fs::write(&exr, &exr_bytes).unwrap();
+    std::fs::write(&decals, &decal_bytes).unwrap();
+    let checked = dir.join(worldgen::pages::sources::CHECKED_FILE);
+    let before = std::fs::read_to_string(&checked).unwrap();
+    assert!(Map::load(&dir).unwrap() == map);
+    let after = std::fs::read_to_string(&checked).unwrap();
+    assert_ne!(before, after, "the new times are remembered");
+    rewrite_keeping_time(&exr, &scrambled(&exr_bytes));
+    assert!(
+        Map::load(&dir).unwrap() == map,
+        "a remembered time is trusted without reading the file"
+    );
+    std::fs::write(&exr, &exr_bytes).unwrap();
+
+    // A damaged page: the layer is decoded from its own file instead, the same map.
+    let page_file = bake::page_file_path(&dir, &map.manifest.heights.file);
+    let mut pages = std::fs::read(&page_file).unwrap();
+    pages[100] ^= 1;
+    std::fs::write(&page_file, &pages).unwrap();
+    assert!(Map::load(&dir).unwrap() == map);
+
+    // Changed heights: the stale pages are not used; the open gives the new heights.
+    let mut changed = map.heights.clone();
+    changed.set(7, 9, changed.get(7, 9) + 1.5);
+    worldgen::map::layers::write_heights(&exr, &changed).unwrap();
+    let reopened = Map::load(&dir).unwrap();
+    assert_eq!(reopened.heights.get(7, 9), map.heights.get(7, 9) + 1.5);
+    assert!(reopened.decals == map.decals);
 }

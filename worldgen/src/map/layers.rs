@@ -99,10 +99,17 @@ pub fn read_heights(dir: &Path, manifest: &Manifest) -> Result<Grid<f32>, MapErr
             format!("holds {} samples, expected {}", samples.len(), w * h),
         )
     })?;
+    check_heights(&path, &grid)?;
+    Ok(grid)
+}
+
+/// Checks that every height of the layer `path` is finite and within the map's limit.
+pub fn check_heights(path: &Path, grid: &Grid<f32>) -> Result<(), MapError> {
+    let w = grid.width();
     for (i, &v) in grid.data().iter().enumerate() {
         if !v.is_finite() || v.abs() > limits::MAX_ABS_HEIGHT_M {
             return Err(MapError::BadHeight {
-                path,
+                path: path.to_path_buf(),
                 x: i % w,
                 y: i / w,
                 value: v,
@@ -110,7 +117,7 @@ pub fn read_heights(dir: &Path, manifest: &Manifest) -> Result<Grid<f32>, MapErr
             });
         }
     }
-    Ok(grid)
+    Ok(())
 }
 
 /// Writes heights as a single-channel f32 OpenEXR (ZIP-compressed, lossless, deterministic).
@@ -227,6 +234,12 @@ pub fn read_ground(dir: &Path, manifest: &Manifest) -> Result<Grid<u8>, MapError
                 "decoded size does not match its header",
             )
         })?;
+    check_ground(&path, &grid, manifest)?;
+    Ok(grid)
+}
+
+/// Checks that every ground type of the layer `path` is an index into the manifest's legend.
+pub fn check_ground(path: &Path, grid: &Grid<u8>, manifest: &Manifest) -> Result<(), MapError> {
     let n = manifest.ground.legend.len();
     let w = grid.width();
     if let Some((i, &v)) = grid
@@ -236,14 +249,14 @@ pub fn read_ground(dir: &Path, manifest: &Manifest) -> Result<Grid<u8>, MapError
         .find(|&(_, &v)| v as usize >= n)
     {
         return Err(MapError::GroundTypeOutOfRange {
-            path,
+            path: path.to_path_buf(),
             x: i % w,
             y: i / w,
             value: v,
             legend_len: n,
         });
     }
-    Ok(grid)
+    Ok(())
 }
 
 fn write_png(

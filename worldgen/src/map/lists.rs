@@ -547,16 +547,28 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
             format!("expected version = 1..={DECALS_VERSION}"),
         ));
     }
-    let v1 = version == Some(1);
-    let before_v3 = version.is_some_and(|v| v < 3);
     let file: DecalFile = toml::from_str(&text).map_err(|e| MapError::ManifestSyntax {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    if file.decal.len() > limits::MAX_LIST_ITEMS {
+    check_decals(path, &file.decal, m, version.unwrap_or(0))?;
+    Ok(file.decal)
+}
+
+/// Checks the decals of the list `path` (of list `version`) against the map's manifest `m`,
+/// naming the first bad field: the text list's check, also applied to a baked binary list.
+pub fn check_decals(
+    path: &Path,
+    decals: &[Decal],
+    m: &Manifest,
+    version: i64,
+) -> Result<(), MapError> {
+    let v1 = version == 1;
+    let before_v3 = version < 3;
+    if decals.len() > limits::MAX_LIST_ITEMS {
         return Err(MapError::field(path, "decal", "too many decals"));
     }
-    for (i, d) in file.decal.iter().enumerate() {
+    for (i, d) in decals.iter().enumerate() {
         let f = |name: &str| format!("decal[{i}].{name}");
         if v1 && matches!(d.kind, DecalKind::Field | DecalKind::Dirt) {
             return Err(MapError::field(
@@ -572,10 +584,7 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
             return Err(MapError::field(
                 path,
                 f("kind"),
-                format!(
-                    "\"pad\" needs decals version 3, the file says version {}",
-                    version.unwrap_or(0)
-                ),
+                format!("\"pad\" needs decals version 3, the file says version {version}"),
             ));
         }
         if d.kind == DecalKind::Pad
@@ -650,7 +659,7 @@ pub fn read_decals(path: &Path, m: &Manifest) -> Result<Vec<Decal>, MapError> {
             ));
         }
     }
-    Ok(file.decal)
+    Ok(())
 }
 
 pub fn write_decals(path: &Path, decals: &[Decal]) -> Result<(), MapError> {

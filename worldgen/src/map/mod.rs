@@ -21,6 +21,7 @@
 //! every field and every sample before it returns; nothing is allocated from a size that has not
 //! been checked against [`limits`].
 
+mod baked;
 pub mod building_models;
 pub mod layers;
 pub mod lists;
@@ -225,6 +226,31 @@ pub struct Map {
     pub materials: Vec<Option<MaterialImage>>,
 }
 
+/// Seconds taken by the parts of a load, for its log line.
+struct PartClock {
+    start: std::time::Instant,
+    parts: Vec<String>,
+}
+
+impl Default for PartClock {
+    fn default() -> Self {
+        Self {
+            start: std::time::Instant::now(),
+            parts: Vec::new(),
+        }
+    }
+}
+
+impl PartClock {
+    /// Records the time since the last part as `name`'s.
+    fn part(&mut self, name: &str) {
+        let now = std::time::Instant::now();
+        let s = now.duration_since(self.start).as_secs_f64();
+        self.parts.push(format!("{name} {s:.2} s"));
+        self.start = now;
+    }
+}
+
 /// Summary numbers for `worldgen check` and logs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MapSummary {
@@ -245,21 +271,53 @@ impl Map {
     pub fn load(dir: &Path) -> Result<Self, MapError> {
         let manifest_path = dir.join("map.toml");
         let manifest = manifest::read(&manifest_path)?;
-        let heights = layers::read_heights(dir, &manifest)?;
-        let ground = layers::read_ground(dir, &manifest)?;
+        let mut clock = PartClock::default();
+        let mut baked = baked::Baked::open(dir);
+        let heights = match baked.raster::<f32>(&manifest.heights) {
+            Some(g) => {
+                layers::check_heights(&dir.join(&manifest.heights.file), &g)?;
+                g
+            }
+            None => layers::read_heights(dir, &manifest)?,
+        };
+        clock.part("heights");
+        let ground_spec = manifest.ground.grid();
+        let ground = match baked.raster::<u8>(&ground_spec) {
+            Some(g) => {
+                layers::check_ground(&dir.join(&ground_spec.file), &g, &manifest)?;
+                g
+            }
+            None => layers::read_ground(dir, &manifest)?,
+        };
+        clock.part("ground types");
         let mut densities = Vec::with_capacity(manifest.vegetation.len());
         for (i, spec) in manifest.vegetation.iter().enumerate() {
-            let density = layers::read_gray8(dir, &format!("vegetation[{i}].file"), &spec.grid())?;
+            let grid = spec.grid();
+            let density = match baked.raster::<u8>(&grid) {
+                Some(g) => g,
+                None => layers::read_gray8(dir, &format!("vegetation[{i}].file"), &grid)?,
+            };
             densities.push(DensityLayer {
                 spec: spec.clone(),
                 density,
             });
         }
+        clock.part("densities");
         let trees = lists::read_trees(&dir.join(&manifest.trees.file), &manifest)?;
-        let decals = lists::read_decals(&dir.join(&manifest.decals.file), &manifest)?;
+        clock.part("trees");
+        let decals_path = dir.join(&manifest.decals.file);
+        let decals = match baked.decals(&manifest.decals.file) {
+            Some(list) => {
+                lists::check_decals(&decals_path, &list, &manifest, lists::DECALS_VERSION.into())?;
+                list
+            }
+            None => lists::read_decals(&decals_path, &manifest)?,
+        };
+        clock.part("decals");
         let buildings = lists::read_buildings(&dir.join(&manifest.buildings.file), &manifest)?;
         let building_models = building_models::read(dir, &buildings)?;
         let building_textures = building_models::read_textures(dir, &buildings)?;
+        clock.part("buildings");
         let poisson = lists::read_poisson(
             &dir.join(&manifest.poisson.file),
             manifest.poisson.min_distance,
@@ -274,6 +332,18 @@ impl Map {
                 None => None,
             });
         }
+        clock.part("Poisson tile and materials");
+        baked.finish();
+        log::info!(
+            "map files of {} read: {}; from the bake's pages: {}",
+            dir.display(),
+            clock.parts.join(", "),
+            if baked.read.is_empty() {
+                "none".to_string()
+            } else {
+                baked.read.join(", ")
+            }
+        );
         Ok(Self {
             manifest,
             heights,

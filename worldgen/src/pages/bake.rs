@@ -258,7 +258,20 @@ pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usiz
             source,
         })?;
     }
+    write_sources(map, map_dir)?;
     Ok(ready.len())
+}
+
+/// Writes the decal list in binary and the record of the bake's sources
+/// ([`super::sources`]): the files an open then reads from the bake instead.
+fn write_sources(map: &Map, map_dir: &Path) -> Result<(), PageError> {
+    let mut baked: Vec<(String, u64)> = rasters(map)
+        .iter()
+        .map(|(name, raster)| (name.clone(), raster.key()))
+        .collect();
+    let decals_key = super::decal_list::write(&super::decal_list::path(map_dir), &map.decals)?;
+    baked.push((map.manifest.decals.file.clone(), decals_key));
+    super::sources::Sources::write(map_dir, &baked)
 }
 
 /// Checks the finished page files of `map`: every layer has one, baked from this map's layer,

@@ -67,7 +67,7 @@ impl SampleKind {
 }
 
 /// A sample type a page file can hold.
-pub trait Sample: Copy + Send + Sync + 'static {
+pub trait Sample: Copy + Default + Send + Sync + 'static {
     const KIND: SampleKind;
     /// Appends the sample's little-endian bytes.
     fn put(self, out: &mut Vec<u8>);
@@ -315,23 +315,42 @@ impl PageFile {
         self.key
     }
 
-    /// Every page, checked, assembled into the whole raster.
+    /// Every page, checked, assembled into the whole raster (bands of pages read on all
+    /// cores).
     pub fn read_all<T: Sample>(&self) -> Result<Grid<T>, PageError> {
         let l = self.layout();
         let (width, height, side) = (l.width as usize, l.height as usize, l.page_side as usize);
-        let mut data = Vec::with_capacity(width * height);
-        let mut pages: Vec<Vec<T>> = Vec::with_capacity(l.pages_per_row() as usize);
-        for y in 0..height {
-            if y % side == 0 {
-                pages.clear();
-                for column in 0..l.pages_per_row() {
-                    pages.push(self.read_page::<T>(column, (y / side) as u32)?);
-                }
-            }
-            for x in 0..width {
-                data.push(pages[x / side][(y % side) * side + x % side]);
-            }
-        }
+        let mut data = vec![T::default(); width * height];
+        let mut bands: Vec<(u32, &mut [T])> = data
+            .chunks_mut(width * side)
+            .enumerate()
+            .map(|(r, band)| (r as u32, band))
+            .collect();
+        let threads = crate::par::thread_count(0).min(bands.len()).max(1);
+        let per_thread = bands.len().div_ceil(threads);
+        let result: Result<(), PageError> = std::thread::scope(|scope| {
+            let jobs: Vec<_> = bands
+                .chunks_mut(per_thread)
+                .map(|group| {
+                    scope.spawn(move || {
+                        for (row, band) in group.iter_mut() {
+                            for column in 0..l.pages_per_row() {
+                                let page = self.read_page::<T>(column, *row)?;
+                                let x0 = column as usize * side;
+                                let n = side.min(width - x0);
+                                for (y, out) in band.chunks_exact_mut(width).enumerate() {
+                                    out[x0..x0 + n].copy_from_slice(&page[y * side..y * side + n]);
+                                }
+                            }
+                        }
+                        Ok(())
+                    })
+                })
+                .collect();
+            jobs.into_iter()
+                .try_for_each(|j| j.join().expect("a page band reader panicked"))
+        });
+        result?;
         Ok(Grid::from_vec(width, height, data).expect("sized by the layout"))
     }
 

@@ -7,13 +7,17 @@
 //! - [`cache`] the page cache: pages are read on first use (checksum verified then), shared
 //!   between readers, and evicted least recently used beyond the budget.
 //! - [`bake`] writes a map's raster layers as page files (all pages, or any subset of them).
+//! - [`sources`] records the files a bake read, so an open reads the pages instead of them;
+//!   [`decal_list`] is the decal list baked into binary.
 //!
 //! Files are read with positioned reads, never memory-mapped: a file truncated or damaged while
 //! it is in use gives an error naming the file and the page, never a crash.
 
 pub mod bake;
 pub mod cache;
+pub mod decal_list;
 pub mod file;
+pub mod sources;
 
 pub use cache::{CacheSample, LayerId, PageCache, PageStats};
 pub use file::{PageFile, PageLayout, SampleKind};

@@ -1,0 +1,80 @@
+//! Reading a baked map's raster layers from their page files and its decal list from its
+//! binary copy, where the record of the bake's sources ([`crate::pages::sources`]) says the
+//! map's own files still hold what was baked. Anything missing, stale or damaged is logged and
+//! read from the map's own files instead, so a bake only ever makes an open faster.
+
+use super::GridSpec;
+use super::lists::Decal;
+use crate::Grid;
+use crate::pages::file::Sample;
+use crate::pages::sources::Sources;
+use crate::pages::{PageFile, bake, decal_list};
+use std::path::{Path, PathBuf};
+
+pub(super) struct Baked {
+    dir: PathBuf,
+    sources: Option<Sources>,
+    /// Files read from the bake, for the open's log line.
+    pub read: Vec<String>,
+}
+
+impl Baked {
+    pub fn open(dir: &Path) -> Self {
+        Self {
+            dir: dir.to_path_buf(),
+            sources: Sources::read(dir),
+            read: Vec::new(),
+        }
+    }
+
+    /// The layer of `spec` from its page file, when baked from the layer file as it is now.
+    pub fn raster<T: Sample>(&mut self, spec: &GridSpec) -> Option<Grid<T>> {
+        let key = self.sources.as_mut()?.baked_key(&spec.file)?;
+        let path = bake::page_file_path(&self.dir, &spec.file);
+        let (w, h) = (spec.width as usize, spec.height as usize);
+        let read = PageFile::open(&path).and_then(|file| {
+            let l = file.layout();
+            if file.key() != key
+                || l.kind != T::KIND
+                || (l.width as usize, l.height as usize) != (w, h)
+            {
+                return Err(crate::pages::PageError::Header {
+                    path: path.clone(),
+                    problem: format!(
+                        "not the pages of this map's {} ({w}x{h} samples, key {key:016x})",
+                        spec.file
+                    ),
+                });
+            }
+            file.read_all::<T>()
+        });
+        self.used(&spec.file, read)
+    }
+
+    /// The decal list from its binary copy, when baked from the text list `name` as it is now.
+    pub fn decals(&mut self, name: &str) -> Option<Vec<Decal>> {
+        let key = self.sources.as_mut()?.baked_key(name)?;
+        let read = decal_list::read(&decal_list::path(&self.dir), key);
+        self.used(name, read)
+    }
+
+    fn used<T>(&mut self, name: &str, read: Result<T, crate::pages::PageError>) -> Option<T> {
+        match read {
+            Ok(v) => {
+                self.read.push(name.to_string());
+                Some(v)
+            }
+            Err(e) => {
+                log::warn!("{e}; {name} is read from the map's own file instead");
+                None
+            }
+        }
+    }
+
+    /// Remembers the files checked by content (see [`Sources::save_checked`]).
+    pub fn finish(&self) {
+        if let Some(s) = &self.sources {
+            s.save_checked();
+        }
+    }
+}
