@@ -78,15 +78,17 @@ pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 /// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
-/// Bytes of max-pyramid pages a baked map keeps resident (the page cache's budget), and,
+/// Bytes of max-pyramid and surface error grid pages a baked map keeps resident (the page cache's budget), and,
 /// under a budget of their own of the same size, bytes of decal tiles.
 pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;
 
 /// Bakes what the engine derives from the map in `dir` (`worldgen bake`), so that no open of
 /// the map computes it: the max-pyramids of the region bounds and the ground amplitude grid as
-/// page files under `pages/derived`, the decal field as a tile file there, and the surface error grids and the 32 m nodes' bounds into [`SURFACE_ERROR_CACHE`] (kept
-/// when it already holds them for this map and this engine). Returns whether the error grids
-/// were computed (false: the file was already right).
+/// page files under `pages/derived`, the decal field as a tile file there, and the surface
+/// error grids with the 32 m nodes' bounds as page files there too (kept when they already
+/// hold them for this map and this engine; read from [`SURFACE_ERROR_CACHE`] when it holds
+/// them, which is then removed). Returns whether the error grids were computed (false: they
+/// were already baked or cached).
 pub fn bake_derived(
     map: worldgen::Map,
     dir: &Path,
@@ -101,12 +103,31 @@ pub fn bake_derived(
         .map_err(std::io::Error::other)?;
     let path = dir.join(SURFACE_ERROR_CACHE);
     let key = map_error_cache::surface_key(&world, precomputed::MEASUREMENT_VERSION);
-    if map_error_cache::read(&path, key).is_ok() {
+    let remove_whole_file = || match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    };
+    let probe = std::sync::Arc::new(worldgen::pages::PageCache::new(1 << 20));
+    let faults = std::sync::Arc::default();
+    if engine::surface::map_error::MapErrorPyramid::open_pages(&pages, key, &probe, &faults).is_ok()
+    {
+        remove_whole_file()?;
         return Ok(false);
     }
-    precomputed::compute(&mut world, progress);
-    map_error_cache::write(&path, key, &world.map_error)?;
-    Ok(true)
+    let computed = if let Ok(grids) = map_error_cache::read(&path, key) {
+        world.map_error = grids;
+        false
+    } else {
+        precomputed::compute(&mut world, progress);
+        true
+    };
+    world
+        .map_error
+        .write_pages(&pages, worldgen::pages::DEFAULT_PAGE_SIDE, key)
+        .map_err(std::io::Error::other)?;
+    // The pages hold the grids now; the whole-map file would only double them on disk.
+    remove_whole_file()?;
+    Ok(computed)
 }
 
 fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::Progress) -> World {

@@ -96,9 +96,11 @@ enum Command {
     /// `<map>/pages/`: fixed square pages, each with its own checksum, read through a page
     /// cache; and, when the bake finishes, what the engine derives from the map: the
     /// max-pyramids of its bounds and the ground amplitude grid (`pages/derived/*.pages`), the
-    /// decal field by 256 m tile (`pages/derived/decals.tiles`, read tile by tile at run time)
-    /// and the surface error grids with the 32 m nodes' bounds (`.surface_error.bin`), so that no open
-    /// of the map computes them (half a minute on the 8 km map). A page depends only on its layer and its index, so the bake can be
+    /// decal field by 64 m tile (`pages/derived/decals.tiles`, read tile by tile at run time)
+    /// and the surface error grids with the 32 m nodes' bounds (`pages/derived/surface_error.*`,
+    /// read page by page), so that no open of the map computes them (half a minute on the 8 km
+    /// map); and the decal list in binary with the record of the files the bake read, so that
+    /// an open reads the pages instead of decoding the files. A page depends only on its layer and its index, so the bake can be
     /// split into shares run in any order, on any machines that share the folder
     /// (`--share 0/4` ... `--share 3/4`, then `--finish`); the result is the same bytes.
     /// Without `--share`, `--pages` or `--finish` it bakes every page and finishes. Finishing
@@ -300,7 +302,10 @@ fn bake(
         );
         let t1 = Instant::now();
         let computed = apps::bake_derived(map, dir, bars).with_context(|| {
-            format!("writing {}", dir.join(apps::SURFACE_ERROR_CACHE).display())
+            format!(
+                "writing the derived data of {}",
+                bake::pages_dir(dir).join("derived").display()
+            )
         })?;
         if computed {
             say!(

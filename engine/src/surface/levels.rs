@@ -20,15 +20,20 @@ pub struct PageFaults {
 }
 
 impl PageFaults {
-    /// Records `e` (logged the first time it is seen).
+    /// Records `e` (logged the first time it is seen, with what is done without it).
     pub fn record(&self, e: &PageError) {
+        self.record_as(e, "the bounds that read it are taken as unbounded there");
+    }
+
+    /// [`Self::record`] with the `consequence` the log names.
+    pub fn record_as(&self, e: &PageError, consequence: &str) {
         let text = e.to_string();
         let mut seen = self
             .seen
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         if !seen.contains(&text) {
-            log::error!("{text}; the bounds that read it are taken as unbounded there");
+            log::error!("{text}; {consequence}");
             seen.push(text);
         }
     }
@@ -86,6 +91,23 @@ impl Level {
                     faults.record(&e);
                     f32::INFINITY
                 }),
+        }
+    }
+
+    /// Sample (`x`, `y`); `None` where its page cannot be read (recorded with `consequence`).
+    #[inline]
+    pub(crate) fn try_get(&self, x: usize, y: usize, consequence: &str) -> Option<f32> {
+        match self {
+            Level::Memory(g) => Some(g.get(x, y)),
+            Level::Paged {
+                cache,
+                layer,
+                faults,
+                ..
+            } => cache
+                .sample::<f32>(*layer, x as u32, y as u32)
+                .map_err(|e| faults.record_as(&e, consequence))
+                .ok(),
         }
     }
 
@@ -148,21 +170,32 @@ pub(crate) fn open_levels(
     cache: &Arc<PageCache>,
     faults: &Arc<PageFaults>,
 ) -> Result<Vec<Level>, PageError> {
-    let mut levels = Vec::with_capacity(sizes.len());
-    for (k, &(width, height)) in sizes.iter().enumerate() {
-        let path = level_path(pages_dir, name, k);
-        let file = worldgen::pages::bake::open_derived(&path, SampleKind::F32, width, height, key)?;
-        if file.layout().page_count() == 1 {
-            levels.push(Level::Memory(file.read_all()?));
-        } else {
-            levels.push(Level::Paged {
-                cache: Arc::clone(cache),
-                layer: cache.add(file),
-                width,
-                height,
-                faults: Arc::clone(faults),
-            });
+    sizes
+        .iter()
+        .enumerate()
+        .map(|(k, &size)| open_level(&level_path(pages_dir, name, k), size, key, cache, faults))
+        .collect()
+}
+
+/// Opens one level's page file `path` of `width` x `height` samples baked with `key`: read
+/// into memory when it is one page, else registered with `cache`.
+pub(crate) fn open_level(
+    path: &Path,
+    (width, height): (usize, usize),
+    key: u64,
+    cache: &Arc<PageCache>,
+    faults: &Arc<PageFaults>,
+) -> Result<Level, PageError> {
+    let file = worldgen::pages::bake::open_derived(path, SampleKind::F32, width, height, key)?;
+    Ok(if file.layout().page_count() == 1 {
+        Level::Memory(file.read_all()?)
+    } else {
+        Level::Paged {
+            cache: Arc::clone(cache),
+            layer: cache.add(file),
+            width,
+            height,
+            faults: Arc::clone(faults),
         }
-    }
-    Ok(levels)
+    })
 }

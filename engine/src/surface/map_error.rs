@@ -45,10 +45,14 @@ pub struct MapBlock {
 
 /// Blocks of one grid spacing, row-major from the south-west: `[z_min, z_max, error, finer]`.
 #[derive(Debug, Clone)]
-struct Level {
-    per_row: usize,
-    rows: usize,
-    blocks: Vec<[f32; 4]>,
+pub(super) struct Level {
+    pub(super) per_row: usize,
+    pub(super) rows: usize,
+    /// In memory (empty when `paged`).
+    pub(super) blocks: Vec<[f32; 4]>,
+    /// A baked map's grid read page by page ([`super::map_error_pages`]): per block row, the
+    /// block's four values as four samples.
+    pub(super) paged: Option<super::levels::Level>,
 }
 
 /// The per-block bounds of `F` for the grids of spacing `hs 2^k`, `k >= -1`: grid index
@@ -56,10 +60,10 @@ struct Level {
 /// index `k + 2`).
 #[derive(Debug, Clone, Default)]
 pub struct MapErrorPyramid {
-    origin_m: [f64; 2],
+    pub(super) origin_m: [f64; 2],
     /// The vertex spacing of grid 0 (`hs / 2`).
-    spacing_m: f64,
-    levels: Vec<Level>,
+    pub(super) spacing_m: f64,
+    pub(super) levels: Vec<Level>,
 }
 
 /// Per band of `BLOCK_QUADS` height-cell rows, the band's partial block values
@@ -125,6 +129,7 @@ impl MapErrorPyramid {
                 per_row,
                 rows,
                 blocks,
+                paged: None,
             }
         };
         let coarse = (0..k_count).map(|k| {
@@ -148,6 +153,7 @@ impl MapErrorPyramid {
                 per_row,
                 rows,
                 blocks: acc.iter().map(|a| round_outwards(*a)).collect(),
+                paged: None,
             }
         });
         let mut p = Self {
@@ -178,6 +184,7 @@ impl MapErrorPyramid {
                 per_row,
                 rows,
                 blocks: blocks.iter().map(|b| round_outwards(*b)).collect(),
+                paged: None,
             },
         );
     }
@@ -188,9 +195,13 @@ impl MapErrorPyramid {
         self.spacing_m
     }
 
-    /// Heap bytes of the blocks.
+    /// Heap bytes of the blocks in memory (a paged grid's resident pages are the page
+    /// cache's).
     pub fn bytes(&self) -> usize {
-        self.levels.iter().map(|l| l.blocks.len() * 16).sum()
+        self.levels
+            .iter()
+            .map(|l| l.blocks.len() * 16 + l.paged.as_ref().map_or(0, super::levels::Level::bytes))
+            .sum()
     }
 
     /// The pyramid as bytes (little-endian; see [`super::map_error_cache`]).
@@ -241,6 +252,7 @@ impl MapErrorPyramid {
                 per_row,
                 rows,
                 blocks,
+                paged: None,
             });
         }
         (levels.len() == count && at == bytes.len()).then_some(Self {
@@ -279,7 +291,16 @@ impl MapErrorPyramid {
         if bx >= level.per_row || by >= level.rows {
             return None;
         }
-        let v = level.blocks[by * level.per_row + bx];
+        let v = match &level.paged {
+            None => level.blocks[by * level.per_row + bx],
+            Some(paged) => {
+                let mut v = [0.0f32; 4];
+                for (i, x) in v.iter_mut().enumerate() {
+                    *x = paged.try_get(4 * bx + i, by, super::map_error_pages::FAULT)?;
+                }
+                v
+            }
+        };
         Some(MapBlock {
             z_min_m: f64::from(v[0]),
             z_max_m: f64::from(v[1]),

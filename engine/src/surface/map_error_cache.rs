@@ -133,6 +133,25 @@ impl World {
         let t0 = std::time::Instant::now();
         let key = surface_key(&world, method);
         let t1 = std::time::Instant::now();
+        if let (Some(dir), Some(cache)) = (&world.pages_dir, &world.page_cache) {
+            let faults = &world.page_faults;
+            match MapErrorPyramid::open_pages(dir, key, cache, faults) {
+                Ok(p) => {
+                    log::info!(
+                        "surface error grids: key {:.2} s, {} paged grids opened in {:.2} s",
+                        (t1 - t0).as_secs_f64(),
+                        p.level_count(),
+                        t1.elapsed().as_secs_f64()
+                    );
+                    world.map_error = p;
+                    return world;
+                }
+                Err(e) => log::warn!(
+                    "{e}; the surface error grids are read from {} or computed",
+                    cache_file.display()
+                ),
+            }
+        }
         match read(cache_file, key) {
             Ok(p) => {
                 world.map_error = p;

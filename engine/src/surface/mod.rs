@@ -20,6 +20,7 @@ pub mod height_max;
 pub mod levels;
 pub mod map_error;
 pub mod map_error_cache;
+pub mod map_error_pages;
 mod max_pyramid;
 mod pyramids;
 pub mod spline;

@@ -39,8 +39,11 @@ pub struct World {
     detail_seed: u64,
     /// The per-cell max-pyramids of the region bounds (computed, or paged from a bake).
     pyramids: Pyramids,
-    /// The page cache of the paged pyramid levels (a baked map), and the page faults met.
+    /// The page cache of a baked map's paged pyramid levels and surface error grids, and the
+    /// page faults met.
     pub page_cache: Option<Arc<PageCache>>,
+    /// A baked map's `pages` folder.
+    pub pages_dir: Option<std::path::PathBuf>,
     pub page_faults: Arc<PageFaults>,
     /// Decal shaping E.
     pub decals: DecalField,
@@ -149,7 +152,10 @@ impl World {
                 "slope, curvature, amplitude and height max-pyramids",
                 pyramids,
             ),
-            ("max-pyramid pages resident", resident_pages),
+            (
+                "max-pyramid and surface error grid pages resident",
+                resident_pages,
+            ),
             (
                 "decal field (a baked map's: index and resident tiles)",
                 self.decals.heap_bytes(),
@@ -262,16 +268,16 @@ impl World {
             map.manifest.ground.spacing_m,
         );
         keys.pyramids = Pyramids::key(heights_key, hs, keys.amplitude, gs);
-        let mut page_cache = None;
-        let paged = pages.and_then(|(dir, budget_bytes)| {
-            let cache = Arc::new(PageCache::new(budget_bytes));
-            let heights = [map.heights.width(), map.heights.height()];
-            let ground = [amplitude_m.width(), amplitude_m.height()];
-            let opened = Pyramids::open(dir, heights, ground, keys.pyramids, &cache, &page_faults);
-            let p = baked("max-pyramids", opened)?;
-            page_cache = Some(cache);
-            Some(p)
-        });
+        let page_cache = pages.map(|(_, budget_bytes)| Arc::new(PageCache::new(budget_bytes)));
+        let paged = pages
+            .zip(page_cache.as_ref())
+            .and_then(|((dir, _), cache)| {
+                let heights = [map.heights.width(), map.heights.height()];
+                let ground = [amplitude_m.width(), amplitude_m.height()];
+                let opened =
+                    Pyramids::open(dir, heights, ground, keys.pyramids, cache, &page_faults);
+                baked("max-pyramids", opened)
+            });
         let (pyramids, heights_max) =
             paged.unwrap_or_else(|| Pyramids::compute(&map.heights, hs, &amplitude_m, gs));
         log::info!(
@@ -286,6 +292,7 @@ impl World {
             detail_seed,
             pyramids,
             page_cache,
+            pages_dir: pages.map(|(dir, _)| dir.to_path_buf()),
             page_faults,
             decals,
             keys,

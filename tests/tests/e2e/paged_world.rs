@@ -118,7 +118,12 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     bytes[64 + 40] ^= 0x40;
     std::fs::write(&file, &bytes).unwrap();
     let paged = World::paged_without_error_grids(map.clone(), &pages, 1 << 20);
-    assert!(paged.page_cache.is_some());
+    assert!(
+        paged
+            .page_cache
+            .as_ref()
+            .is_some_and(|c| c.file_count() > 0)
+    );
     let cell = |x: f64, y: f64| Rect {
         min: [x, y],
         max: [x + 1.0, y + 1.0],
@@ -149,7 +154,8 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     let v = other.heights.get(20, 20);
     other.heights.set(20, 20, v + 5.0);
     let reopened = World::paged_without_error_grids(other.clone(), &pages, 1 << 20);
-    assert!(reopened.page_cache.is_none(), "stale pages were used");
+    let registered = reopened.page_cache.as_ref().map_or(0, |c| c.file_count());
+    assert_eq!(registered, 0, "stale pages were used");
     let fresh = World::without_error_grids(other);
     let r = cell(80.0, 80.0);
     assert_eq!(fresh.cell_region_bounds(r), reopened.cell_region_bounds(r));
@@ -237,4 +243,110 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
         "a fault names no file and page: {seen:?}"
     );
     assert!(cache.stats().failures > 0);
+}
+
+/// A baked map's surface error grids read page by page give every node of every level the
+/// bounds of the grids computed at open, bit for bit, under a budget of a few pages; a damaged
+/// page makes only the nodes over it measure their bounds on the surface (true bounds: they
+/// contain the stored ones' measurement), and is reported with its file and page.
+#[test]
+fn paged_surface_error_grids_give_the_same_node_bounds_and_a_damaged_page_is_measured() {
+    use engine::terrain::bounds::{from_map_error, measure};
+    use engine::terrain::precomputed;
+    let map = tests::generated(&tests::patches_map_params());
+    let tmp = tempfile::tempdir().unwrap();
+    let pages = tmp.path().join("pages");
+    let whole = precomputed::open(map.clone(), None, &worldgen::progress::Silent);
+    whole.write_derived_pages(&pages, 64).unwrap();
+    let key =
+        engine::surface::map_error_cache::surface_key(&whole, precomputed::MEASUREMENT_VERSION);
+    whole.map_error.write_pages(&pages, 64, key).unwrap();
+    let open = |budget: usize| {
+        let w = World::paged_without_error_grids(map.clone(), &pages, budget);
+        // No whole-map file: the grids can only come from the pages (or be computed).
+        precomputed::open_world(
+            w,
+            Some(&tmp.path().join("none.bin")),
+            &worldgen::progress::Silent,
+        )
+    };
+    // Eight pages of 64 x 64 f32 against 7 MiB of pyramids and the grids.
+    let paged = open(8 * 64 * 64 * 4);
+    assert!(
+        paged.map_error.bytes() * 20 < whole.map_error.bytes(),
+        "only grids of one page are held in memory: {} of {} bytes",
+        paged.map_error.bytes(),
+        whole.map_error.bytes()
+    );
+    assert_eq!(paged.map_error.level_count(), whole.map_error.level_count());
+    let tree = tree_of(&whole);
+    let mut stored = 0;
+    for level in 0..=tree.max_level {
+        let n = 1u32 << level;
+        for iy in 0..n {
+            for ix in 0..n {
+                let key = NodeKey { level, ix, iy };
+                let (a, b) = (
+                    from_map_error(&whole, &tree, key),
+                    from_map_error(&paged, &tree, key),
+                );
+                assert_eq!(a, b, "{key:?}");
+                stored += usize::from(a.is_some());
+            }
+        }
+    }
+    assert!(
+        stored > 300,
+        "{stored} nodes take their bounds from the grids"
+    );
+    assert!(
+        paged.page_cache.as_ref().unwrap().stats().evictions > 0,
+        "the budget was exceeded"
+    );
+    assert!(
+        !tmp.path().join("none.bin").exists(),
+        "nothing was computed"
+    );
+
+    // Flip a byte of page (0, 0) of the finest grid: the nodes over it are measured.
+    let file = engine::surface::levels::level_path(&pages, "surface_error", 0);
+    let mut bytes = std::fs::read(&file).unwrap();
+    bytes[64 + 8] ^= 0x10;
+    std::fs::write(&file, &bytes).unwrap();
+    let damaged = open(1 << 20);
+    let level = (0..=tree.max_level)
+        .find(|&l| whole.map_error.level_of_spacing(tree.spacing_m(l)) == Some(0))
+        .expect("a level on the finest grid");
+    let corner = NodeKey {
+        level,
+        ix: 0,
+        iy: 0,
+    };
+    assert!(from_map_error(&whole, &tree, corner).is_some());
+    assert!(
+        from_map_error(&damaged, &tree, corner).is_none(),
+        "a damaged block was served"
+    );
+    let measured = measure(&damaged, &tree, corner);
+    let true_bounds = engine::terrain::bounds::measure_surface(&whole, &tree, corner, false).0;
+    assert_eq!(
+        measured, true_bounds,
+        "the damaged node is measured on the surface"
+    );
+    let far = NodeKey {
+        level,
+        ix: (1 << level) - 1,
+        iy: (1 << level) - 1,
+    };
+    assert_eq!(
+        from_map_error(&whole, &tree, far),
+        from_map_error(&damaged, &tree, far)
+    );
+    let faults = damaged.page_faults.list();
+    assert!(
+        faults
+            .iter()
+            .any(|f| f.contains("surface_error.0.pages") && f.contains("page (0, 0)")),
+        "{faults:?}"
+    );
 }

@@ -157,6 +157,11 @@ impl PageCache {
         Arc::clone(&lock(&self.files)[layer.0 as usize])
     }
 
+    /// How many files are registered.
+    pub fn file_count(&self) -> usize {
+        lock(&self.files).len()
+    }
+
     pub fn stats(&self) -> PageStats {
         lock(&self.state).stats
     }
