@@ -152,7 +152,8 @@ fn bake(worldgen: &Path, map: &Path, km: &str, p: &str, r: &mut Report) -> Resul
         "s",
         p,
     );
-    let derived = "max-pyramids, surface error grids and 32 m node bounds";
+    let derived =
+        "max-pyramids, ground amplitude, decal tiles, surface error grids and 32 m node bounds";
     if let Some(v) = number_after(&out, &format!("{derived}: baked (")) {
         r.add("worlds", &name(derived), v, "s", p);
     }
@@ -225,6 +226,24 @@ fn fly_once(
             "MiB",
             &fp,
         );
+    }
+    // The world's parts held whole, without the pages and tiles resident in its caches,
+    // which are reported at their peak under their budgets.
+    if let Some(parts) = stats["world_memory_mib"].as_object() {
+        let whole: f64 = parts
+            .iter()
+            .filter(|(what, _)| !what.contains("resident"))
+            .filter_map(|(_, v)| v.as_f64())
+            .sum();
+        let name = format!("flyover {km}, {open}: world held whole in memory");
+        r.add("worlds", &name, whole, "MiB", &fp);
+    }
+    let caches = ["page_cache", "decal_tiles"].map(|c| stats[c]["peak_resident_mib"].as_f64());
+    if caches.iter().any(Option::is_some) {
+        let name = format!(
+            "flyover {km}, {open}: page and decal tile caches resident at their peaks (128 MiB budget each)"
+        );
+        r.add("worlds", &name, caches.iter().flatten().sum(), "MiB", &fp);
     }
     let mut sel: Vec<f64> = stats["frames"]
         .as_array()
