@@ -6,6 +6,37 @@
 
 use crate::Grid;
 
+/// A raster of f32 samples the bilinear interpolators read: a [`Grid`], or storage of a
+/// caller's own that answers sample by sample.
+pub trait Samples {
+    fn width(&self) -> usize;
+    fn height(&self) -> usize;
+    /// Sample (`x`, `y`), both in range.
+    fn at(&self, x: usize, y: usize) -> f32;
+    /// Sample (`x`, `y`) clamped into the raster.
+    #[inline]
+    fn at_clamped(&self, x: i64, y: i64) -> f32 {
+        let xc = x.clamp(0, self.width() as i64 - 1) as usize;
+        let yc = y.clamp(0, self.height() as i64 - 1) as usize;
+        self.at(xc, yc)
+    }
+}
+
+impl Samples for Grid<f32> {
+    #[inline]
+    fn width(&self) -> usize {
+        Grid::width(self)
+    }
+    #[inline]
+    fn height(&self) -> usize {
+        Grid::height(self)
+    }
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> f32 {
+        self.data()[y * Grid::width(self) + x]
+    }
+}
+
 /// Where a grid lies in the world.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridPlacement {
@@ -58,7 +89,7 @@ pub fn floor_small(x: f64) -> f64 {
 }
 
 /// Bilinear interpolation (C0) at a world position.
-pub fn bilinear(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
+pub fn bilinear<S: Samples + ?Sized>(grid: &S, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     let (gx, gy) = at.grid_coords(grid.width(), grid.height(), x_m, y_m);
     let (x0, y0) = (floor_small(gx), floor_small(gy));
     let (fx, fy) = (gx - x0, gy - y0);
@@ -66,19 +97,18 @@ pub fn bilinear(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 
     let (w, h) = (grid.width() as i64, grid.height() as i64);
     if ix + 1 < w && iy + 1 < h {
         // Interior (grid_coords already clamped below at 0): no index clamping needed.
-        let i = (iy * w + ix) as usize;
-        let d = grid.data();
+        let (x, y) = (ix as usize, iy as usize);
         let (s00, s10, s01, s11) = (
-            f64::from(d[i]),
-            f64::from(d[i + 1]),
-            f64::from(d[i + w as usize]),
-            f64::from(d[i + w as usize + 1]),
+            f64::from(grid.at(x, y)),
+            f64::from(grid.at(x + 1, y)),
+            f64::from(grid.at(x, y + 1)),
+            f64::from(grid.at(x + 1, y + 1)),
         );
         let a = s00 + fx * (s10 - s00);
         let b = s01 + fx * (s11 - s01);
         return a + fy * (b - a);
     }
-    let s = |dx: i64, dy: i64| f64::from(grid.get_clamped(ix + dx, iy + dy));
+    let s = |dx: i64, dy: i64| f64::from(grid.at_clamped(ix + dx, iy + dy));
     let a = s(0, 0) + fx * (s(1, 0) - s(0, 0));
     let b = s(0, 1) + fx * (s(1, 1) - s(0, 1));
     a + fy * (b - a)
@@ -164,7 +194,12 @@ pub fn stencil_indices(starts: &[i64], len: i64) -> (Vec<i64>, Vec<usize>) {
 /// [`bilinear`] at every point of the lattice `xs` x `ys` (row-major, one row per `ys` entry),
 /// equal to it point by point: each grid row the lattice touches is interpolated along x once
 /// per column, then each point blends two such values (the same operations in the same order).
-pub fn bilinear_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+pub fn bilinear_lattice<S: Samples + ?Sized>(
+    grid: &S,
+    at: GridPlacement,
+    xs: &[f64],
+    ys: &[f64],
+) -> Vec<f64> {
     let cols = at.axis_cells(0, grid.width(), xs);
     let rows = at.axis_cells(1, grid.height(), ys);
     let starts: Vec<i64> = rows.iter().map(|r| r.0).collect();
@@ -174,8 +209,8 @@ pub fn bilinear_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f
     for &gy in &grid_rows {
         along_x.extend(cols.iter().map(|&(ix, fx)| {
             let (s0, s1) = (
-                f64::from(grid.get_clamped(ix, gy)),
-                f64::from(grid.get_clamped(ix + 1, gy)),
+                f64::from(grid.at_clamped(ix, gy)),
+                f64::from(grid.at_clamped(ix + 1, gy)),
             );
             s0 + fx * (s1 - s0)
         }));

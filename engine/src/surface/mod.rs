@@ -12,6 +12,7 @@
 //! - [`map_error`]: the map part's interpolation error per block of the coarse grids, computed
 //!   once at load; [`map_error_cache`] keeps it in a file between runs.
 
+pub mod amplitude;
 pub mod decal_bake;
 mod decal_build;
 mod decal_tiles;

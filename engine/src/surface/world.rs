@@ -8,6 +8,7 @@
 //! Detail is evaluated in map-local coordinates, so the same map placed at another origin gives
 //! the same surface.
 
+use super::amplitude::{self, Amplitude, NearRoads};
 use super::levels::PageFaults;
 use super::max_pyramid::MaxPyramid;
 use super::pyramids::Pyramids;
@@ -34,8 +35,10 @@ pub const GRADIENT_NOISE_HESSIAN: f64 = 18.0;
 #[derive(Debug, Clone)]
 pub struct World {
     pub map: Map,
-    /// Detail amplitude (m) at each ground sample, from the legend.
-    amplitude_m: worldgen::Grid<f32>,
+    /// The legend's detail amplitude (m) per ground type, and the ground samples near roads
+    /// whose amplitude is scaled down ([`super::amplitude`]).
+    legend_amplitude_m: Vec<f32>,
+    near_roads: NearRoads,
     detail_seed: u64,
     /// The per-cell max-pyramids of the region bounds (computed, or paged from a bake).
     pyramids: Pyramids,
@@ -65,11 +68,6 @@ struct DerivedKeys {
     decals: u64,
     amplitude: u64,
     pyramids: u64,
-}
-
-/// The page file of the baked ground amplitude grid in a map's `pages` folder.
-pub fn amplitude_path(pages_dir: &Path) -> std::path::PathBuf {
-    pages_dir.join("derived").join("amplitude.pages")
 }
 
 /// How far the finest surface can stray from its linear interpolation over a small region,
@@ -145,8 +143,8 @@ impl World {
         vec![
             ("map layers (heights, ground, densities)", layers),
             (
-                "ground amplitude grid",
-                grid(self.amplitude_m.width(), self.amplitude_m.height(), 4),
+                "ground amplitude near roads (elsewhere the ground types')",
+                self.near_roads.bytes(),
             ),
             (
                 "slope, curvature, amplitude and height max-pyramids",
@@ -210,17 +208,13 @@ impl World {
     }
 
     /// Writes what this world derives from its map under `pages_dir/derived` (`worldgen
-    /// bake`): the max-pyramids and the ground amplitude grid as page files of `page_side`, the
-    /// decal field as a tile file.
+    /// bake`): the max-pyramids as page files of `page_side`, the ground amplitude near roads,
+    /// the decal field as a tile file.
     pub fn write_derived_pages(&self, pages_dir: &Path, page_side: u32) -> Result<(), PageError> {
         self.pyramids
             .write(&self.heights_max, pages_dir, page_side, self.keys.pyramids)?;
-        worldgen::pages::bake::write_grid(
-            &amplitude_path(pages_dir),
-            &self.amplitude_m,
-            page_side,
-            self.keys.amplitude,
-        )?;
+        self.near_roads
+            .write(&amplitude::near_roads_path(pages_dir), self.keys.amplitude)?;
         self.decals
             .write_tiles(&super::decal_bake::tiles_path(pages_dir), self.keys.decals)
     }
@@ -252,15 +246,24 @@ impl World {
                 )
             });
         let t1 = std::time::Instant::now();
-        keys.amplitude = amplitude_key(&map, keys.decals);
-        let amplitude_m = pages
-            .and_then(|(dir, _)| {
-                let (w, h) = (map.ground.width(), map.ground.height());
-                let read =
-                    worldgen::pages::bake::read_grid(&amplitude_path(dir), w, h, keys.amplitude);
-                baked("ground amplitude grid", read)
-            })
-            .unwrap_or_else(|| amplitude_grid(&map, &decals));
+        keys.amplitude = amplitude::key(&map, keys.decals);
+        let legend_amplitude_m = amplitude::legend_m(&map);
+        // The whole amplitude grid, where it had to be computed (kept for the pyramids).
+        let mut whole_amplitude = None;
+        let baked_near = pages.and_then(|(dir, _)| {
+            let (w, h) = (map.ground.width(), map.ground.height());
+            let path = amplitude::near_roads_path(dir);
+            baked(
+                "ground amplitude near roads",
+                NearRoads::read(&path, keys.amplitude, w, h),
+            )
+        });
+        let near_roads = baked_near.unwrap_or_else(|| {
+            let grid = amplitude::grid(&map, &decals);
+            let near = NearRoads::new(&grid, &map.ground, &legend_amplitude_m);
+            whole_amplitude = Some(grid);
+            near
+        });
         let t2 = std::time::Instant::now();
         let detail_seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0) ^ 0xDE7A_11ED;
         let (hs, gs) = (
@@ -273,22 +276,27 @@ impl World {
             .zip(page_cache.as_ref())
             .and_then(|((dir, _), cache)| {
                 let heights = [map.heights.width(), map.heights.height()];
-                let ground = [amplitude_m.width(), amplitude_m.height()];
+                let ground = [map.ground.width(), map.ground.height()];
                 let opened =
                     Pyramids::open(dir, heights, ground, keys.pyramids, cache, &page_faults);
                 baked("max-pyramids", opened)
             });
-        let (pyramids, heights_max) =
-            paged.unwrap_or_else(|| Pyramids::compute(&map.heights, hs, &amplitude_m, gs));
+        let (pyramids, heights_max) = paged.unwrap_or_else(|| {
+            let grid = whole_amplitude
+                .take()
+                .unwrap_or_else(|| amplitude::grid(&map, &decals));
+            Pyramids::compute(&map.heights, hs, &grid, gs)
+        });
         log::info!(
-            "world opened: decal field {:.2} s, ground amplitude grid {:.2} s, max-pyramids {:.2} s",
+            "world opened: decal field {:.2} s, ground amplitude {:.2} s, max-pyramids {:.2} s",
             (t1 - t0).as_secs_f64(),
             (t2 - t1).as_secs_f64(),
             t2.elapsed().as_secs_f64()
         );
         Self {
             map,
-            amplitude_m,
+            legend_amplitude_m,
+            near_roads,
             detail_seed,
             pyramids,
             page_cache,
@@ -316,7 +324,16 @@ impl World {
             origin_m: self.origin_m(),
             spacing_m: self.map.manifest.ground.spacing_m,
         };
-        worldgen::sample::bilinear(&self.amplitude_m, at, x_m, y_m)
+        worldgen::sample::bilinear(&self.amplitude(), at, x_m, y_m)
+    }
+
+    /// The ground amplitude raster as the interpolators read it.
+    fn amplitude(&self) -> Amplitude<'_> {
+        Amplitude {
+            ground: &self.map.ground,
+            legend_m: &self.legend_amplitude_m,
+            near_roads: &self.near_roads,
+        }
     }
 
     /// Detail noise D in [-1, 1] at a map-local position.
@@ -368,7 +385,7 @@ impl World {
             origin_m: o,
             spacing_m: self.map.manifest.ground.spacing_m,
         };
-        let amplitude = worldgen::sample::bilinear_lattice(&self.amplitude_m, ground, xs, ys);
+        let amplitude = worldgen::sample::bilinear_lattice(&self.amplitude(), ground, xs, ys);
         let g = worldgen::sample::bicubic_lattice(
             &self.map.heights,
             self.map.height_placement(),
@@ -496,73 +513,6 @@ impl World {
 fn baked<T>(what: &str, r: Result<T, PageError>) -> Option<T> {
     r.map_err(|e| log::warn!("{e}: computing the {what} instead"))
         .ok()
-}
-
-/// The key of the ground amplitude grid's inputs: the ground types, the legend's amplitudes,
-/// the decal field's key (roads suppress detail) and the code's version.
-fn amplitude_key(map: &Map, decals_key: u64) -> u64 {
-    let mut k = worldgen::pages::SourceKey::new(0xA3B1_0001);
-    k.update(
-        &worldgen::pages::bake::Raster::U8(&map.ground)
-            .key()
-            .to_le_bytes(),
-    );
-    k.update(&decals_key.to_le_bytes());
-    for t in &map.manifest.ground.legend {
-        k.update(&t.detail_amplitude_m.to_le_bytes());
-    }
-    k.finish()
-}
-
-/// The detail amplitude (m) at each ground sample: the legend's, suppressed on roads.
-fn amplitude_grid(map: &Map, decals: &DecalField) -> worldgen::Grid<f32> {
-    let legend: Vec<f32> = map
-        .manifest
-        .ground
-        .legend
-        .iter()
-        .map(|t| t.detail_amplitude_m)
-        .collect();
-    let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
-    suppress_detail_on_roads(&mut amplitude_m, map, decals);
-    amplitude_m
-}
-
-/// Scales the detail amplitude down to zero at ground samples near roads and paths, so the
-/// flattened surface stays flat: a ground sample within one ground-cell diagonal of a road
-/// lattice sample of weight `w` keeps at most `1 - w` of its amplitude. Then A (bilinear) is zero
-/// everywhere on a road's core and falloff.
-fn suppress_detail_on_roads(amplitude_m: &mut worldgen::Grid<f32>, map: &Map, decals: &DecalField) {
-    let gs = map.manifest.ground.spacing_m;
-    let o = map.manifest.origin_m;
-    let reach = gs * std::f64::consts::SQRT_2;
-    let (w, h) = (amplitude_m.width() as i64, amplitude_m.height() as i64);
-    let mut keep = worldgen::Grid::new(amplitude_m.width(), amplitude_m.height(), 1.0f32);
-    for (p, weight) in decals.road_samples() {
-        let (gx, gy) = ((p[0] - o[0]) / gs, (p[1] - o[1]) / gs);
-        let (x0, x1) = (
-            (gx - reach / gs).floor() as i64,
-            (gx + reach / gs).ceil() as i64,
-        );
-        let (y0, y1) = (
-            (gy - reach / gs).floor() as i64,
-            (gy + reach / gs).ceil() as i64,
-        );
-        for y in y0.max(0)..=y1.min(h - 1) {
-            for x in x0.max(0)..=x1.min(w - 1) {
-                let d = (x as f64 - gx).hypot(y as f64 - gy) * gs;
-                if d <= reach {
-                    let k = keep.get(x as usize, y as usize).min((1.0 - weight) as f32);
-                    keep.set(x as usize, y as usize, k);
-                }
-            }
-        }
-    }
-    for y in 0..amplitude_m.height() {
-        for x in 0..amplitude_m.width() {
-            amplitude_m.set(x, y, amplitude_m.get(x, y) * keep.get(x, y));
-        }
-    }
 }
 
 #[cfg(test)]
