@@ -94,18 +94,28 @@ impl Level {
         }
     }
 
-    /// Sample (`x`, `y`); `None` where its page cannot be read (recorded with `consequence`).
-    #[inline]
-    pub(crate) fn try_get(&self, x: usize, y: usize, consequence: &str) -> Option<f32> {
+    /// The `width` x `height` samples from (`x`, `y`), row-major, in one read of the cache;
+    /// `None` where a page cannot be read (recorded with `consequence`).
+    pub(crate) fn try_region(
+        &self,
+        [x, y]: [usize; 2],
+        [width, height]: [usize; 2],
+        consequence: &str,
+    ) -> Option<Vec<f32>> {
         match self {
-            Level::Memory(g) => Some(g.get(x, y)),
+            Level::Memory(g) => Some(
+                (y..y + height)
+                    .flat_map(|row| (x..x + width).map(move |col| g.get(col, row)))
+                    .collect(),
+            ),
             Level::Paged {
                 cache,
                 layer,
                 faults,
                 ..
             } => cache
-                .sample::<f32>(*layer, x as u32, y as u32)
+                .region::<f32>(*layer, x as u32, y as u32, width as u32, height as u32)
+                .map(|g| g.data().to_vec())
                 .map_err(|e| faults.record_as(&e, consequence))
                 .ok(),
         }

@@ -278,8 +278,15 @@ impl MapErrorPyramid {
     }
 
     /// The block of grid `k` whose south-west corner is at world `min_m`, if it is a whole block
-    /// of the map.
+    /// of the map (and, on a baked map, its page can be read).
     pub fn block_at(&self, k: usize, min_m: [f64; 2]) -> Option<MapBlock> {
+        self.blocks_at(k, min_m, 1).map(|b| b[0])
+    }
+
+    /// The `n` x `n` blocks of grid `k` from the one whose south-west corner is at world
+    /// `min_m`, row-major from the south-west (a node's blocks, read at once): `None` unless all
+    /// are whole blocks of the map (and, on a baked map, their pages can be read).
+    pub fn blocks_at(&self, k: usize, min_m: [f64; 2], n: usize) -> Option<Vec<MapBlock>> {
         let level = self.levels.get(k)?;
         let side = self.spacing_of_level_m(k) * BLOCK_QUADS as f64;
         let whole = |v: f64| {
@@ -288,25 +295,28 @@ impl MapErrorPyramid {
         };
         let bx = whole((min_m[0] - self.origin_m[0]) / side)?;
         let by = whole((min_m[1] - self.origin_m[1]) / side)?;
-        if bx >= level.per_row || by >= level.rows {
+        if n == 0 || bx + n > level.per_row || by + n > level.rows {
             return None;
         }
-        let v = match &level.paged {
-            None => level.blocks[by * level.per_row + bx],
-            Some(paged) => {
-                let mut v = [0.0f32; 4];
-                for (i, x) in v.iter_mut().enumerate() {
-                    *x = paged.try_get(4 * bx + i, by, super::map_error_pages::FAULT)?;
-                }
-                v
-            }
-        };
-        Some(MapBlock {
+        let block = |v: &[f32]| MapBlock {
             z_min_m: f64::from(v[0]),
             z_max_m: f64::from(v[1]),
             error_m: f64::from(v[2]),
             finer_error_m: f64::from(v[3]),
-        })
+        };
+        match &level.paged {
+            None => Some(
+                (by..by + n)
+                    .flat_map(|y| (bx..bx + n).map(move |x| (x, y)))
+                    .map(|(x, y)| block(&level.blocks[y * level.per_row + x]))
+                    .collect(),
+            ),
+            Some(paged) => {
+                let fault = super::map_error_pages::FAULT;
+                let samples = paged.try_region([4 * bx, by], [4 * n, n], fault)?;
+                Some(samples.chunks_exact(4).map(block).collect())
+            }
+        }
     }
 
     /// A block's finer-grid bound also covers the grids of its four quarter blocks (one level

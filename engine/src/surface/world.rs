@@ -215,6 +215,13 @@ impl World {
             .write(&self.heights_max, pages_dir, page_side, self.keys.pyramids)?;
         self.near_roads
             .write(&amplitude::near_roads_path(pages_dir), self.keys.amplitude)?;
+        // An older bake's whole amplitude grid, no longer read.
+        let old_grid = pages_dir.join("derived").join("amplitude.pages");
+        if let Err(e) = std::fs::remove_file(&old_grid)
+            && e.kind() != std::io::ErrorKind::NotFound
+        {
+            log::warn!("{}: not removed: {e}", old_grid.display());
+        }
         self.decals
             .write_tiles(&super::decal_bake::tiles_path(pages_dir), self.keys.decals)
     }

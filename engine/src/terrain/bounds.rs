@@ -203,9 +203,12 @@ pub fn from_map_error(world: &World, tree: &QuadTree, key: NodeKey) -> Option<No
     let k = world
         .map_error
         .level_of_spacing(tree.spacing_m(key.level))?;
+    let stored_blocks =
+        world
+            .map_error
+            .blocks_at(k, block_rect(tree, key, 0).min, BLOCKS_PER_SIDE)?;
     let mut blocks = [BlockMeasure::EMPTY; BLOCKS];
-    for (i, b) in blocks.iter_mut().enumerate() {
-        let stored = world.map_error.block_at(k, block_rect(tree, key, i).min)?;
+    for (b, stored) in blocks.iter_mut().zip(stored_blocks) {
         *b = BlockMeasure {
             lo: stored.z_min_m,
             hi: stored.z_max_m,
