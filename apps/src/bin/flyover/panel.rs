@@ -229,3 +229,36 @@ fn object_controls(ui: &mut egui::Ui, view: &mut ViewOptions) {
     ui.add(egui::Slider::new(&mut view.pm_lod.z_disp_m, 0.0..=500.0).text("object ZDISP (m)"));
     ui.add(egui::Slider::new(&mut view.pm_lod.morph_s, 0.0..=2.0).text("object geomorph (s)"));
 }
+
+/// A baked map's pages and decal tiles as the panel shows them: what the caches read and hold,
+/// and every page or tile that could not be read (its nodes are served without it), by file and
+/// page. Empty for a map without pages.
+pub(crate) fn map_pages(world: &engine::surface::World) -> String {
+    let mib = |b: usize| b as f64 / 1_048_576.0;
+    let mut lines = Vec::new();
+    if let Some(c) = &world.page_cache {
+        let s = c.stats();
+        lines.push(format!(
+            "map pages: {} read, {:.0} of {:.0} MiB resident",
+            s.page_ins,
+            mib(s.resident_bytes),
+            mib(c.budget_bytes())
+        ));
+    }
+    if let Some(t) = world.decals.tile_stats() {
+        lines.push(format!(
+            "decal tiles: {} read, {:.0} MiB resident",
+            t.tile_ins,
+            mib(t.resident_bytes)
+        ));
+    }
+    let faults = world.page_faults.list();
+    if !faults.is_empty() {
+        lines.push(format!(
+            "{} map pages or tiles cannot be read (their nodes are served without them):",
+            faults.len()
+        ));
+        lines.extend(faults.iter().take(4).cloned());
+    }
+    lines.join("\n")
+}

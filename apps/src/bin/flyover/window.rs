@@ -503,6 +503,12 @@ fn redraw(st: &mut State, cli: &Cli, path: Option<&CameraPath>) -> Result<()> {
             ""
         }
     );
+    let pages = crate::panel::map_pages(&st.viewer.streamer.shared.world);
+    let extra = if pages.is_empty() {
+        extra
+    } else {
+        format!("{extra}\n{pages}")
+    };
     let mut output: Option<egui::FullOutput> = None;
     let passes = if st.viewer.streamer.stats.completed == 0 {
         2
