@@ -24,7 +24,7 @@ pub fn near_roads_path(pages_dir: &Path) -> PathBuf {
 }
 
 /// The ground samples whose amplitude is not their type's (near roads), by block of
-/// [`BLOCK`] x [`BLOCK`] samples: block `b`'s samples are `local[offsets[b]..offsets[b + 1]]`
+/// 64 x 64 samples: block `b`'s samples are `local[offsets[b]..offsets[b + 1]]`
 /// (the index inside the block, ascending) with their amplitudes in `value`.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct NearRoads {
