@@ -10,7 +10,7 @@
 
 use crate::surface::decals::DecalField;
 use std::path::{Path, PathBuf};
-use worldgen::pages::{PageError, SourceKey};
+use worldgen::pages::{PageError, SourceKey, checked_file};
 use worldgen::{Grid, Map};
 
 /// Samples per side of a block of [`NearRoads`].
@@ -114,53 +114,26 @@ impl NearRoads {
         out
     }
 
-    /// Writes the file `path` for `key` (magic, version, key, a checksum of the payload, the
-    /// payload: width, height and count as u32, the block offsets, the local indices, the
-    /// values), through a hidden partial file renamed into place.
+    /// Writes the file `path` for `key` ([`worldgen::pages::checked_file`]; payload: width,
+    /// height and count as u32, the block offsets, the local indices, the values).
     pub fn write(&self, path: &Path, key: u64) -> Result<(), PageError> {
-        let payload = self.payload();
-        let mut bytes = Vec::with_capacity(payload.len() + 28);
-        bytes.extend_from_slice(MAGIC);
-        bytes.extend_from_slice(&VERSION.to_le_bytes());
-        bytes.extend_from_slice(&key.to_le_bytes());
-        bytes.extend_from_slice(&checksum(&payload).to_le_bytes());
-        bytes.extend_from_slice(&payload);
-        let partial = worldgen::pages::fresh_partial_path(path)?;
-        let io = |action, source| PageError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        };
-        std::fs::write(&partial, &bytes).map_err(|e| io("write", e))?;
-        std::fs::rename(&partial, path).map_err(|e| io("move into place", e))
+        checked_file::write(path, MAGIC, VERSION, key, &self.payload())
     }
 
     /// Reads the file `path`, refused (naming the file) unless it is whole, was written for
     /// `key` and holds a `width` x `height` raster.
     pub fn read(path: &Path, key: u64, width: usize, height: usize) -> Result<Self, PageError> {
+        let what = "the ground amplitude near roads";
+        let payload = checked_file::read(path, MAGIC, VERSION, key, what)?;
+        let payload = payload.as_slice();
         let bad = |problem: &str| PageError::Header {
             path: path.to_path_buf(),
             problem: problem.into(),
         };
-        let bytes = std::fs::read(path).map_err(|source| PageError::Io {
-            path: path.to_path_buf(),
-            action: "read",
-            source,
-        })?;
-        if bytes.len() < 40 || &bytes[..8] != MAGIC {
-            return Err(bad("not a file of the ground amplitude near roads"));
+        if payload.len() < 12 {
+            return Err(bad("cut short"));
         }
         let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().expect("4"));
-        let u64_at = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().expect("8"));
-        if u32_at(&bytes, 8) != VERSION || u64_at(&bytes, 12) != key {
-            return Err(bad(
-                "baked from another map or another engine; bake the map again",
-            ));
-        }
-        let payload = &bytes[28..];
-        if u64_at(&bytes, 20) != checksum(payload) {
-            return Err(bad("does not match its checksum (damaged or truncated)"));
-        }
         let (w, h, n) = (
             u32_at(payload, 0) as usize,
             u32_at(payload, 4) as usize,
@@ -207,12 +180,6 @@ impl NearRoads {
             value,
         })
     }
-}
-
-fn checksum(bytes: &[u8]) -> u64 {
-    let mut k = SourceKey::new(0xA3B1_7000);
-    k.update(bytes);
-    k.finish()
 }
 
 /// The amplitude raster as the interpolators read it: a sample's type's amplitude unless it is

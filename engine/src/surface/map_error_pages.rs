@@ -4,10 +4,9 @@
 //! `worldgen bake` writes each grid `k` as `pages/derived/surface_error.<k>.pages`: one row of
 //! samples per row of blocks, each block's `[z_min, z_max, error, finer error]` as four f32
 //! samples, keyed by the surface's key ([`super::map_error_cache::surface_key`]); and
-//! `pages/derived/surface_error.levels`, the grids' shape. Layout of that file (little-endian):
-//! magic `TVS-SELV`, version u32, key u64, origin (2 f64), grid 0's vertex spacing f64, grid
-//! count u32, per grid its blocks per row and rows (2 u32), then a checksum of every byte before it
-//! (a [`worldgen::pages::SourceKey`], u64).
+//! `pages/derived/surface_error.levels`, the grids' shape: a [`worldgen::pages::checked_file`] of
+//! magic `TVS-SELV` whose payload is (little-endian) the origin (2 f64), grid 0's vertex spacing
+//! f64, the grid count u32 and per grid its blocks per row and rows (2 u32).
 //!
 //! A block whose page cannot be read is not served ([`MapErrorPyramid::block_at`] gives `None`),
 //! so the nodes over it measure their bounds on the surface at run time, as on a map without
@@ -17,7 +16,7 @@ use super::levels::{self, PageFaults};
 use super::map_error::{Level, MapErrorPyramid};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use worldgen::pages::{PageCache, PageError};
+use worldgen::pages::{PageCache, PageError, checked_file};
 
 /// What happens without a page of the grids (for the fault's log line).
 pub(super) const FAULT: &str = "the nodes over it measure their bounds on the surface instead";
@@ -31,21 +30,11 @@ pub fn levels_path(pages_dir: &Path) -> PathBuf {
     pages_dir.join("derived").join(format!("{NAME}.levels"))
 }
 
-fn checksum(bytes: &[u8]) -> u64 {
-    let mut key = worldgen::pages::SourceKey::new(0x5E1E_0000);
-    key.update(bytes);
-    key.finish()
-}
-
 impl MapErrorPyramid {
     /// Writes the grids (all in memory) as page files of `page_side` under `pages_dir/derived`,
     /// keyed by `key`, and their shape file last.
     pub fn write_pages(&self, pages_dir: &Path, page_side: u32, key: u64) -> Result<(), PageError> {
-        let shape = levels_path(pages_dir);
         let mut meta = Vec::new();
-        meta.extend_from_slice(MAGIC);
-        meta.extend_from_slice(&VERSION.to_le_bytes());
-        meta.extend_from_slice(&key.to_le_bytes());
         for v in [self.origin_m[0], self.origin_m[1], self.spacing_m] {
             meta.extend_from_slice(&v.to_le_bytes());
         }
@@ -74,16 +63,7 @@ impl MapErrorPyramid {
                 })?;
             worldgen::pages::bake::write_grid(&path, &grid, page_side, key)?;
         }
-        let check = checksum(&meta);
-        meta.extend_from_slice(&check.to_le_bytes());
-        let partial = worldgen::pages::fresh_partial_path(&shape)?;
-        let io = |action, source| PageError::Io {
-            path: shape.clone(),
-            action,
-            source,
-        };
-        std::fs::write(&partial, &meta).map_err(|e| io("write", e))?;
-        std::fs::rename(&partial, &shape).map_err(|e| io("move into place", e))
+        checked_file::write(&levels_path(pages_dir), MAGIC, VERSION, key, &meta)
     }
 
     /// Opens the grids baked under `pages_dir` for `key`: their shape file read whole, grids
@@ -97,25 +77,12 @@ impl MapErrorPyramid {
         faults: &Arc<PageFaults>,
     ) -> Result<Self, PageError> {
         let shape = levels_path(pages_dir);
-        let bytes = std::fs::read(&shape).map_err(|source| PageError::Io {
-            path: shape.clone(),
-            action: "read",
-            source,
-        })?;
+        let data = checked_file::read(&shape, MAGIC, VERSION, key, "surface error grids' shape")?;
         let bad = |problem: &str| PageError::Header {
             path: shape.clone(),
             problem: problem.into(),
         };
-        if bytes.len() < 52 || &bytes[..8] != MAGIC {
-            return Err(bad("not a shape file of surface error grids"));
-        }
-        let (data, tail) = bytes.split_at(bytes.len() - 8);
-        if checksum(data).to_le_bytes() != tail {
-            return Err(bad(
-                "does not match its checksum (damaged); bake the map again",
-            ));
-        }
-        let mut at = 8;
+        let mut at = 0;
         let mut take = |n: usize| {
             let s = data.get(at..at + n);
             at += n;
@@ -123,14 +90,6 @@ impl MapErrorPyramid {
         };
         let u32_of = |s: &[u8]| u32::from_le_bytes(s.try_into().expect("4 bytes"));
         let f64_of = |s: &[u8]| f64::from_le_bytes(s.try_into().expect("8 bytes"));
-        if u32_of(take(4)?) != VERSION {
-            return Err(bad("of another version; bake the map again"));
-        }
-        if u64::from_le_bytes(take(8)?.try_into().expect("8 bytes")) != key {
-            return Err(bad(
-                "baked from another map or another engine; bake the map again",
-            ));
-        }
         let origin_m = [f64_of(take(8)?), f64_of(take(8)?)];
         let spacing_m = f64_of(take(8)?);
         let count = u32_of(take(4)?) as usize;

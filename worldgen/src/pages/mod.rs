@@ -15,6 +15,7 @@
 
 pub mod bake;
 pub mod cache;
+pub mod checked_file;
 pub mod decal_list;
 pub mod file;
 pub mod sources;
