@@ -50,12 +50,24 @@ pub fn open_world(
         generate("not found")?;
     }
     let t0 = std::time::Instant::now();
-    match worldgen::Map::load(dir) {
+    // A baked map serves its heights page by page through the world's page cache.
+    let load = || {
+        if worldgen::pages::bake::pages_dir(dir)
+            .join("derived")
+            .is_dir()
+        {
+            let paging = worldgen::pages::Paging::new(PAGE_CACHE_BUDGET_BYTES);
+            worldgen::Map::load_paged(dir, &paging)
+        } else {
+            worldgen::Map::load(dir)
+        }
+    };
+    match load() {
         Err(worldgen::MapError::UnknownVersion {
             found, supported, ..
         }) if is_default && found < i64::from(supported) => {
             generate("is from an older map format")?;
-            Ok(world_of(worldgen::Map::load(dir)?, dir, progress))
+            Ok(world_of(load()?, dir, progress))
         }
         r => {
             log::info!(
@@ -78,8 +90,9 @@ pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 /// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
-/// Bytes of max-pyramid and surface error grid pages a baked map keeps resident (the page cache's budget), and,
-/// under a budget of their own of the same size, bytes of decal tiles.
+/// Bytes of height, max-pyramid and surface error grid pages a baked map keeps resident (the
+/// page cache's budget), and, under a budget of their own of the same size, bytes of decal
+/// tiles.
 pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;
 
 /// Bakes what the engine derives from the map in `dir` (`worldgen bake`), so that no open of

@@ -97,6 +97,24 @@ pub fn generated(p: &worldgen::generate::GenerateParams) -> worldgen::Map {
     worldgen::generate::generate(p, &worldgen::progress::Silent, &mut Vec::new()).expect("generate")
 }
 
+/// `map` with its heights served page by page ([`worldgen::map::Heights::Paged`]) from a page
+/// file of `page_side` written as `dir/heights.pages`, through `paging`'s cache.
+pub fn with_paged_heights(
+    mut map: worldgen::Map,
+    dir: &Path,
+    page_side: u32,
+    paging: &worldgen::pages::Paging,
+) -> worldgen::Map {
+    use worldgen::pages::{PageFile, PagedRaster, bake};
+    let path = dir.join("heights.pages");
+    let grid = map.heights.grid().expect("heights in memory");
+    bake::write_grid(&path, grid, page_side, map.heights.key()).expect("write the heights pages");
+    let file = PageFile::open(&path).expect("open the heights pages");
+    let paged = PagedRaster::new(paging, file, 0.0).expect("f32 pages");
+    map.heights = worldgen::map::Heights::Paged(paged);
+    map
+}
+
 /// Copies every file under folder `from` (subfolders included) into a new folder `to`.
 pub fn copy_dir(from: &Path, to: &Path) {
     for rel in files_under(from) {
@@ -212,11 +230,14 @@ pub mod terrain {
                 } else if x >= 40 {
                     z += 100.0;
                 }
-                map.heights.set(x, y, z);
+                let hg = map.heights.grid_mut().expect("heights in memory");
+                hg.set(x, y, z);
             }
         }
-        map.heights.set(20, 90, map.heights.get(20, 90) + 50.0);
-        map.heights.set(100, 100, map.heights.get(100, 100) - 30.0);
+        let hg = map.heights.grid_mut().expect("heights in memory");
+        hg.set(20, 90, hg.get(20, 90) + 50.0);
+        let hg = map.heights.grid_mut().expect("heights in memory");
+        hg.set(100, 100, hg.get(100, 100) - 30.0);
         world_of(map)
     }
 

@@ -345,7 +345,7 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
     let materials = vec![None; manifest.ground.legend.len()];
     Ok(Map {
         manifest,
-        heights: a.heights,
+        heights: a.heights.into(),
         ground: a.ground,
         densities,
         trees,

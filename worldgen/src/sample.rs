@@ -129,23 +129,24 @@ pub fn catmull_rom_weights(t: f64) -> [f64; 4] {
 
 /// Bicubic (Catmull-Rom, C1) interpolation at a world position. It passes through every sample;
 /// it may overshoot between samples by a fraction of the neighbouring differences.
-pub fn bicubic(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
+pub fn bicubic<S: Samples + ?Sized>(grid: &S, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     let (gx, gy) = at.grid_coords(grid.width(), grid.height(), x_m, y_m);
     let (x0, y0) = (floor_small(gx), floor_small(gy));
     let (wx, wy) = (catmull_rom_weights(gx - x0), catmull_rom_weights(gy - y0));
     let (ix, iy) = (x0 as i64, y0 as i64);
     let (w, h) = (grid.width() as i64, grid.height() as i64);
+    if gx == x0 && gy == y0 {
+        // On a sample: the weights are (0, 1, 0, 0) along both axes, so the sum is the sample
+        // itself, which is read alone (a coarse lattice reads no neighbours).
+        return f64::from(grid.at_clamped(ix, iy));
+    }
     if ix >= 1 && iy >= 1 && ix + 2 < w && iy + 2 < h {
         // Interior: the 4x4 stencil needs no clamping.
-        let data = grid.data();
+        let (x, y) = (ix as usize - 1, iy as usize - 1);
         let mut sum = 0.0;
         for (j, wyj) in wy.iter().enumerate() {
-            let row = &data[((iy - 1 + j as i64) * w + ix - 1) as usize..][..4];
-            sum += wyj
-                * (wx[0] * f64::from(row[0])
-                    + wx[1] * f64::from(row[1])
-                    + wx[2] * f64::from(row[2])
-                    + wx[3] * f64::from(row[3]));
+            let s = |i: usize| f64::from(grid.at(x + i, y + j));
+            sum += wyj * (wx[0] * s(0) + wx[1] * s(1) + wx[2] * s(2) + wx[3] * s(3));
         }
         return sum;
     }
@@ -153,7 +154,7 @@ pub fn bicubic(grid: &Grid<f32>, at: GridPlacement, x_m: f64, y_m: f64) -> f64 {
     for (j, wyj) in wy.iter().enumerate() {
         let mut row = 0.0;
         for (i, wxi) in wx.iter().enumerate() {
-            row += wxi * f64::from(grid.get_clamped(ix + i as i64 - 1, iy + j as i64 - 1));
+            row += wxi * f64::from(grid.at_clamped(ix + i as i64 - 1, iy + j as i64 - 1));
         }
         sum += wyj * row;
     }
@@ -226,7 +227,12 @@ pub fn bilinear_lattice<S: Samples + ?Sized>(
 /// [`bicubic`] at every point of the lattice `xs` x `ys` (row-major), equal to it point by
 /// point: each grid row the stencils touch is filtered along x once per column (the column's
 /// weights computed once), then each point sums four such values with its row's weights.
-pub fn bicubic_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f64]) -> Vec<f64> {
+pub fn bicubic_lattice<S: Samples + ?Sized>(
+    grid: &S,
+    at: GridPlacement,
+    xs: &[f64],
+    ys: &[f64],
+) -> Vec<f64> {
     let weights = |cells: Vec<(i64, f64)>| -> Vec<(i64, [f64; 4])> {
         cells
             .into_iter()
@@ -241,12 +247,21 @@ pub fn bicubic_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f6
     let mut along_x = Vec::with_capacity(grid_rows.len() * n);
     for &gy in &grid_rows {
         along_x.extend(cols.iter().map(|(ix, wx)| {
-            let s = |d: i64| f64::from(grid.get_clamped(ix + d - 1, gy));
-            wx[0] * s(0) + wx[1] * s(1) + wx[2] * s(2) + wx[3] * s(3)
+            let s = |d: i64| f64::from(grid.at_clamped(ix + d - 1, gy));
+            // On a sample column the weights are (0, 1, 0, 0): the sample alone.
+            if *wx == ON_SAMPLE {
+                s(1)
+            } else {
+                wx[0] * s(0) + wx[1] * s(1) + wx[2] * s(2) + wx[3] * s(3)
+            }
         }));
     }
     let mut out = Vec::with_capacity(n * ys.len());
     for ((_, wy), &r) in rows.iter().zip(&first) {
+        if *wy == ON_SAMPLE {
+            out.extend_from_slice(&along_x[(r + 1) * n..][..n]);
+            continue;
+        }
         for i in 0..n {
             let mut sum = 0.0;
             for (j, wyj) in wy.iter().enumerate() {
@@ -257,6 +272,9 @@ pub fn bicubic_lattice(grid: &Grid<f32>, at: GridPlacement, xs: &[f64], ys: &[f6
     }
     out
 }
+
+/// The Catmull-Rom weights at fraction 0 (a position on a sample), which pick the sample.
+const ON_SAMPLE: [f64; 4] = [0.0, 1.0, 0.0, 0.0];
 
 #[cfg(test)]
 mod tests {

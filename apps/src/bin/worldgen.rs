@@ -309,12 +309,12 @@ fn bake(
         })?;
         if computed {
             say!(
-                "max-pyramids, ground amplitude, decal tiles, surface error grids and 32 m node bounds: baked ({:.2} s)",
+                "max-pyramids, coarse height levels, ground amplitude, decal tiles, surface error grids and 32 m node bounds: baked ({:.2} s)",
                 t1.elapsed().as_secs_f64()
             );
         } else {
             say!(
-                "max-pyramids, ground amplitude and decal tiles: baked; surface error grids and 32 m node bounds: already baked for this map"
+                "max-pyramids, coarse height levels, ground amplitude and decal tiles: baked; surface error grids and 32 m node bounds: already baked for this map"
             );
         }
     }

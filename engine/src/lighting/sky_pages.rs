@@ -426,7 +426,8 @@ mod tests {
         // Pages of another map (one height raised) are stale for it, and a truncated page is
         // not a page.
         let mut other = crate::test_maps::tiny_map();
-        other.heights.set(40, 40, other.heights.get(40, 40) + 3.0);
+        let hg = other.heights.grid_mut().expect("heights in memory");
+        hg.set(40, 40, hg.get(40, 40) + 3.0);
         let other_world = World::new(other);
         let other_pages = SkyPages::new(&dir, &other_world, &canopy);
         assert_eq!(other_pages.read(fine), Err(PageRefused::Stale));

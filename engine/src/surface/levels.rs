@@ -9,43 +9,11 @@
 //! log and the viewer.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use worldgen::Grid;
 use worldgen::pages::{LayerId, PageCache, PageError, SampleKind};
 
-/// Page faults met while reading paged levels, each once.
-#[derive(Debug, Default)]
-pub struct PageFaults {
-    seen: Mutex<Vec<String>>,
-}
-
-impl PageFaults {
-    /// Records `e` (logged the first time it is seen, with what is done without it).
-    pub fn record(&self, e: &PageError) {
-        self.record_as(e, "the bounds that read it are taken as unbounded there");
-    }
-
-    /// [`Self::record`] with the `consequence` the log names.
-    pub fn record_as(&self, e: &PageError, consequence: &str) {
-        let text = e.to_string();
-        let mut seen = self
-            .seen
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if !seen.contains(&text) {
-            log::error!("{text}; {consequence}");
-            seen.push(text);
-        }
-    }
-
-    /// The faults seen so far, in order.
-    pub fn list(&self) -> Vec<String> {
-        self.seen
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .clone()
-    }
-}
+pub use worldgen::pages::PageFaults;
 
 /// One level of a max-pyramid.
 #[derive(Debug, Clone)]

@@ -489,11 +489,14 @@ mod tests {
         let (w, h) = (map.heights.width(), map.heights.height());
         for y in 0..h {
             for x in 70..w {
-                map.heights.set(x, y, map.heights.get(x, y) + 60.0);
+                let hg = map.heights.grid_mut().expect("heights in memory");
+                hg.set(x, y, hg.get(x, y) + 60.0);
             }
         }
-        map.heights.set(30, 40, map.heights.get(30, 40) + 40.0);
-        map.heights.set(100, 20, map.heights.get(100, 20) - 25.0);
+        let hg = map.heights.grid_mut().expect("heights in memory");
+        hg.set(30, 40, hg.get(30, 40) + 40.0);
+        let hg = map.heights.grid_mut().expect("heights in memory");
+        hg.set(100, 20, hg.get(100, 20) - 25.0);
         World::new(map)
     }
 

@@ -238,9 +238,8 @@ mod tests {
         assert!(read(&path, key).is_ok(), "the file was rewritten");
         // Other heights: the key differs, the file is stale for that map.
         let mut changed = tiny_map();
-        changed
-            .heights
-            .set(10, 10, changed.heights.get(10, 10) + 1.0);
+        let hg = changed.heights.grid_mut().expect("heights in memory");
+        hg.set(10, 10, hg.get(10, 10) + 1.0);
         let changed_world = opened(changed.clone(), None);
         let changed_key = surface_key(&changed_world, MEASUREMENT_VERSION);
         assert_ne!(changed_key, key);

@@ -9,15 +9,18 @@
 //! the same surface.
 
 use super::amplitude::{self, Amplitude, NearRoads};
+use super::height_levels::HeightLevels;
 use super::levels::PageFaults;
 use super::max_pyramid::MaxPyramid;
 use super::pyramids::Pyramids;
 use crate::surface::decals::{DecalBounds, DecalField};
+use std::borrow::Cow;
 use std::path::Path;
 use std::sync::Arc;
-use worldgen::Map;
+use worldgen::map::Heights;
 use worldgen::noise;
 use worldgen::pages::{PageCache, PageError};
+use worldgen::{Grid, Map};
 
 /// Detail-noise octaves: (wavelength m, weight). The weights sum to 1, so |D| <= 1.
 pub const DETAIL_OCTAVES: [(f64, f64); 3] = [(8.0, 4.0 / 7.0), (4.0, 2.0 / 7.0), (2.0, 1.0 / 7.0)];
@@ -56,6 +59,8 @@ pub struct World {
     pub map_error: super::map_error::MapErrorPyramid,
     /// Max-pyramid of the map's height samples.
     pub heights_max: super::height_max::HeightMax,
+    /// Paged heights' coarse levels (a baked map's), for coarse lattices; empty otherwise.
+    height_levels: HeightLevels,
     /// A folder where data derived from this map may be kept between runs (the light grids'
     /// sky pages, [`crate::lighting::sky_pages`]); `None` (the default) keeps none.
     pub derived_dir: Option<std::path::PathBuf>,
@@ -129,7 +134,11 @@ impl World {
     pub fn memory_bytes(&self) -> Vec<(&'static str, usize)> {
         let grid = |w: usize, h: usize, b: usize| w * h * b;
         let m = &self.map;
-        let layers = grid(m.heights.width(), m.heights.height(), 4)
+        let heights = m
+            .heights
+            .grid()
+            .map_or(0, |g| grid(g.width(), g.height(), 4));
+        let layers = heights
             + grid(m.ground.width(), m.ground.height(), 1)
             + m.densities
                 .iter()
@@ -141,7 +150,10 @@ impl World {
             .as_ref()
             .map_or(0, |c| c.stats().resident_bytes);
         vec![
-            ("map layers (heights, ground, densities)", layers),
+            (
+                "map layers held whole (ground types, densities, and the heights unless paged)",
+                layers,
+            ),
             (
                 "ground amplitude near roads (elsewhere the ground types')",
                 self.near_roads.bytes(),
@@ -151,7 +163,7 @@ impl World {
                 pyramids,
             ),
             (
-                "max-pyramid and surface error grid pages resident",
+                "height, max-pyramid and surface error grid pages resident",
                 resident_pages,
             ),
             (
@@ -213,6 +225,9 @@ impl World {
     pub fn write_derived_pages(&self, pages_dir: &Path, page_side: u32) -> Result<(), PageError> {
         self.pyramids
             .write(&self.heights_max, pages_dir, page_side, self.keys.pyramids)?;
+        let heights = whole_heights(&self.map.heights);
+        let key = self.map.heights.key();
+        super::height_levels::write(&heights, key, pages_dir, page_side)?;
         self.near_roads
             .write(&amplitude::near_roads_path(pages_dir), self.keys.amplitude)?;
         // An older bake's whole amplitude grid, no longer read.
@@ -227,14 +242,17 @@ impl World {
     }
 
     fn build(map: Map, pages: Option<(&Path, usize)>) -> Self {
-        use worldgen::pages::bake::Raster;
         let t0 = std::time::Instant::now();
-        let heights_key = Raster::F32(&map.heights).key();
+        let heights_key = map.heights.key();
         let mut keys = DerivedKeys {
             decals: DecalField::bake_key(&map, heights_key),
             ..DerivedKeys::default()
         };
-        let page_faults = Arc::new(PageFaults::default());
+        // Paged heights bring the page cache and the record of faults they were opened with.
+        let paging = map.heights.paged().map(|p| p.paging().clone());
+        let page_faults = paging
+            .as_ref()
+            .map_or_else(Arc::default, |p| Arc::clone(&p.faults));
         let decals = pages
             .and_then(|(dir, budget_bytes)| {
                 let path = super::decal_bake::tiles_path(dir);
@@ -278,7 +296,12 @@ impl World {
             map.manifest.ground.spacing_m,
         );
         keys.pyramids = Pyramids::key(heights_key, hs, keys.amplitude, gs);
-        let page_cache = pages.map(|(_, budget_bytes)| Arc::new(PageCache::new(budget_bytes)));
+        let page_cache = pages.map(|(_, budget_bytes)| {
+            paging.as_ref().map_or_else(
+                || Arc::new(PageCache::new(budget_bytes)),
+                |p| Arc::clone(&p.cache),
+            )
+        });
         let paged = pages
             .zip(page_cache.as_ref())
             .and_then(|((dir, _), cache)| {
@@ -292,8 +315,23 @@ impl World {
             let grid = whole_amplitude
                 .take()
                 .unwrap_or_else(|| amplitude::grid(&map, &decals));
-            Pyramids::compute(&map.heights, hs, &grid, gs)
+            Pyramids::compute(&whole_heights(&map.heights), hs, &grid, gs)
         });
+        let mut height_levels = HeightLevels::default();
+        if let Some(p) = map.heights.paged() {
+            // Nothing stands below a patch of terrain whose page cannot be read.
+            let n = [p.width() as i64, p.height() as i64];
+            let fill = heights_max.max_in([0, n[0] - 1], [0, n[1] - 1]);
+            p.set_fill(fill);
+            if let Some((dir, _)) = pages {
+                let samples = [p.width(), p.height()];
+                let opened = HeightLevels::open(dir, samples, heights_key, p.paging());
+                if let Some(levels) = baked("coarse height levels", opened) {
+                    levels.set_fill(fill);
+                    height_levels = levels;
+                }
+            }
+        }
         log::info!(
             "world opened: decal field {:.2} s, ground amplitude {:.2} s, max-pyramids {:.2} s",
             (t1 - t0).as_secs_f64(),
@@ -314,6 +352,7 @@ impl World {
             derived_dir: None,
             map_error: super::map_error::MapErrorPyramid::default(),
             heights_max,
+            height_levels,
         }
     }
 
@@ -368,7 +407,25 @@ impl World {
         } else {
             0.0
         };
-        self.map.height_bicubic_m(x_m, y_m) + d + self.decals.offset_m(x_m, y_m)
+        let g = self
+            .level_samples(&[x_m], &[y_m])
+            .map_or_else(|| self.map.height_bicubic_m(x_m, y_m), |v| v[0]);
+        g + d + self.decals.offset_m(x_m, y_m)
+    }
+
+    /// The heights part `G` on the lattice `xs` x `ys` read from the coarsest baked level of
+    /// the paged heights that holds it (every point on a height sample: `G` is the sample,
+    /// [`super::height_levels`]); `None` where the heights are not paged or the lattice is not
+    /// on such samples.
+    fn level_samples(&self, xs: &[f64], ys: &[f64]) -> Option<Vec<f64>> {
+        if self.height_levels.is_empty() {
+            return None;
+        }
+        let (o, hs) = (self.origin_m(), self.map.manifest.heights.spacing_m);
+        let (w, h) = (self.map.heights.width(), self.map.heights.height());
+        let gx = super::height_levels::on_samples(xs, o[0], hs, w)?;
+        let gy = super::height_levels::on_samples(ys, o[1], hs, h)?;
+        self.height_levels.samples(&gx, &gy)
     }
 
     /// [`Self::height_m`] at every point of the lattice `xs` x `ys` (row-major, one row per
@@ -393,12 +450,13 @@ impl World {
             spacing_m: self.map.manifest.ground.spacing_m,
         };
         let amplitude = worldgen::sample::bilinear_lattice(&self.amplitude(), ground, xs, ys);
-        let g = worldgen::sample::bicubic_lattice(
-            &self.map.heights,
-            self.map.height_placement(),
-            xs,
-            ys,
-        );
+        let at = self.map.height_placement();
+        let g = match &self.map.heights {
+            Heights::Grid(h) => worldgen::sample::bicubic_lattice(h, at, xs, ys),
+            Heights::Paged(h) => self
+                .level_samples(xs, ys)
+                .unwrap_or_else(|| worldgen::sample::bicubic_lattice(h, at, xs, ys)),
+        };
         // The decal part reads a dense patch of its 0.5 m samples under the lattice: on a sparse
         // lattice that patch would be far larger than the lattice, so it is evaluated per point.
         let e = if sparse(xs) || sparse(ys) {
@@ -513,6 +571,24 @@ impl World {
             to(rect.min[1] - e, o[1], p.height()),
             to(rect.max[1] + e, o[1], p.height()),
         )
+    }
+}
+
+/// Every height sample, for work on the whole map: the grid itself, or the pages read whole
+/// (logged), or, where a page cannot be read, sample by sample (the faults recorded and the
+/// raster's fill value served for them).
+pub(crate) fn whole_heights(h: &Heights) -> Cow<'_, Grid<f32>> {
+    match h {
+        Heights::Grid(g) => Cow::Borrowed(g),
+        Heights::Paged(p) => {
+            log::info!("heights read whole from their pages, to compute what was not baked");
+            Cow::Owned(p.read_whole().unwrap_or_else(|e| {
+                log::error!("{e}; the heights are read sample by sample instead");
+                let (w, h) = (p.width(), p.height());
+                let samples = (0..h).flat_map(|y| (0..w).map(move |x| p.get(x, y)));
+                Grid::from_vec(w, h, samples.collect()).expect("sized above")
+            }))
+        }
     }
 }
 

@@ -33,8 +33,21 @@ fn srtm_tile_imports_and_loads_with_flat_sea() {
         "{s}"
     );
     // The sea stays exactly flat (no interpolation ripples), and is classified as water.
-    let zeros = loaded.heights.data().iter().filter(|&&h| h == 0.0).count();
-    let frac = zeros as f64 / loaded.heights.data().len() as f64;
+    let zeros = loaded
+        .heights
+        .grid()
+        .expect("heights in memory")
+        .data()
+        .iter()
+        .filter(|&&h| h == 0.0)
+        .count();
+    let frac = zeros as f64
+        / loaded
+            .heights
+            .grid()
+            .expect("heights in memory")
+            .data()
+            .len() as f64;
     assert!(frac > 0.80, "only {frac:.3} of samples are exactly 0 m");
     let water = loaded
         .ground
@@ -78,7 +91,7 @@ fn void_samples_are_filled_and_counted() {
     std::fs::write(&p, &bytes).unwrap();
     let (map, report) = import(&params(p.clone()), &mut Vec::new()).unwrap();
     assert_eq!(report.voids_filled, 100);
-    let (lo, hi) = map.heights.min_max();
+    let (lo, hi) = map.heights.grid().expect("heights in memory").min_max();
     assert!(
         lo > -10.0 && hi < 170.0,
         "filled values out of the data range: {lo}..{hi}"
@@ -132,7 +145,7 @@ fn puget_sound_png_imports_with_vertical_scale() {
     p.vertical_scale_m = 0.1;
     let (map, _) = import(&p, &mut Vec::new()).expect("import");
     assert_eq!(map.manifest.size_m, [163_840.0, 163_840.0]);
-    let (lo, hi) = map.heights.min_max();
+    let (lo, hi) = map.heights.grid().expect("heights in memory").min_max();
     assert!(lo == 0.0 && (4379.0..=4380.0).contains(&hi), "{lo}..{hi}");
 }
 
@@ -142,7 +155,8 @@ fn single_channel_exr_imports_with_nan_voids() {
     let tmp = tempfile::tempdir().unwrap();
     let mut map = worldgen::Map::load(&tests::tiny_map_dir()).unwrap();
     let original = map.heights.clone();
-    map.heights.set(60, 70, f32::NAN);
+    let hg = map.heights.grid_mut().expect("heights in memory");
+    hg.set(60, 70, f32::NAN);
     // Write only the height layer, through a scratch map folder.
     let scratch = tmp.path().join("scratch");
     map.write(&scratch).unwrap();
@@ -156,13 +170,11 @@ fn single_channel_exr_imports_with_nan_voids() {
     assert_eq!(report.voids_filled, 1);
     assert_eq!(imported.manifest.size_m, [512.0, 512.0]);
     // Every sample but the void is exact; the void is filled from its neighbours.
-    for (i, (&a, &b)) in imported
-        .heights
-        .data()
-        .iter()
-        .zip(original.data())
-        .enumerate()
-    {
+    let (imported, original) = (
+        imported.heights.grid().expect("heights in memory"),
+        original.grid().expect("heights in memory"),
+    );
+    for (i, (&a, &b)) in imported.data().iter().zip(original.data()).enumerate() {
         if i == 70 * 129 + 60 {
             assert!((a - b).abs() < 5.0, "filled void {a} far from {b}");
         } else {

@@ -674,7 +674,18 @@ fn srtm_tile_as_geotiff_matches_the_hgt_import() {
         let rel = tif.source_spacing_m[k] / hgt_report.source_spacing_m[k] - 1.0;
         assert!(rel.abs() < 0.005, "axis {k}: {tif:?} vs {hgt_report:?}");
     }
-    let (a, b) = (from_tif.heights.min_max(), from_hgt.heights.min_max());
+    let (a, b) = (
+        from_tif
+            .heights
+            .grid()
+            .expect("heights in memory")
+            .min_max(),
+        from_hgt
+            .heights
+            .grid()
+            .expect("heights in memory")
+            .min_max(),
+    );
     assert!(
         (a.0 - b.0).abs() < 1.0 && (a.1 - b.1).abs() < 1.0,
         "{a:?} vs {b:?}"

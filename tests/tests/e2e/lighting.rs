@@ -104,7 +104,8 @@ pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
     let (w, h) = (map.heights.width(), map.heights.height());
     for y in 0..h {
         for x in 0..w {
-            map.heights.set(x, y, height(x, y));
+            let hg = map.heights.grid_mut().expect("heights in memory");
+            hg.set(x, y, height(x, y));
         }
     }
     let (gw, gh) = (map.ground.width(), map.ground.height());

@@ -198,7 +198,8 @@ fn malformed_truncated_exr() {
 fn malformed_nan_height() {
     let (_t, dir) = broken_copy();
     let mut map = Map::load(&dir).unwrap();
-    map.heights.set(17, 23, f32::NAN);
+    let hg = map.heights.grid_mut().expect("heights in memory");
+    hg.set(17, 23, f32::NAN);
     map.write(&dir).unwrap();
     let e = expect_error(&dir, "heights.exr", &["column 17", "row 23", "NaN"]);
     assert!(

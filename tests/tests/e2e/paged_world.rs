@@ -1,7 +1,9 @@
-//! A baked map's derived data (max-pyramids read page by page, the decal field tile by tile,
-//! the ground amplitude grid): the same region bounds, height maxima, decal offsets and node
-//! meshes as computed at open, bit for bit, under budgets far below their size; a damaged page loosens only the bounds that read it, is reported with its file
-//! and page, and never panics; pages of another map are refused and computed instead.
+//! A baked map's heights and derived data (heights and max-pyramids read page by page, the
+//! decal field tile by tile, the ground amplitude near roads): the same surface, region bounds,
+//! height maxima, decal offsets and node meshes as the map held whole, bit for bit, under
+//! budgets far below their size; a damaged page loosens only the bounds that read it (or
+//! stands its heights at the fill value), is reported with its file and page, and never
+//! panics; pages of another map are refused and computed instead.
 
 use engine::surface::{Rect, World};
 use engine::terrain::bounds::BoundsCache;
@@ -35,10 +37,17 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
     let pages = tmp.path().join("pages");
     let whole = World::without_error_grids(map.clone());
     whole.write_derived_pages(&pages, 64).unwrap();
-    // Eight pages of 64 x 64 f32: 128 KiB against 7 MiB of pyramids on this 2 km map.
+    // Eight pages of 64 x 64 f32: 128 KiB against 7 MiB of pyramids and 1 MiB of heights on
+    // this 2 km map, shared by both.
     let budget = 8 * 64 * 64 * 4;
+    let paging = worldgen::pages::Paging::new(budget);
+    let map = tests::with_paged_heights(map, tmp.path(), 64, &paging);
     let paged = World::paged_without_error_grids(map, &pages, budget);
     let cache = paged.page_cache.clone().expect("the pyramids were paged");
+    assert!(
+        std::sync::Arc::ptr_eq(&cache, &paging.cache),
+        "the heights and the pyramids share the world's page cache"
+    );
     assert!(
         paged.decals.tile_stats().is_some() && !paged.decals.is_empty(),
         "the decal field was read from its tiles"
@@ -61,6 +70,27 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
             whole.cell_region_bounds(cell),
             paged.cell_region_bounds(cell)
         );
+        // The surface (heights paged, read through the threads' pages at hand) at points and
+        // on lattices, bit for bit.
+        let (px, py) = (r.min[0] + (r.max[0] - r.min[0]) * 0.37, r.max[1]);
+        assert_eq!(
+            whole.height_m(px, py).to_bits(),
+            paged.height_m(px, py).to_bits()
+        );
+        if i % 50 == 0 {
+            let n = rng.random_range(2..70);
+            let axis = |lo: f64, hi: f64| -> Vec<f64> {
+                (0..n)
+                    .map(|k| lo + (hi - lo) * f64::from(k) / f64::from(n))
+                    .collect()
+            };
+            let (lx, ly) = (axis(r.min[0], r.max[0]), axis(r.min[1], r.max[1]));
+            assert_eq!(
+                whole.heights_on_lattice(&lx, &ly),
+                paged.heights_on_lattice(&lx, &ly),
+                "{r:?}"
+            );
+        }
         let xs = [rng.random_range(-5..520), rng.random_range(-5..520)];
         let ys = [rng.random_range(-5..520), rng.random_range(-5..520)];
         assert_eq!(
@@ -68,6 +98,38 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
             paged.heights_max.max_in(xs, ys).to_bits()
         );
     }
+    // Lattices on every 2^k-th height sample (as coarse nodes' vertices stand), beyond the
+    // map's edges too: read from the baked coarse levels, bit for bit.
+    let levels_before = cache.stats().page_ins;
+    let (o, (hs, _)) = (whole.origin_m(), whole.cell_spacings_m());
+    for k in 1..=7 {
+        let stride = hs * f64::from(1u32 << k);
+        for _ in 0..6 {
+            let (i0, j0) = (rng.random_range(-3..40), rng.random_range(-3..40));
+            let axis = |first: i64, o: f64| -> Vec<f64> {
+                (first - 1..first + 66)
+                    .map(|i| o + i as f64 * stride)
+                    .collect()
+            };
+            let (lx, ly) = (axis(i0, o[0]), axis(j0, o[1]));
+            let (a, b) = (
+                whole.heights_on_lattice(&lx, &ly),
+                paged.heights_on_lattice(&lx, &ly),
+            );
+            assert!(
+                a.iter().zip(&b).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "stride 2^{k} lattice at ({i0}, {j0}) differs"
+            );
+            assert_eq!(
+                whole.height_m(lx[5], ly[7]).to_bits(),
+                paged.height_m(lx[5], ly[7]).to_bits()
+            );
+        }
+    }
+    assert!(
+        cache.stats().page_ins > levels_before,
+        "the levels were not read"
+    );
     // Node meshes with their bounds measured at run time (no error grids): every level, a
     // sample of nodes per level.
     let tree = tree_of(&whole);
@@ -152,7 +214,8 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     // Pages baked from another map are refused at open: the pyramids are computed instead.
     let mut other = map;
     let v = other.heights.get(20, 20);
-    other.heights.set(20, 20, v + 5.0);
+    let hg = other.heights.grid_mut().expect("heights in memory");
+    hg.set(20, 20, v + 5.0);
     let reopened = World::paged_without_error_grids(other.clone(), &pages, 1 << 20);
     let registered = reopened.page_cache.as_ref().map_or(0, |c| c.file_count());
     assert_eq!(registered, 0, "stale pages were used");
@@ -177,10 +240,13 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     World::without_error_grids(map.clone())
         .write_derived_pages(&pages, 16)
         .unwrap();
+    let reference = World::without_error_grids(map.clone());
     // A budget of four 16 x 16 pages: the flight reads pages again all the time.
-    let paged = World::paged_without_error_grids(map, &pages, 4 * 16 * 16 * 4);
+    let budget = 4 * 16 * 16 * 4;
+    let paging = worldgen::pages::Paging::new(budget);
+    let map = tests::with_paged_heights(map, tmp.path(), 16, &paging);
+    let paged = World::paged_without_error_grids(map, &pages, budget);
     let world = engine::terrain::precomputed::open_world(paged, None, &worldgen::progress::Silent);
-    let reference = World::without_error_grids(world.map.clone());
     let (cache, faults) = (world.page_cache.clone().unwrap(), world.page_faults.clone());
     let kinds = engine::kinds::content_kinds(&world);
     let settings = StreamSettings {
@@ -207,6 +273,15 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     let mut bytes = std::fs::read(&hmax).unwrap();
     bytes[64 + 8] ^= 0x20;
     std::fs::write(&hmax, &bytes).unwrap();
+    // And a byte of the heights' page under the middle of the flight (samples 48..64 along
+    // x and y: page (3, 3) of 9 x 9).
+    let heights = tmp.path().join("heights.pages");
+    let layout = worldgen::pages::PageFile::open(&heights).unwrap().layout();
+    let offset = worldgen::pages::file::HEADER_BYTES
+        + u64::from(layout.index(3, 3)) * layout.page_stride_bytes();
+    let mut bytes = std::fs::read(&heights).unwrap();
+    bytes[offset as usize + 40] ^= 0x01;
+    std::fs::write(&heights, &bytes).unwrap();
     cache.clear();
 
     // Fly on across the map, low (fine nodes measure their bounds from the slope level).
@@ -236,6 +311,11 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
         seen.iter()
             .any(|f| f.contains("slope_g.0.pages") && f.contains("page (")),
         "the truncated level was not reported: {seen:?}"
+    );
+    assert!(
+        seen.iter()
+            .any(|f| f.contains("heights.pages") && f.contains("page (3, 3)")),
+        "the damaged heights page was not reported: {seen:?}"
     );
     assert!(
         seen.iter()

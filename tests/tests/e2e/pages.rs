@@ -76,7 +76,7 @@ fn paged_layers_equal_the_map_layers_before_and_after_eviction() {
     let cache = PageCache::new(3 * page_bytes);
     let mut rng = SmallRng::seed_from_u64(81);
     let mut layers = Vec::new();
-    for (name, raster) in bake::rasters(&map) {
+    for (name, raster) in bake::rasters(&map).expect("heights in memory") {
         let file = PageFile::open(&bake::page_file_path(tmp.path(), &name)).expect("open");
         let (w, h) = (file.layout().width, file.layout().height);
         let id = cache.add(file);
@@ -135,7 +135,7 @@ fn a_bake_in_shares_and_subsets_in_any_order_writes_the_same_bytes() {
         err.to_string().contains(".partial") && err.to_string().contains("page ("),
         "{err}"
     );
-    for (name, _) in bake::rasters(&map) {
+    for (name, _) in bake::rasters(&map).expect("heights in memory") {
         assert!(
             !bake::page_file_path(&split, &name).exists(),
             "{name} moved into place early"
@@ -148,13 +148,16 @@ fn a_bake_in_shares_and_subsets_in_any_order_writes_the_same_bytes() {
     assert!(bake::missing_pages(&map, &split).unwrap().is_empty());
     assert_eq!(
         bake::finish(&map, &split, &Silent).unwrap(),
-        bake::rasters(&map).len()
+        bake::rasters(&map).expect("heights in memory").len()
     );
     let (a, b) = (bake::pages_dir(&whole), bake::pages_dir(&split));
     let names = tests::files_under(&a);
     assert_eq!(names, tests::files_under(&b), "different files");
     // The layers, the binary decal list and the record of sources.
-    assert_eq!(names.len(), bake::rasters(&map).len() + 2);
+    assert_eq!(
+        names.len(),
+        bake::rasters(&map).expect("heights in memory").len() + 2
+    );
     for n in &names {
         assert!(
             std::fs::read(a.join(n)).unwrap() == std::fs::read(b.join(n)).unwrap(),
@@ -201,7 +204,7 @@ fn damaged_page_files_name_the_file_and_page_and_other_pages_still_read() {
     check_region(
         &cache,
         id,
-        Raster::F32(&map.heights),
+        Raster::F32(map.heights.grid().expect("heights in memory")),
         [SIDE, SIDE, SIDE, SIDE],
     );
     assert_eq!(cache.stats().failures, 1);
@@ -221,7 +224,12 @@ fn damaged_page_files_name_the_file_and_page_and_other_pages_still_read() {
         "{err}"
     );
     assert!(err.to_string().contains("heights.exr.pages"), "{err}");
-    check_region(&cache, id, Raster::F32(&map.heights), [0, 0, SIDE, 2]);
+    check_region(
+        &cache,
+        id,
+        Raster::F32(map.heights.grid().expect("heights in memory")),
+        [0, 0, SIDE, 2],
+    );
     let err = PageFile::open(&heights).expect_err("truncated file opened");
     assert!(
         matches!(err, PageError::Length { .. }) && err.to_string().contains("truncated"),
@@ -333,10 +341,100 @@ fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     assert!(Map::load(&dir).unwrap() == map);
 
     // Changed heights: the stale pages are not used; the open gives the new heights.
-    let mut changed = map.heights.clone();
+    let mut changed = map.heights.grid().expect("heights in memory").clone();
     changed.set(7, 9, changed.get(7, 9) + 1.5);
     worldgen::map::layers::write_heights(&exr, &changed).unwrap();
     let reopened = Map::load(&dir).unwrap();
     assert_eq!(reopened.heights.get(7, 9), map.heights.get(7, 9) + 1.5);
     assert!(reopened.decals == map.decals);
+}
+
+/// Heights served sample by sample from their page file (through the threads' pages at hand
+/// and a cache of three pages) equal the map's heights bit for bit, read by several threads in
+/// different orders; a damaged page is served as the fill value, reported once with its file
+/// and page, and not read again; the other pages still read; a map loaded paged from its bake
+/// opens with paged heights equal to the loaded ones.
+#[test]
+fn paged_heights_equal_the_map_heights_and_a_damaged_page_serves_the_fill() {
+    use worldgen::map::Heights;
+    use worldgen::pages::{PagedRaster, Paging};
+    let tmp = tempfile::tempdir().unwrap();
+    let map = baked_tiny(tmp.path());
+    let grid = map.heights.grid().expect("heights in memory").clone();
+    let path = bake::page_file_path(tmp.path(), &map.manifest.heights.file);
+    let page_bytes = (SIDE * SIDE * 4) as usize;
+    let paging = Paging::new(3 * page_bytes);
+    let paged = PagedRaster::<f32>::new(&paging, PageFile::open(&path).unwrap(), 0.0).unwrap();
+    let (w, h) = (grid.width(), grid.height());
+    std::thread::scope(|s| {
+        for t in 0..3u64 {
+            let (paged, grid) = (&paged, &grid);
+            s.spawn(move || {
+                let mut rng = SmallRng::seed_from_u64(t);
+                for _ in 0..40_000 {
+                    let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
+                    assert_eq!(paged.get(x, y).to_bits(), grid.get(x, y).to_bits());
+                }
+            });
+        }
+    });
+    let s = paging.cache.stats();
+    assert!(
+        s.evictions > 0 && s.peak_resident_bytes <= 3 * page_bytes,
+        "{s:?}"
+    );
+    assert!(paging.faults.list().is_empty());
+
+    // Page (2, 1) damaged: a new raster (no page at hand) serves its samples as the fill.
+    let layout = PageFile::open(&path).unwrap().layout();
+    let offset = worldgen::pages::file::HEADER_BYTES
+        + u64::from(layout.index(2, 1)) * layout.page_stride_bytes();
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[offset as usize + 12] ^= 0x10;
+    std::fs::write(&path, &bytes).unwrap();
+    let paging = Paging::new(3 * page_bytes);
+    let paged = PagedRaster::<f32>::new(&paging, PageFile::open(&path).unwrap(), 0.0).unwrap();
+    paged.set_fill(1234.5);
+    let side = SIDE as usize;
+    for y in 0..h {
+        for x in 0..w {
+            let expected = if (x / side, y / side) == (2, 1) {
+                1234.5
+            } else {
+                grid.get(x, y)
+            };
+            assert_eq!(paged.get(x, y).to_bits(), expected.to_bits(), "({x}, {y})");
+        }
+    }
+    let faults = paging.faults.list();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    assert!(
+        faults[0].contains("heights.exr.pages") && faults[0].contains("page (2, 1)"),
+        "{faults:?}"
+    );
+    assert_eq!(
+        paging.cache.stats().failures,
+        1,
+        "the damaged page was read again"
+    );
+
+    // The paged open of a baked copy of the map.
+    let dir = tmp.path().join("map");
+    tests::copy_dir(&tiny_map_dir(), &dir);
+    bake::bake(&map, &dir, SIDE, &PageSet::All, &Silent).unwrap();
+    bake::finish(&map, &dir, &Silent).unwrap();
+    let opened = Map::load_paged(&dir, &Paging::new(4 * page_bytes)).unwrap();
+    let Heights::Paged(p) = &opened.heights else {
+        panic!("the heights of a baked map were not paged");
+    };
+    assert_eq!(p.key(), map.heights.key());
+    for y in 0..h {
+        for x in 0..w {
+            assert_eq!(
+                p.get(x, y).to_bits(),
+                grid.get(x, y).to_bits(),
+                "({x}, {y})"
+            );
+        }
+    }
 }

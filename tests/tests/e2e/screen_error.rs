@@ -147,7 +147,8 @@ fn ridge_world() -> World {
             let (xm, ym) = (x as f64 * spacing, y as f64 * spacing);
             let crest = 150.0 + 12.0 * (std::f64::consts::TAU * ym / 24.0).sin();
             let z = (crest - 4.0 * (xm - CREST_X_M).abs()).max(30.0);
-            map.heights.set(x, y, z as f32);
+            let hg = map.heights.grid_mut().expect("heights in memory");
+            hg.set(x, y, z as f32);
             map.ground.set(x, y, worldgen::classify::WATER);
         }
     }

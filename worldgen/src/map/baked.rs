@@ -29,10 +29,35 @@ impl Baked {
 
     /// The layer of `spec` from its page file, when baked from the layer file as it is now.
     pub fn raster<T: Sample>(&mut self, spec: &GridSpec) -> Option<Grid<T>> {
+        let read = self
+            .page_file::<T>(spec)?
+            .and_then(|file| file.read_all::<T>());
+        self.used(&spec.file, read)
+    }
+
+    /// The heights of `spec` served from their page file through `paging`, when baked from
+    /// the heights file as it is now.
+    pub fn paged_heights(
+        &mut self,
+        spec: &GridSpec,
+        paging: &crate::pages::Paging,
+    ) -> Option<crate::pages::PagedRaster<f32>> {
+        let opened = self
+            .page_file::<f32>(spec)?
+            .and_then(|file| crate::pages::PagedRaster::new(paging, file, 0.0));
+        self.used(&spec.file, opened)
+    }
+
+    /// The page file of `spec`'s layer, checked against the record of sources (`None` where
+    /// the layer was not baked from its file as it is now) and against `spec`.
+    fn page_file<T: Sample>(
+        &mut self,
+        spec: &GridSpec,
+    ) -> Option<Result<PageFile, crate::pages::PageError>> {
         let key = self.sources.as_mut()?.baked_key(&spec.file)?;
         let path = bake::page_file_path(&self.dir, &spec.file);
         let (w, h) = (spec.width as usize, spec.height as usize);
-        let read = PageFile::open(&path).and_then(|file| {
+        Some(PageFile::open(&path).and_then(|file| {
             let l = file.layout();
             if file.key() != key
                 || l.kind != T::KIND
@@ -46,9 +71,8 @@ impl Baked {
                     ),
                 });
             }
-            file.read_all::<T>()
-        });
-        self.used(&spec.file, read)
+            Ok(file)
+        }))
     }
 
     /// The decal list from its binary copy, when baked from the text list `name` as it is now.

@@ -23,11 +23,13 @@
 
 mod baked;
 pub mod building_models;
+pub mod heights;
 pub mod layers;
 pub mod lists;
 pub mod manifest;
 pub mod material_image;
 
+pub use heights::Heights;
 pub use lists::{Building, Decal, DecalKind, Tree};
 pub use manifest::validate as validate_manifest;
 pub use manifest::{
@@ -207,8 +209,9 @@ pub struct DensityLayer {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Map {
     pub manifest: Manifest,
-    /// Heights in metres, `manifest.heights.width` x `manifest.heights.height`.
-    pub heights: Grid<f32>,
+    /// Heights in metres, `manifest.heights.width` x `manifest.heights.height`: in memory, or
+    /// served from the bake's pages ([`Self::load_paged`]).
+    pub heights: Heights,
     /// Ground type index per sample, always < `manifest.ground.legend.len()`.
     pub ground: Grid<u8>,
     /// One layer per `manifest.vegetation` entry, in the same order.
@@ -269,16 +272,33 @@ impl Map {
     /// Loads and validates the map in folder `dir`. Either the whole map is returned or an error
     /// that names the file and the field.
     pub fn load(dir: &Path) -> Result<Self, MapError> {
+        Self::load_with(dir, None)
+    }
+
+    /// [`Self::load`], with the heights served page by page through `paging`'s cache from
+    /// the bake's page file, where the record of the bake's sources says it holds the map's
+    /// heights file as it is now (else they are read whole, as by [`Self::load`]). The bake
+    /// checked every sample when it read the heights file, and each page's checksum is checked
+    /// as it is read.
+    pub fn load_paged(dir: &Path, paging: &crate::pages::Paging) -> Result<Self, MapError> {
+        Self::load_with(dir, Some(paging))
+    }
+
+    fn load_with(dir: &Path, paging: Option<&crate::pages::Paging>) -> Result<Self, MapError> {
         let manifest_path = dir.join("map.toml");
         let manifest = manifest::read(&manifest_path)?;
         let mut clock = PartClock::default();
         let mut baked = baked::Baked::open(dir);
-        let heights = match baked.raster::<f32>(&manifest.heights) {
-            Some(g) => {
-                layers::check_heights(&dir.join(&manifest.heights.file), &g)?;
-                g
-            }
-            None => layers::read_heights(dir, &manifest)?,
+        let paged = paging.and_then(|p| baked.paged_heights(&manifest.heights, p));
+        let heights = match paged {
+            Some(p) => Heights::Paged(p),
+            None => match baked.raster::<f32>(&manifest.heights) {
+                Some(g) => {
+                    layers::check_heights(&dir.join(&manifest.heights.file), &g)?;
+                    Heights::Grid(g)
+                }
+                None => Heights::Grid(layers::read_heights(dir, &manifest)?),
+            },
         };
         clock.part("heights");
         let ground_spec = manifest.ground.grid();
@@ -379,7 +399,15 @@ impl Map {
         std::fs::create_dir_all(&staging)
             .map_err(|e| MapError::io(&staging, "create folder", e))?;
         manifest::write(&staging.join("map.toml"), &self.manifest)?;
-        layers::write_heights(&staging.join(&self.manifest.heights.file), &self.heights)?;
+        let heights_path = staging.join(&self.manifest.heights.file);
+        let heights = self.heights.whole().map_err(|e| {
+            MapError::io(
+                &heights_path,
+                "read the heights pages",
+                std::io::Error::other(e),
+            )
+        })?;
+        layers::write_heights(&heights_path, &heights)?;
         layers::write_ground(
             &staging.join(&self.manifest.ground.file),
             &self.ground,
@@ -537,12 +565,20 @@ impl Map {
 
     /// Height (m) at a world position, bilinear, clamped at the border.
     pub fn height_bilinear_m(&self, x_m: f64, y_m: f64) -> f64 {
-        sample::bilinear(&self.heights, self.height_placement(), x_m, y_m)
+        let at = self.height_placement();
+        match &self.heights {
+            Heights::Grid(h) => sample::bilinear(h, at, x_m, y_m),
+            Heights::Paged(h) => sample::bilinear(h, at, x_m, y_m),
+        }
     }
 
     /// Height (m) at a world position, C1 bicubic (Catmull-Rom), clamped at the border.
     pub fn height_bicubic_m(&self, x_m: f64, y_m: f64) -> f64 {
-        sample::bicubic(&self.heights, self.height_placement(), x_m, y_m)
+        let at = self.height_placement();
+        match &self.heights {
+            Heights::Grid(h) => sample::bicubic(h, at, x_m, y_m),
+            Heights::Paged(h) => sample::bicubic(h, at, x_m, y_m),
+        }
     }
 
     /// Ground type index of the nearest ground sample.
@@ -555,7 +591,10 @@ impl Map {
 
     /// Summary numbers (sizes, height range, counts).
     pub fn summary(&self) -> MapSummary {
-        let (lo, hi) = self.heights.min_max();
+        let (lo, hi) = self
+            .heights
+            .whole()
+            .map_or((f32::NAN, f32::NAN), |g| g.min_max());
         let mut counts = vec![0usize; self.manifest.ground.legend.len()];
         for &g in self.ground.data() {
             counts[g as usize] += 1;

@@ -77,17 +77,22 @@ impl Raster<'_> {
 }
 
 /// The map's raster layers, named by their files in the map (unique, checked names), in the
-/// manifest's order: heights, ground types, then the species' densities.
-pub fn rasters(map: &Map) -> Vec<(String, Raster<'_>)> {
+/// manifest's order: heights, ground types, then the species' densities. The map must hold
+/// its heights in memory (a bake reads a map loaded by [`Map::load`], not served from pages).
+pub fn rasters(map: &Map) -> Result<Vec<(String, Raster<'_>)>, PageError> {
     let m = &map.manifest;
+    let heights = map.heights.grid().ok_or_else(|| PageError::Request {
+        path: PathBuf::from(&m.heights.file),
+        problem: "the heights are served from pages; a bake reads a map loaded whole".into(),
+    })?;
     let mut out = vec![
-        (m.heights.file.clone(), Raster::F32(&map.heights)),
+        (m.heights.file.clone(), Raster::F32(heights)),
         (m.ground.file.clone(), Raster::U8(&map.ground)),
     ];
     for d in &map.densities {
         out.push((d.spec.file.clone(), Raster::U8(&d.density)));
     }
-    out
+    Ok(out)
 }
 
 /// Which pages of each layer a bake writes.
@@ -135,7 +140,7 @@ pub fn bake(
         action: "create the pages folder",
         source,
     })?;
-    let layers = rasters(map);
+    let layers = rasters(map)?;
     let mut jobs = Vec::new();
     for (name, raster) in &layers {
         let path = partial_path(map_dir, name);
@@ -176,7 +181,7 @@ pub fn bake(
 /// file and no finished file is listed by [`finish`] as not started.
 pub fn missing_pages(map: &Map, map_dir: &Path) -> Result<Vec<(String, Vec<u32>)>, PageError> {
     let mut out = Vec::new();
-    for (name, _) in rasters(map) {
+    for (name, _) in rasters(map)? {
         let path = partial_path(map_dir, &name);
         if !path.exists() {
             continue;
@@ -234,7 +239,7 @@ fn read_every_page(files: &[(String, PageFile)], progress: &dyn Progress) -> Res
 /// a page is missing or damaged.
 pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usize, PageError> {
     let mut ready = Vec::new();
-    for (name, raster) in &rasters(map) {
+    for (name, raster) in &rasters(map)? {
         let path = partial_path(map_dir, name);
         if !path.exists() {
             if page_file_path(map_dir, name).exists() {
@@ -265,7 +270,7 @@ pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usiz
 /// Writes the decal list in binary and the record of the bake's sources
 /// ([`super::sources`]): the files an open then reads from the bake instead.
 fn write_sources(map: &Map, map_dir: &Path) -> Result<(), PageError> {
-    let mut baked: Vec<(String, u64)> = rasters(map)
+    let mut baked: Vec<(String, u64)> = rasters(map)?
         .iter()
         .map(|(name, raster)| (name.clone(), raster.key()))
         .collect();
@@ -278,7 +283,7 @@ fn write_sources(map: &Map, map_dir: &Path) -> Result<(), PageError> {
 /// and every page reads (mark and checksum). Returns the number of pages.
 pub fn verify(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<u64, PageError> {
     let mut files = Vec::new();
-    for (name, raster) in &rasters(map) {
+    for (name, raster) in &rasters(map)? {
         files.push((
             name.clone(),
             open_checked(page_file_path(map_dir, name), name, raster)?,

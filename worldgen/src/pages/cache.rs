@@ -38,11 +38,20 @@ pub trait CacheSample: Sample {
     fn slice(page: &PageData) -> Option<&[Self]>;
     fn wrap(samples: Vec<Self>) -> PageData;
     fn zero() -> Self;
+    /// The sample as 32 bits and back (for values kept in an atomic).
+    fn to_bits(self) -> u32;
+    fn from_bits(bits: u32) -> Self;
 }
 
 impl CacheSample for f32 {
     fn zero() -> Self {
         0.0
+    }
+    fn to_bits(self) -> u32 {
+        f32::to_bits(self)
+    }
+    fn from_bits(bits: u32) -> Self {
+        f32::from_bits(bits)
     }
     fn slice(page: &PageData) -> Option<&[f32]> {
         match page {
@@ -58,6 +67,12 @@ impl CacheSample for f32 {
 impl CacheSample for u8 {
     fn zero() -> Self {
         0
+    }
+    fn to_bits(self) -> u32 {
+        u32::from(self)
+    }
+    fn from_bits(bits: u32) -> Self {
+        (bits & 0xFF) as u8
     }
     fn slice(page: &PageData) -> Option<&[u8]> {
         match page {
@@ -186,8 +201,13 @@ impl PageCache {
         Some(data)
     }
 
-    /// Page `index` of `layer`, resident or read now.
-    fn page<T: CacheSample>(&self, layer: LayerId, index: u32) -> Result<Arc<PageData>, PageError> {
+    /// Page `index` of `layer`, resident or read now (for readers that keep a page while
+    /// they read many of its samples).
+    pub fn page<T: CacheSample>(
+        &self,
+        layer: LayerId,
+        index: u32,
+    ) -> Result<Arc<PageData>, PageError> {
         {
             let mut s = lock(&self.state);
             if let Some(data) = Self::touch(&mut s, (layer, index)) {

@@ -7,6 +7,8 @@
 //! - [`cache`] the page cache: pages are read on first use (checksum verified then), shared
 //!   between readers, and evicted least recently used beyond the budget.
 //! - [`bake`] writes a map's raster layers as page files (all pages, or any subset of them).
+//! - [`paged_raster`] a layer read sample by sample through the cache, for the interpolators;
+//!   [`faults`] the record of pages that could not be read.
 //! - [`sources`] records the files a bake read, so an open reads the pages instead of them;
 //!   [`decal_list`] is the decal list baked into binary.
 //!
@@ -17,11 +19,15 @@ pub mod bake;
 pub mod cache;
 pub mod checked_file;
 pub mod decal_list;
+pub mod faults;
 pub mod file;
+pub mod paged_raster;
 pub mod sources;
 
-pub use cache::{CacheSample, LayerId, PageCache, PageStats};
+pub use cache::{CacheSample, LayerId, PageCache, PageData, PageStats};
+pub use faults::PageFaults;
 pub use file::{PageFile, PageLayout, SampleKind};
+pub use paged_raster::{PagedRaster, Paging};
 
 use std::path::PathBuf;
 

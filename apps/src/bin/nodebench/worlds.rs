@@ -152,8 +152,7 @@ fn bake(worldgen: &Path, map: &Path, km: &str, p: &str, r: &mut Report) -> Resul
         "s",
         p,
     );
-    let derived =
-        "max-pyramids, ground amplitude, decal tiles, surface error grids and 32 m node bounds";
+    let derived = "max-pyramids, coarse height levels, ground amplitude, decal tiles, surface error grids and 32 m node bounds";
     if let Some(v) = number_after(&out, &format!("{derived}: baked (")) {
         r.add("worlds", &name(derived), v, "s", p);
     }
