@@ -55,6 +55,10 @@ pub struct PagedRaster<T> {
     paging: Paging,
     layer: LayerId,
     layout: PageLayout,
+    /// Pages along x, and log2 of the page side where it is a power of two (the usual case:
+    /// a shift and a mask find a sample's page instead of two divisions).
+    pages_per_row: usize,
+    side_shift: Option<u32>,
     key: u64,
     /// The fill value's bits (f32 or u8 widened), shared by clones.
     fill_bits: Arc<AtomicU32>,
@@ -81,6 +85,11 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
             paging: paging.clone(),
             layer,
             layout,
+            pages_per_row: layout.pages_per_row() as usize,
+            side_shift: layout
+                .page_side
+                .is_power_of_two()
+                .then(|| layout.page_side.trailing_zeros()),
             key,
             fill_bits: Arc::new(AtomicU32::new(T::to_bits(fill))),
             failed: Arc::default(),
@@ -118,9 +127,16 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
     /// Sample (`x`, `y`), both in range (row 0 = south).
     #[inline]
     pub fn get(&self, x: usize, y: usize) -> T {
-        let side = self.layout.page_side as usize;
-        let index = self.layout.index((x / side) as u32, (y / side) as u32);
-        let at = (y % side) * side + x % side;
+        let (index, at) = if let Some(s) = self.side_shift {
+            let mask = (1usize << s) - 1;
+            let index = (y >> s) * self.pages_per_row + (x >> s);
+            (index, ((y & mask) << s) + (x & mask))
+        } else {
+            let side = self.layout.page_side as usize;
+            let index = (y / side) * self.pages_per_row + x / side;
+            (index, (y % side) * side + x % side)
+        };
+        let index = index as u32;
         let hit = RECENT.with(|r| {
             let r = r.borrow();
             r.iter().flatten().find_map(|(serial, i, data)| {
