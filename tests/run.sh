@@ -81,7 +81,23 @@ test "$(grep -oE "on worker tcp://[0-9.]+:[0-9]+" "$smoke/bake-dask.log" | sort 
 test "$(find "$smoke/bake-local/pages" -type f | wc -l)" -ge 8
 test -s "$smoke/bake-local/pages/derived/surface_error.levels"
 diff -r "$smoke/bake-local/pages" "$smoke/bake-dask/pages"
-./target/debug/worldgen check "$smoke/bake-dask" | grep -q "every one matches its checksum"
+./target/debug/worldgen check "$smoke/bake-dask" > "$smoke/check.log"
+grep -q "page files: .* every one matches its checksum and this map" "$smoke/check.log"
+grep -q "derived data: .* every part baked for this map and this engine" "$smoke/check.log"
+# Derived data missing or damaged: check fails naming the part, or the file and the page.
+cp -r "$smoke/bake-local" "$smoke/bake-stale"
+rm "$smoke/bake-stale/pages/derived/heights_stride_2.pages"
+if ./target/debug/worldgen check "$smoke/bake-stale" 2> "$smoke/stale.log" >/dev/null; then
+  echo "worldgen check accepted a map missing derived data" >&2; exit 1
+fi
+grep -q "derived data missing, damaged or baked for another map or engine: coarse height levels" "$smoke/stale.log"
+cp -r "$smoke/bake-local" "$smoke/bake-damaged"
+/usr/bin/python3 -c 'import sys; p = sys.argv[1]; b = bytearray(open(p, "rb").read()); b[100] ^= 1; open(p, "wb").write(b)' \
+  "$smoke/bake-damaged/pages/derived/slope_g.0.pages"
+if ./target/debug/worldgen check "$smoke/bake-damaged" 2> "$smoke/damaged.log" >/dev/null; then
+  echo "worldgen check accepted a damaged derived page" >&2; exit 1
+fi
+grep -q "slope_g.0.pages: page (0, 0) does not match its checksum" "$smoke/damaged.log"
 # A flipped byte in the first page: check fails naming the file and the page.
 /usr/bin/python3 -c 'import sys; p = sys.argv[1]; b = bytearray(open(p, "rb").read()); b[164] ^= 1; open(p, "wb").write(b)' \
   "$smoke/bake-dask/pages/heights.exr.pages"

@@ -143,6 +143,64 @@ pub fn bake_derived(
     Ok(computed)
 }
 
+/// Checks what `worldgen bake` derived for the map in `dir` (`worldgen check`): every page of
+/// every page file under `pages/derived` matches its checksum, and the viewer's open of the map
+/// reads every derived part from the bake (none missing, damaged or baked for another map or
+/// engine). Returns a line saying so, or the error naming the file (and page) or the parts.
+pub fn check_derived(dir: &Path) -> Result<String, String> {
+    use engine::surface::map_error::MapErrorPyramid;
+    use worldgen::pages::{PageFile, SampleKind};
+    let pages = worldgen::pages::bake::pages_dir(dir);
+    let derived = pages.join("derived");
+    let mut files: Vec<_> = std::fs::read_dir(&derived)
+        .map_err(|e| format!("{}: {e}", derived.display()))?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "pages"))
+        .collect();
+    files.sort();
+    let mut page_count = 0u64;
+    for path in &files {
+        let file = PageFile::open(path).map_err(|e| e.to_string())?;
+        let l = file.layout();
+        for index in 0..l.page_count() {
+            let (column, row) = l.column_row(index);
+            match l.kind {
+                SampleKind::F32 => file.read_page::<f32>(column, row).map(drop),
+                SampleKind::U8 => file.read_page::<u8>(column, row).map(drop),
+            }
+            .map_err(|e| e.to_string())?;
+        }
+        page_count += u64::from(l.page_count());
+    }
+    let paging = worldgen::pages::Paging::new(PAGE_CACHE_BUDGET_BYTES);
+    let map = worldgen::Map::load_paged(dir, &paging).map_err(|e| e.to_string())?;
+    let mut stale: Vec<&str> = Vec::new();
+    if map.heights.paged().is_none() {
+        stale.push("heights pages");
+    }
+    let world = World::paged_without_error_grids(map, &pages, PAGE_CACHE_BUDGET_BYTES);
+    stale.extend(&world.computed_at_open);
+    let method = engine::terrain::precomputed::MEASUREMENT_VERSION;
+    let key = engine::surface::map_error_cache::surface_key(&world, method);
+    let faults = std::sync::Arc::default();
+    if MapErrorPyramid::open_pages(&pages, key, &paging.cache, &faults).is_err() {
+        stale.push("surface error grids");
+    }
+    if !stale.is_empty() {
+        return Err(format!(
+            "{}: derived data missing, damaged or baked for another map or engine: {} (logged above); bake it again with `worldgen bake {} --finish`",
+            derived.display(),
+            stale.join(", "),
+            dir.display()
+        ));
+    }
+    Ok(format!(
+        "derived data: {} page files, {page_count} pages, every one matches its checksum; every part baked for this map and this engine",
+        files.len()
+    ))
+}
+
 fn world_of(map: worldgen::Map, dir: &Path, progress: &dyn worldgen::progress::Progress) -> World {
     let cells = (map.heights.width() - 1) * (map.heights.height() - 1);
     // Large maps keep the grids they compute; any map keeps what `worldgen bake` wrote.

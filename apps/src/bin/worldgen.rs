@@ -123,7 +123,8 @@ enum Command {
         finish: bool,
     },
     /// Validate a map folder and print a summary; exit code 0 when valid, 1 with the error.
-    /// A baked map's page files are read whole and every page's checksum checked.
+    /// A baked map's page files are read whole and every page's checksum checked, and so are
+    /// its derived files, each checked to be baked for this map and this engine.
     Check {
         /// The map folder.
         dir: PathBuf,
@@ -216,6 +217,12 @@ fn check(dir: &std::path::Path) -> Result<()> {
     if worldgen::pages::bake::pages_dir(dir).is_dir() {
         let pages = worldgen::pages::bake::verify(&map, dir, &worldgen::progress::Silent)?;
         say!("page files: {pages} pages, every one matches its checksum and this map");
+        if worldgen::pages::bake::pages_dir(dir)
+            .join("derived")
+            .is_dir()
+        {
+            say!("{}", apps::check_derived(dir).map_err(anyhow::Error::msg)?);
+        }
     }
     Ok(())
 }

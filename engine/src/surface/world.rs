@@ -61,6 +61,10 @@ pub struct World {
     pub heights_max: super::height_max::HeightMax,
     /// Paged heights' coarse levels (a baked map's), for coarse lattices; empty otherwise.
     height_levels: HeightLevels,
+    /// The parts of a baked map's derived data that its open did not read from the bake (their
+    /// files missing, damaged, or baked for another map or engine; each logged): computed
+    /// instead, or, for the coarse height levels, done without.
+    pub computed_at_open: Vec<&'static str>,
     /// A folder where data derived from this map may be kept between runs (the light grids'
     /// sky pages, [`crate::lighting::sky_pages`]); `None` (the default) keeps none.
     pub derived_dir: Option<std::path::PathBuf>,
@@ -253,6 +257,7 @@ impl World {
         let page_faults = paging
             .as_ref()
             .map_or_else(Arc::default, |p| Arc::clone(&p.faults));
+        let mut computed_at_open = Vec::new();
         let decals = pages
             .and_then(|(dir, budget_bytes)| {
                 let path = super::decal_bake::tiles_path(dir);
@@ -260,7 +265,7 @@ impl World {
                 let faults = Arc::clone(&page_faults);
                 let opened =
                     DecalField::open_tiles(&path, keys.decals, origin, budget_bytes, faults);
-                baked("decal field", opened)
+                from_bake(&mut computed_at_open, "decal field", opened)
             })
             .unwrap_or_else(|| {
                 DecalField::new(
@@ -278,7 +283,8 @@ impl World {
         let baked_near = pages.and_then(|(dir, _)| {
             let (w, h) = (map.ground.width(), map.ground.height());
             let path = amplitude::near_roads_path(dir);
-            baked(
+            from_bake(
+                &mut computed_at_open,
                 "ground amplitude near roads",
                 NearRoads::read(&path, keys.amplitude, w, h),
             )
@@ -309,7 +315,7 @@ impl World {
                 let ground = [map.ground.width(), map.ground.height()];
                 let opened =
                     Pyramids::open(dir, heights, ground, keys.pyramids, cache, &page_faults);
-                baked("max-pyramids", opened)
+                from_bake(&mut computed_at_open, "max-pyramids", opened)
             });
         let (pyramids, heights_max) = paged.unwrap_or_else(|| {
             let grid = whole_amplitude
@@ -325,10 +331,15 @@ impl World {
             p.set_fill(fill);
             if let Some((dir, _)) = pages {
                 let samples = [p.width(), p.height()];
-                let opened = HeightLevels::open(dir, samples, heights_key, p.paging());
-                if let Some(levels) = baked("coarse height levels", opened) {
-                    levels.set_fill(fill);
-                    height_levels = levels;
+                match HeightLevels::open(dir, samples, heights_key, p.paging()) {
+                    Ok(levels) => {
+                        levels.set_fill(fill);
+                        height_levels = levels;
+                    }
+                    Err(e) => {
+                        log::warn!("{e}: coarse nodes read the heights' own pages instead");
+                        computed_at_open.push("coarse height levels");
+                    }
                 }
             }
         }
@@ -353,6 +364,7 @@ impl World {
             map_error: super::map_error::MapErrorPyramid::default(),
             heights_max,
             height_levels,
+            computed_at_open,
         }
     }
 
@@ -590,6 +602,20 @@ pub(crate) fn whole_heights(h: &Heights) -> Cow<'_, Grid<f32>> {
             }))
         }
     }
+}
+
+/// What a bake gave: `Some` if it could be used, else `None` with the reason logged and `what`
+/// noted in `computed`.
+fn from_bake<T>(
+    computed: &mut Vec<&'static str>,
+    what: &'static str,
+    r: Result<T, PageError>,
+) -> Option<T> {
+    let got = baked(what, r);
+    if got.is_none() {
+        computed.push(what);
+    }
+    got
 }
 
 /// What a bake gave: `Some` if it could be used, else `None` with the reason logged.
