@@ -50,16 +50,11 @@ pub fn open_world(
         generate("not found")?;
     }
     let t0 = std::time::Instant::now();
-    // A baked map whose heights are large serves them page by page through the world's page
-    // cache (see [`PAGED_HEIGHTS_MIN_BYTES`]).
+    // A baked map serves its heights page by page through the world's page cache.
     let load = || {
-        let large = worldgen::map::manifest::read(&dir.join("map.toml")).is_ok_and(|m| {
-            m.heights.width as usize * m.heights.height as usize * 4 >= PAGED_HEIGHTS_MIN_BYTES
-        });
-        if large
-            && worldgen::pages::bake::pages_dir(dir)
-                .join("derived")
-                .is_dir()
+        if worldgen::pages::bake::pages_dir(dir)
+            .join("derived")
+            .is_dir()
         {
             let paging = worldgen::pages::Paging::new(PAGE_CACHE_BUDGET_BYTES);
             worldgen::Map::load_paged(dir, &paging)
@@ -94,13 +89,6 @@ pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 /// 32 m nodes' bounds, [`engine::terrain::precomputed`]), a 2 km map in seconds; smaller maps
 /// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
-
-/// Baked maps whose heights take at least this many bytes serve them page by page; smaller
-/// ones hold them whole. A paged sample costs a thread-local lookup where a grid's costs an
-/// index, which slowed streaming on the 8 km default map (16 MiB of heights) measurably
-/// (`nodebench streaming`, 300 m/s with one worker: pop debt 0.7 -> 33 % of frames), while
-/// holding its heights costs a small fraction of the world's 256 MiB budget.
-pub const PAGED_HEIGHTS_MIN_BYTES: usize = 64 << 20;
 
 /// Bytes of height, max-pyramid and surface error grid pages a baked map keeps resident (the
 /// page cache's budget), and, under a budget of their own of the same size, bytes of decal
