@@ -74,6 +74,8 @@ pub struct World {
 /// and of the code that derives it.
 #[derive(Debug, Clone, Copy, Default)]
 struct DerivedKeys {
+    /// The heights' own key ([`Heights::key`]), also that of their coarse levels.
+    heights: u64,
     decals: u64,
     amplitude: u64,
     pyramids: u64,
@@ -230,8 +232,7 @@ impl World {
         self.pyramids
             .write(&self.heights_max, pages_dir, page_side, self.keys.pyramids)?;
         let heights = whole_heights(&self.map.heights);
-        let key = self.map.heights.key();
-        super::height_levels::write(&heights, key, pages_dir, page_side)?;
+        super::height_levels::write(&heights, self.keys.heights, pages_dir, page_side)?;
         self.near_roads
             .write(&amplitude::near_roads_path(pages_dir), self.keys.amplitude)?;
         // An older bake's whole amplitude grid, no longer read.
@@ -249,6 +250,7 @@ impl World {
         let t0 = std::time::Instant::now();
         let heights_key = map.heights.key();
         let mut keys = DerivedKeys {
+            heights: heights_key,
             decals: DecalField::bake_key(&map, heights_key),
             ..DerivedKeys::default()
         };

@@ -152,12 +152,12 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
     /// Sample `at` of page `index`, read through the cache and kept at hand for this thread.
     #[cold]
     fn read(&self, index: u32, at: usize) -> T {
-        let lock = |m: &Mutex<HashSet<u32>>| {
-            m.lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .contains(&index)
-        };
-        if lock(&self.failed) {
+        let failed_before = self
+            .failed
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .contains(&index);
+        if failed_before {
             return self.fill();
         }
         match self.paging.cache.page::<T>(self.layer, index) {
