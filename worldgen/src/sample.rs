@@ -20,6 +20,17 @@ pub trait Samples {
         let yc = y.clamp(0, self.height() as i64 - 1) as usize;
         self.at(xc, yc)
     }
+    /// Samples `x..x + 2` by `y..y + 2` (`[row][column]`, south row first), all in range. A
+    /// paged raster reads them with one look-up of their page.
+    #[inline]
+    fn quad(&self, x: usize, y: usize) -> [[f32; 2]; 2] {
+        std::array::from_fn(|j| std::array::from_fn(|i| self.at(x + i, y + j)))
+    }
+    /// Samples `x..x + 4` by `y..y + 4`, as [`Samples::quad`].
+    #[inline]
+    fn block4(&self, x: usize, y: usize) -> [[f32; 4]; 4] {
+        std::array::from_fn(|j| std::array::from_fn(|i| self.at(x + i, y + j)))
+    }
 }
 
 impl Samples for Grid<f32> {
@@ -97,13 +108,9 @@ pub fn bilinear<S: Samples + ?Sized>(grid: &S, at: GridPlacement, x_m: f64, y_m:
     let (w, h) = (grid.width() as i64, grid.height() as i64);
     if ix + 1 < w && iy + 1 < h {
         // Interior (grid_coords already clamped below at 0): no index clamping needed.
-        let (x, y) = (ix as usize, iy as usize);
-        let (s00, s10, s01, s11) = (
-            f64::from(grid.at(x, y)),
-            f64::from(grid.at(x + 1, y)),
-            f64::from(grid.at(x, y + 1)),
-            f64::from(grid.at(x + 1, y + 1)),
-        );
+        let [[s00, s10], [s01, s11]] = grid
+            .quad(ix as usize, iy as usize)
+            .map(|r| r.map(f64::from));
         let a = s00 + fx * (s10 - s00);
         let b = s01 + fx * (s11 - s01);
         return a + fy * (b - a);
@@ -142,10 +149,10 @@ pub fn bicubic<S: Samples + ?Sized>(grid: &S, at: GridPlacement, x_m: f64, y_m: 
     }
     if ix >= 1 && iy >= 1 && ix + 2 < w && iy + 2 < h {
         // Interior: the 4x4 stencil needs no clamping.
-        let (x, y) = (ix as usize - 1, iy as usize - 1);
+        let block = grid.block4(ix as usize - 1, iy as usize - 1);
         let mut sum = 0.0;
-        for (j, wyj) in wy.iter().enumerate() {
-            let s = |i: usize| f64::from(grid.at(x + i, y + j));
+        for (row, wyj) in block.iter().zip(&wy) {
+            let s = |i: usize| f64::from(row[i]);
             sum += wyj * (wx[0] * s(0) + wx[1] * s(1) + wx[2] * s(2) + wx[3] * s(3));
         }
         return sum;

@@ -374,6 +374,14 @@ fn paged_heights_equal_the_map_heights_and_a_damaged_page_serves_the_fill() {
                 for _ in 0..40_000 {
                     let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
                     assert_eq!(paged.get(x, y).to_bits(), grid.get(x, y).to_bits());
+                    // A stencil's block: inside one page (one look-up) or across pages.
+                    let (x, y) = (rng.random_range(0..w - 3), rng.random_range(0..h - 3));
+                    let block = paged.block::<4>(x, y);
+                    for (j, row) in block.iter().enumerate() {
+                        for (i, v) in row.iter().enumerate() {
+                            assert_eq!(v.to_bits(), grid.get(x + i, y + j).to_bits());
+                        }
+                    }
                 }
             });
         }
@@ -404,6 +412,25 @@ fn paged_heights_equal_the_map_heights_and_a_damaged_page_serves_the_fill() {
                 grid.get(x, y)
             };
             assert_eq!(paged.get(x, y).to_bits(), expected.to_bits(), "({x}, {y})");
+        }
+    }
+    // Blocks inside and across the damaged page's edges serve the fill at its samples alone.
+    for (x, y) in [
+        (2 * side + 5, side + 7),
+        (2 * side - 2, side - 1),
+        (3 * side - 2, 2 * side - 3),
+    ] {
+        let block = paged.block::<4>(x, y);
+        for (j, row) in block.iter().enumerate() {
+            for (i, v) in row.iter().enumerate() {
+                let (sx, sy) = (x + i, y + j);
+                let expected = if (sx / side, sy / side) == (2, 1) {
+                    1234.5
+                } else {
+                    grid.get(sx, sy)
+                };
+                assert_eq!(v.to_bits(), expected.to_bits(), "({sx}, {sy})");
+            }
         }
     }
     let faults = paging.faults.list();

@@ -113,4 +113,18 @@ impl Samples for Heights {
     fn at(&self, x: usize, y: usize) -> f32 {
         Heights::get(self, x, y)
     }
+    #[inline]
+    fn quad(&self, x: usize, y: usize) -> [[f32; 2]; 2] {
+        match self {
+            Heights::Grid(g) => g.quad(x, y),
+            Heights::Paged(p) => p.block(x, y),
+        }
+    }
+    #[inline]
+    fn block4(&self, x: usize, y: usize) -> [[f32; 4]; 4] {
+        match self {
+            Heights::Grid(g) => g.block4(x, y),
+            Heights::Paged(p) => p.block(x, y),
+        }
+    }
 }

@@ -2,9 +2,11 @@
 //! the interpolators ([`crate::sample::Samples`]): what is resident follows what the readers
 //! ask for, not the layer's area.
 //!
-//! Each thread keeps the last few pages it read from (an `Arc` of each: eviction from the
-//! cache never invalidates them), so a lattice or a stencil that stays inside a page costs a
-//! thread-local lookup per sample and one cache request per page it enters.
+//! Each thread keeps the pages it read from lately in a small table indexed by raster and page
+//! (an `Arc` of each: eviction from the cache never invalidates them; a page read later into
+//! the same slot replaces it), so a lattice or a stencil that stays inside a page costs a
+//! thread-local lookup per sample (or per stencil, [`PagedRaster::block`]) and one cache
+//! request per page it enters.
 //!
 //! A page that cannot be read (damaged, truncated, removed) is recorded once in the
 //! [`PageFaults`] with its file and page, never read again, and its samples are served as the
@@ -40,13 +42,25 @@ impl Paging {
 /// Tells the rasters apart in the threads' memos (never reused, unlike addresses).
 static NEXT_SERIAL: AtomicU64 = AtomicU64::new(1);
 
-/// Pages a thread keeps at hand, most recent first.
-const RECENT_PAGES: usize = 4;
+/// Log2 of the pages a thread keeps at hand: a direct-mapped table, one slot per (raster,
+/// page) hash, so a look-up compares one entry. Light grids, meshes and bounds interleave
+/// reads of several rasters (heights, their coarse levels, max-pyramids), each in a few pages.
+const RECENT_SLOTS_LOG2: u32 = 5;
 
-type Recent = [Option<(u64, u32, Arc<PageData>)>; RECENT_PAGES];
+type Slot = Option<(u64, u32, Arc<PageData>)>;
 
 thread_local! {
-    static RECENT: RefCell<Recent> = const { RefCell::new([None, None, None, None]) };
+    static RECENT: RefCell<[Slot; 1 << RECENT_SLOTS_LOG2]> =
+        const { RefCell::new([const { None }; 1 << RECENT_SLOTS_LOG2]) };
+}
+
+/// The slot of page `index` of the raster numbered `serial`.
+#[inline]
+fn slot(serial: u64, index: u32) -> usize {
+    let h = (serial as u32)
+        .wrapping_mul(0x9E37_79B9)
+        .wrapping_add(index.wrapping_mul(0x85EB_CA6B));
+    (h >> (32 - RECENT_SLOTS_LOG2)) as usize
 }
 
 /// One raster layer of a page file, read through a page cache.
@@ -136,39 +150,67 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
             let index = (y / side) * self.pages_per_row + x / side;
             (index, (y % side) * side + x % side)
         };
-        let index = index as u32;
+        self.with_page(index as u32, |page| page[at])
+            .unwrap_or_else(|| self.fill())
+    }
+
+    /// The samples `x..x + N` by `y..y + N` (`[row][column]`, south row first), all in range:
+    /// one look-up of their page where they share one (the usual case for a stencil), else
+    /// sample by sample. Equal to [`Self::get`] at each sample.
+    #[inline]
+    pub fn block<const N: usize>(&self, x: usize, y: usize) -> [[T; N]; N] {
+        if let Some(s) = self.side_shift {
+            let side = 1usize << s;
+            let (px, py) = (x & (side - 1), y & (side - 1));
+            if px + N <= side && py + N <= side {
+                let index = ((y >> s) * self.pages_per_row + (x >> s)) as u32;
+                return self
+                    .with_page(index, |page| {
+                        std::array::from_fn(|j| {
+                            let row = &page[(py + j) * side + px..][..N];
+                            std::array::from_fn(|i| row[i])
+                        })
+                    })
+                    .unwrap_or_else(|| [[self.fill(); N]; N]);
+            }
+        }
+        std::array::from_fn(|j| std::array::from_fn(|i| self.get(x + i, y + j)))
+    }
+
+    /// `f` of the samples of page `index`: from this thread's recent pages, else read through
+    /// the cache (and kept at hand). `None` where the page cannot be read.
+    #[inline]
+    fn with_page<R>(&self, index: u32, f: impl Fn(&[T]) -> R) -> Option<R> {
         let hit = RECENT.with(|r| {
             let r = r.borrow();
-            r.iter().flatten().find_map(|(serial, i, data)| {
-                (*serial == self.serial && *i == index).then(|| T::slice(data).map(|s| s[at]))
-            })
+            let (serial, i, data) = r[slot(self.serial, index)].as_ref()?;
+            (*serial == self.serial && *i == index).then(|| T::slice(data).map(&f))
         });
         match hit {
-            Some(Some(v)) => v,
-            _ => self.read(index, at),
+            Some(value) => value,
+            None => self.read(index).and_then(|data| T::slice(&data).map(f)),
         }
     }
 
-    /// Sample `at` of page `index`, read through the cache and kept at hand for this thread.
+    /// Page `index`, read through the cache and kept at hand for this thread; `None` (and the
+    /// fault recorded once) where it cannot be read.
     #[cold]
-    fn read(&self, index: u32, at: usize) -> T {
+    fn read(&self, index: u32) -> Option<Arc<PageData>> {
         let failed_before = self
             .failed
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .contains(&index);
         if failed_before {
-            return self.fill();
+            return None;
         }
         match self.paging.cache.page::<T>(self.layer, index) {
             Ok(data) => {
-                let v = T::slice(&data).map_or_else(|| self.fill(), |s| s[at]);
                 RECENT.with(|r| {
-                    let mut r = r.borrow_mut();
-                    r.rotate_right(1);
-                    r[0] = Some((self.serial, index, data));
+                    r.borrow_mut()[slot(self.serial, index)] =
+                        Some((self.serial, index, Arc::clone(&data)));
                 });
-                v
+                Some(data)
             }
             Err(e) => {
                 self.failed
@@ -180,7 +222,7 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
                     self.fill()
                 );
                 self.paging.faults.record_as(&e, &consequence);
-                self.fill()
+                None
             }
         }
     }
@@ -203,5 +245,13 @@ impl Samples for PagedRaster<f32> {
     #[inline]
     fn at(&self, x: usize, y: usize) -> f32 {
         self.get(x, y)
+    }
+    #[inline]
+    fn quad(&self, x: usize, y: usize) -> [[f32; 2]; 2] {
+        self.block(x, y)
+    }
+    #[inline]
+    fn block4(&self, x: usize, y: usize) -> [[f32; 4]; 4] {
+        self.block(x, y)
     }
 }
