@@ -97,9 +97,9 @@ pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;
 
 /// Bakes what the engine derives from the map in `dir` (`worldgen bake`), so that no open of
 /// the map computes it: the max-pyramids of the region bounds and the ground amplitude grid as
-/// page files under `pages/derived`, the decal field as a tile file there, and the surface
-/// error grids with the 32 m nodes' bounds as page files there too (kept when they already
-/// hold them for this map and this engine; read from [`SURFACE_ERROR_CACHE`] when it holds
+/// page files under `pages/derived`, the decal field as a tile file there, the ground
+/// materials' texture layers, and the surface error grids with the 32 m nodes' bounds as page
+/// files there too (kept when they already hold them for this map and this engine; read from [`SURFACE_ERROR_CACHE`] when it holds
 /// them, which is then removed). Returns whether the error grids were computed (false: they
 /// were already baked or cached).
 pub fn bake_derived(
@@ -113,6 +113,8 @@ pub fn bake_derived(
     let pages = worldgen::pages::bake::pages_dir(dir);
     world
         .write_derived_pages(&pages, worldgen::pages::DEFAULT_PAGE_SIDE)
+        .map_err(std::io::Error::other)?;
+    engine::ground::material_layers::write_baked(&world.map, &pages)
         .map_err(std::io::Error::other)?;
     let path = dir.join(SURFACE_ERROR_CACHE);
     let key = map_error_cache::surface_key(&world, precomputed::MEASUREMENT_VERSION);
@@ -186,6 +188,11 @@ pub fn check_derived(dir: &Path) -> Result<String, String> {
     let faults = std::sync::Arc::default();
     if MapErrorPyramid::open_pages(&pages, key, &paging.cache, &faults).is_err() {
         stale.push("surface error grids");
+    }
+    use engine::ground::material_layers;
+    let materials = material_layers::baked_path(&pages);
+    if material_layers::read_baked(&materials, material_layers::key(&world.map)).is_err() {
+        stale.push("ground materials");
     }
     if !stale.is_empty() {
         return Err(format!(

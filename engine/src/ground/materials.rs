@@ -1,9 +1,10 @@
 //! Ground materials: per ground type of the map's legend, an albedo texture and a detail height
 //! texture that tile seamlessly, `MATERIAL_TEXELS` texels over [`MATERIAL_TILE_M`] metres.
 //!
-//! Made by the engine at start-up, not stored in the map: they are a pure function of the
-//! legend (name and colour) and the map seed, cost about a millisecond per type, and so need no
-//! new map layer, no format version and no validation of generated files. A map may instead name
+//! Not stored in the map: they are a pure function of the legend (name and colour) and the map
+//! seed, so they need no map layer and no format version. `worldgen bake` makes them (about a
+//! tenth of a second per type) into the bake ([`super::material_layers`]); a viewer makes them
+//! at start-up only for a map without that bake. A map may instead name
 //! a PNG for a type (`ground.legend[i].material`, validated by `Map::load`): its texels are then
 //! the albedo, box-filtered (in linear light) or repeated to `MATERIAL_TEXELS`, north up.
 //!
@@ -186,14 +187,22 @@ pub fn materials(
     images: &[Option<MaterialImage>],
     seed: u64,
 ) -> Vec<Material> {
-    legend
-        .iter()
-        .enumerate()
-        .map(|(i, t)| match images.get(i).and_then(Option::as_ref) {
-            Some(image) => material_from_image(t, image),
-            None => material(i, t, seed),
-        })
+    (0..legend.len())
+        .map(|i| material_of(legend, images, i, seed))
         .collect()
+}
+
+/// The material of type `i` of `legend` (one of [`materials`]).
+pub fn material_of(
+    legend: &[GroundType],
+    images: &[Option<MaterialImage>],
+    i: usize,
+    seed: u64,
+) -> Material {
+    match images.get(i).and_then(Option::as_ref) {
+        Some(image) => material_from_image(&legend[i], image),
+        None => material(i, &legend[i], seed),
+    }
 }
 
 #[cfg(test)]

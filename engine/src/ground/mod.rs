@@ -2,12 +2,13 @@
 //! temporary texture"). The CPU side: the content kind ([`content`]), the spatial index that
 //! gives a node the decals it needs ([`decal_index`]), the texel layout every node texture uses
 //! ([`layout`]), the decal pieces a texture draws ([`pieces`]) and the ground materials
-//! ([`materials`]). The GPU pass that renders a node's texture from them is
+//! ([`materials`], baked for the renderer by [`material_layers`]). The GPU pass that renders a node's texture from them is
 //! `crate::render::ground`, run by the terrain renderer's upload hook into a layer of
 //! `crate::render::ground_pool`, sampled by the terrain shading.
 
 pub mod content;
 pub mod decal_index;
 pub mod layout;
+pub mod material_layers;
 pub mod materials;
 pub mod pieces;

@@ -18,14 +18,12 @@ use super::Gpu;
 use super::frame::{sampler_entry, texture_entry, uint_texture_entry};
 use super::ground_pool::LayerMips;
 use crate::ground::layout::{SIDE, lattice_index, texel_m};
-use crate::ground::materials::{
-    MATERIAL_TEXELS, MATERIAL_TILE_M, MAX_RELIEF_M, Material, materials,
-};
+use crate::ground::material_layers::{self, MaterialLayers};
+use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M};
 use crate::ground::pieces::NodeDecals;
 use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use wgpu::util::DeviceExt;
-use worldgen::house_textures::MipChain;
 use worldgen::map::DecalKind;
 
 /// Format node ground textures are rendered into and sampled through (shaded in linear light,
@@ -234,45 +232,13 @@ fn ground_types_view(gpu: &Gpu, ground: &worldgen::Grid<u8>) -> wgpu::TextureVie
         .create_view(&wgpu::TextureViewDescriptor::default())
 }
 
-/// The texels of `m` as the renderer stores them: sRGB albedo, and in alpha (linear in every
-/// format) the detail height in steps of [`MAX_RELIEF_M`] / 255 above the material's lowest.
-fn material_texels(m: &Material) -> Vec<[u8; 4]> {
-    let scale = (m.relief_m / MAX_RELIEF_M).clamp(0.0, 1.0);
-    m.albedo_srgb
-        .iter()
-        .zip(&m.height)
-        .map(|(&[r, g, b, _], &h)| [r, g, b, (f64::from(h) * scale).round() as u8])
-        .collect()
-}
-
 /// The legend's materials as one layer each of a mipmapped sRGB array (a flat grey one for an
 /// empty legend), and the layer count.
-fn materials_view(gpu: &Gpu, map: &worldgen::Map) -> (wgpu::TextureView, u32) {
-    let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap_or(0);
-    let mut mats: Vec<Vec<[u8; 4]>> = materials(&map.manifest.ground.legend, &map.materials, seed)
-        .iter()
-        .map(material_texels)
-        .collect();
-    if mats.is_empty() {
-        mats.push(vec![
-            [128, 128, 128, 0];
-            (MATERIAL_TEXELS * MATERIAL_TEXELS) as usize
-        ]);
-    }
-    let types = mats.len() as u32;
-    // Each layer's mip chain (2 x 2 box filter in linear light; heights averaged), levels in
-    // order.
-    let bytes: Vec<u8> = mats
-        .iter()
-        .flat_map(|m| {
-            MipChain::from_level0(
-                MATERIAL_TEXELS.ilog2(),
-                m.iter().flatten().copied().collect(),
-            )
-            .levels
-        })
-        .flatten()
-        .collect();
+fn materials_view(gpu: &Gpu, world: &World) -> (wgpu::TextureView, u32) {
+    let MaterialLayers {
+        layers: types,
+        bytes,
+    } = material_layers::for_world(world);
     let view = gpu
         .device
         .create_texture_with_data(
@@ -307,7 +273,7 @@ impl GroundTexturer {
         let device = &gpu.device;
         let map = &world.map;
         let ground_types = ground_types_view(gpu, &map.ground);
-        let (materials, types) = materials_view(gpu, map);
+        let (materials, types) = materials_view(gpu, world);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("ground material sampler"),
             address_mode_u: wgpu::AddressMode::Repeat,

@@ -1,8 +1,12 @@
 //! The pool node ground textures live in (owned by the terrain renderer): layers
-//! of a few `SIDE x SIDE` texture arrays (pages of [`LAYERS_PER_PAGE`], or up to
+//! of a few `SIDE x SIDE` texture arrays (pages of at most [`LAYERS_PER_PAGE`], or
 //! [`MAX_LAYERS_PER_PAGE`] where the device allows ([`layers_per_page`]), created as needed, at
 //! most as many as the byte budget allows), one layer leased per node and given back when the
-//! lease drops (with the node's GPU objects, on eviction). A layer's view and the bind group
+//! lease drops. The first page holds [`FIRST_PAGE_LAYERS`] and the later ones the largest
+//! number: a view's first textures do not wait for memory for thousands (an adapter clears a
+//! texture array whole before it is first sampled: on a CPU adapter, seconds for the largest
+//! page), and a view that needs more has them in one more page (each page a drawn node's
+//! texture is in is one more terrain multi-draw) (with the node's GPU objects, on eviction). A layer's view and the bind group
 //! of its mip levels are made once, the first time the layer is leased, and kept with the
 //! page (a node texture then creates no GPU object).
 
@@ -17,6 +21,9 @@ pub const LAYERS_PER_PAGE: u32 = 256;
 /// textures are spread over fewer pages, and each page a node's texture is in is one more
 /// multi-draw.
 pub const MAX_LAYERS_PER_PAGE: u32 = 2048;
+
+/// Layers of the first page (the later ones hold the largest number).
+pub const FIRST_PAGE_LAYERS: u32 = 128;
 
 /// Bytes of one layer (RGBA8 with its mip levels).
 pub const LAYER_BYTES: usize = crate::ground::content::TEXTURE_BYTES;
@@ -76,7 +83,6 @@ impl GroundSlot {
 
 /// Texture-array pages and their layer allocator.
 pub struct GroundPool {
-    layers_per_page: u32,
     alloc: Suballocator,
     pages: Vec<wgpu::Texture>,
     /// Per page, per layer: its view and mip bindings, once leased.
@@ -103,17 +109,19 @@ impl GroundPool {
         Self::with_pages_of(budget_bytes, LAYERS_PER_PAGE, mip_layout)
     }
 
-    /// A pool of at most `budget_bytes` of pages of `layers_per_page` layers (at least one
-    /// page; see [`layers_per_page`] for what a device allows).
+    /// A pool of at most `budget_bytes` of pages of up to `layers_per_page` layers (at least
+    /// one page; see [`layers_per_page`] for what a device allows), [`page_layers`] each.
     pub fn with_pages_of(
         budget_bytes: usize,
         layers_per_page: u32,
         mip_layout: &wgpu::BindGroupLayout,
     ) -> Self {
-        let page_bytes = LAYER_BYTES * layers_per_page as usize;
+        let pages = page_layers(budget_bytes, layers_per_page)
+            .into_iter()
+            .map(|layers| vec![layers])
+            .collect();
         Self {
-            layers_per_page,
-            alloc: Suballocator::new(&[layers_per_page], (budget_bytes / page_bytes).max(1)),
+            alloc: Suballocator::with_pages(pages),
             pages: Vec::new(),
             layers: Vec::new(),
             mip_layout: mip_layout.clone(),
@@ -131,7 +139,7 @@ impl GroundPool {
                     size: wgpu::Extent3d {
                         width: SIDE,
                         height: SIDE,
-                        depth_or_array_layers: self.layers_per_page,
+                        depth_or_array_layers: self.alloc.capacity(self.pages.len(), 0),
                     },
                     mip_level_count: MIP_LEVELS,
                     sample_count: 1,
@@ -145,7 +153,8 @@ impl GroundPool {
                 }));
         }
         while self.layers.len() < self.pages.len() {
-            self.layers.push(vec![None; self.layers_per_page as usize]);
+            let layers = self.alloc.capacity(self.layers.len(), 0);
+            self.layers.push(vec![None; layers as usize]);
         }
         let (page, layer) = (lease.page as usize, lease.start[0]);
         let views = self.layers[page][layer as usize]
@@ -177,8 +186,26 @@ impl GroundPool {
     /// Bytes of the pages made so far (never above the budget, rounded down to whole pages,
     /// and at least one page).
     pub fn bytes(&self) -> usize {
-        self.pages.len() * self.layers_per_page as usize * LAYER_BYTES
+        (0..self.pages.len())
+            .map(|p| self.alloc.capacity(p, 0) as usize * LAYER_BYTES)
+            .sum()
     }
+}
+
+/// The layers of each page a pool of `budget_bytes` may open, pages of at most `largest`:
+/// [`FIRST_PAGE_LAYERS`] (or `largest`, if fewer), then `largest`, while the pages' bytes stay
+/// within the budget (one page at least).
+pub fn page_layers(budget_bytes: usize, largest: u32) -> Vec<u32> {
+    let budget_layers = budget_bytes / LAYER_BYTES;
+    let mut pages = Vec::new();
+    let mut next = FIRST_PAGE_LAYERS.min(largest).max(1);
+    let mut total = 0usize;
+    while total + next as usize <= budget_layers || pages.is_empty() {
+        pages.push(next);
+        total += next as usize;
+        next = largest;
+    }
+    pages
 }
 
 /// Layer `layer` of `page`: the sRGB view of its level 0 and the bind group of its mip pass.
@@ -231,4 +258,24 @@ fn layer_views(
         entries: &entries,
     }));
     LayerViews { view, mips }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_small_first_page_then_the_largest_within_the_budget() {
+        let layers = |n: usize| n * LAYER_BYTES;
+        assert_eq!(page_layers(layers(4096), 1024), vec![128, 1024, 1024, 1024]);
+        // A page that would overrun the budget is not opened.
+        assert_eq!(page_layers(layers(2000), 2048), vec![128]);
+        assert_eq!(page_layers(layers(2200), 2048), vec![128, 2048]);
+        assert_eq!(
+            page_layers(layers(100), 2048),
+            vec![128],
+            "one page at least"
+        );
+        assert_eq!(page_layers(layers(1000), 64), vec![64; 15]);
+    }
 }

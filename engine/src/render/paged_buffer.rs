@@ -48,7 +48,7 @@ impl PagedBuffer {
             self.pages
                 .push(device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(&format!("{} page {n}", self.label)),
-                    size: u64::from(self.pool.capacity(0)) * self.element_bytes,
+                    size: u64::from(self.pool.capacity(n, 0)) * self.element_bytes,
                     usage: self.usage,
                     mapped_at_creation: false,
                 }));

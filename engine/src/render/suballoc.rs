@@ -75,12 +75,11 @@ impl RangeAllocator {
 /// Per page, one allocator per part.
 type Pages = Arc<Mutex<Vec<Vec<RangeAllocator>>>>;
 
-/// Pages of `parts.len()` parts, `capacity[k]` elements in part k of every page, at most
-/// `max_pages` pages.
+/// Pages of `parts.len()` parts, `capacity[p][k]` elements in part k of page p, opened in
+/// order as needed.
 #[derive(Debug, Clone)]
 pub struct Suballocator {
-    capacity: Vec<u32>,
-    max_pages: usize,
+    capacity: Vec<Vec<u32>>,
     pages: Pages,
 }
 
@@ -107,20 +106,28 @@ impl Drop for Lease {
 }
 
 impl Suballocator {
+    /// At most `max_pages` pages of `capacity` each.
     pub fn new(capacity: &[u32], max_pages: usize) -> Self {
+        Self::with_pages(vec![capacity.to_vec(); max_pages])
+    }
+
+    /// Pages of the capacities `capacity` (per page, one entry per part), opened in that order.
+    pub fn with_pages(capacity: Vec<Vec<u32>>) -> Self {
         Self {
-            capacity: capacity.to_vec(),
-            max_pages,
+            capacity,
             pages: Arc::default(),
         }
     }
 
     /// Ranges of `len[k]` elements in part k, all in the first page where they fit (a new page
-    /// when none has room). None when a length exceeds a part's capacity or all `max_pages`
+    /// when none has room). None when a length exceeds a part's capacity in every page or all
     /// pages are full. `len` has one entry per part.
     pub fn lease(&self, len: &[u32]) -> Option<Lease> {
-        assert_eq!(len.len(), self.capacity.len(), "one length per part");
-        if len.iter().zip(&self.capacity).any(|(l, c)| l > c) {
+        let fits = |capacity: &Vec<u32>| {
+            assert_eq!(len.len(), capacity.len(), "one length per part");
+            len.iter().zip(capacity).all(|(l, c)| l <= c)
+        };
+        if !self.capacity.iter().any(fits) {
             return None;
         }
         let mut pages = self.pages.lock().unwrap_or_else(PoisonError::into_inner);
@@ -142,17 +149,17 @@ impl Suballocator {
                 return Some(self.make(p, start, len));
             }
         }
-        if pages.len() >= self.max_pages {
-            return None;
+        // Pages too small for the request are opened on the way to one that fits.
+        while let Some(capacity) = self.capacity.get(pages.len()) {
+            let mut parts: Vec<RangeAllocator> =
+                capacity.iter().map(|&c| RangeAllocator::new(c)).collect();
+            let start = try_page(&mut parts);
+            pages.push(parts);
+            if let Some(start) = start {
+                return Some(self.make(pages.len() - 1, start, len));
+            }
         }
-        let mut parts: Vec<RangeAllocator> = self
-            .capacity
-            .iter()
-            .map(|&c| RangeAllocator::new(c))
-            .collect();
-        let start = try_page(&mut parts)?;
-        pages.push(parts);
-        Some(self.make(pages.len() - 1, start, len))
+        None
     }
 
     fn make(&self, page: usize, start: Vec<u32>, len: &[u32]) -> Lease {
@@ -172,9 +179,9 @@ impl Suballocator {
             .len()
     }
 
-    /// Elements in part k of each page.
-    pub fn capacity(&self, part: usize) -> u32 {
-        self.capacity[part]
+    /// Elements in part k of page `page` (0 where there is no such page).
+    pub fn capacity(&self, page: usize, part: usize) -> u32 {
+        self.capacity.get(page).map_or(0, |c| c[part])
     }
 
     /// Elements in use in part k over all pages.
@@ -182,7 +189,8 @@ impl Suballocator {
         let pages = self.pages.lock().unwrap_or_else(PoisonError::into_inner);
         pages
             .iter()
-            .map(|p| u64::from(self.capacity[part]) - p[part].free_len())
+            .zip(&self.capacity)
+            .map(|(p, c)| u64::from(c[part]) - p[part].free_len())
             .sum()
     }
 }
@@ -225,5 +233,30 @@ mod tests {
         assert_eq!(s.used(0), 10);
         drop((b, c));
         assert_eq!((s.used(0), s.used(1)), (0, 0));
+    }
+
+    #[test]
+    fn pages_of_growing_capacity_open_in_order() {
+        let s = Suballocator::with_pages(vec![vec![2], vec![4], vec![8]]);
+        let a: Vec<Lease> = (0..2).map(|_| s.lease(&[1]).expect("page 0")).collect();
+        assert!(a.iter().all(|l| l.page == 0));
+        let b = s.lease(&[3]).expect("page 1");
+        assert_eq!((b.page, s.pages()), (1, 2));
+        // Only the last page holds 5: page 2 opens (page 1 has 1 left).
+        let c = s.lease(&[5]).expect("page 2");
+        assert_eq!((c.page, s.pages()), (2, 3));
+        assert!(s.lease(&[9]).is_none(), "larger than every page");
+        assert_eq!(s.used(0), 2 + 3 + 5);
+        assert_eq!((s.capacity(1, 0), s.capacity(3, 0)), (4, 0));
+    }
+
+    #[test]
+    fn a_request_only_a_later_page_holds_opens_the_pages_before_it() {
+        let s = Suballocator::with_pages(vec![vec![2], vec![8]]);
+        let a = s.lease(&[5]).expect("page 1");
+        assert_eq!((a.page, s.pages()), (1, 2));
+        let b = s.lease(&[2]).expect("page 0, opened on the way");
+        assert_eq!(b.page, 0);
+        assert!(s.lease(&[4]).is_none(), "page 1 has 3 left, page 0 none");
     }
 }

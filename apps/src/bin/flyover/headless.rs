@@ -32,8 +32,10 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let target = Target::new(&gpu.device, cli.size, COLOR_FORMAT);
     let start = scripted_camera(cli, path.as_ref(), &world, 0.0, cli.size, cli.fov_deg);
     let after_gpu_rss_mib = rss_mib_now();
+    let after_gpu_s = load.elapsed().as_secs_f64();
     let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
     let after_viewer_rss_mib = rss_mib_now();
+    let after_viewer_s = load.elapsed().as_secs_f64();
     viewer.view.merged_draws = !cli.per_item_draws;
     viewer.view.flat_terrain = cli.flat_terrain;
     if cli.gpu_reference {
@@ -45,6 +47,13 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     }
     if cli.warm_start {
         warm_start(cli, path.as_ref(), &gpu, &mut viewer)?;
+    }
+    // Seconds from the start of the open to the end of the first frame that drew terrain.
+    let mut first_world_frame_s = None;
+    if cli.wait_first_world {
+        let t = wait_first_world(cli, path.as_ref(), &gpu, &target, &mut viewer, load)?;
+        eprintln!("the first frame showing the world came {t:.2} s after the open began");
+        first_world_frame_s = Some(t);
     }
     let bar = indicatif::ProgressBar::new(cli.frames);
     bar.set_style(
@@ -67,6 +76,9 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
             .render_offscreen(&gpu, &target, &cam, dt)
             .map_err(|e| anyhow::anyhow!(e))?;
         st.t_s = t_s;
+        if first_world_frame_s.is_none() && st.drawn_nodes > 0 {
+            first_world_frame_s = Some(load.elapsed().as_secs_f64());
+        }
         if cli.every > 0 && (f % cli.every == 0 || f + 1 == cli.frames) {
             let png = cli.out.join(format!("frame_{f:05}.png"));
             write_png(&png, target.size, &target.read_rgba(&gpu)?)?;
@@ -94,6 +106,12 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         show(rss_mib),
         show(peak_rss_mib)
     );
+    match first_world_frame_s {
+        Some(t) => {
+            println!("the first frame showing the world ended {t:.2} s after the open began")
+        }
+        None => println!("no frame of the run showed the world (terrain)"),
+    }
     let mib = |b: usize| b as f64 / f64::from(1 << 20);
     let parts: Vec<String> = world_memory
         .iter()
@@ -101,8 +119,9 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .collect();
     println!("world in memory: {}", parts.join(", "));
     println!(
-        "resident memory after loading the map {}, after opening the GPU {}, after making the \
-         viewer and its renderers {}",
+        "resident memory after loading the map {}, after opening the GPU {} ({after_gpu_s:.2} s \
+         after the open began), after making the viewer and its renderers {} \
+         ({after_viewer_s:.2} s)",
         show(after_load_rss_mib),
         show(after_gpu_rss_mib),
         show(after_viewer_rss_mib)
@@ -126,6 +145,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         "tau_px": cli.tau,
         "fov_deg": cli.fov_deg,
         "map_load_s": map_load_s,
+        "first_world_frame_s": first_world_frame_s,
         "page_cache": pages,
         "decal_tiles": decal_tiles,
         "page_faults": page_faults.list(),
@@ -134,6 +154,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         "after_load_rss_mib": after_load_rss_mib,
         "after_gpu_rss_mib": after_gpu_rss_mib,
         "after_viewer_rss_mib": after_viewer_rss_mib,
+        "after_gpu_s": after_gpu_s,
+        "after_viewer_s": after_viewer_s,
         "summary": summary,
         "frames": all,
     });
@@ -146,6 +168,36 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         json.display()
     );
     Ok(())
+}
+
+/// Frames of the flight's first view, drawn until one shows terrain: the seconds from `open`
+/// (the start of the map's open) to the end of that frame. An error after 60 s.
+fn wait_first_world(
+    cli: &Cli,
+    path: Option<&CameraPath>,
+    gpu: &Gpu,
+    target: &Target,
+    viewer: &mut engine::viewer::Viewer,
+    open: Instant,
+) -> Result<f64> {
+    let world = &viewer.streamer.shared.world;
+    let cam = scripted_camera(cli, path, world, 0.0, cli.size, cli.fov_deg);
+    let waited = Instant::now();
+    loop {
+        let st = viewer
+            .render_offscreen(gpu, target, &cam, 1.0 / cli.fps)
+            .map_err(|e| anyhow::anyhow!(e))?;
+        if st.drawn_nodes > 0 {
+            return Ok(open.elapsed().as_secs_f64());
+        }
+        if waited.elapsed().as_secs_f64() > 60.0 {
+            anyhow::bail!(
+                "--wait-first-world: no frame showed the world within 60 s ({})",
+                viewer.outstanding()
+            );
+        }
+        std::thread::yield_now();
+    }
 }
 
 /// The page cache of a baked map's max-pyramids over a run of `secs`: printed, and as JSON.

@@ -157,6 +157,12 @@ pub(crate) struct Cli {
     /// computed (pictures of a settled view; the frames' statistics then start warm).
     #[arg(long)]
     pub(crate) warm_start: bool,
+    /// Headless: before the flight, draw frames of its first view until one shows the world
+    /// (terrain at any level of detail; at most 60 s), and report the time from the start of
+    /// the map's open to that frame (`first_world_frame_s` in stats.json), what a user waits
+    /// for. Without it the time is reported only if a frame of the flight shows the world.
+    #[arg(long)]
+    pub(crate) wait_first_world: bool,
     /// Place this model as progressive-mesh objects in the world (repeatable): a `.pm` file
     /// (`worldgen pm`), or an `.obj` / `.gltf` / `.glb` built at start-up with the quadric
     /// cost (a glTF `MSFT_lod` chain's levels too, each with its bounded distance to the base).
