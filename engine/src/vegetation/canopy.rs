@@ -2,6 +2,7 @@
 
 use super::placement::Placer;
 use crate::surface::{Rect, World};
+use worldgen::sample::Samples;
 
 /// Samples along a line of sight for [`Canopy::visibility`].
 pub const SIGHT_SAMPLES: usize = 16;
@@ -10,35 +11,117 @@ pub const SIGHT_SAMPLES: usize = 16;
 /// view is blocked (seed 002). Per species: the extinction `density * crown diameter` (1/m) on
 /// the density layer's grid, up to the species' typical height above the ground; large trees
 /// from the map's list as crown diameters per 8 m cell, up to their mean height.
+///
+/// A species' extinction is computed from its density sample when read (not stored as a grid
+/// of its own), so the canopy holds the density layers' bytes, the large trees' grid and one
+/// bit per cell of occupancy.
 #[derive(Debug, Clone)]
 pub struct Canopy {
-    /// Per species with a layer: (extinction grid 1/m, spacing m, height m).
-    layers: Vec<(worldgen::Grid<f32>, f64, f64)>,
+    /// Per species with a layer, then the large trees: (extinction, spacing m, height m).
+    layers: Vec<(LayerGrid, f64, f64)>,
     origin_m: [f64; 2],
     heights_spacing_m: f64,
     /// The tallest species' height: lines of sight above the ground by more never hit.
     pub top_m: f64,
-    /// The layers summed per height band, when they all lie on one grid.
+    /// The layers grouped per height band, when they all lie on one grid.
     bands: Option<Bands>,
 }
 
-/// The canopy's layers summed ahead of time, for layers that share one grid (the usual case:
-/// every density layer and the large trees' grid on 8 m cells from the map's origin): one
-/// bilinear look-up per extinction instead of one per layer, and an O(1) test of whether any
-/// vegetation stands in a rectangle.
+/// One layer's extinction (1/m) at its grid's samples.
+#[derive(Debug, Clone)]
+enum LayerGrid {
+    /// A species' density samples (0-255), and per sample value the extinction: the value
+    /// times the species' scale, rounded to f32.
+    Density {
+        density: worldgen::Grid<u8>,
+        extinction: Box<[f32; 256]>,
+    },
+    /// The extinction itself (the large trees).
+    Extinction(worldgen::Grid<f32>),
+}
+
+impl LayerGrid {
+    #[inline]
+    fn get(&self, x: usize, y: usize) -> f32 {
+        match self {
+            LayerGrid::Density {
+                density,
+                extinction,
+            } => extinction[usize::from(density.get(x, y))],
+            LayerGrid::Extinction(g) => g.get(x, y),
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        match self {
+            LayerGrid::Density { density, .. } => density.data().len(),
+            LayerGrid::Extinction(g) => std::mem::size_of_val(g.data()),
+        }
+    }
+}
+
+impl Samples for LayerGrid {
+    fn width(&self) -> usize {
+        match self {
+            LayerGrid::Density { density, .. } => density.width(),
+            LayerGrid::Extinction(g) => g.width(),
+        }
+    }
+    fn height(&self) -> usize {
+        match self {
+            LayerGrid::Density { density, .. } => density.height(),
+            LayerGrid::Extinction(g) => g.height(),
+        }
+    }
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> f32 {
+        self.get(x, y)
+    }
+}
+
+/// The sum of some layers at each sample (f32, added in the layers' order): a band of
+/// [`Bands`], read as a raster.
+struct BandSum<'a> {
+    layers: &'a [(LayerGrid, f64, f64)],
+    members: &'a [usize],
+}
+
+impl Samples for BandSum<'_> {
+    fn width(&self) -> usize {
+        self.layers[0].0.width()
+    }
+    fn height(&self) -> usize {
+        self.layers[0].0.height()
+    }
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> f32 {
+        let mut sum = 0.0f32;
+        for &i in self.members {
+            sum += self.layers[i].0.get(x, y);
+        }
+        sum
+    }
+}
+
+/// The canopy's layers grouped per height band, for layers that share one grid (the usual
+/// case: every density layer and the large trees' grid on 8 m cells from the map's origin):
+/// one bilinear look-up of the band's sum per extinction, and a test of whether any
+/// vegetation stands in a rectangle that reads one bit per cell.
 #[derive(Debug, Clone)]
 struct Bands {
     /// The distinct layer tops (m), ascending.
     tops_m: Vec<f64>,
-    /// Per top: the sum of the layers that reach at least that high.
-    sums: Vec<worldgen::Grid<f32>>,
+    /// Per top: the layers (indices, ascending) that reach at least that high.
+    members: Vec<Vec<usize>>,
     spacing_m: f64,
-    /// Summed-area table of the cells where any layer is above zero (`width + 1` per row).
-    occupied: Vec<u32>,
+    width: usize,
+    /// One bit per cell, set where any layer is above zero: rows of `words_per_row` words.
+    occupied: Vec<u64>,
+    words_per_row: usize,
 }
 
 impl Bands {
-    fn new(layers: &[(worldgen::Grid<f32>, f64, f64)]) -> Option<Self> {
+    fn new(layers: &[(LayerGrid, f64, f64)]) -> Option<Self> {
         let (first, spacing_m, _) = layers.first()?;
         let (w, h) = (first.width(), first.height());
         if layers
@@ -50,33 +133,48 @@ impl Bands {
         let mut tops_m: Vec<f64> = layers.iter().map(|l| l.2).collect();
         tops_m.sort_by(f64::total_cmp);
         tops_m.dedup();
-        let sums = tops_m
+        let members = tops_m
             .iter()
-            .map(|&top| {
-                let mut sum = worldgen::Grid::new(w, h, 0.0f32);
-                for (g, _, _) in layers.iter().filter(|l| l.2 >= top) {
-                    for (s, v) in sum.data_mut().iter_mut().zip(g.data()) {
-                        *s += v;
-                    }
-                }
-                sum
-            })
+            .map(|&top| (0..layers.len()).filter(|&i| layers[i].2 >= top).collect())
             .collect();
-        let mut occupied = vec![0u32; (w + 1) * (h + 1)];
+        let words_per_row = w.div_ceil(64);
+        let mut occupied = vec![0u64; words_per_row * h];
         for y in 0..h {
             for x in 0..w {
-                let any = layers.iter().any(|(g, _, _)| g.get(x, y) > 0.0);
-                occupied[(y + 1) * (w + 1) + x + 1] = u32::from(any)
-                    + occupied[y * (w + 1) + x + 1]
-                    + occupied[(y + 1) * (w + 1) + x]
-                    - occupied[y * (w + 1) + x];
+                if layers.iter().any(|(g, _, _)| g.get(x, y) > 0.0) {
+                    occupied[y * words_per_row + x / 64] |= 1 << (x % 64);
+                }
             }
         }
         Some(Self {
             tops_m,
-            sums,
+            members,
             spacing_m: *spacing_m,
+            width: w,
             occupied,
+            words_per_row,
+        })
+    }
+
+    /// Band `band`'s summed layers as a raster.
+    fn sum<'a>(&'a self, layers: &'a [(LayerGrid, f64, f64)], band: usize) -> BandSum<'a> {
+        BandSum {
+            layers,
+            members: &self.members[band],
+        }
+    }
+
+    /// Whether any cell of columns `x0..=x1` and rows `y0..=y1` is occupied.
+    fn any_in_cells(&self, (x0, x1): (usize, usize), (y0, y1): (usize, usize)) -> bool {
+        let (w0, w1) = (x0 / 64, x1 / 64);
+        (y0..=y1).any(|y| {
+            let row = &self.occupied[y * self.words_per_row..][..self.words_per_row];
+            (w0..=w1).any(|k| {
+                let lo = if k == w0 { x0 % 64 } else { 0 };
+                let hi = if k == w1 { x1 % 64 } else { 63 };
+                let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
+                row[k] & mask != 0
+            })
         })
     }
 }
@@ -89,15 +187,17 @@ impl Canopy {
             let Some(l) = sp.layer else { continue };
             let layer = &world.map.densities[l];
             let scale = layer.spec.max_density_per_m2 / 255.0 * 2.0 * sp.radius_m;
-            let g = &layer.density;
-            let mut ext = worldgen::Grid::new(g.width(), g.height(), 0.0f32);
-            for y in 0..g.height() {
-                for x in 0..g.width() {
-                    ext.set(x, y, (f64::from(g.get(x, y)) * scale) as f32);
-                }
-            }
             top = top.max(sp.height_m);
-            layers.push((ext, layer.spec.spacing_m, sp.height_m));
+            let density = layer.density.clone();
+            let extinction = Box::new(std::array::from_fn(|v| (v as f64 * scale) as f32));
+            layers.push((
+                LayerGrid::Density {
+                    density,
+                    extinction,
+                },
+                layer.spec.spacing_m,
+                sp.height_m,
+            ));
         }
         // Large trees: crown diameters per cell area on an 8 m grid, up to their mean height.
         if !world.map.trees.is_empty() {
@@ -119,7 +219,7 @@ impl Canopy {
             }
             let mean = height_sum / world.map.trees.len() as f64;
             top = top.max(mean);
-            layers.push((ext, cell, mean));
+            layers.push((LayerGrid::Extinction(ext), cell, mean));
         }
         Self {
             bands: Bands::new(&layers),
@@ -128,6 +228,12 @@ impl Canopy {
             heights_spacing_m: world.map.manifest.heights.spacing_m,
             top_m: top,
         }
+    }
+
+    /// Bytes the canopy holds (its layers and occupancy bits).
+    pub fn bytes(&self) -> usize {
+        self.layers.iter().map(|l| l.0.bytes()).sum::<usize>()
+            + self.bands.as_ref().map_or(0, |b| b.occupied.len() * 8)
     }
 
     /// The fraction of the line of sight from `eye` to `target` that vegetation leaves clear,
@@ -168,10 +274,10 @@ impl Canopy {
                 origin_m: self.origin_m,
                 spacing_m: b.spacing_m,
             };
-            return b
-                .sums
-                .get(band)
-                .map_or(0.0, |g| worldgen::sample::bilinear(g, at, x_m, y_m));
+            if band >= b.tops_m.len() {
+                return 0.0;
+            }
+            return worldgen::sample::bilinear(&b.sum(&self.layers, band), at, x_m, y_m);
         }
         let mut sum = 0.0;
         for (ext, spacing, h) in &self.layers {
@@ -250,10 +356,10 @@ impl Canopy {
         };
         Some(BandLattice {
             tops_m: b.tops_m.clone(),
-            values: b
-                .sums
-                .iter()
-                .map(|g| worldgen::sample::bilinear_lattice(g, at, xs, ys))
+            values: (0..b.tops_m.len())
+                .map(|band| {
+                    worldgen::sample::bilinear_lattice(&b.sum(&self.layers, band), at, xs, ys)
+                })
                 .collect(),
         })
     }
@@ -271,12 +377,13 @@ impl Canopy {
 impl Canopy {
     /// Whether [`Self::extinction_per_m`] can be above zero anywhere in the rectangle
     /// `min`..`max` (world m) at any height: some layer has a value above zero in a cell that
-    /// touches it, as the scan of the layers' cells looks. O(1) where the layers share one grid.
+    /// touches it, as the scan of the layers' cells looks: one bit per cell where the layers
+    /// share one grid.
     pub fn any_in(&self, min: [f64; 2], max: [f64; 2]) -> bool {
         let Some(b) = &self.bands else {
             return self.max_extinction_in(min, max) > 0.0;
         };
-        let (w, h) = (b.sums[0].width(), b.sums[0].height());
+        let (w, h) = (b.width, b.occupied.len() / b.words_per_row);
         let range = |axis: usize, len: usize| {
             let to =
                 |v: f64| ((v - self.origin_m[axis]) / b.spacing_m).clamp(0.0, (len - 1) as f64);
@@ -285,9 +392,7 @@ impl Canopy {
                 to(max[axis]).ceil() as usize,
             )
         };
-        let ((x0, x1), (y0, y1)) = (range(0, w), range(1, h));
-        let at = |x: usize, y: usize| b.occupied[y * (w + 1) + x];
-        at(x1 + 1, y1 + 1) + at(x0, y0) > at(x0, y1 + 1) + at(x1 + 1, y0)
+        b.any_in_cells(range(0, w), range(1, h))
     }
 }
 

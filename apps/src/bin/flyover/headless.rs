@@ -14,7 +14,7 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let world = open_world(&cli.map, &worldgen::progress::Bars::new(false))
         .with_context(|| format!("opening map {}", cli.map.display()))?;
     let map_load_s = load.elapsed().as_secs_f64();
-    let world_memory: Vec<(&str, usize)> = world.memory_bytes();
+    let mut world_memory: Vec<(&str, usize)> = world.memory_bytes();
     // A baked map's paged max-pyramids: their cache and faults, reported at the end.
     // And its decal field read tile by tile (a clone shares the tiles and their cache).
     let paged = (
@@ -36,6 +36,17 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let mut viewer = make_viewer(cli, &gpu, COLOR_FORMAT, world, &start)?;
     let after_viewer_rss_mib = rss_mib_now();
     let after_viewer_s = load.elapsed().as_secs_f64();
+    // What the vegetation kind holds of the map's whole area.
+    let vegetation = viewer
+        .streamer
+        .shared
+        .kind::<engine::vegetation::content::VegetationContent>();
+    if let Some(v) = vegetation {
+        world_memory.push((
+            "vegetation canopy (density layers and large trees, for lines of sight and light)",
+            v.canopy.bytes(),
+        ));
+    }
     viewer.view.merged_draws = !cli.per_item_draws;
     viewer.view.flat_terrain = cli.flat_terrain;
     if cli.gpu_reference {
