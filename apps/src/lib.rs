@@ -150,6 +150,7 @@ pub fn bake_derived(
 /// reads every derived part from the bake (none missing, damaged or baked for another map or
 /// engine). Returns a line saying so, or the error naming the file (and page) or the parts.
 pub fn check_derived(dir: &Path) -> Result<String, String> {
+    use engine::ground::material_layers;
     use engine::surface::map_error::MapErrorPyramid;
     use worldgen::pages::{PageFile, SampleKind};
     let pages = worldgen::pages::bake::pages_dir(dir);
@@ -189,7 +190,6 @@ pub fn check_derived(dir: &Path) -> Result<String, String> {
     if MapErrorPyramid::open_pages(&pages, key, &paging.cache, &faults).is_err() {
         stale.push("surface error grids");
     }
-    use engine::ground::material_layers;
     let materials = material_layers::baked_path(&pages);
     if material_layers::read_baked(&materials, material_layers::key(&world.map)).is_err() {
         stale.push("ground materials");

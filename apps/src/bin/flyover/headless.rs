@@ -109,34 +109,15 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
     let summary = print_table(&all, &gpu.adapter_name());
     let peak_rss_mib = worldgen::progress::peak_rss_bytes().map(|b| b as f64 / f64::from(1 << 20));
     let rss_mib = rss_mib_now();
-    let show =
-        |m: Option<f64>| m.map_or_else(|| "not reported".to_string(), |m| format!("{m:.0} MiB"));
-    println!(
-        "\nmap opened in {map_load_s:.2} s (load, validation, error grids); resident memory {} at \
-         the end, {} at the peak",
-        show(rss_mib),
-        show(peak_rss_mib)
-    );
-    match first_world_frame_s {
-        Some(t) => {
-            println!("the first frame showing the world ended {t:.2} s after the open began")
-        }
-        None => println!("no frame of the run showed the world (terrain)"),
-    }
+    let open = OpenReport {
+        map_load_s,
+        first_world_frame_s,
+        after_gpu_s,
+        after_viewer_s,
+        rss_mib: [after_load_rss_mib, after_gpu_rss_mib, after_viewer_rss_mib],
+    };
+    open.print(&world_memory, rss_mib, peak_rss_mib);
     let mib = |b: usize| b as f64 / f64::from(1 << 20);
-    let parts: Vec<String> = world_memory
-        .iter()
-        .map(|(what, b)| format!("{what} {:.0} MiB", mib(*b)))
-        .collect();
-    println!("world in memory: {}", parts.join(", "));
-    println!(
-        "resident memory after loading the map {}, after opening the GPU {} ({after_gpu_s:.2} s \
-         after the open began), after making the viewer and its renderers {} \
-         ({after_viewer_s:.2} s)",
-        show(after_load_rss_mib),
-        show(after_gpu_rss_mib),
-        show(after_viewer_rss_mib)
-    );
     let world_memory_mib: serde_json::Map<String, serde_json::Value> = world_memory
         .iter()
         .map(|(what, b)| ((*what).to_string(), serde_json::json!(mib(*b))))
@@ -179,6 +160,51 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         json.display()
     );
     Ok(())
+}
+
+/// How the map's open went: seconds from its start, and resident memory (MiB) after loading
+/// the map, opening the GPU and making the viewer.
+struct OpenReport {
+    map_load_s: f64,
+    first_world_frame_s: Option<f64>,
+    after_gpu_s: f64,
+    after_viewer_s: f64,
+    rss_mib: [Option<f64>; 3],
+}
+
+impl OpenReport {
+    /// Prints the open's times, the world's parts in memory and the resident memory at the
+    /// end (`rss_mib`) and peak.
+    fn print(&self, world_memory: &[(&str, usize)], rss_mib: Option<f64>, peak: Option<f64>) {
+        let show = |m: Option<f64>| {
+            m.map_or_else(|| "not reported".to_string(), |m| format!("{m:.0} MiB"))
+        };
+        println!(
+            "\nmap opened in {:.2} s (load, validation, error grids); resident memory {} at the \
+             end, {} at the peak",
+            self.map_load_s,
+            show(rss_mib),
+            show(peak)
+        );
+        match self.first_world_frame_s {
+            Some(t) => {
+                println!("the first frame showing the world ended {t:.2} s after the open began");
+            }
+            None => println!("no frame of the run showed the world (terrain)"),
+        }
+        let mib = |b: usize| b as f64 / f64::from(1 << 20);
+        let parts: Vec<String> = world_memory
+            .iter()
+            .map(|(what, b)| format!("{what} {:.0} MiB", mib(*b)))
+            .collect();
+        println!("world in memory: {}", parts.join(", "));
+        let [load, gpu, viewer] = self.rss_mib.map(show);
+        println!(
+            "resident memory after loading the map {load}, after opening the GPU {gpu} ({:.2} s \
+             after the open began), after making the viewer and its renderers {viewer} ({:.2} s)",
+            self.after_gpu_s, self.after_viewer_s
+        );
+    }
 }
 
 /// Frames of the flight's first view, drawn until one shows terrain: the seconds from `open`
