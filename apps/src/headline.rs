@@ -124,10 +124,10 @@ const FIGURES: &[Figure] = &[
         params: &["tau 2 px"],
     },
     Figure {
-        label: "first open of a 32 km map after `worldgen bake`",
+        label: "32 km map after `worldgen bake`: from the open to the first frame showing it",
         doc: "worlds.md",
         section: "worlds",
-        metric: "flyover 32768 m, first open: map load",
+        metric: "flyover 32768 m, first open: from the open to the first frame showing the world",
         params: &[],
     },
     Figure {
