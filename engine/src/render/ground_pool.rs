@@ -1,14 +1,16 @@
 //! The pool node ground textures live in (owned by the terrain renderer): layers
 //! of a few `SIDE x SIDE` texture arrays (pages of at most [`LAYERS_PER_PAGE`], or
-//! [`MAX_LAYERS_PER_PAGE`] where the device allows ([`layers_per_page`]), created as needed, at
-//! most as many as the byte budget allows), one layer leased per node and given back when the
-//! lease drops. The first page holds [`FIRST_PAGE_LAYERS`] and the later ones the largest
-//! number: a view's first textures do not wait for memory for thousands (an adapter clears a
-//! texture array whole before it is first sampled: on a CPU adapter, seconds for the largest
-//! page), and a view that needs more has them in one more page (each page a drawn node's
-//! texture is in is one more terrain multi-draw) (with the node's GPU objects, on eviction). A layer's view and the bind group
+//! [`MAX_LAYERS_PER_PAGE`] where the device allows ([`layers_per_page`]), created as needed, as
+//! many layers as the byte budget holds), one layer leased per node and given back when the
+//! lease drops (with the node's GPU objects, on eviction). A layer's view and the bind group
 //! of its mip levels are made once, the first time the layer is leased, and kept with the
 //! page (a node texture then creates no GPU object).
+//!
+//! The first page holds [`FIRST_PAGE_LAYERS`], the later ones the largest number ([`page_layers`]):
+//! a view's first textures do not wait for memory for thousands (an adapter clears a texture
+//! array whole before it is first sampled: on a CPU adapter, seconds for the largest page), and a
+//! view that needs more has them in one more page (each page a drawn node's texture is in is one
+//! more terrain multi-draw).
 
 use super::ground::{GROUND_PAGE_FORMAT, GROUND_TEXTURE_FORMAT};
 use super::suballoc::{Lease, Suballocator};
@@ -193,17 +195,17 @@ impl GroundPool {
 }
 
 /// The layers of each page a pool of `budget_bytes` may open, pages of at most `largest`:
-/// [`FIRST_PAGE_LAYERS`] (or `largest`, if fewer), then `largest`, while the pages' bytes stay
-/// within the budget (one page at least).
+/// [`FIRST_PAGE_LAYERS`] (or `largest`, if fewer), then `largest`, the last page what is left
+/// of the budget: as many layers as the budget holds (and one page at least).
 pub fn page_layers(budget_bytes: usize, largest: u32) -> Vec<u32> {
     let budget_layers = budget_bytes / LAYER_BYTES;
-    let mut pages = Vec::new();
-    let mut next = FIRST_PAGE_LAYERS.min(largest).max(1);
-    let mut total = 0usize;
-    while total + next as usize <= budget_layers || pages.is_empty() {
+    let largest = largest.max(1);
+    let mut pages = vec![FIRST_PAGE_LAYERS.min(largest)];
+    let mut total = pages[0] as usize;
+    while total < budget_layers {
+        let next = (budget_layers - total).min(largest as usize) as u32;
         pages.push(next);
         total += next as usize;
-        next = largest;
     }
     pages
 }
@@ -267,15 +269,22 @@ mod tests {
     #[test]
     fn a_small_first_page_then_the_largest_within_the_budget() {
         let layers = |n: usize| n * LAYER_BYTES;
-        assert_eq!(page_layers(layers(4096), 1024), vec![128, 1024, 1024, 1024]);
-        // A page that would overrun the budget is not opened.
-        assert_eq!(page_layers(layers(2000), 2048), vec![128]);
-        assert_eq!(page_layers(layers(2200), 2048), vec![128, 2048]);
+        assert_eq!(
+            page_layers(layers(4096), 1024),
+            vec![128, 1024, 1024, 1024, 896]
+        );
+        // The budget's layers, no more: the last page holds what is left.
+        assert_eq!(page_layers(layers(2000), 2000), vec![128, 1872]);
+        assert_eq!(page_layers(layers(2176), 2048), vec![128, 2048]);
+        assert_eq!(page_layers(layers(384), 256), vec![128, 256]);
         assert_eq!(
             page_layers(layers(100), 2048),
             vec![128],
             "one page at least"
         );
-        assert_eq!(page_layers(layers(1000), 64), vec![64; 15]);
+        assert_eq!(
+            page_layers(layers(1000), 64),
+            [vec![64; 15], vec![40]].concat()
+        );
     }
 }

@@ -8,7 +8,7 @@ use engine::ground::layout::{BORDER, MIP_LEVELS, SIDE, TEXELS, texel_m};
 use engine::ground::pieces::node_decals;
 use engine::render::Target;
 use engine::render::ground::{GROUND_TEXTURE_FORMAT, GroundTexturer};
-use engine::render::ground_pool::{GroundPool, LAYER_BYTES, LAYERS_PER_PAGE};
+use engine::render::ground_pool::{FIRST_PAGE_LAYERS, GroundPool, LAYER_BYTES, LAYERS_PER_PAGE};
 use engine::render::read_texels;
 use engine::render::terrain::{TerrainNodeGpu, TerrainRenderer};
 use engine::stream::StreamSettings;
@@ -323,43 +323,44 @@ fn a_road_centre_is_road_and_ten_metres_off_is_not() {
     assert!(checked >= 2, "only {checked} road points checked");
 }
 
-/// The pool hands out each layer once, refuses when full, takes a layer back when its slot
-/// drops (the next lease gets it), and never holds more pages than its budget allows.
+/// The pool hands out each layer once, as many as its budget holds (a small first page, then
+/// pages of the largest size, the last one what is left), refuses when full, takes a layer back
+/// when its slot drops (the next lease gets it), and never holds more than its budget.
 #[test]
 fn the_texture_pool_stays_in_its_budget_and_reuses_dropped_layers() {
     let Some(gpu) = device() else { return };
     let page = LAYERS_PER_PAGE as usize * LAYER_BYTES;
     let world = tiny_world();
     let t = GroundTexturer::new(&gpu, &world);
-    let mut pool = GroundPool::new(page + page / 2, t.mip_layout());
-    let mut slots: Vec<_> = (0..LAYERS_PER_PAGE)
+    let budget = page + page / 2;
+    let capacity = budget / LAYER_BYTES;
+    // 384 layers: the first page (128) and one of 256.
+    assert_eq!(
+        engine::render::ground_pool::page_layers(budget, LAYERS_PER_PAGE),
+        vec![FIRST_PAGE_LAYERS, LAYERS_PER_PAGE]
+    );
+    let mut pool = GroundPool::new(budget, t.mip_layout());
+    let mut slots: Vec<_> = (0..capacity)
         .map(|_| pool.lease(&gpu.device).expect("a free layer"))
         .collect();
-    let mut layers: Vec<u32> = slots
-        .iter()
-        .map(engine::render::ground_pool::GroundSlot::layer)
-        .collect();
+    let mut layers: Vec<(u32, u32)> = slots.iter().map(|s| (s.page(), s.layer())).collect();
     layers.sort_unstable();
     layers.dedup();
-    assert_eq!(
-        layers.len(),
-        LAYERS_PER_PAGE as usize,
-        "each layer leased once"
-    );
+    assert_eq!(layers.len(), capacity, "each layer leased once");
     assert!(
         pool.lease(&gpu.device).is_none(),
-        "a 1.5-page budget holds one page"
+        "a 1.5-page budget holds 1.5 pages of layers"
     );
-    assert_eq!(pool.layers_in_use(), LAYERS_PER_PAGE as usize);
+    assert_eq!(pool.layers_in_use(), capacity);
     let freed = slots.swap_remove(17);
-    let layer = freed.layer();
+    let layer = (freed.page(), freed.layer());
     drop(freed);
-    assert_eq!(pool.layers_in_use(), LAYERS_PER_PAGE as usize - 1);
+    assert_eq!(pool.layers_in_use(), capacity - 1);
     let again = pool
         .lease(&gpu.device)
         .expect("the dropped layer is free again");
-    assert_eq!(again.layer(), layer);
-    assert!(pool.bytes() <= page + page / 2);
+    assert_eq!((again.page(), again.layer()), layer);
+    assert!(pool.bytes() <= budget);
     drop(slots);
     drop(again);
     assert_eq!(pool.layers_in_use(), 0);
