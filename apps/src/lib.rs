@@ -99,8 +99,8 @@ pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;
 /// the map computes it: the max-pyramids of the region bounds and the ground amplitude grid as
 /// page files under `pages/derived`, the decal field as a tile file there, the ground
 /// materials' texture layers, and the surface error grids with the 32 m nodes' bounds as page
-/// files there too (kept when they already hold them for this map and this engine; read from [`SURFACE_ERROR_CACHE`] when it holds
-/// them, which is then removed). Returns whether the error grids were computed (false: they
+/// files there too (kept when they already hold them for this map and this engine; read from
+/// [`SURFACE_ERROR_CACHE`] when it holds them, which is then removed). Returns whether the error grids were computed (false: they
 /// were already baked or cached).
 pub fn bake_derived(
     map: worldgen::Map,

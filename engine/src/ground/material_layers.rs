@@ -134,7 +134,9 @@ pub fn for_world(world: &World) -> MaterialLayers {
     if let Some(pages) = &world.pages_dir {
         match read_baked(&baked_path(pages), key(&world.map)) {
             Ok(layers) => return layers,
-            Err(e) => log::warn!("ground materials made at start-up: {e}"),
+            Err(e) => log::warn!(
+                "ground materials made at start-up ({e}); `worldgen bake <map> --finish` bakes them"
+            ),
         }
     }
     make(&world.map)
@@ -143,6 +145,7 @@ pub fn for_world(world: &World) -> MaterialLayers {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ground::materials::materials;
 
     /// The layers made on several threads equal the materials made one after another, in the
     /// upload layout; a bake reads back equal, and is refused for another key or when damaged.
@@ -151,8 +154,7 @@ mod tests {
         let map = crate::test_maps::tiny_map();
         let layers = make(&map);
         let seed = u64::from_str_radix(&map.manifest.seed, 16).unwrap();
-        let mats =
-            super::super::materials::materials(&map.manifest.ground.legend, &map.materials, seed);
+        let mats = materials(&map.manifest.ground.legend, &map.materials, seed);
         assert_eq!(layers.layers as usize, mats.len());
         assert_eq!(layers.bytes.len(), mats.len() * layer_bytes());
         let texels = (MATERIAL_TEXELS * MATERIAL_TEXELS) as usize * 4;

@@ -4,9 +4,9 @@
 //! Not stored in the map: they are a pure function of the legend (name and colour) and the map
 //! seed, so they need no map layer and no format version. `worldgen bake` makes them (about a
 //! tenth of a second per type) into the bake ([`super::material_layers`]); a viewer makes them
-//! at start-up only for a map without that bake. A map may instead name
-//! a PNG for a type (`ground.legend[i].material`, validated by `Map::load`): its texels are then
-//! the albedo, box-filtered (in linear light) or repeated to `MATERIAL_TEXELS`, north up.
+//! at start-up only for a map without that bake. A map may instead name a PNG for a type
+//! (`ground.legend[i].material`, validated by `Map::load`): its texels are then the albedo,
+//! box-filtered (in linear light) or repeated to `MATERIAL_TEXELS`, north up.
 //!
 //! Each texture is periodic value noise (corner values hashed from lattice indices modulo the
 //! lattice size, so the texture's last column continues into its first) in a few octaves whose

@@ -58,20 +58,22 @@ impl LayerGrid {
             LayerGrid::Extinction(g) => std::mem::size_of_val(g.data()),
         }
     }
+
+    /// Samples along x and y.
+    fn size(&self) -> (usize, usize) {
+        match self {
+            LayerGrid::Density { density, .. } => (density.width(), density.height()),
+            LayerGrid::Extinction(g) => (g.width(), g.height()),
+        }
+    }
 }
 
 impl Samples for LayerGrid {
     fn width(&self) -> usize {
-        match self {
-            LayerGrid::Density { density, .. } => density.width(),
-            LayerGrid::Extinction(g) => g.width(),
-        }
+        self.size().0
     }
     fn height(&self) -> usize {
-        match self {
-            LayerGrid::Density { density, .. } => density.height(),
-            LayerGrid::Extinction(g) => g.height(),
-        }
+        self.size().1
     }
     #[inline]
     fn at(&self, x: usize, y: usize) -> f32 {
@@ -114,7 +116,6 @@ struct Bands {
     /// Per top: the layers (indices, ascending) that reach at least that high.
     members: Vec<Vec<usize>>,
     spacing_m: f64,
-    width: usize,
     /// One bit per cell, set where any layer is above zero: rows of `words_per_row` words.
     occupied: Vec<u64>,
     words_per_row: usize,
@@ -150,7 +151,6 @@ impl Bands {
             tops_m,
             members,
             spacing_m: *spacing_m,
-            width: w,
             occupied,
             words_per_row,
         })
@@ -383,7 +383,8 @@ impl Canopy {
         let Some(b) = &self.bands else {
             return self.max_extinction_in(min, max) > 0.0;
         };
-        let (w, h) = (b.width, b.occupied.len() / b.words_per_row);
+        // Bands exist only for layers that share one grid.
+        let (w, h) = self.layers[0].0.size();
         let range = |axis: usize, len: usize| {
             let to =
                 |v: f64| ((v - self.origin_m[axis]) / b.spacing_m).clamp(0.0, (len - 1) as f64);
