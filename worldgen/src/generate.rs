@@ -340,7 +340,10 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
     let densities = species
         .into_iter()
         .zip(density_grids)
-        .map(|(spec, density)| DensityLayer { spec, density })
+        .map(|(spec, density)| DensityLayer {
+            spec,
+            density: density.into(),
+        })
         .collect();
     let materials = vec![None; manifest.ground.legend.len()];
     Ok(Map {

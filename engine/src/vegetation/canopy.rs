@@ -1,6 +1,7 @@
 //! Line-of-sight extinction through vegetation, for splitting less where the view is blocked.
 
 use super::placement::Placer;
+use super::sparse_grid::SparseGrid;
 use crate::surface::{Rect, World};
 use worldgen::sample::Samples;
 
@@ -13,8 +14,9 @@ pub const SIGHT_SAMPLES: usize = 16;
 /// from the map's list as crown diameters per 8 m cell, up to their mean height.
 ///
 /// A species' extinction is computed from its density sample when read (not stored as a grid
-/// of its own), so the canopy holds the density layers' bytes, the large trees' grid and one
-/// bit per cell of occupancy.
+/// of its own), and the density layers are the map's own (shared, not copied), so the canopy
+/// adds only the large trees' grid (sparse: a bit per cell and the cells that hold a tree)
+/// and one bit per cell of occupancy.
 #[derive(Debug, Clone)]
 pub struct Canopy {
     /// Per species with a layer, then the large trees: (extinction, spacing m, height m).
@@ -30,14 +32,14 @@ pub struct Canopy {
 /// One layer's extinction (1/m) at its grid's samples.
 #[derive(Debug, Clone)]
 enum LayerGrid {
-    /// A species' density samples (0-255), and per sample value the extinction: the value
-    /// times the species' scale, rounded to f32.
+    /// A species' density samples (0-255; the map's layer, shared), and per sample value the
+    /// extinction: the value times the species' scale, rounded to f32.
     Density {
-        density: worldgen::Grid<u8>,
+        density: std::sync::Arc<worldgen::Grid<u8>>,
         extinction: Box<[f32; 256]>,
     },
-    /// The extinction itself (the large trees).
-    Extinction(worldgen::Grid<f32>),
+    /// The extinction itself (the large trees), stored only at the cells that hold some.
+    Extinction(SparseGrid),
 }
 
 impl LayerGrid {
@@ -52,10 +54,11 @@ impl LayerGrid {
         }
     }
 
+    /// Bytes held beyond the map's own layers (a shared density layer holds none).
     fn bytes(&self) -> usize {
         match self {
-            LayerGrid::Density { density, .. } => density.data().len(),
-            LayerGrid::Extinction(g) => std::mem::size_of_val(g.data()),
+            LayerGrid::Density { .. } => 0,
+            LayerGrid::Extinction(g) => g.bytes(),
         }
     }
 
@@ -188,7 +191,7 @@ impl Canopy {
             let layer = &world.map.densities[l];
             let scale = layer.spec.max_density_per_m2 / 255.0 * 2.0 * sp.radius_m;
             top = top.max(sp.height_m);
-            let density = layer.density.clone();
+            let density = std::sync::Arc::clone(&layer.density);
             let extinction = Box::new(std::array::from_fn(|v| (v as f64 * scale) as f32));
             layers.push((
                 LayerGrid::Density {
@@ -207,16 +210,17 @@ impl Canopy {
                 (s[0] / cell).ceil() as usize + 1,
                 (s[1] / cell).ceil() as usize + 1,
             );
-            let mut ext = worldgen::Grid::new(w, h, 0.0f32);
             let o = world.origin_m();
             let mut height_sum = 0.0;
+            let mut adds = Vec::with_capacity(world.map.trees.len());
             for t in &world.map.trees {
                 let x = (((t.x_m - o[0]) / cell).round() as usize).min(w - 1);
                 let y = (((t.y_m - o[1]) / cell).round() as usize).min(h - 1);
                 let add = 2.0 * f64::from(t.crown_radius_m) / (cell * cell);
-                ext.set(x, y, ext.get(x, y) + add as f32);
+                adds.push((y * w + x, add as f32));
                 height_sum += f64::from(t.height_m);
             }
+            let ext = SparseGrid::from_adds(w, h, adds);
             let mean = height_sum / world.map.trees.len() as f64;
             top = top.max(mean);
             layers.push((LayerGrid::Extinction(ext), cell, mean));
@@ -230,7 +234,8 @@ impl Canopy {
         }
     }
 
-    /// Bytes the canopy holds (its layers and occupancy bits).
+    /// Bytes the canopy holds beyond the map's density layers (the large trees' grid and the
+    /// occupancy bits).
     pub fn bytes(&self) -> usize {
         self.layers.iter().map(|l| l.0.bytes()).sum::<usize>()
             + self.bands.as_ref().map_or(0, |b| b.occupied.len() * 8)

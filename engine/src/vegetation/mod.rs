@@ -6,7 +6,7 @@
 //! - [`placement`]: the ranked tile scaled per species, density thinning, large trees.
 //! - [`representation`](mod@representation): the ladder, a node's instance groups, the kept-groups rule, and the
 //!   group-billboard clusters.
-//! - [`canopy`]: line-of-sight extinction.
+//! - [`canopy`]: line-of-sight extinction (its large trees in a sparse grid).
 //! - [`plants`]: procedural unit plant meshes and each species' look.
 //! - [`content`]: vegetation as a node-content kind of the streaming system.
 
@@ -15,6 +15,7 @@ pub mod content;
 pub mod placement;
 pub mod plants;
 pub mod representation;
+mod sparse_grid;
 
 pub use canopy::Canopy;
 pub use placement::{Item, Kind, Placer, Species};

@@ -116,7 +116,7 @@ pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
     }
     for d in &mut map.densities {
         let (dw, dh) = (d.density.width(), d.density.height());
-        d.density = worldgen::Grid::new(dw, dh, 0u8);
+        d.density = worldgen::Grid::new(dw, dh, 0u8).into();
     }
     map.trees.clear();
     map.decals.clear();

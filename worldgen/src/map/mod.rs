@@ -198,11 +198,12 @@ impl MapError {
     }
 }
 
-/// One vegetation species: its manifest entry and density samples (0..255 = 0..max density).
+/// One vegetation species: its manifest entry and density samples (0..255 = 0..max density),
+/// shared (readers that keep a layer, such as the engine's canopy, hold it without a copy).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DensityLayer {
     pub spec: SpeciesSpec,
-    pub density: Grid<u8>,
+    pub density: std::sync::Arc<Grid<u8>>,
 }
 
 /// A whole, validated map in memory.
@@ -319,7 +320,7 @@ impl Map {
             };
             densities.push(DensityLayer {
                 spec: spec.clone(),
-                density,
+                density: density.into(),
             });
         }
         clock.part("densities");

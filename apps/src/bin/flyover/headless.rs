@@ -43,7 +43,8 @@ pub(crate) fn run_headless(cli: &Cli) -> Result<()> {
         .kind::<engine::vegetation::content::VegetationContent>();
     if let Some(v) = vegetation {
         world_memory.push((
-            "vegetation canopy (density layers and large trees, for lines of sight and light)",
+            "vegetation canopy (large trees' grid and occupancy bits, for lines of sight and \
+             light; its density layers are the map's)",
             v.canopy.bytes(),
         ));
     }
