@@ -153,10 +153,10 @@ fn a_bake_in_shares_and_subsets_in_any_order_writes_the_same_bytes() {
     let (a, b) = (bake::pages_dir(&whole), bake::pages_dir(&split));
     let names = tests::files_under(&a);
     assert_eq!(names, tests::files_under(&b), "different files");
-    // The layers, the binary decal list and the record of sources.
+    // The layers, the binary decal and tree lists and the record of sources.
     assert_eq!(
         names.len(),
-        bake::rasters(&map).expect("heights in memory").len() + 2
+        bake::rasters(&map).expect("heights in memory").len() + 3
     );
     for n in &names {
         assert!(
@@ -276,11 +276,11 @@ fn rewrite_keeping_time(path: &Path, bytes: &[u8]) {
     file.set_modified(modified).unwrap();
 }
 
-/// An open of a baked map reads its raster layers from their pages and its decal list from
-/// the binary copy while the map's files hold what was baked, and decodes the files themselves
-/// once they change or a page is damaged. That the bake is what is read is shown by damaging the
-/// heights image and the decal list behind an unchanged length and time: decoding them would
-/// fail, yet the open gives the map as baked.
+/// An open of a baked map reads its raster layers from their pages and its decal and tree
+/// lists from their binary copies while the map's files hold what was baked, and decodes the
+/// files themselves once they change or a page is damaged. That the bake is what is read is
+/// shown by damaging the heights image and the lists behind an unchanged length and time:
+/// decoding them would fail, yet the open gives the map as baked.
 #[test]
 fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     let tmp = tempfile::tempdir().unwrap();
@@ -291,10 +291,13 @@ fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     bake::finish(&map, &dir, &Silent).unwrap();
     let exr = dir.join(&map.manifest.heights.file);
     let decals = dir.join(&map.manifest.decals.file);
-    let (exr_bytes, decal_bytes) = (
+    let trees = dir.join(&map.manifest.trees.file);
+    let (exr_bytes, decal_bytes, tree_bytes) = (
         std::fs::read(&exr).unwrap(),
         std::fs::read(&decals).unwrap(),
+        std::fs::read(&trees).unwrap(),
     );
+    assert!(!map.trees.is_empty(), "the tiny map has large trees");
     let scrambled = |b: &[u8]| -> Vec<u8> {
         let mut out = b.to_vec();
         let mid = out.len() / 2;
@@ -307,9 +310,11 @@ fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     // Damaged behind the same length and time: both are read from the bake.
     rewrite_keeping_time(&exr, &scrambled(&exr_bytes));
     rewrite_keeping_time(&decals, &scrambled(&decal_bytes));
+    rewrite_keeping_time(&trees, &scrambled(&tree_bytes));
     assert!(
         worldgen::map::layers::read_heights(&dir, &map.manifest).is_err()
-            && worldgen::map::lists::read_decals(&decals, &map.manifest).is_err(),
+            && worldgen::map::lists::read_decals(&decals, &map.manifest).is_err()
+            && worldgen::map::lists::read_trees(&trees, &map.manifest).is_err(),
         "the damage must be visible to a decode"
     );
     assert!(
@@ -321,6 +326,7 @@ fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     // time is remembered for the next open.
     std::fs::write(&exr, &exr_bytes).unwrap();
     std::fs::write(&decals, &decal_bytes).unwrap();
+    std::fs::write(&trees, &tree_bytes).unwrap();
     let checked = dir.join(worldgen::pages::sources::CHECKED_FILE);
     let before = std::fs::read_to_string(&checked).unwrap();
     assert!(Map::load(&dir).unwrap() == map);
@@ -347,6 +353,47 @@ fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     let reopened = Map::load(&dir).unwrap();
     assert_eq!(reopened.heights.get(7, 9), map.heights.get(7, 9) + 1.5);
     assert!(reopened.decals == map.decals);
+}
+
+/// The binary tree list is checked against the manifest like the CSV: with the species its
+/// trees use no longer named in map.toml, the open of the baked map fails naming the list and
+/// the tree, as the open of the unbaked map fails naming its line.
+#[test]
+fn a_baked_tree_list_is_checked_against_the_manifest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("map");
+    tests::copy_dir(&tiny_map_dir(), &dir);
+    let map = Map::load(&dir).expect("tiny map");
+    bake::bake(&map, &dir, SIDE, &PageSet::All, &Silent).unwrap();
+    bake::finish(&map, &dir, &Silent).unwrap();
+    let first = map
+        .trees
+        .iter()
+        .position(|t| t.species == 1)
+        .expect("a tree of species 1");
+    let toml = dir.join("map.toml");
+    let text = std::fs::read_to_string(&toml).unwrap();
+    let start = text.find("tree_species = [").expect("the species list");
+    let end = start + text[start..].find(']').expect("the list's end") + 1;
+    let one_species = format!(
+        "{}tree_species = [\"pine\"]{}",
+        &text[..start],
+        &text[end..]
+    );
+    std::fs::write(&toml, one_species).unwrap();
+    let refused = |what: &str| match Map::load(&dir) {
+        Ok(_) => panic!("{what}: the map opened with species 1 not named"),
+        Err(e) => e.to_string(),
+    };
+    let msg = refused("baked");
+    for w in ["trees.csv", &format!("tree[{first}]"), "species 1"] {
+        assert!(msg.contains(w), "error lacks {w:?}: {msg}");
+    }
+    std::fs::remove_dir_all(bake::pages_dir(&dir)).unwrap();
+    let msg = refused("unbaked");
+    for w in ["trees.csv", "line ", "species 1"] {
+        assert!(msg.contains(w), "error lacks {w:?}: {msg}");
+    }
 }
 
 /// Heights served sample by sample from their page file (through the threads' pages at hand

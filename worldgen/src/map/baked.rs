@@ -1,14 +1,14 @@
-//! Reading a baked map's raster layers from their page files and its decal list from its
-//! binary copy, where the record of the bake's sources ([`crate::pages::sources`]) says the
+//! Reading a baked map's raster layers from their page files and its decal and tree lists from
+//! their binary copies, where the record of the bake's sources ([`crate::pages::sources`]) says the
 //! map's own files still hold what was baked. Anything missing, stale or damaged is logged and
 //! read from the map's own files instead, so a bake only ever makes an open faster.
 
 use super::GridSpec;
-use super::lists::Decal;
+use super::lists::{Decal, Tree};
 use crate::Grid;
 use crate::pages::file::Sample;
 use crate::pages::sources::Sources;
-use crate::pages::{PageFile, bake, decal_list};
+use crate::pages::{PageFile, bake, decal_list, tree_list};
 use std::path::{Path, PathBuf};
 
 pub(super) struct Baked {
@@ -79,6 +79,13 @@ impl Baked {
     pub fn decals(&mut self, name: &str) -> Option<Vec<Decal>> {
         let key = self.sources.as_mut()?.baked_key(name)?;
         let read = decal_list::read(&decal_list::path(&self.dir), key);
+        self.used(name, read)
+    }
+
+    /// The large trees from their binary copy, when baked from the CSV `name` as it is now.
+    pub fn trees(&mut self, name: &str) -> Option<Vec<Tree>> {
+        let key = self.sources.as_mut()?.baked_key(name)?;
+        let read = tree_list::read(&tree_list::path(&self.dir), key);
         self.used(name, read)
     }
 

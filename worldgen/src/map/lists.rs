@@ -249,41 +249,52 @@ pub fn read_trees(path: &Path, m: &Manifest) -> Result<Vec<Tree>, MapError> {
                 format!("too many columns; expected {TREES_COLUMNS}"),
             ));
         }
-        if usize::from(t.species) >= m.tree_species.len() {
-            return Err(line_err(
-                path,
-                n,
-                format!(
-                    "species {} is not in map.toml `tree_species` ({} names)",
-                    t.species,
-                    m.tree_species.len()
-                ),
-            ));
-        }
-        if !in_world(m, t.x_m, t.y_m) {
-            return Err(line_err(
-                path,
-                n,
-                format!("position ({}, {}) is outside the world", t.x_m, t.y_m),
-            ));
-        }
-        if !(t.height_m > 0.0
-            && t.height_m <= 200.0
-            && t.crown_radius_m > 0.0
-            && t.crown_radius_m <= 50.0)
-        {
-            return Err(line_err(
-                path,
-                n,
-                format!(
-                    "height {} m / crown radius {} m out of range (0, 200] / (0, 50]",
-                    t.height_m, t.crown_radius_m
-                ),
-            ));
+        if let Some(problem) = tree_problem(&t, m) {
+            return Err(line_err(path, n, problem));
         }
         trees.push(t);
     }
     Ok(trees)
+}
+
+/// What is wrong with tree `t` of a map with manifest `m`, if anything: a species the
+/// manifest does not name, a position outside the world, or a size out of range.
+fn tree_problem(t: &Tree, m: &Manifest) -> Option<String> {
+    if usize::from(t.species) >= m.tree_species.len() {
+        return Some(format!(
+            "species {} is not in map.toml `tree_species` ({} names)",
+            t.species,
+            m.tree_species.len()
+        ));
+    }
+    if !in_world(m, t.x_m, t.y_m) {
+        return Some(format!(
+            "position ({}, {}) is outside the world",
+            t.x_m, t.y_m
+        ));
+    }
+    if !(t.height_m > 0.0
+        && t.height_m <= 200.0
+        && t.crown_radius_m > 0.0
+        && t.crown_radius_m <= 50.0)
+    {
+        return Some(format!(
+            "height {} m / crown radius {} m out of range (0, 200] / (0, 50]",
+            t.height_m, t.crown_radius_m
+        ));
+    }
+    None
+}
+
+/// Checks trees read from elsewhere than the CSV `path` (its binary copy in the bake) as
+/// [`read_trees`] checks each row; an error names `path` and the tree's index.
+pub fn check_trees(path: &Path, trees: &[Tree], m: &Manifest) -> Result<(), MapError> {
+    for (i, t) in trees.iter().enumerate() {
+        if let Some(problem) = tree_problem(t, m) {
+            return Err(MapError::field(path, format!("tree[{i}]"), problem));
+        }
+    }
+    Ok(())
 }
 
 pub fn write_trees(path: &Path, trees: &[Tree], _m: &Manifest) -> Result<(), MapError> {

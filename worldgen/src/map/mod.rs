@@ -324,7 +324,14 @@ impl Map {
             });
         }
         clock.part("densities");
-        let trees = lists::read_trees(&dir.join(&manifest.trees.file), &manifest)?;
+        let trees_path = dir.join(&manifest.trees.file);
+        let trees = match baked.trees(&manifest.trees.file) {
+            Some(list) => {
+                lists::check_trees(&trees_path, &list, &manifest)?;
+                list
+            }
+            None => lists::read_trees(&trees_path, &manifest)?,
+        };
         clock.part("trees");
         let decals_path = dir.join(&manifest.decals.file);
         let decals = match baked.decals(&manifest.decals.file) {

@@ -267,7 +267,7 @@ pub fn finish(map: &Map, map_dir: &Path, progress: &dyn Progress) -> Result<usiz
     Ok(ready.len())
 }
 
-/// Writes the decal list in binary and the record of the bake's sources
+/// Writes the decal and tree lists in binary and the record of the bake's sources
 /// ([`super::sources`]): the files an open then reads from the bake instead.
 fn write_sources(map: &Map, map_dir: &Path) -> Result<(), PageError> {
     let mut baked: Vec<(String, u64)> = rasters(map)?
@@ -276,6 +276,8 @@ fn write_sources(map: &Map, map_dir: &Path) -> Result<(), PageError> {
         .collect();
     let decals_key = super::decal_list::write(&super::decal_list::path(map_dir), &map.decals)?;
     baked.push((map.manifest.decals.file.clone(), decals_key));
+    let trees_key = super::tree_list::write(&super::tree_list::path(map_dir), &map.trees)?;
+    baked.push((map.manifest.trees.file.clone(), trees_key));
     super::sources::Sources::write(map_dir, &baked)
 }
 

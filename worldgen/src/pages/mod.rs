@@ -23,6 +23,7 @@ pub mod faults;
 pub mod file;
 pub mod paged_raster;
 pub mod sources;
+pub mod tree_list;
 
 pub use cache::{CacheSample, LayerId, PageCache, PageData, PageStats};
 pub use faults::PageFaults;

@@ -1,7 +1,9 @@
 //! The record of the source files a bake read, so that an open of a baked map reads the
-//! layers' pages and the binary decal list instead of decoding the map's image and text files.
+//! layers' pages and the binary decal and tree lists instead of decoding the map's image and
+//! text files.
 //!
-//! `pages/sources.toml` names each source file (a raster layer's image, the decal list) with its
+//! `pages/sources.toml` names each source file (a raster layer's image, the decal list, the tree
+//! list) with its
 //! length, a content key ([`super::SourceKey`] of its bytes) and the key of what was baked from
 //! it. It is a pure function of the sources, so bakes on any machines write the same bytes.
 //!
