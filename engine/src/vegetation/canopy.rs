@@ -62,6 +62,39 @@ impl LayerGrid {
         }
     }
 
+    /// Sets the bit of every sample above zero in `bits` (rows of `words_per_row` words),
+    /// reading each layer in its own form: a density layer byte by byte through a table of
+    /// which values have a positive extinction, the large trees at their stored cells only.
+    fn mark_positive(&self, bits: &mut [u64], words_per_row: usize) {
+        match self {
+            LayerGrid::Density {
+                density,
+                extinction,
+            } => {
+                let positive: [u64; 256] = std::array::from_fn(|v| u64::from(extinction[v] > 0.0));
+                let w = density.width();
+                for (row, out) in density
+                    .data()
+                    .chunks_exact(w)
+                    .zip(bits.chunks_exact_mut(words_per_row))
+                {
+                    for (chunk, word) in row.chunks(64).zip(out.iter_mut()) {
+                        let mut m = 0u64;
+                        for (i, &v) in chunk.iter().enumerate() {
+                            m |= positive[usize::from(v)] << i;
+                        }
+                        *word |= m;
+                    }
+                }
+            }
+            LayerGrid::Extinction(g) => g.for_each_stored(|x, y, v| {
+                if v > 0.0 {
+                    bits[y * words_per_row + x / 64] |= 1 << (x % 64);
+                }
+            }),
+        }
+    }
+
     /// Samples along x and y.
     fn size(&self) -> (usize, usize) {
         match self {
@@ -143,12 +176,8 @@ impl Bands {
             .collect();
         let words_per_row = w.div_ceil(64);
         let mut occupied = vec![0u64; words_per_row * h];
-        for y in 0..h {
-            for x in 0..w {
-                if layers.iter().any(|(g, _, _)| g.get(x, y) > 0.0) {
-                    occupied[y * words_per_row + x / 64] |= 1 << (x % 64);
-                }
-            }
+        for (g, _, _) in layers {
+            g.mark_positive(&mut occupied, words_per_row);
         }
         Some(Self {
             tops_m,

@@ -82,6 +82,20 @@ impl SparseGrid {
         self.values[(self.before[word] + below) as usize]
     }
 
+    /// Calls `f(x, y, value)` for every stored sample, in row order.
+    pub(super) fn for_each_stored(&self, mut f: impl FnMut(usize, usize, f32)) {
+        let mut k = 0;
+        for (word, &bits) in self.bits.iter().enumerate() {
+            let mut rest = bits;
+            while rest != 0 {
+                let i = word * 64 + rest.trailing_zeros() as usize;
+                f(i % self.width, i / self.width, self.values[k]);
+                k += 1;
+                rest &= rest - 1;
+            }
+        }
+    }
+
     /// Bytes held (the bits, their counts and the stored values).
     pub(super) fn bytes(&self) -> usize {
         std::mem::size_of_val(self.bits.as_slice())
@@ -133,5 +147,16 @@ mod tests {
                 );
             }
         }
+        // The stored samples, visited in row order, are the added ones with their values.
+        let mut visited = Vec::new();
+        g.for_each_stored(|x, y, v| visited.push((y * w + x, v.to_bits())));
+        let mut added: Vec<(usize, u32)> = points
+            .iter()
+            .chain([&(30, 3)])
+            .map(|&(x, y)| (y * w + x, dense[y * w + x].to_bits()))
+            .collect();
+        added.sort_unstable();
+        added.dedup();
+        assert_eq!(visited, added);
     }
 }
