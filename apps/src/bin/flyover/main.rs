@@ -290,7 +290,8 @@ pub(crate) fn make_viewer(
     if !cli.object.is_empty() {
         kinds.push(objects_registration(cli, &world, start)?);
     }
-    let mut viewer = Viewer::with_kinds(gpu, format, world, settings(cli), &kinds);
+    let mut viewer =
+        Viewer::with_kinds_from(gpu, format, world, settings(cli), &kinds, Some(start));
     viewer.view.ground_view = cli.ground_view.into();
     viewer.view.lighting_only = cli.lighting_only;
     viewer.view.light_values = cli.light_values;
