@@ -393,7 +393,7 @@ fn run(cli: &Cli) -> Result<()> {
         checkpoint(&report, "gpu, textures and soak", adapter_name.as_deref())?;
     }
     if cli.only.iter().any(|o| o == "worlds") {
-        worlds::section_worlds(&world_sizes_m, &cli.worlds_scratch, &mut report)?;
+        worlds::section_worlds(&world_sizes_m, &cli.map, &cli.worlds_scratch, &mut report)?;
         checkpoint(&report, "worlds", adapter_name.as_deref())?;
     }
     let summary = format!(
