@@ -22,6 +22,17 @@ fn baked_tiny(into: &Path) -> Map {
     map
 }
 
+/// A copy of the tiny map in `into/map`, baked in its own folder (its files beside its pages),
+/// and the map.
+fn baked_copy_of_tiny(into: &Path) -> (std::path::PathBuf, Map) {
+    let dir = into.join("map");
+    tests::copy_dir(&tiny_map_dir(), &dir);
+    let map = Map::load(&dir).expect("tiny map");
+    bake::bake(&map, &dir, SIDE, &PageSet::All, &Silent).expect("bake");
+    bake::finish(&map, &dir, &Silent).expect("finish");
+    (dir, map)
+}
+
 /// Compares a region served by the cache with the same samples of the layer itself.
 fn check_region(
     cache: &PageCache,
@@ -284,11 +295,7 @@ fn rewrite_keeping_time(path: &Path, bytes: &[u8]) {
 #[test]
 fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("map");
-    tests::copy_dir(&tiny_map_dir(), &dir);
-    let map = Map::load(&dir).expect("tiny map");
-    bake::bake(&map, &dir, SIDE, &PageSet::All, &Silent).unwrap();
-    bake::finish(&map, &dir, &Silent).unwrap();
+    let (dir, map) = baked_copy_of_tiny(tmp.path());
     let exr = dir.join(&map.manifest.heights.file);
     let decals = dir.join(&map.manifest.decals.file);
     let trees = dir.join(&map.manifest.trees.file);
@@ -361,11 +368,7 @@ fn a_baked_map_opens_from_its_pages_while_its_files_are_as_baked() {
 #[test]
 fn a_baked_tree_list_is_checked_against_the_manifest() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("map");
-    tests::copy_dir(&tiny_map_dir(), &dir);
-    let map = Map::load(&dir).expect("tiny map");
-    bake::bake(&map, &dir, SIDE, &PageSet::All, &Silent).unwrap();
-    bake::finish(&map, &dir, &Silent).unwrap();
+    let (dir, map) = baked_copy_of_tiny(tmp.path());
     let first = map
         .trees
         .iter()
