@@ -9,9 +9,11 @@ use super::{
 };
 
 impl ObjectsRenderer {
-    /// Instance `id`'s GPU entry for this frame: made (starting at full detail, geomorphing
-    /// down when MORPH is on) or remade at the chosen level on another chain option, its level
-    /// moved towards `choice`. None when the index pages are full.
+    /// Instance `id`'s GPU entry for this frame: made at the chosen level (an instance without
+    /// an entry was not drawn in the last frames, so nothing on the screen changes shape; the
+    /// first frame of a large map would otherwise draw every house of its root node at full
+    /// detail) or remade at the chosen level on another chain option, its level moved towards
+    /// `choice` (geomorphing when MORPH is on). None when the index pages are full.
     pub(super) fn update_instance(
         &mut self,
         gpu: &Gpu,
@@ -38,7 +40,7 @@ impl ObjectsRenderer {
         let entry = match self.instances.entry(id) {
             std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::hash_map::Entry::Vacant(e) => {
-                let Some(i) = new_entry(&mut self.pools, drawn_model.pm.level_count()) else {
+                let Some(i) = new_entry(&mut self.pools, choice.level) else {
                     self.stats.pool_full += 1;
                     return None;
                 };
