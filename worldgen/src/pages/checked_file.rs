@@ -39,6 +39,23 @@ pub fn write(
     std::fs::rename(&partial, path).map_err(|e| io("move into place", e))
 }
 
+/// [`write`] keyed by the payload itself (a [`SourceKey`] seeded with `seed`): for a file that
+/// copies a source list into binary, whose key the record of sources ties to that list.
+/// Returns the key.
+pub fn write_keyed_by_payload(
+    path: &Path,
+    magic: &[u8; 8],
+    version: u32,
+    seed: u32,
+    payload: &[u8],
+) -> Result<u64, PageError> {
+    let mut key = SourceKey::new(seed);
+    key.update(payload);
+    let key = key.finish();
+    write(path, magic, version, key, payload)?;
+    Ok(key)
+}
+
 /// The payload of the file `path`, refused unless it is a whole file of `magic` (`what` in the
 /// message) and `version` written for `key`.
 pub fn read(

@@ -7,7 +7,7 @@
 //! [`super::SourceKey`] of the payload: the record of sources ([`super::sources`]) ties it to the
 //! text list it was baked from.
 
-use super::{PageError, SourceKey, checked_file};
+use super::{PageError, checked_file};
 use crate::map::lists::{Decal, DecalKind};
 use std::path::{Path, PathBuf};
 
@@ -50,11 +50,7 @@ fn body(decals: &[Decal]) -> Vec<u8> {
 pub fn write(path: &Path, decals: &[Decal]) -> Result<u64, PageError> {
     let mut payload = (decals.len() as u32).to_le_bytes().to_vec();
     payload.extend_from_slice(&body(decals));
-    let mut key = SourceKey::new(0xDEC0_0000);
-    key.update(&payload);
-    let key = key.finish();
-    checked_file::write(path, MAGIC, VERSION, key, &payload)?;
-    Ok(key)
+    checked_file::write_keyed_by_payload(path, MAGIC, VERSION, 0xDEC0_0000, &payload)
 }
 
 /// Reads the binary list `path`, refused (naming the file) unless it is whole, matches its

@@ -7,7 +7,7 @@
 //! ([`super::sources`]) ties it to the CSV it was baked from. A tree read back is checked
 //! against the manifest like a row of the CSV ([`crate::map::lists::check_trees`]).
 
-use super::{PageError, SourceKey, checked_file};
+use super::{PageError, checked_file};
 use crate::map::lists::Tree;
 use std::path::{Path, PathBuf};
 
@@ -34,11 +34,7 @@ pub fn write(path: &Path, trees: &[Tree]) -> Result<u64, PageError> {
         payload.extend_from_slice(&t.height_m.to_le_bytes());
         payload.extend_from_slice(&t.crown_radius_m.to_le_bytes());
     }
-    let mut key = SourceKey::new(0x7EE5_0000);
-    key.update(&payload);
-    let key = key.finish();
-    checked_file::write(path, MAGIC, VERSION, key, &payload)?;
-    Ok(key)
+    checked_file::write_keyed_by_payload(path, MAGIC, VERSION, 0x7EE5_0000, &payload)
 }
 
 /// Reads the binary list `path`, refused (naming the file) unless it is whole, matches its

@@ -179,6 +179,33 @@ fn bake(worldgen: &Path, map: &Path, km: &str, p: &str, r: &mut Report) -> Resul
     Ok(())
 }
 
+/// `flyover --headless --wait-first-world` on `map` for `frames` frames of the automatic
+/// flight (one per second of its 40 s, 640x360, no images) into `out`: its stats.json.
+fn fly_headless(flyover: &Path, map: &Path, out: &Path, frames: u32) -> Result<serde_json::Value> {
+    run(
+        Command::new(flyover)
+            .args(["--headless", "--wait-first-world", "--frames"])
+            .arg(frames.to_string())
+            .args([
+                "--every",
+                "0",
+                "--size",
+                "640x360",
+                "--duration-s",
+                "40",
+                "--map",
+            ])
+            .arg(map)
+            .arg("--out")
+            .arg(out),
+        "flyover --headless",
+    )?;
+    let path = out.join("stats.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(serde_json::from_str(&text)?)
+}
+
 /// One frame of `flyover --headless` on `warm_map` right before a map's first open, so that
 /// the first open measures the map and not the program's start: this machine drops files it
 /// has not read for a few minutes from its cache (with most of its memory free), so after a
@@ -193,19 +220,7 @@ fn warm_up(
     r: &mut Report,
 ) -> Result<()> {
     eprintln!("worlds: starting the viewer once on {}", warm_map.display());
-    let fly = scratch.join("fly_warm_up");
-    run(
-        Command::new(flyover)
-            .args(["--headless", "--wait-first-world", "--frames", "1"])
-            .args(["--every", "0", "--size", "640x360", "--map"])
-            .arg(warm_map)
-            .arg("--out")
-            .arg(&fly),
-        "flyover --headless (warm-up)",
-    )?;
-    let stats: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(fly.join("stats.json")).context("reading stats.json")?,
-    )?;
+    let stats = fly_headless(flyover, warm_map, &scratch.join("fly_warm_up"), 1)?;
     if let Some(v) = stats["first_world_frame_s"].as_f64() {
         r.add(
             "worlds",
@@ -237,28 +252,7 @@ fn fly_once(
     r: &mut Report,
 ) -> Result<()> {
     eprintln!("worlds: flying {km} ({open})");
-    let fly = scratch.join(format!("fly_{size:.0}m"));
-    run(
-        Command::new(flyover)
-            .args([
-                "--headless",
-                "--wait-first-world",
-                "--frames",
-                "40",
-                "--every",
-                "0",
-                "--size",
-                "640x360",
-            ])
-            .args(["--duration-s", "40", "--map"])
-            .arg(map)
-            .arg("--out")
-            .arg(&fly),
-        "flyover --headless",
-    )?;
-    let stats: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(fly.join("stats.json")).context("reading stats.json")?,
-    )?;
+    let stats = fly_headless(flyover, map, &scratch.join(format!("fly_{size:.0}m")), 40)?;
     let fp = format!(
         "{p}; flyover --headless --wait-first-world ({open} of the map; the flight starts \
          once a frame shows the world), 40 frames of the automatic flight, 640x360"
