@@ -39,7 +39,7 @@ pub fn write(
     std::fs::rename(&partial, path).map_err(|e| io("move into place", e))
 }
 
-/// [`write`] keyed by the payload itself (a [`SourceKey`] seeded with `seed`): for a file that
+/// [`write()`] keyed by the payload itself (a [`SourceKey`] seeded with `seed`): for a file that
 /// copies a source list into binary, whose key the record of sources ties to that list.
 /// Returns the key.
 pub fn write_keyed_by_payload(
