@@ -1,7 +1,8 @@
 // A node's ground texture (engine::render::ground): one full-target triangle; each fragment is
-// one texel of the node's layout (engine::ground::layout). Its colour: the ground type at the
-// texel's position, read from the map's ground layer at a noise-perturbed position (natural
-// borders instead of the 4 m staircase), shaded with that type's tiled material; then the
+// one texel of the node's layout (engine::ground::layout). Its colour: the texel's ground type
+// (resolved on the CPU at a noise-perturbed position of the map's ground layer, natural borders
+// instead of the 4 m staircase: engine::ground::types), shaded with that type's tiled material;
+// then the
 // node's closed areas (fields, dirt, rock patches) in file order, each as its box with an
 // even-odd inside test and a soft edge; then its road and path segments with soft edges, in
 // file order, each as a quad around the segment (cost in proportion to the area covered, not
@@ -15,20 +16,21 @@
 struct GroundNode {
     // Lattice index of texel (0, 0) (x east, y north).
     first: vec2<i32>,
-    // Ground-grid coordinates of lattice index (0, 0)'s corner, and the texel size in ground
-    // cells.
-    ground_anchor: vec2<f32>,
-    ground_step: f32,
-    // Texel size in material tiles, and material-tile coordinates of lattice index (0, 0)'s
-    // corner (fractions).
-    material_step: f32,
+    // Material-tile coordinates of lattice index (0, 0)'s corner (fractions), and the texel
+    // size in material tiles.
     material_anchor: vec2<f32>,
+    material_step: f32,
     // Material mip level the texel size calls for.
     material_lod: f32,
     segment_count: u32,
-    ground_types: u32,
     // Texel size in metres (patterns finer than a few texels fade to their mean).
     texel_m: f32,
+    // The node's first word of `texel_types` (SIDE x SIDE types, four a word, low byte first,
+    // rows south to north).
+    types_first: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 };
 
 // A road or path segment in texel-lattice units of the node's level (the same numbers in every
@@ -43,7 +45,7 @@ struct Segment {
 };
 
 @group(2) @binding(0) var<uniform> node: GroundNode;
-@group(2) @binding(1) var ground_types: texture_2d<u32>;
+@group(2) @binding(1) var<storage, read> texel_types: array<u32>;
 @group(2) @binding(2) var materials: texture_2d_array<f32>;
 @group(2) @binding(3) var material_sampler: sampler;
 @group(2) @binding(4) var<storage, read> segments: array<Segment>;
@@ -81,13 +83,9 @@ fn segment_distance(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> f32 {
 @fragment
 fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     // Framebuffer rows run top down; texel rows run south to north.
-    let size = vec2<i32>(textureDimensions(ground_types));
     let centre = texel_centre(frag);
-    // Ground type: the nearest ground sample to a position moved by two octaves of noise of
-    // up to 0.7 ground cells.
-    let g = node.ground_anchor + centre * node.ground_step;
-    let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), size - 1);
-    let t = min(textureLoad(ground_types, at, 0).r, node.ground_types - 1u);
+    let k = (SIDE - 1u - u32(frag.y)) * SIDE + u32(frag.x);
+    let t = (texel_types[node.types_first + k / 4u] >> (8u * (k % 4u))) & 0xffu;
     let uv = fract(node.material_anchor + centre * node.material_step);
     var albedo = textureSampleLevel(materials, material_sampler, uv, t, node.material_lod).rgb;
     return vec4<f32>(albedo, 1.0);

@@ -10,8 +10,9 @@
 @group(2) @binding(2) var ground_sampler: sampler;
 
 // The ground's detail below the finest node texel (engine::render::ground_detail): the
-// materials (one layer per ground type, tiling over `material_tile_m`), the map's ground layer
-// (row 0 south) and the camera's place in both, in f32 near the camera.
+// materials (one layer per ground type, tiling over `material_tile_m`), a window of the map's
+// ground layer around the camera (row 0 south) and the camera's place in both, in f32 near the
+// camera.
 struct GroundDetail {
     camera_cells: vec2<f32>,
     camera_tiles: vec2<f32>,
@@ -25,6 +26,12 @@ struct GroundDetail {
     // Pixels up to this size (m) see the detail height as bumps of the ground's normal.
     bump_px_m: f32,
     pad: f32,
+    // The ground cell of `ground_types` texel (0, 0), the window's side in cells (no detail
+    // outside it) and the ground layer's cells per side.
+    window_first: vec2<i32>,
+    window_side: vec2<i32>,
+    map_cells: vec2<i32>,
+    pad2: vec2<f32>,
 };
 @group(2) @binding(3) var materials: texture_2d_array<f32>;
 @group(2) @binding(4) var ground_types: texture_2d<u32>;
@@ -151,8 +158,10 @@ fn material_detail(rel: vec3<f32>, px_m: f32) -> Detail {
         return out;
     }
     let g = detail.camera_cells + rel.xy / detail.ground_spacing_m;
-    let size = vec2<i32>(textureDimensions(ground_types));
-    let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), size - 1);
+    let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), detail.map_cells - 1) - detail.window_first;
+    if (any(at < vec2<i32>(0)) || any(at >= detail.window_side)) {
+        return out;
+    }
     let t = min(textureLoad(ground_types, at, 0).r, detail.ground_types - 1u);
     // Material coordinates as the node texture's pass has them (engine::render::ground); rows
     // run south to north, so u is east and v north.

@@ -1,14 +1,16 @@
 //! Ground textures as a node-content kind: the CPU phase `ground pieces` finds the decal pieces
-//! a node's texture draws (from the spatial index, [`super::pieces::node_decals`]) and stores
-//! them as the node's [`NodeGround`]. The texture itself is rendered on the GPU by the terrain
+//! a node's texture draws (from the spatial index, [`super::pieces::node_decals`]) and the ground
+//! type of each of its texels ([`super::types`]), and stores them as the node's [`NodeGround`]. The texture itself is rendered on the GPU by the terrain
 //! renderer's upload hook (the terrain shading is its only reader, so the terrain renderer owns
 //! the layer pool it lives in) and freed with the node's GPU objects.
 
 use super::decal_index::DecalIndex;
 use super::layout::{MIP_LEVELS, SIDE};
 use super::pieces::{NodeDecals, node_decals};
+use super::types::{NodeTypes, TexelCells};
 use crate::stream::{ContentKind, NodeWork, Payload, Phase, Shared};
 use crate::surface::World;
+use crate::terrain::quadtree::{NodeKey, QuadTree};
 use std::sync::Arc;
 
 /// Bytes of one node texture on the GPU (`SIDE x SIDE` RGBA8 and its [`MIP_LEVELS`] - 1
@@ -29,14 +31,31 @@ pub const TEXTURE_BYTES: usize = {
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct NodeGround {
     pub decals: NodeDecals,
+    /// The ground type of each texel.
+    pub types: NodeTypes,
+}
+
+impl NodeGround {
+    /// What node `key`'s texture draws of `world`, its decals found through `index`.
+    pub fn new(world: &World, index: &DecalIndex, tree: &QuadTree, key: NodeKey) -> Self {
+        let ground = &world.map.manifest.ground;
+        let cells = TexelCells::new(tree, key, world.map.manifest.origin_m, ground.spacing_m);
+        let last_type = (ground.legend.len().clamp(1, 256) - 1) as u8;
+        Self {
+            decals: node_decals(&world.map.decals, index, tree, key),
+            types: NodeTypes::resolve(&world.map.ground, &cells, last_type),
+        }
+    }
 }
 
 impl Payload for NodeGround {
-    /// The pieces' bytes; the texture's are counted when it is made ([`TEXTURE_BYTES`]).
+    /// The pieces' and types' bytes; the texture's are counted when it is made
+    /// ([`TEXTURE_BYTES`]).
     fn bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(self.decals.segments.as_slice())
             + std::mem::size_of_val(self.decals.areas.as_slice())
+            + self.types.bytes()
     }
 }
 
@@ -67,8 +86,7 @@ impl ContentKind for GroundContent {
         vec![Phase::cpu(
             "ground pieces",
             move |s: &Shared, w: &mut NodeWork| {
-                let decals = node_decals(&s.world.map.decals, &self.index, &s.tree, w.key);
-                w.put(NodeGround { decals });
+                w.put(NodeGround::new(&s.world, &self.index, &s.tree, w.key));
             },
         )]
     }

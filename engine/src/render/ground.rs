@@ -1,7 +1,7 @@
 //! The GPU part of a node's ground texture: renders the texels of a node's layout
 //! ([`crate::ground::layout`]) into a colour target (the terrain renderer's pool layer for the
-//! node) — the ground type at a noise-perturbed position of the map's ground layer, shaded with
-//! the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's closed
+//! node) — each texel's ground type, resolved by the node's CPU phase
+//! ([`crate::ground::types`]), shaded with the type's material ([`crate::ground::materials`], with CPU-made mips), then the node's closed
 //! decal areas (fields, dirt, rock patches: each its box, an inside test and a soft edge) and
 //! its road and path segments ([`crate::ground::pieces`]) with soft edges, each a quad around
 //! its segment, blended in file order (areas before segments); then its mip levels, all of a
@@ -11,12 +11,14 @@
 //!
 //! Nodes recorded between two submissions share one set of buffers: each node's uniforms sit
 //! at a 256-byte dynamic offset, its segments and areas are instance ranges of the batch's
-//! lists, and [`GroundTexturer::submit`] writes the batch once before submitting (a node
-//! texture creates no buffer, bind group or view; the pool keeps each layer's views).
+//! lists, its texels' types a range of the batch's type words, and [`GroundTexturer::submit`]
+//! writes the batch once before submitting (a node texture creates no buffer, bind group or
+//! view; the pool keeps each layer's views).
 
 use super::Gpu;
-use super::frame::{sampler_entry, texture_entry, uint_texture_entry};
+use super::frame::{sampler_entry, texture_entry};
 use super::ground_pool::LayerMips;
+use crate::ground::content::NodeGround;
 use crate::ground::layout::{SIDE, lattice_index, texel_m};
 use crate::ground::material_layers::{self, MaterialLayers};
 use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M};
@@ -84,14 +86,15 @@ pub fn shader_source() -> String {
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct GroundNodeUniform {
     first: [i32; 2],
-    ground_anchor: [f32; 2],
-    ground_step: f32,
-    material_step: f32,
     material_anchor: [f32; 2],
+    material_step: f32,
     material_lod: f32,
     segment_count: u32,
-    ground_types: u32,
     texel_m: f32,
+    /// The node's first word in the batch's type words (`SIDE * SIDE / 4` words, four texels'
+    /// types each).
+    types_first: u32,
+    pad: [u32; 3],
 }
 
 /// One segment (mirrors `Segment` in `ground.wgsl`), in texel-lattice units of its level.
@@ -144,12 +147,10 @@ pub struct GroundTexturer {
     mips: wgpu::ComputePipeline,
     mips_layout: wgpu::BindGroupLayout,
     layout: wgpu::BindGroupLayout,
-    ground_types: wgpu::TextureView,
     materials: wgpu::TextureView,
     sampler: wgpu::Sampler,
     types: u32,
     map_origin_m: [f64; 2],
-    ground_spacing_m: f64,
     /// The node data of the passes recorded since the last [`Self::submit`] (behind a lock so
     /// that recording takes `&self`; one thread records at a time in practice).
     pending: std::sync::Mutex<Pending>,
@@ -177,6 +178,8 @@ struct Batch {
     segments: Vec<GpuSegment>,
     areas: Vec<GpuArea>,
     points: Vec<[f32; 2]>,
+    /// The nodes' texel types, [`TYPE_WORDS`] words a node.
+    types: Vec<u32>,
 }
 
 impl Batch {
@@ -185,8 +188,12 @@ impl Batch {
         self.segments.clear();
         self.areas.clear();
         self.points.clear();
+        self.types.clear();
     }
 }
+
+/// Words of one node's texel types (four a word).
+const TYPE_WORDS: usize = (SIDE * SIDE / 4) as usize;
 
 /// The GPU buffers of a batch and the bind group over them, with their capacities (elements).
 struct BatchBuffers {
@@ -194,6 +201,7 @@ struct BatchBuffers {
     segments: wgpu::Buffer,
     areas: wgpu::Buffer,
     points: wgpu::Buffer,
+    types: wgpu::Buffer,
     group: wgpu::BindGroup,
     nodes: usize,
     segment_capacity: usize,
@@ -205,31 +213,6 @@ impl std::fmt::Debug for GroundTexturer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "GroundTexturer({} types)", self.types)
     }
-}
-
-/// The map's ground layer as an `R8Uint` texture (row 0 = south).
-fn ground_types_view(gpu: &Gpu, ground: &worldgen::Grid<u8>) -> wgpu::TextureView {
-    gpu.device
-        .create_texture_with_data(
-            &gpu.queue,
-            &wgpu::TextureDescriptor {
-                label: Some("ground types"),
-                size: wgpu::Extent3d {
-                    width: ground.width() as u32,
-                    height: ground.height() as u32,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::R8Uint,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            ground.data(),
-        )
-        .create_view(&wgpu::TextureViewDescriptor::default())
 }
 
 /// The legend's materials as one layer each of a mipmapped sRGB array (a flat grey one for an
@@ -268,11 +251,10 @@ fn materials_view(gpu: &Gpu, world: &World) -> (wgpu::TextureView, u32) {
 }
 
 impl GroundTexturer {
-    /// Uploads the map's ground layer and the legend's materials.
+    /// Uploads the legend's materials.
     pub fn new(gpu: &Gpu, world: &World) -> Self {
         let device = &gpu.device;
         let map = &world.map;
-        let ground_types = ground_types_view(gpu, &map.ground);
         let (materials, types) = materials_view(gpu, world);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("ground material sampler"),
@@ -287,7 +269,7 @@ impl GroundTexturer {
             label: Some("ground texture layout"),
             entries: &[
                 super::frame::uniform_entry(0, true, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                uint_texture_entry(1),
+                storage_entry(1),
                 texture_entry(2, wgpu::TextureViewDimension::D2Array),
                 sampler_entry(3),
                 storage_entry(4),
@@ -386,7 +368,7 @@ impl GroundTexturer {
         let buffers = BatchBuffers::new(
             device,
             &layout,
-            [&ground_types, &materials],
+            &materials,
             &sampler,
             [64, 4096, 1024, 8192],
         );
@@ -397,12 +379,10 @@ impl GroundTexturer {
             mips,
             mips_layout,
             layout,
-            ground_types,
             materials,
             sampler,
             types,
             map_origin_m: map.manifest.origin_m,
-            ground_spacing_m: map.manifest.ground.spacing_m,
             pending: std::sync::Mutex::new(Pending {
                 batch: Batch::default(),
                 buffers,
@@ -411,14 +391,10 @@ impl GroundTexturer {
         }
     }
 
-    /// What the terrain's detail below the finest texel samples: the materials array, the
-    /// map's ground layer and the number of ground types.
-    pub fn detail_sources(&self) -> (wgpu::TextureView, wgpu::TextureView, u32) {
-        (
-            self.materials.clone(),
-            self.ground_types.clone(),
-            self.types,
-        )
+    /// What the terrain's detail below the finest texel samples: the materials array and the
+    /// number of ground types.
+    pub fn detail_sources(&self) -> (wgpu::TextureView, u32) {
+        (self.materials.clone(), self.types)
     }
 
     /// The layout of the mip pass's bindings: what [`super::ground_pool::GroundPool`] binds
@@ -471,8 +447,8 @@ impl GroundTexturer {
     }
 
     /// Records the texels of node `key` into `target` (a `SIDE x SIDE` view in
-    /// [`GROUND_TEXTURE_FORMAT`]), drawing `decals` (the node's pieces) from the map's
-    /// `decal_list`.
+    /// [`GROUND_TEXTURE_FORMAT`]): `ground`'s texel types, then its decal pieces drawn from the
+    /// map's `decal_list`.
     pub fn record(
         &self,
         gpu: &Gpu,
@@ -480,9 +456,10 @@ impl GroundTexturer {
         target: &wgpu::TextureView,
         tree: &QuadTree,
         key: NodeKey,
-        decals: &NodeDecals,
+        ground: &NodeGround,
         decal_list: &[worldgen::map::Decal],
     ) {
+        let decals = &ground.decals;
         let t = texel_m(tree, key.level);
         let root = tree.rect(NodeKey::ROOT).min;
         // Lattice units of the level: (world - root) / t, in f64, then f32 (the same numbers
@@ -505,16 +482,10 @@ impl GroundTexturer {
             })
             .collect();
         let (areas, points) = gpu_areas(decals, decal_list, &lattice, t);
-        let gs = self.ground_spacing_m;
         let material_m = MATERIAL_TILE_M;
         let corner = |o: f64, r: f64, unit: f64| (r - o) / unit;
-        let uniform = GroundNodeUniform {
+        let mut uniform = GroundNodeUniform {
             first: lattice_index(key, 0, 0).map(|v| v as i32),
-            ground_anchor: [
-                corner(self.map_origin_m[0], root[0], gs) as f32,
-                corner(self.map_origin_m[1], root[1], gs) as f32,
-            ],
-            ground_step: (t / gs) as f32,
             material_step: (t / material_m) as f32,
             material_anchor: [
                 corner(self.map_origin_m[0], root[0], material_m).rem_euclid(1.0) as f32,
@@ -524,8 +495,9 @@ impl GroundTexturer {
                 .log2()
                 .max(0.0) as f32,
             segment_count: segments.len() as u32,
-            ground_types: self.types,
             texel_m: t as f32,
+            types_first: 0,
+            pad: [0; 3],
         };
         let mut guard = self
             .pending
@@ -538,6 +510,7 @@ impl GroundTexturer {
             p.batch.areas.len() + areas.len(),
             p.batch.points.len() + points.len(),
         ];
+        // (The type words follow the node count: `TYPE_WORDS` a node.)
         if !p.buffers.holds(need) {
             // The passes recorded so far read the current buffers: keep them with their data
             // until the submission, and go on in buffers twice the size this node needs.
@@ -545,7 +518,7 @@ impl GroundTexturer {
             let bigger = BatchBuffers::new(
                 &gpu.device,
                 &self.layout,
-                [&self.ground_types, &self.materials],
+                &self.materials,
                 &self.sampler,
                 std::array::from_fn(|i| (2 * need[i]).max(have[i])),
             );
@@ -554,6 +527,8 @@ impl GroundTexturer {
         }
         let b = &mut p.batch;
         let offset = b.uniforms.len();
+        uniform.types_first = b.types.len() as u32;
+        ground.types.append_words(&mut b.types);
         b.uniforms.extend_from_slice(bytemuck::bytes_of(&uniform));
         b.uniforms.resize(offset + UNIFORM_STRIDE, 0);
         let first_segment = b.segments.len() as u32;
@@ -585,7 +560,7 @@ impl BatchBuffers {
     fn new(
         device: &wgpu::Device,
         layout: &wgpu::BindGroupLayout,
-        [ground_types, materials]: [&wgpu::TextureView; 2],
+        materials: &wgpu::TextureView,
         sampler: &wgpu::Sampler,
         [nodes, segments, areas, points]: [usize; 4],
     ) -> Self {
@@ -618,6 +593,11 @@ impl BatchBuffers {
             points * std::mem::size_of::<[f32; 2]>(),
             storage,
         );
+        let type_buffer = buffer(
+            "ground texel types",
+            nodes * TYPE_WORDS * std::mem::size_of::<u32>(),
+            storage,
+        );
         let group =
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("ground nodes"),
@@ -635,7 +615,7 @@ impl BatchBuffers {
                     },
                     wgpu::BindGroupEntry {
                         binding: 1,
-                        resource: wgpu::BindingResource::TextureView(ground_types),
+                        resource: type_buffer.as_entire_binding(),
                     },
                     wgpu::BindGroupEntry {
                         binding: 2,
@@ -664,6 +644,7 @@ impl BatchBuffers {
             segments: segment_buffer,
             areas: area_buffer,
             points: point_buffer,
+            types: type_buffer,
             group,
             nodes,
             segment_capacity: segments,
@@ -701,6 +682,7 @@ impl BatchBuffers {
         put(&self.segments, bytemuck::cast_slice(&batch.segments));
         put(&self.areas, bytemuck::cast_slice(&batch.areas));
         put(&self.points, bytemuck::cast_slice(&batch.points));
+        put(&self.types, bytemuck::cast_slice(&batch.types));
     }
 }
 

@@ -4,17 +4,22 @@
 //! pixel's own scale over its luminance at the finest node texel's scale, so only what the node
 //! texture cannot hold is added, it is 1 where a pixel is a texel or larger, and it fades in by
 //! metres per pixel only (no node or level border can show). The material is the ground type's
-//! at the pixel (the map's ground layer, with the node texture's noise-perturbed borders).
+//! at the pixel (the map's ground layer, with the node texture's noise-perturbed borders), read
+//! from a window of the layer around the camera ([`crate::ground::type_window`]) that follows
+//! it.
 //! Nearer still (pixels under [`BUMP_PX_M`]) the material's detail height, stored in the
 //! materials' alpha, bends the shading normal: the gradient of the height mip at the pixel's
 //! scale, so the bumps smooth out with distance before they fade by pixel size.
 //!
-//! Bindings 3 to 6 of the terrain's group 2: the materials array, the ground layer, a
+//! Bindings 3 to 6 of the terrain's group 2: the materials array, the ground layer's window, a
 //! repeating sampler and a small uniform (`DetailUniform`), rewritten each frame from the camera.
 
 use super::Gpu;
 use crate::camera::Camera;
 use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M, MAX_RELIEF_M};
+use crate::ground::type_window::TypeWindow;
+use crate::surface::World;
+use std::sync::Arc;
 
 /// Per-frame uniforms (mirrors `GroundDetail` in `terrain.wgsl`).
 #[repr(C)]
@@ -36,6 +41,12 @@ struct DetailUniform {
     /// Pixels up to this size (m) see the materials' relief ([`BUMP_PX_M`]).
     bump_px_m: f32,
     pad: f32,
+    /// The ground cell of the window's texel (0, 0), and the window's side in cells.
+    window_first: [i32; 2],
+    window_side: [i32; 2],
+    /// The ground layer's cells per side.
+    map_cells: [i32; 2],
+    pad2: [f32; 2],
 }
 
 /// Pixels up to this size see the ground materials' detail height as bumps of the ground's
@@ -46,6 +57,8 @@ pub const BUMP_PX_M: f64 = 0.1;
 /// The detail bindings and the map numbers the uniform is made of.
 pub struct GroundDetail {
     pub materials: wgpu::TextureView,
+    /// The window of the ground layer (`R8Uint`, row 0 south).
+    window_texture: wgpu::Texture,
     pub ground_types: wgpu::TextureView,
     pub sampler: wgpu::Sampler,
     pub buffer: wgpu::Buffer,
@@ -53,6 +66,10 @@ pub struct GroundDetail {
     ground_spacing_m: f64,
     types: u32,
     finest_texel_m: f64,
+    /// The map whose ground layer the window shows (none for the stand-in), and where the
+    /// window is (none before the first frame).
+    world: Option<Arc<World>>,
+    window: Option<TypeWindow>,
 }
 
 impl std::fmt::Debug for GroundDetail {
@@ -63,13 +80,33 @@ impl std::fmt::Debug for GroundDetail {
 
 impl GroundDetail {
     /// Detail from `materials` (a 2D array, one layer per ground type, `MATERIAL_TEXELS`
-    /// texels over `MATERIAL_TILE_M`, full mip chain) for the map's ground layer `ground_types`
-    /// (R8Uint, row 0 south), whose cells are `ground_spacing_m` from `map_origin_m`; the finest
-    /// node texel is `finest_texel_m`.
+    /// texels over `MATERIAL_TILE_M`, full mip chain; `types` layers) for `world`'s ground
+    /// layer; the finest node texel is `finest_texel_m`.
     pub fn new(
         gpu: &Gpu,
         materials: wgpu::TextureView,
-        ground_types: wgpu::TextureView,
+        types: u32,
+        world: &Arc<World>,
+        finest_texel_m: f64,
+    ) -> Self {
+        let ground = &world.map.manifest.ground;
+        let map = [world.map.ground.width(), world.map.ground.height()];
+        let side = TypeWindow::around(map, ground.spacing_m, [0.0; 2]).side;
+        let mut detail = Self::with_window(
+            gpu,
+            materials,
+            window_texture(gpu, side.map(|s| s as u32)),
+            (world.map.manifest.origin_m, ground.spacing_m, types),
+            finest_texel_m,
+        );
+        detail.world = Some(Arc::clone(world));
+        detail
+    }
+
+    fn with_window(
+        gpu: &Gpu,
+        materials: wgpu::TextureView,
+        window_texture: wgpu::Texture,
         (map_origin_m, ground_spacing_m, types): ([f64; 2], f64, u32),
         finest_texel_m: f64,
     ) -> Self {
@@ -90,13 +127,16 @@ impl GroundDetail {
         });
         Self {
             materials,
-            ground_types,
+            ground_types: window_texture.create_view(&wgpu::TextureViewDescriptor::default()),
+            window_texture,
             sampler,
             buffer,
             map_origin_m,
             ground_spacing_m,
             types,
             finest_texel_m,
+            world: None,
+            window: None,
         }
     }
 
@@ -127,29 +167,71 @@ impl GroundDetail {
                     ..Default::default()
                 })
         };
-        Self::new(
+        Self::with_window(
             gpu,
             texture(
                 "no ground materials",
                 wgpu::TextureFormat::Rgba8UnormSrgb,
                 true,
             ),
-            texture("no ground types", wgpu::TextureFormat::R8Uint, false),
+            window_texture(gpu, [1, 1]),
             ([0.0; 2], 1.0, 1),
             0.0,
         )
     }
 
+    /// Moves the window of the ground layer with the camera at `camera_cells` (ground-cell
+    /// coordinates) when it nears the window's edge, writing the new window's cells; the
+    /// window in use.
+    fn follow(&mut self, queue: &wgpu::Queue, camera_cells: [f64; 2]) -> Option<TypeWindow> {
+        let world = self.world.as_ref()?;
+        let ground = &world.map.ground;
+        let next = match self.window {
+            Some(w) => w.follow(camera_cells),
+            None => TypeWindow::around(
+                [ground.width(), ground.height()],
+                self.ground_spacing_m,
+                camera_cells,
+            ),
+        };
+        if self.window != Some(next) {
+            let [w, h] = next.side.map(|s| s as u32);
+            queue.write_texture(
+                self.window_texture.as_image_copy(),
+                &next.cells(ground),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(w),
+                    rows_per_image: Some(h),
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+            );
+            self.window = Some(next);
+        }
+        Some(next)
+    }
+
     /// Writes this frame's uniform for `camera`.
-    pub fn write(&self, queue: &wgpu::Queue, camera: &Camera) {
+    pub fn write(&mut self, queue: &wgpu::Queue, camera: &Camera) {
         let p = camera.position_m;
         let (dx, dy) = (p.x - self.map_origin_m[0], p.y - self.map_origin_m[1]);
+        let camera_cells = [dx / self.ground_spacing_m, dy / self.ground_spacing_m];
+        // Without a map (the stand-in) the window is empty: no detail anywhere.
+        let window = self.follow(queue, camera_cells);
+        let (window_first, window_side, map_cells) = window.map_or(([0; 2], [0; 2], [1; 2]), |w| {
+            (
+                w.first.map(|v| v as i32),
+                w.side.map(|v| v as i32),
+                w.map_cells().map(|v| v as i32),
+            )
+        });
         let material_texel_m = MATERIAL_TILE_M / f64::from(MATERIAL_TEXELS);
         let u = DetailUniform {
-            camera_cells: [
-                (dx / self.ground_spacing_m) as f32,
-                (dy / self.ground_spacing_m) as f32,
-            ],
+            camera_cells: camera_cells.map(|c| c as f32),
             camera_tiles: [
                 (dx / MATERIAL_TILE_M).rem_euclid(1.0) as f32,
                 (dy / MATERIAL_TILE_M).rem_euclid(1.0) as f32,
@@ -162,6 +244,10 @@ impl GroundDetail {
             max_relief_m: MAX_RELIEF_M as f32,
             bump_px_m: BUMP_PX_M as f32,
             pad: 0.0,
+            window_first,
+            window_side,
+            map_cells,
+            pad2: [0.0; 2],
         };
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&u));
     }
@@ -187,4 +273,22 @@ impl GroundDetail {
             },
         ]
     }
+}
+
+/// A texture for a window of `side` ground cells (`R8Uint`, row 0 south).
+fn window_texture(gpu: &Gpu, side: [u32; 2]) -> wgpu::Texture {
+    gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("ground types around the camera"),
+        size: wgpu::Extent3d {
+            width: side[0].max(1),
+            height: side[1].max(1),
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::R8Uint,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    })
 }

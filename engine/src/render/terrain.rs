@@ -456,20 +456,14 @@ impl TerrainRenderer {
     pub fn with_ground_textures(
         mut self,
         gpu: &Gpu,
-        world: &World,
+        world: &Arc<World>,
         pool_budget_bytes: usize,
     ) -> Self {
         let texturer = GroundTexturer::new(gpu, world);
-        let (materials, ground_types, types) = texturer.detail_sources();
+        let (materials, types) = texturer.detail_sources();
         let tree = QuadTree::new(world.origin_m(), world.size_m());
-        let ground = &world.map.manifest.ground;
-        self.detail = GroundDetail::new(
-            gpu,
-            materials,
-            ground_types,
-            (world.map.manifest.origin_m, ground.spacing_m, types),
-            texel_m(&tree, tree.max_level),
-        );
+        self.detail =
+            GroundDetail::new(gpu, materials, types, world, texel_m(&tree, tree.max_level));
         self.ground = Some(GroundTextures {
             pool: GroundPool::with_pages_of(
                 pool_budget_bytes,
@@ -569,7 +563,7 @@ impl TerrainRenderer {
         let enc = deferred.get(&gpu.device);
         g.timer.item(gpu, enc);
         g.texturer
-            .record(gpu, enc, &slot.view, tree, key, &pieces.decals, &g.decals);
+            .record(gpu, enc, &slot.view, tree, key, pieces, &g.decals);
         g.mips_due.push(slot.mips.clone());
         let uv_per_m = 1.0 / (texel_m(tree, key.level) * f64::from(SIDE));
         Some((slot, uv_per_m as f32))

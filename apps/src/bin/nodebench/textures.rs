@@ -1,16 +1,17 @@
 //! Section `textures` (when an adapter exists): the ground texture of every node of the
 //! flight's sample rendered offscreen one at a time: the CPU time to gather its decal pieces
-//! and to record its pass, its GPU time from timestamp queries (where the adapter has them),
-//! bytes per node, and segments drawn per node; then the automatic flight through the viewer
+//! and resolve its texels' ground types, and to record its pass, its GPU time from timestamp queries (where the adapter has them),
+//! bytes per node (the texture's, and the types' the node holds on the CPU), and segments drawn
+//! per node; then the automatic flight through the viewer
 //! with ground textures: texels per pixel on ground pixels (read back from the texel-density
 //! view) and pool layers in use.
 
 use crate::report::{Report, bar};
 use engine::color::srgb_to_linear;
+use engine::ground::content::NodeGround;
 use engine::ground::content::TEXTURE_BYTES;
 use engine::ground::decal_index::DecalIndex;
 use engine::ground::layout::{MIP_LEVELS, SIDE};
-use engine::ground::pieces::node_decals;
 use engine::render::frame::{GroundView, texels_per_pixel_of};
 use engine::render::ground::GroundTexturer;
 use engine::render::ground_pool::GroundPool;
@@ -48,10 +49,11 @@ pub(crate) fn section_textures(
     let mut timer = GpuTimer::new(gpu);
     let (mut t_pieces, mut t_encode, mut t_submit, mut t_gpu, mut segments) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut type_bytes = Vec::new();
     let b = bar(keys.len() as u64, "ground textures");
     for &key in &keys {
         let t0 = Instant::now();
-        let pieces = node_decals(&world.map.decals, &index, tree, key);
+        let pieces = NodeGround::new(world, &index, tree, key);
         let t1 = Instant::now();
         let mut enc = gpu
             .device
@@ -84,7 +86,8 @@ pub(crate) fn section_textures(
         t_pieces.push((t1 - t0).as_secs_f64());
         t_encode.push((t2 - t1).as_secs_f64());
         t_submit.push((t3 - t2).as_secs_f64());
-        segments.push(pieces.segments.len() as f64);
+        segments.push(pieces.decals.segments.len() as f64);
+        type_bytes.push(pieces.types.bytes() as f64);
         b.inc(1);
     }
     b.finish_and_clear();
@@ -95,12 +98,17 @@ pub(crate) fn section_textures(
     );
     r.add(
         "textures",
-        "set-up: materials and ground layer uploaded, decal index",
+        "set-up: materials uploaded, decal index",
         setup_ms,
         "ms",
         &params,
     );
-    r.timings("textures", "node decal pieces (CPU)", t_pieces, &params);
+    r.timings(
+        "textures",
+        "node decal pieces and texel ground types (CPU)",
+        t_pieces,
+        &params,
+    );
     r.timings(
         "textures",
         "node texture passes recorded (CPU)",
@@ -138,6 +146,16 @@ pub(crate) fn section_textures(
             apps::percentile(&segments, q),
             "segments",
             &params,
+        );
+    }
+    type_bytes.sort_by(f64::total_cmp);
+    for (name, q) in [("p50", 0.5), ("max", 1.0)] {
+        r.add(
+            "textures",
+            &format!("texel ground types held per node (runs of one type) {name}"),
+            apps::percentile(&type_bytes, q),
+            "bytes",
+            &format!("{params}; a plain list would hold {} bytes", SIDE * SIDE),
         );
     }
     flight_texels(gpu, adapter, world_path, r, quick)

@@ -1,0 +1,365 @@
+//! The ground type of every texel of a node's ground texture, resolved on the CPU in the node's
+//! `ground pieces` phase, so the GPU holds no copy of the map's ground layer (64 MiB at 32 km):
+//! the texture pass reads each texel's type from the node's own list.
+//!
+//! A texel's type is the ground sample nearest to its centre moved by two octaves of value
+//! noise of up to 0.7 ground cells ([`perturbed_ground_cell`]), so type borders are natural
+//! instead of the 4 m staircase. The noise mirrors the prelude's `perturbed_ground_cell`
+//! (`shaders/prelude.inc.wgsl`), which the terrain shader still evaluates for the materials'
+//! detail near the camera: both sides make the same f32 operations, so they agree except where
+//! a position rounds within an ulp of a half cell. Most texels need no noise: when every
+//! sample the perturbation can reach has one type, that is the texel's.
+//!
+//! Stored as runs of equal types in texel order (row 0 south, west to east): a node's texels
+//! run across few types, so a node holds hundreds of bytes where a plain list would take 64 KiB.
+
+use super::layout::{SIDE, lattice_index, texel_m};
+use crate::terrain::quadtree::{NodeKey, QuadTree};
+use worldgen::Grid;
+
+/// The largest distance (ground cells, per axis) the perturbation moves a position.
+const REACH_CELLS: f32 = 0.7;
+
+/// Where a node's texels lie on the ground layer, in the f32 numbers the shader used: ground
+/// cell coordinates of texel (`i`, `j`) are `anchor + (first + (i, j) + 1/2) step`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TexelCells {
+    /// Lattice index of texel (0, 0) ([`lattice_index`]).
+    pub first: [i32; 2],
+    /// Ground-cell coordinates of lattice index (0, 0)'s corner.
+    pub anchor: [f32; 2],
+    /// Texel size in ground cells.
+    pub step: f32,
+}
+
+impl TexelCells {
+    /// The texels of node `key` on a ground layer of cells `spacing_m` from `origin_m`.
+    pub fn new(tree: &QuadTree, key: NodeKey, origin_m: [f64; 2], spacing_m: f64) -> Self {
+        let t = texel_m(tree, key.level);
+        let root = tree.rect(NodeKey::ROOT).min;
+        Self {
+            first: lattice_index(key, 0, 0).map(|v| v as i32),
+            anchor: [
+                ((root[0] - origin_m[0]) / spacing_m) as f32,
+                ((root[1] - origin_m[1]) / spacing_m) as f32,
+            ],
+            step: (t / spacing_m) as f32,
+        }
+    }
+
+    /// Ground-cell coordinates of texel (`i`, `j`)'s centre.
+    fn centre(&self, i: u32, j: u32) -> [f32; 2] {
+        let c = |first: i32, k: u32, anchor: f32| {
+            let centre = (first + k as i32) as f32 + 0.5;
+            anchor + centre * self.step
+        };
+        [
+            c(self.first[0], i, self.anchor[0]),
+            c(self.first[1], j, self.anchor[1]),
+        ]
+    }
+}
+
+/// The prelude's `lattice_hash`: a value in [0, 1] per integer lattice point.
+pub fn lattice_hash(x: i32, y: i32) -> f32 {
+    let mut h = (x as u32).wrapping_mul(0x8da6_b343) ^ (y as u32).wrapping_mul(0xd816_3841);
+    h = (h ^ (h >> 15)).wrapping_mul(0x2c1b_3c6d);
+    h ^= h >> 12;
+    (h & 0xffff) as f32 / 65535.0
+}
+
+/// WGSL's `mix`: `a (1 - t) + b t`.
+fn mix(a: f32, b: f32, t: f32) -> f32 {
+    a * (1.0 - t) + b * t
+}
+
+/// The prelude's `value_noise`: smooth value noise in [0, 1] on a lattice of unit cells.
+pub fn value_noise(p: [f32; 2]) -> f32 {
+    let c = [p[0].floor(), p[1].floor()];
+    let f = [p[0] - c[0], p[1] - c[1]];
+    let u = f.map(|f| f * f * (3.0 - 2.0 * f));
+    let [x, y] = c.map(|c| c as i32);
+    let a = lattice_hash(x, y);
+    let b = lattice_hash(x.wrapping_add(1), y);
+    let d = lattice_hash(x, y.wrapping_add(1));
+    let e = lattice_hash(x.wrapping_add(1), y.wrapping_add(1));
+    mix(mix(a, b, u[0]), mix(d, e, u[0]), u[1])
+}
+
+/// The prelude's `perturbed_ground_cell`: the ground sample whose type shows at `g` (ground-cell
+/// coordinates from the map origin).
+pub fn perturbed_ground_cell(g: [f32; 2]) -> [i32; 2] {
+    let at = |k: f32, o: f32| [g[0] * k + o, g[1] * k + o];
+    let wobble = [
+        (value_noise(at(1.3, 0.0)) + 0.5 * value_noise(at(3.7, 17.0))) / 1.5 - 0.5,
+        (value_noise(at(1.3, 41.0)) + 0.5 * value_noise(at(3.7, 59.0))) / 1.5 - 0.5,
+    ];
+    [0, 1].map(|a| (g[a] + 2.0 * REACH_CELLS * wobble[a]).round_ties_even() as i32)
+}
+
+/// [`perturbed_ground_cell`] along one row of positions (one `y`): the row's part of each
+/// noise term is computed once, and the lattice hashes of a cell are reused while positions
+/// stay in it (fine nodes have many texels per noise cell). The same operations in the same
+/// order as [`value_noise`], so the same results bit for bit.
+struct WobbleRow {
+    y: f32,
+    terms: [NoiseRow; 4],
+}
+
+/// One value-noise term `value_noise(p * scale + offset)` along a row.
+struct NoiseRow {
+    scale: f32,
+    offset: f32,
+    iy: i32,
+    uy: f32,
+    /// The lattice cell column the hashes are of, and the hashes of its four corners.
+    ix: Option<i32>,
+    hashes: [f32; 4],
+}
+
+impl NoiseRow {
+    fn new(y: f32, scale: f32, offset: f32) -> Self {
+        let py = y * scale + offset;
+        let cy = py.floor();
+        let fy = py - cy;
+        Self {
+            scale,
+            offset,
+            iy: cy as i32,
+            uy: fy * fy * (3.0 - 2.0 * fy),
+            ix: None,
+            hashes: [0.0; 4],
+        }
+    }
+
+    fn at(&mut self, x: f32) -> f32 {
+        let px = x * self.scale + self.offset;
+        let cx = px.floor();
+        let fx = px - cx;
+        let ux = fx * fx * (3.0 - 2.0 * fx);
+        let ix = cx as i32;
+        if self.ix != Some(ix) {
+            let (x1, y1) = (ix.wrapping_add(1), self.iy.wrapping_add(1));
+            self.hashes = [
+                lattice_hash(ix, self.iy),
+                lattice_hash(x1, self.iy),
+                lattice_hash(ix, y1),
+                lattice_hash(x1, y1),
+            ];
+            self.ix = Some(ix);
+        }
+        let [a, b, d, e] = self.hashes;
+        mix(mix(a, b, ux), mix(d, e, ux), self.uy)
+    }
+}
+
+impl WobbleRow {
+    fn new(y: f32) -> Self {
+        Self {
+            y,
+            terms: [
+                NoiseRow::new(y, 1.3, 0.0),
+                NoiseRow::new(y, 3.7, 17.0),
+                NoiseRow::new(y, 1.3, 41.0),
+                NoiseRow::new(y, 3.7, 59.0),
+            ],
+        }
+    }
+
+    /// `perturbed_ground_cell([x, y])`.
+    fn cell(&mut self, x: f32) -> [i32; 2] {
+        let [a, b, c, d] = &mut self.terms;
+        let wobble = [
+            (a.at(x) + 0.5 * b.at(x)) / 1.5 - 0.5,
+            (c.at(x) + 0.5 * d.at(x)) / 1.5 - 0.5,
+        ];
+        let g = [x, self.y];
+        [0, 1].map(|k| (g[k] + 2.0 * REACH_CELLS * wobble[k]).round_ties_even() as i32)
+    }
+}
+
+/// The ground type of every texel of one node texture (see the module docs).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NodeTypes {
+    /// Runs of one type in texel order: (length - 1, type).
+    runs: Vec<[u8; 2]>,
+}
+
+impl NodeTypes {
+    /// The types of the texels `cells` places on `ground`, each at most `last_type` (the
+    /// materials' last layer).
+    pub fn resolve(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
+        let (w, h) = (ground.width() as i32, ground.height() as i32);
+        // The samples the perturbation can reach from `v` along one axis (a margin of a
+        // hundredth of a cell beyond the reach covers rounding differences).
+        let span = |v: f32, n: i32| {
+            let lo = (v - REACH_CELLS - 0.01).round() as i32;
+            let hi = (v + REACH_CELLS + 0.01).round() as i32;
+            (lo.clamp(0, n - 1) as usize, hi.clamp(0, n - 1) as usize)
+        };
+        let columns: Vec<(f32, (usize, usize))> = (0..SIDE)
+            .map(|i| {
+                let gx = cells.centre(i, 0)[0];
+                (gx, span(gx, w))
+            })
+            .collect();
+        let mut runs: Vec<[u8; 2]> = Vec::new();
+        for j in 0..SIDE {
+            let gy = cells.centre(0, j)[1];
+            let (y0, y1) = span(gy, h);
+            let mut noise = WobbleRow::new(gy);
+            // The last column span's single type (None: mixed): neighbouring texels of a fine
+            // node share their spans.
+            let mut last: Option<((usize, usize), Option<u8>)> = None;
+            for &(gx, (x0, x1)) in &columns {
+                let single = match last {
+                    Some((span, single)) if span == (x0, x1) => single,
+                    _ => {
+                        let first = ground.get(x0, y0);
+                        let single = (y0..=y1)
+                            .all(|y| {
+                                ground.data()[y * w as usize..][x0..=x1]
+                                    .iter()
+                                    .all(|&v| v == first)
+                            })
+                            .then_some(first);
+                        last = Some(((x0, x1), single));
+                        single
+                    }
+                };
+                let t = single
+                    .unwrap_or_else(|| {
+                        let [x, y] = noise.cell(gx);
+                        ground.get(x.clamp(0, w - 1) as usize, y.clamp(0, h - 1) as usize)
+                    })
+                    .min(last_type);
+                match runs.last_mut() {
+                    Some(run) if run[1] == t && run[0] < u8::MAX => run[0] += 1,
+                    _ => runs.push([0, t]),
+                }
+            }
+        }
+        runs.shrink_to_fit();
+        Self { runs }
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.runs.as_slice())
+    }
+
+    /// Appends the texels' types to `out` as `SIDE * SIDE / 4` words whose bytes are the types
+    /// in texel order (the GPU reads words little-endian: the first texel in the low byte).
+    pub fn append_words(&self, out: &mut Vec<u32>) {
+        let start = out.len();
+        out.resize(start + (SIDE * SIDE / 4) as usize, 0);
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out[start..]);
+        let mut texel = 0usize;
+        for &[length, t] in &self.runs {
+            let end = texel + usize::from(length) + 1;
+            bytes[texel..end].fill(t);
+            texel = end;
+        }
+        debug_assert_eq!(texel, (SIDE * SIDE) as usize, "runs cover every texel");
+    }
+
+    /// The type of texel (`i`, `j`) (`i` east, `j` north from the south-west border texel).
+    pub fn get(&self, i: u32, j: u32) -> u8 {
+        let at = (j * SIDE + i) as usize;
+        let mut texel = 0usize;
+        for &[length, t] in &self.runs {
+            texel += usize::from(length) + 1;
+            if at < texel {
+                return t;
+            }
+        }
+        0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ground layer of stripes and noise-free blocks with types 0 - 3.
+    fn ground(n: usize) -> Grid<u8> {
+        let mut g = Grid::new(n, n, 0u8);
+        for y in 0..n {
+            for x in 0..n {
+                g.set(x, y, (((x / 7) + (y / 5) * 3 + (x * y) % 3 / 2) % 4) as u8);
+            }
+        }
+        g
+    }
+
+    /// Resolving with the shortcut equals the perturbed sample of every texel, computed texel
+    /// by texel without it, on fine, middle and coarse nodes.
+    #[test]
+    fn the_uniform_shortcut_changes_no_texel() {
+        let g = ground(129);
+        let tree = QuadTree::new([0.0, 0.0], [512.0, 512.0]);
+        for key in [
+            NodeKey {
+                level: 0,
+                ix: 0,
+                iy: 0,
+            },
+            NodeKey {
+                level: 3,
+                ix: 2,
+                iy: 5,
+            },
+            NodeKey {
+                level: tree.max_level,
+                ix: 7,
+                iy: 3,
+            },
+        ] {
+            let cells = TexelCells::new(&tree, key, [0.0, 0.0], 4.0);
+            let types = NodeTypes::resolve(&g, &cells, 3);
+            for j in 0..SIDE {
+                for i in 0..SIDE {
+                    let [x, y] = perturbed_ground_cell(cells.centre(i, j));
+                    let want = g.get(x.clamp(0, 128) as usize, y.clamp(0, 128) as usize);
+                    assert_eq!(types.get(i, j), want, "{key:?} texel {i}, {j}");
+                }
+            }
+            let mut words = Vec::new();
+            types.append_words(&mut words);
+            assert_eq!(words.len(), (SIDE * SIDE / 4) as usize);
+            let (i, j) = (SIDE - 1, SIDE / 2);
+            let k = (j * SIDE + i) as usize;
+            assert_eq!((words[k / 4] >> (8 * (k % 4))) as u8, types.get(i, j));
+        }
+    }
+
+    /// The perturbation moves positions by up to 0.7 cells and does move them: a position's
+    /// nearest sample differs from its perturbed sample for a good share of positions.
+    #[test]
+    fn the_perturbation_reaches_up_to_seven_tenths_of_a_cell() {
+        let mut moved = 0;
+        for k in 0..10_000 {
+            let g = [k as f32 * 0.173 + 3.0, (k / 100) as f32 * 0.291 + 1000.0];
+            let p = perturbed_ground_cell(g);
+            for a in 0..2 {
+                assert!(
+                    (p[a] as f32 - g[a]).abs() <= 0.5 + REACH_CELLS + 1e-3,
+                    "{g:?} {p:?}"
+                );
+            }
+            moved += usize::from(p != g.map(|v| v.round_ties_even() as i32));
+        }
+        assert!((2_000..8_000).contains(&moved), "{moved} of 10000 moved");
+    }
+
+    /// Types above the last layer are clamped, and a map of one type gives one run.
+    #[test]
+    fn one_type_is_one_run_and_types_clamp() {
+        let g = Grid::new(33, 33, 9u8);
+        let tree = QuadTree::new([0.0, 0.0], [128.0, 128.0]);
+        let cells = TexelCells::new(&tree, NodeKey::ROOT, [0.0, 0.0], 4.0);
+        let types = NodeTypes::resolve(&g, &cells, 5);
+        assert_eq!(types.get(3, 200), 5);
+        assert_eq!(types.bytes(), 2 * (SIDE * SIDE / 256) as usize);
+    }
+}
