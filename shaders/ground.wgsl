@@ -25,12 +25,19 @@ struct GroundNode {
     segment_count: u32,
     // Texel size in metres (patterns finer than a few texels fade to their mean).
     texel_m: f32,
-    // The node's first word of `texel_types` (SIDE x SIDE types, four a word, low byte first,
-    // rows south to north).
+    // The node's first word of `texel_types` (four types a word, low byte first, rows south to
+    // north), and what they hold: 0 each texel's type (SIDE x SIDE), 1 the ground cells the
+    // texels reach (`window_side` cells from `window_first` on a layer of `map_cells`).
     types_first: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    types_form: u32,
+    // Ground-grid coordinates of lattice index (0, 0)'s corner, and (below) the texel size in
+    // ground cells.
+    ground_anchor: vec2<f32>,
+    window_first: vec2<i32>,
+    window_side: vec2<i32>,
+    map_cells: vec2<i32>,
+    ground_step: f32,
+    pad: f32,
 };
 
 // A road or path segment in texel-lattice units of the node's level (the same numbers in every
@@ -80,14 +87,28 @@ fn segment_distance(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> f32 {
     return length(p - (a + t * ab));
 }
 
+// A texel of a node whose types are each texel's (`types_form` 0).
 @fragment
 fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     // Framebuffer rows run top down; texel rows run south to north.
-    let centre = texel_centre(frag);
-    let k = (SIDE - 1u - u32(frag.y)) * SIDE + u32(frag.x);
+    return texel_color(frag, (SIDE - 1u - u32(frag.y)) * SIDE + u32(frag.x));
+}
+
+// A texel of a node whose types are the cells its texels reach (`types_form` 1): the nearest
+// ground sample to the texel's centre moved by two octaves of noise of up to 0.7 ground cells.
+@fragment
+fn fs_texel_cells(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let g = node.ground_anchor + texel_centre(frag) * node.ground_step;
+    let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), node.map_cells - 1);
+    let local = clamp(at - node.window_first, vec2<i32>(0), node.window_side - 1);
+    return texel_color(frag, u32(local.y * node.window_side.x + local.x));
+}
+
+// The texel's colour: the material of type `k` of the node's types.
+fn texel_color(frag: vec4<f32>, k: u32) -> vec4<f32> {
     let t = (texel_types[node.types_first + k / 4u] >> (8u * (k % 4u))) & 0xffu;
-    let uv = fract(node.material_anchor + centre * node.material_step);
-    var albedo = textureSampleLevel(materials, material_sampler, uv, t, node.material_lod).rgb;
+    let uv = fract(node.material_anchor + texel_centre(frag) * node.material_step);
+    let albedo = textureSampleLevel(materials, material_sampler, uv, t, node.material_lod).rgb;
     return vec4<f32>(albedo, 1.0);
 }
 

@@ -1,17 +1,19 @@
-//! The ground type of every texel of a node's ground texture, resolved on the CPU in the node's
-//! `ground pieces` phase, so the GPU holds no copy of the map's ground layer (64 MiB at 32 km):
-//! the texture pass reads each texel's type from the node's own list.
+//! The ground types of a node's ground texture, gathered by the node's CPU phase `ground
+//! pieces`, so the GPU holds no copy of the map's ground layer (64 MiB at 32 km).
 //!
 //! A texel's type is the ground sample nearest to its centre moved by two octaves of value
-//! noise of up to 0.7 ground cells ([`perturbed_ground_cell`]), so type borders are natural
-//! instead of the 4 m staircase. The noise mirrors the prelude's `perturbed_ground_cell`
-//! (`shaders/prelude.inc.wgsl`), which the terrain shader still evaluates for the materials'
-//! detail near the camera: both sides make the same f32 operations, so they agree except where
-//! a position rounds within an ulp of a half cell. Most texels need no noise: when every
-//! sample the perturbation can reach has one type, that is the texel's.
+//! noise of up to 0.7 ground cells ([`perturbed_ground_cell`], the prelude's function of the
+//! same name), so type borders are natural instead of the 4 m staircase. Where a node's texels
+//! are at most a ground cell apart (every node but the few coarsest), the phase gathers the
+//! cells its texels can reach (a few hundred bytes for the finest nodes) and the texture pass
+//! perturbs each texel on the GPU as before ([`TypeForm::Cells`]). On coarser nodes that would
+//! be a large part of the map, so the phase resolves each texel's type itself
+//! ([`TypeForm::Texels`]; a few milliseconds a node): its noise makes the same f32 operations as
+//! the shader's, so the two agree except where a position rounds within an ulp of a half cell,
+//! and most texels need none (every sample the perturbation can reach has one type).
 //!
-//! Stored as runs of equal types in texel order (row 0 south, west to east): a node's texels
-//! run across few types, so a node holds hundreds of bytes where a plain list would take 64 KiB.
+//! Both are stored as runs of equal types: a node holds hundreds of bytes (27 KB at most on the
+//! default map's flight) where a plain list of its texels would take 64 KiB.
 
 use super::layout::{SIDE, lattice_index, texel_m};
 use crate::terrain::quadtree::{NodeKey, QuadTree};
@@ -178,17 +180,84 @@ impl WobbleRow {
     }
 }
 
-/// The ground type of every texel of one node texture (see the module docs).
+/// What a node's type list holds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum TypeForm {
+    /// Each texel's type, in texel order (row 0 south, west to east): coarse nodes, whose
+    /// texels are more than a ground cell apart.
+    #[default]
+    Texels,
+    /// The ground cells the node's texels can reach, `side` cells from cell `first`, rows
+    /// south to north, on a layer of `map` cells: the texture pass perturbs each texel's
+    /// position and reads its cell here (nodes whose texels are at most a cell apart: their
+    /// cells are few, and the noise costs the GPU nothing).
+    Cells {
+        first: [i32; 2],
+        side: [u32; 2],
+        map: [i32; 2],
+    },
+}
+
+/// The ground types of one node texture (see the module docs).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct NodeTypes {
-    /// Runs of one type in texel order: (length - 1, type).
+    pub form: TypeForm,
+    /// Runs of one type in the form's order: (length - 1, type).
     runs: Vec<[u8; 2]>,
+}
+
+/// Appends a run of `t` to `runs`.
+fn push_run(runs: &mut Vec<[u8; 2]>, t: u8) {
+    match runs.last_mut() {
+        Some(run) if run[1] == t && run[0] < u8::MAX => run[0] += 1,
+        _ => runs.push([0, t]),
+    }
 }
 
 impl NodeTypes {
     /// The types of the texels `cells` places on `ground`, each at most `last_type` (the
-    /// materials' last layer).
+    /// materials' last layer): the cells they reach where texels are at most a cell apart,
+    /// each texel's type otherwise.
     pub fn resolve(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
+        if cells.step <= 1.0 {
+            Self::reached_cells(ground, cells, last_type)
+        } else {
+            Self::texels(ground, cells, last_type)
+        }
+    }
+
+    /// [`TypeForm::Cells`]: the cells within reach of the texels' centres, with a margin of a
+    /// cell for rounding.
+    fn reached_cells(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
+        let map = [ground.width() as i32, ground.height() as i32];
+        let (lo, hi) = (cells.centre(0, 0), cells.centre(SIDE - 1, SIDE - 1));
+        let reach = REACH_CELLS + 1.5;
+        let range = |a: usize| {
+            let first = ((lo[a] - reach).floor() as i32).clamp(0, map[a] - 1);
+            let last = ((hi[a] + reach).ceil() as i32).clamp(0, map[a] - 1);
+            (first, (last - first + 1) as u32)
+        };
+        let ((x0, w), (y0, h)) = (range(0), range(1));
+        let mut runs = Vec::new();
+        for y in y0..y0 + h as i32 {
+            let row = &ground.data()[y as usize * ground.width()..][x0 as usize..][..w as usize];
+            for &t in row {
+                push_run(&mut runs, t.min(last_type));
+            }
+        }
+        runs.shrink_to_fit();
+        Self {
+            form: TypeForm::Cells {
+                first: [x0, y0],
+                side: [w, h],
+                map,
+            },
+            runs,
+        }
+    }
+
+    /// [`TypeForm::Texels`].
+    fn texels(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
         let (w, h) = (ground.width() as i32, ground.height() as i32);
         // The samples the perturbation can reach from `v` along one axis (a margin of a
         // hundredth of a cell beyond the reach covers rounding differences).
@@ -233,14 +302,32 @@ impl NodeTypes {
                         ground.get(x.clamp(0, w - 1) as usize, y.clamp(0, h - 1) as usize)
                     })
                     .min(last_type);
-                match runs.last_mut() {
-                    Some(run) if run[1] == t && run[0] < u8::MAX => run[0] += 1,
-                    _ => runs.push([0, t]),
-                }
+                push_run(&mut runs, t);
             }
         }
         runs.shrink_to_fit();
-        Self { runs }
+        Self {
+            form: TypeForm::Texels,
+            runs,
+        }
+    }
+
+    /// Types the list holds (texels or cells).
+    pub fn len(&self) -> usize {
+        match self.form {
+            TypeForm::Texels => (SIDE * SIDE) as usize,
+            TypeForm::Cells { side, .. } => side[0] as usize * side[1] as usize,
+        }
+    }
+
+    /// Whether the list holds no type (never: a node has texels and reaches a cell).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Words [`Self::append_words`] appends.
+    pub fn words(&self) -> usize {
+        self.len().div_ceil(4)
     }
 
     /// Bytes held.
@@ -248,11 +335,11 @@ impl NodeTypes {
         std::mem::size_of_val(self.runs.as_slice())
     }
 
-    /// Appends the texels' types to `out` as `SIDE * SIDE / 4` words whose bytes are the types
-    /// in texel order (the GPU reads words little-endian: the first texel in the low byte).
+    /// Appends the types to `out` as [`Self::words`] words whose bytes are the types in the
+    /// form's order (the GPU reads words little-endian: the first type in the low byte).
     pub fn append_words(&self, out: &mut Vec<u32>) {
         let start = out.len();
-        out.resize(start + (SIDE * SIDE / 4) as usize, 0);
+        out.resize(start + self.words(), 0);
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out[start..]);
         let mut texel = 0usize;
         for &[length, t] in &self.runs {
@@ -260,12 +347,25 @@ impl NodeTypes {
             bytes[texel..end].fill(t);
             texel = end;
         }
-        debug_assert_eq!(texel, (SIDE * SIDE) as usize, "runs cover every texel");
+        debug_assert_eq!(texel, self.len(), "runs cover the list");
     }
 
-    /// The type of texel (`i`, `j`) (`i` east, `j` north from the south-west border texel).
-    pub fn get(&self, i: u32, j: u32) -> u8 {
-        let at = (j * SIDE + i) as usize;
+    /// The type of texel (`i`, `j`) (`i` east, `j` north from the south-west border texel) of
+    /// the node whose texels `cells` places, as the texture pass reads it.
+    pub fn texel(&self, cells: &TexelCells, i: u32, j: u32) -> u8 {
+        match self.form {
+            TypeForm::Texels => self.at((j * SIDE + i) as usize),
+            TypeForm::Cells { first, side, map } => {
+                let c = perturbed_ground_cell(cells.centre(i, j));
+                let local = [0, 1]
+                    .map(|a| (c[a].clamp(0, map[a] - 1) - first[a]).clamp(0, side[a] as i32 - 1));
+                self.at(local[1] as usize * side[0] as usize + local[0] as usize)
+            }
+        }
+    }
+
+    /// The list's `at`-th type.
+    fn at(&self, at: usize) -> u8 {
         let mut texel = 0usize;
         for &[length, t] in &self.runs {
             texel += usize::from(length) + 1;
@@ -292,44 +392,36 @@ mod tests {
         g
     }
 
-    /// Resolving with the shortcut equals the perturbed sample of every texel, computed texel
-    /// by texel without it, on fine, middle and coarse nodes.
+    /// Every texel reads the perturbed sample of its centre, computed texel by texel: from
+    /// its own type on a coarse node (the shortcut for uniform spans changes nothing), from the
+    /// node's reached cells on finer ones (the cells cover every reachable one).
     #[test]
-    fn the_uniform_shortcut_changes_no_texel() {
-        let g = ground(129);
+    fn every_texel_reads_its_perturbed_cell() {
+        let g = ground(513);
         let tree = QuadTree::new([0.0, 0.0], [512.0, 512.0]);
-        for key in [
-            NodeKey {
-                level: 0,
-                ix: 0,
-                iy: 0,
-            },
-            NodeKey {
-                level: 3,
-                ix: 2,
-                iy: 5,
-            },
-            NodeKey {
-                level: tree.max_level,
-                ix: 7,
-                iy: 3,
-            },
+        let key = |level, ix, iy| NodeKey { level, ix, iy };
+        for (key, texels) in [
+            (key(0, 0, 0), true),
+            (key(1, 1, 0), true),
+            (key(2, 3, 1), false),
+            (key(3, 2, 5), false),
+            (key(tree.max_level, 7, 3), false),
         ] {
-            let cells = TexelCells::new(&tree, key, [0.0, 0.0], 4.0);
+            let cells = TexelCells::new(&tree, key, [0.0, 0.0], 1.0);
             let types = NodeTypes::resolve(&g, &cells, 3);
+            assert_eq!(types.form == TypeForm::Texels, texels, "{key:?}");
             for j in 0..SIDE {
                 for i in 0..SIDE {
                     let [x, y] = perturbed_ground_cell(cells.centre(i, j));
-                    let want = g.get(x.clamp(0, 128) as usize, y.clamp(0, 128) as usize);
-                    assert_eq!(types.get(i, j), want, "{key:?} texel {i}, {j}");
+                    let want = g.get(x.clamp(0, 512) as usize, y.clamp(0, 512) as usize);
+                    assert_eq!(types.texel(&cells, i, j), want, "{key:?} texel {i}, {j}");
                 }
             }
-            let mut words = Vec::new();
+            let mut words = vec![7];
             types.append_words(&mut words);
-            assert_eq!(words.len(), (SIDE * SIDE / 4) as usize);
-            let (i, j) = (SIDE - 1, SIDE / 2);
-            let k = (j * SIDE + i) as usize;
-            assert_eq!((words[k / 4] >> (8 * (k % 4))) as u8, types.get(i, j));
+            assert_eq!(words.len(), 1 + types.words());
+            let k = types.len() - 1;
+            assert_eq!((words[1 + k / 4] >> (8 * (k % 4))) as u8, types.at(k));
         }
     }
 
@@ -359,7 +451,7 @@ mod tests {
         let tree = QuadTree::new([0.0, 0.0], [128.0, 128.0]);
         let cells = TexelCells::new(&tree, NodeKey::ROOT, [0.0, 0.0], 4.0);
         let types = NodeTypes::resolve(&g, &cells, 5);
-        assert_eq!(types.get(3, 200), 5);
-        assert_eq!(types.bytes(), 2 * (SIDE * SIDE / 256) as usize);
+        assert_eq!(types.texel(&cells, 3, 200), 5);
+        assert_eq!(types.bytes(), 2 * types.len().div_ceil(256));
     }
 }

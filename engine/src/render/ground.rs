@@ -23,6 +23,7 @@ use crate::ground::layout::{SIDE, lattice_index, texel_m};
 use crate::ground::material_layers::{self, MaterialLayers};
 use crate::ground::materials::{MATERIAL_TEXELS, MATERIAL_TILE_M};
 use crate::ground::pieces::NodeDecals;
+use crate::ground::types::{TexelCells, TypeForm};
 use crate::surface::World;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
 use wgpu::util::DeviceExt;
@@ -91,10 +92,19 @@ struct GroundNodeUniform {
     material_lod: f32,
     segment_count: u32,
     texel_m: f32,
-    /// The node's first word in the batch's type words (`SIDE * SIDE / 4` words, four texels'
-    /// types each).
+    /// The node's first word in the batch's type words (four types a word), and what they
+    /// hold: 0 each texel's type, 1 the cells the texels reach ([`TypeForm`]).
     types_first: u32,
-    pad: [u32; 3],
+    types_form: u32,
+    /// Ground-cell coordinates of lattice index (0, 0)'s corner ([`TexelCells`]).
+    ground_anchor: [f32; 2],
+    /// The reached cells: the first, how many a side, and the map's cells a side.
+    window_first: [i32; 2],
+    window_side: [i32; 2],
+    map_cells: [i32; 2],
+    /// Texel size in ground cells.
+    ground_step: f32,
+    pad: f32,
 }
 
 /// One segment (mirrors `Segment` in `ground.wgsl`), in texel-lattice units of its level.
@@ -138,7 +148,9 @@ fn area_kind(kind: DecalKind) -> u32 {
 
 /// The ground-texture pipeline and the map data it reads.
 pub struct GroundTexturer {
+    /// A node's texels from each texel's type, and from the cells its texels reach.
     pipeline: wgpu::RenderPipeline,
+    cells_pipeline: wgpu::RenderPipeline,
     /// Road and path segments as quads, blended over the ground in file order.
     segments: wgpu::RenderPipeline,
     /// Closed areas as their boxes, blended over the ground in file order (before segments).
@@ -151,6 +163,7 @@ pub struct GroundTexturer {
     sampler: wgpu::Sampler,
     types: u32,
     map_origin_m: [f64; 2],
+    ground_spacing_m: f64,
     /// The node data of the passes recorded since the last [`Self::submit`] (behind a lock so
     /// that recording takes `&self`; one thread records at a time in practice).
     pending: std::sync::Mutex<Pending>,
@@ -178,7 +191,7 @@ struct Batch {
     segments: Vec<GpuSegment>,
     areas: Vec<GpuArea>,
     points: Vec<[f32; 2]>,
-    /// The nodes' texel types, [`TYPE_WORDS`] words a node.
+    /// The nodes' ground types ([`crate::ground::types::NodeTypes::append_words`]).
     types: Vec<u32>,
 }
 
@@ -192,9 +205,6 @@ impl Batch {
     }
 }
 
-/// Words of one node's texel types (four a word).
-const TYPE_WORDS: usize = (SIDE * SIDE / 4) as usize;
-
 /// The GPU buffers of a batch and the bind group over them, with their capacities (elements).
 struct BatchBuffers {
     uniforms: wgpu::Buffer,
@@ -207,6 +217,7 @@ struct BatchBuffers {
     segment_capacity: usize,
     area_capacity: usize,
     point_capacity: usize,
+    type_capacity: usize,
 }
 
 impl std::fmt::Debug for GroundTexturer {
@@ -353,6 +364,12 @@ impl GroundTexturer {
             })
         };
         let pipeline = make("ground texture", "vs_fill", "fs_texel", None);
+        let cells_pipeline = make(
+            "ground texture from cells",
+            "vs_fill",
+            "fs_texel_cells",
+            None,
+        );
         let segments = make(
             "ground texture segments",
             "vs_segment",
@@ -370,10 +387,11 @@ impl GroundTexturer {
             &layout,
             &materials,
             &sampler,
-            [64, 4096, 1024, 8192],
+            [64, 4096, 1024, 8192, 64 * (SIDE * SIDE / 4) as usize],
         );
         Self {
             pipeline,
+            cells_pipeline,
             segments,
             areas,
             mips,
@@ -383,6 +401,7 @@ impl GroundTexturer {
             sampler,
             types,
             map_origin_m: map.manifest.origin_m,
+            ground_spacing_m: map.manifest.ground.spacing_m,
             pending: std::sync::Mutex::new(Pending {
                 batch: Batch::default(),
                 buffers,
@@ -482,6 +501,7 @@ impl GroundTexturer {
             })
             .collect();
         let (areas, points) = gpu_areas(decals, decal_list, &lattice, t);
+        let cells = TexelCells::new(tree, key, self.map_origin_m, self.ground_spacing_m);
         let material_m = MATERIAL_TILE_M;
         let corner = |o: f64, r: f64, unit: f64| (r - o) / unit;
         let mut uniform = GroundNodeUniform {
@@ -497,8 +517,20 @@ impl GroundTexturer {
             segment_count: segments.len() as u32,
             texel_m: t as f32,
             types_first: 0,
-            pad: [0; 3],
+            types_form: 0,
+            ground_anchor: cells.anchor,
+            window_first: [0; 2],
+            window_side: [1; 2],
+            map_cells: [1; 2],
+            ground_step: cells.step,
+            pad: 0.0,
         };
+        if let TypeForm::Cells { first, side, map } = ground.types.form {
+            uniform.types_form = 1;
+            uniform.window_first = first;
+            uniform.window_side = side.map(|v| v as i32);
+            uniform.map_cells = map;
+        }
         let mut guard = self
             .pending
             .lock()
@@ -509,8 +541,9 @@ impl GroundTexturer {
             p.batch.segments.len() + segments.len(),
             p.batch.areas.len() + areas.len(),
             p.batch.points.len() + points.len(),
+            p.batch.types.len() + ground.types.words(),
         ];
-        // (The type words follow the node count: `TYPE_WORDS` a node.)
+
         if !p.buffers.holds(need) {
             // The passes recorded so far read the current buffers: keep them with their data
             // until the submission, and go on in buffers twice the size this node needs.
@@ -541,7 +574,11 @@ impl GroundTexturer {
         }));
         b.points.extend_from_slice(&points);
         let mut pass = clear_pass(enc, target, "ground texture");
-        pass.set_pipeline(&self.pipeline);
+        pass.set_pipeline(if uniform.types_form == 1 {
+            &self.cells_pipeline
+        } else {
+            &self.pipeline
+        });
         pass.set_bind_group(2, &p.buffers.group, &[offset as u32]);
         pass.draw(0..3, 0..1);
         if !areas.is_empty() {
@@ -556,13 +593,13 @@ impl GroundTexturer {
 }
 
 impl BatchBuffers {
-    /// Buffers for `[nodes, segments, areas, points]` and their bind group.
+    /// Buffers for `[nodes, segments, areas, points, type words]` and their bind group.
     fn new(
         device: &wgpu::Device,
         layout: &wgpu::BindGroupLayout,
         materials: &wgpu::TextureView,
         sampler: &wgpu::Sampler,
-        [nodes, segments, areas, points]: [usize; 4],
+        [nodes, segments, areas, points, type_words]: [usize; 5],
     ) -> Self {
         let buffer = |label: &str, bytes: usize, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -595,7 +632,7 @@ impl BatchBuffers {
         );
         let type_buffer = buffer(
             "ground texel types",
-            nodes * TYPE_WORDS * std::mem::size_of::<u32>(),
+            type_words * std::mem::size_of::<u32>(),
             storage,
         );
         let group =
@@ -650,25 +687,28 @@ impl BatchBuffers {
             segment_capacity: segments,
             area_capacity: areas,
             point_capacity: points,
+            type_capacity: type_words,
         }
     }
 
-    /// `[nodes, segments, areas, points]` they hold.
-    fn capacity(&self) -> [usize; 4] {
+    /// `[nodes, segments, areas, points, type words]` they hold.
+    fn capacity(&self) -> [usize; 5] {
         [
             self.nodes,
             self.segment_capacity,
             self.area_capacity,
             self.point_capacity,
+            self.type_capacity,
         ]
     }
 
-    /// Whether `[nodes, segments, areas, points]` fit.
-    fn holds(&self, [nodes, segments, areas, points]: [usize; 4]) -> bool {
+    /// Whether `[nodes, segments, areas, points, type words]` fit.
+    fn holds(&self, [nodes, segments, areas, points, type_words]: [usize; 5]) -> bool {
         nodes <= self.nodes
             && segments <= self.segment_capacity
             && areas <= self.area_capacity
             && points <= self.point_capacity
+            && type_words <= self.type_capacity
     }
 
     /// Queues `batch` into these buffers (written before the next submission's commands).
