@@ -87,21 +87,20 @@ fn segment_distance(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> f32 {
     return length(p - (a + t * ab));
 }
 
-// A texel of a node whose types are each texel's (`types_form` 0).
+// A node texel: its type from the node's types, read by one of two indices (both computed, so
+// one pipeline serves every node and the fragment shader has no branch): the texel's own
+// (`types_form` 0: each texel's type, SIDE x SIDE) or its cell's (`types_form` 1: the nearest
+// ground sample to the texel's centre moved by two octaves of noise of up to 0.7 ground cells,
+// among the cells the node's CPU phase gathered).
 @fragment
 fn fs_texel(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     // Framebuffer rows run top down; texel rows run south to north.
-    return texel_color(frag, (SIDE - 1u - u32(frag.y)) * SIDE + u32(frag.x));
-}
-
-// A texel of a node whose types are the cells its texels reach (`types_form` 1): the nearest
-// ground sample to the texel's centre moved by two octaves of noise of up to 0.7 ground cells.
-@fragment
-fn fs_texel_cells(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let own = (SIDE - 1u - u32(frag.y)) * SIDE + u32(frag.x);
     let g = node.ground_anchor + texel_centre(frag) * node.ground_step;
     let at = clamp(perturbed_ground_cell(g), vec2<i32>(0), node.map_cells - 1);
     let local = clamp(at - node.window_first, vec2<i32>(0), node.window_side - 1);
-    return texel_color(frag, u32(local.y * node.window_side.x + local.x));
+    let cell = u32(local.y * node.window_side.x + local.x);
+    return texel_color(frag, select(own, cell, node.types_form == 1u));
 }
 
 // The texel's colour: the material of type `k` of the node's types.

@@ -148,9 +148,8 @@ fn area_kind(kind: DecalKind) -> u32 {
 
 /// The ground-texture pipeline and the map data it reads.
 pub struct GroundTexturer {
-    /// A node's texels from each texel's type, and from the cells its texels reach.
+    /// A node's texels, from each texel's type or from the cells its texels reach.
     pipeline: wgpu::RenderPipeline,
-    cells_pipeline: wgpu::RenderPipeline,
     /// Road and path segments as quads, blended over the ground in file order.
     segments: wgpu::RenderPipeline,
     /// Closed areas as their boxes, blended over the ground in file order (before segments).
@@ -364,12 +363,6 @@ impl GroundTexturer {
             })
         };
         let pipeline = make("ground texture", "vs_fill", "fs_texel", None);
-        let cells_pipeline = make(
-            "ground texture from cells",
-            "vs_fill",
-            "fs_texel_cells",
-            None,
-        );
         let segments = make(
             "ground texture segments",
             "vs_segment",
@@ -391,7 +384,6 @@ impl GroundTexturer {
         );
         Self {
             pipeline,
-            cells_pipeline,
             segments,
             areas,
             mips,
@@ -574,11 +566,7 @@ impl GroundTexturer {
         }));
         b.points.extend_from_slice(&points);
         let mut pass = clear_pass(enc, target, "ground texture");
-        pass.set_pipeline(if uniform.types_form == 1 {
-            &self.cells_pipeline
-        } else {
-            &self.pipeline
-        });
+        pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(2, &p.buffers.group, &[offset as u32]);
         pass.draw(0..3, 0..1);
         if !areas.is_empty() {
