@@ -22,7 +22,7 @@ use worldgen::Grid;
 /// The largest distance (ground cells, per axis) the perturbation moves a position.
 const REACH_CELLS: f32 = 0.7;
 
-/// Where a node's texels lie on the ground layer, in the f32 numbers the shader used: ground
+/// Where a node's texels lie on the ground layer, in the f32 numbers the shader uses: ground
 /// cell coordinates of texel (`i`, `j`) are `anchor + (first + (i, j) + 1/2) step`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TexelCells {
@@ -313,21 +313,16 @@ impl NodeTypes {
     }
 
     /// Types the list holds (texels or cells).
-    pub fn len(&self) -> usize {
+    pub fn count(&self) -> usize {
         match self.form {
             TypeForm::Texels => (SIDE * SIDE) as usize,
             TypeForm::Cells { side, .. } => side[0] as usize * side[1] as usize,
         }
     }
 
-    /// Whether the list holds no type (never: a node has texels and reaches a cell).
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// Words [`Self::append_words`] appends.
     pub fn words(&self) -> usize {
-        self.len().div_ceil(4)
+        self.count().div_ceil(4)
     }
 
     /// Bytes held.
@@ -347,7 +342,7 @@ impl NodeTypes {
             bytes[texel..end].fill(t);
             texel = end;
         }
-        debug_assert_eq!(texel, self.len(), "runs cover the list");
+        debug_assert_eq!(texel, self.count(), "runs cover the list");
     }
 
     /// The type of texel (`i`, `j`) (`i` east, `j` north from the south-west border texel) of
@@ -420,7 +415,7 @@ mod tests {
             let mut words = vec![7];
             types.append_words(&mut words);
             assert_eq!(words.len(), 1 + types.words());
-            let k = types.len() - 1;
+            let k = types.count() - 1;
             assert_eq!((words[1 + k / 4] >> (8 * (k % 4))) as u8, types.at(k));
         }
     }
@@ -452,6 +447,6 @@ mod tests {
         let cells = TexelCells::new(&tree, NodeKey::ROOT, [0.0, 0.0], 4.0);
         let types = NodeTypes::resolve(&g, &cells, 5);
         assert_eq!(types.texel(&cells, 3, 200), 5);
-        assert_eq!(types.bytes(), 2 * types.len().div_ceil(256));
+        assert_eq!(types.bytes(), 2 * types.count().div_ceil(256));
     }
 }

@@ -138,25 +138,26 @@ pub(crate) fn section_textures(
         "bytes",
         &format!("{params}, RGBA8 sRGB: the layout's size, not a measurement"),
     );
-    segments.sort_by(f64::total_cmp);
-    for (name, q) in [("p50", 0.5), ("max", 1.0)] {
-        r.add(
-            "textures",
-            &format!("road and path segments per node {name}"),
-            apps::percentile(&segments, q),
+    let types_params = format!("{params}; a plain list would hold {} bytes", SIDE * SIDE);
+    for (what, mut values, unit, params) in [
+        (
+            "road and path segments per node",
+            segments,
             "segments",
             &params,
-        );
-    }
-    type_bytes.sort_by(f64::total_cmp);
-    for (name, q) in [("p50", 0.5), ("max", 1.0)] {
-        r.add(
-            "textures",
-            &format!("texel ground types held per node (runs of one type) {name}"),
-            apps::percentile(&type_bytes, q),
+        ),
+        (
+            "texel ground types held per node (runs of one type)",
+            type_bytes,
             "bytes",
-            &format!("{params}; a plain list would hold {} bytes", SIDE * SIDE),
-        );
+            &types_params,
+        ),
+    ] {
+        values.sort_by(f64::total_cmp);
+        for (name, q) in [("p50", 0.5), ("max", 1.0)] {
+            let value = apps::percentile(&values, q);
+            r.add("textures", &format!("{what} {name}"), value, unit, params);
+        }
     }
     flight_texels(gpu, adapter, world_path, r, quick)
 }
