@@ -90,7 +90,7 @@ pub const SURFACE_ERROR_CACHE: &str = ".surface_error.bin";
 /// compute them in a fraction of a second and are left untouched.
 pub const CACHE_MIN_CELLS: usize = 1 << 18;
 
-/// Bytes of height, max-pyramid and surface error grid pages a baked map keeps resident (the
+/// Bytes of height, ground type, max-pyramid and surface error grid pages a baked map keeps resident (the
 /// page cache's budget), and, under a budget of their own of the same size, bytes of decal
 /// tiles.
 pub const PAGE_CACHE_BUDGET_BYTES: usize = 128 << 20;

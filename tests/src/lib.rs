@@ -97,21 +97,29 @@ pub fn generated(p: &worldgen::generate::GenerateParams) -> worldgen::Map {
     worldgen::generate::generate(p, &worldgen::progress::Silent, &mut Vec::new()).expect("generate")
 }
 
-/// `map` with its heights served page by page ([`worldgen::map::Heights::Paged`]) from a page
-/// file of `page_side` written as `dir/heights.pages`, through `paging`'s cache.
-pub fn with_paged_heights(
+/// `map` with its heights and ground types served page by page ([`worldgen::map::MapRaster::Paged`])
+/// from page files of `page_side` written as `dir/heights.pages` and `dir/ground.pages`, through
+/// `paging`'s cache.
+pub fn with_paged_layers(
     mut map: worldgen::Map,
     dir: &Path,
     page_side: u32,
     paging: &worldgen::pages::Paging,
 ) -> worldgen::Map {
-    use worldgen::pages::{PageFile, PagedRaster, bake};
-    let path = dir.join("heights.pages");
-    let grid = map.heights.grid().expect("heights in memory");
-    bake::write_grid(&path, grid, page_side, map.heights.key()).expect("write the heights pages");
-    let file = PageFile::open(&path).expect("open the heights pages");
-    let paged = PagedRaster::new(paging, file, 0.0).expect("f32 pages");
-    map.heights = worldgen::map::Heights::Paged(paged);
+    use worldgen::pages::{CacheSample, PageFile, PagedRaster, bake};
+    fn paged<T: CacheSample + std::fmt::Debug>(
+        raster: &worldgen::map::MapRaster<T>,
+        path: &Path,
+        page_side: u32,
+        paging: &worldgen::pages::Paging,
+    ) -> worldgen::map::MapRaster<T> {
+        let grid = raster.grid().expect("the layer in memory");
+        bake::write_grid(path, grid, page_side, raster.key()).expect("write the pages");
+        let file = PageFile::open(path).expect("open the pages");
+        worldgen::map::MapRaster::Paged(PagedRaster::new(paging, file, T::zero()).expect("pages"))
+    }
+    map.heights = paged(&map.heights, &dir.join("heights.pages"), page_side, paging);
+    map.ground = paged(&map.ground, &dir.join("ground.pages"), page_side, paging);
     map
 }
 
@@ -226,7 +234,11 @@ pub mod terrain {
                 let mut z = map.heights.get(x, y);
                 if x >= w / 2 && y < h / 2 {
                     z = 0.0;
-                    map.ground.set(x, y, worldgen::classify::WATER);
+                    map.ground.grid_mut().expect("ground in memory").set(
+                        x,
+                        y,
+                        worldgen::classify::WATER,
+                    );
                 } else if x >= 40 {
                     z += 100.0;
                 }

@@ -349,7 +349,7 @@ pub fn assemble(a: AssembleInputs<'_>) -> Result<Map, GenerateError> {
     Ok(Map {
         manifest,
         heights: a.heights.into(),
-        ground: a.ground,
+        ground: a.ground.into(),
         densities,
         trees,
         decals: a.decals,

@@ -43,7 +43,7 @@ impl NodeGround {
         let last_type = (ground.legend.len().clamp(1, 256) - 1) as u8;
         Self {
             decals: node_decals(&world.map.decals, index, tree, key),
-            types: NodeTypes::resolve(&world.map.ground, &cells, last_type),
+            types: NodeTypes::resolve(&world.map.ground, &world.ground_levels, &cells, last_type),
         }
     }
 }

@@ -7,7 +7,7 @@
 //! [`REACH_M`] from the camera in every direction (or the whole map), and the shader shows no
 //! detail outside it.
 
-use worldgen::Grid;
+use worldgen::map::GroundTypes;
 
 /// The window's side (m) where the map is larger: twice [`REACH_M`] beyond the quarter of a
 /// side the camera may move before the window follows.
@@ -70,13 +70,10 @@ impl TypeWindow {
     }
 
     /// The window's cells of `ground`, rows south to north.
-    pub fn cells(&self, ground: &Grid<u8>) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.side[0] * self.side[1]);
-        for y in self.first[1]..self.first[1] + self.side[1] {
-            let row = &ground.data()[y * ground.width()..][..ground.width()];
-            out.extend_from_slice(&row[self.first[0]..self.first[0] + self.side[0]]);
-        }
-        out
+    pub fn cells(&self, ground: &GroundTypes) -> Vec<u8> {
+        let [x0, y0] = self.first;
+        let [w, h] = self.side;
+        ground.region(x0, y0, w, h).data().to_vec()
     }
 }
 
@@ -114,13 +111,13 @@ mod tests {
     /// A small map is one window, and its cells are the map's.
     #[test]
     fn a_small_map_is_one_window() {
-        let mut g = Grid::new(65, 33, 0u8);
+        let mut g = worldgen::Grid::new(65, 33, 0u8);
         g.set(64, 32, 7);
         g.set(3, 1, 2);
         let w = TypeWindow::around([65, 33], 4.0, [10.0, 10.0]);
         assert_eq!((w.first, w.side), ([0, 0], [65, 33]));
         assert_eq!(w.follow([60.0, 30.0]), w);
-        let cells = w.cells(&g);
+        let cells = w.cells(&g.into());
         assert_eq!((cells[65 * 32 + 64], cells[65 + 3]), (7, 2));
     }
 }

@@ -8,16 +8,20 @@
 //! cells its texels can reach (a few hundred bytes for the finest nodes) and the texture pass
 //! perturbs each texel on the GPU as before ([`TypeForm::Cells`]). On coarser nodes that would
 //! be a large part of the map, so the phase resolves each texel's type itself
-//! ([`TypeForm::Texels`]; a few milliseconds a node): its noise makes the same f32 operations as
-//! the shader's, so the two agree except where a position rounds within an ulp of a half cell,
-//! and most texels need none (every sample the perturbation can reach has one type).
+//! ([`TypeForm::Texels`]; a few milliseconds a node), on the coarsest level of the layer whose
+//! samples are at most a texel apart ([`crate::surface::stride_levels`]; a few pages, where
+//! the layer's own samples under the root are the whole map): its noise makes the same f32
+//! operations as the shader's, so on the layer itself the two agree except where a position
+//! rounds within an ulp of a half cell, and most texels need none (every sample the
+//! perturbation can reach has one type).
 //!
 //! Both are stored as runs of equal types: a node holds hundreds of bytes (27 KB at most on the
 //! default map's flight) where a plain list of its texels would take 64 KiB.
 
 use super::layout::{SIDE, lattice_index, texel_m};
+use crate::surface::stride_levels::StrideLevels;
 use crate::terrain::quadtree::{NodeKey, QuadTree};
-use worldgen::Grid;
+use worldgen::map::GroundTypes;
 
 /// The largest distance (ground cells, per axis) the perturbation moves a position.
 const REACH_CELLS: f32 = 0.7;
@@ -46,6 +50,17 @@ impl TexelCells {
                 ((root[1] - origin_m[1]) / spacing_m) as f32,
             ],
             step: (t / spacing_m) as f32,
+        }
+    }
+
+    /// The same texels placed on level `k` of the ground layer (stride `2^k` cells): its
+    /// coordinates are the layer's divided by `2^k` (exact in f32).
+    fn on_level(&self, k: usize) -> Self {
+        let scale = 1.0 / (1u32 << k) as f32;
+        Self {
+            first: self.first,
+            anchor: self.anchor.map(|a| a * scale),
+            step: self.step * scale,
         }
     }
 
@@ -215,20 +230,34 @@ fn push_run(runs: &mut Vec<[u8; 2]>, t: u8) {
 }
 
 impl NodeTypes {
-    /// The types of the texels `cells` places on `ground`, each at most `last_type` (the
-    /// materials' last layer): the cells they reach where texels are at most a cell apart,
-    /// each texel's type otherwise.
-    pub fn resolve(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
+    /// The types of the texels `cells` places on `ground` (with its `levels`), each at most
+    /// `last_type` (the materials' last layer): the cells they reach where texels are at most
+    /// a cell apart, each texel's type otherwise.
+    ///
+    /// A texel more than a cell across reads the coarsest level of `levels` whose samples are
+    /// at most a texel apart (level `k` for texels of `2^k` to `2^(k+1)` cells), perturbed on
+    /// that level's lattice: a node reads a few pages of its level where the ground layer's own
+    /// samples under it would be a large part of the map (the root's texel spans 34 cells at
+    /// 32 km). Its texels' types are then point samples of the level, as they were of the layer.
+    pub fn resolve(
+        ground: &GroundTypes,
+        levels: &StrideLevels<u8>,
+        cells: &TexelCells,
+        last_type: u8,
+    ) -> Self {
         if cells.step <= 1.0 {
-            Self::reached_cells(ground, cells, last_type)
-        } else {
-            Self::texels(ground, cells, last_type)
+            return Self::reached_cells(ground, cells, last_type);
+        }
+        let k = (cells.step.log2().floor() as usize).min(levels.count());
+        match levels.level(k) {
+            Some(level) => Self::texels(level, &cells.on_level(k), last_type),
+            None => Self::texels(ground, cells, last_type),
         }
     }
 
     /// [`TypeForm::Cells`]: the cells within reach of the texels' centres, with a margin of a
     /// cell for rounding.
-    fn reached_cells(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
+    fn reached_cells(ground: &GroundTypes, cells: &TexelCells, last_type: u8) -> Self {
         let map = [ground.width() as i32, ground.height() as i32];
         let (lo, hi) = (cells.centre(0, 0), cells.centre(SIDE - 1, SIDE - 1));
         let reach = REACH_CELLS + 1.5;
@@ -238,12 +267,10 @@ impl NodeTypes {
             (first, (last - first + 1) as u32)
         };
         let ((x0, w), (y0, h)) = (range(0), range(1));
+        let region = ground.region(x0 as usize, y0 as usize, w as usize, h as usize);
         let mut runs = Vec::new();
-        for y in y0..y0 + h as i32 {
-            let row = &ground.data()[y as usize * ground.width()..][x0 as usize..][..w as usize];
-            for &t in row {
-                push_run(&mut runs, t.min(last_type));
-            }
+        for &t in region.data() {
+            push_run(&mut runs, t.min(last_type));
         }
         runs.shrink_to_fit();
         Self {
@@ -256,8 +283,9 @@ impl NodeTypes {
         }
     }
 
-    /// [`TypeForm::Texels`].
-    fn texels(ground: &Grid<u8>, cells: &TexelCells, last_type: u8) -> Self {
+    /// [`TypeForm::Texels`] read from `ground` (the layer or one of its levels, `cells` placed
+    /// on it).
+    fn texels(ground: &GroundTypes, cells: &TexelCells, last_type: u8) -> Self {
         let (w, h) = (ground.width() as i32, ground.height() as i32);
         // The samples the perturbation can reach from `v` along one axis (a margin of a
         // hundredth of a cell beyond the reach covers rounding differences).
@@ -272,34 +300,39 @@ impl NodeTypes {
                 (gx, span(gx, w))
             })
             .collect();
+        // Every sample any texel can reach, read at once.
+        let (x0, x1) = (columns[0].1.0, columns[SIDE as usize - 1].1.1);
+        let (y0, y1) = (
+            span(cells.centre(0, 0)[1], h).0,
+            span(cells.centre(0, SIDE - 1)[1], h).1,
+        );
+        let region = ground.region(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
+        let sample = |x: usize, y: usize| region.get(x - x0, y - y0);
         let mut runs: Vec<[u8; 2]> = Vec::new();
         for j in 0..SIDE {
             let gy = cells.centre(0, j)[1];
-            let (y0, y1) = span(gy, h);
+            let (ya, yb) = span(gy, h);
             let mut noise = WobbleRow::new(gy);
             // The last column span's single type (None: mixed): neighbouring texels of a fine
             // node share their spans.
             let mut last: Option<((usize, usize), Option<u8>)> = None;
-            for &(gx, (x0, x1)) in &columns {
+            for &(gx, (xa, xb)) in &columns {
                 let single = match last {
-                    Some((span, single)) if span == (x0, x1) => single,
+                    Some((span, single)) if span == (xa, xb) => single,
                     _ => {
-                        let first = ground.get(x0, y0);
-                        let single = (y0..=y1)
-                            .all(|y| {
-                                ground.data()[y * w as usize..][x0..=x1]
-                                    .iter()
-                                    .all(|&v| v == first)
-                            })
+                        let first = sample(xa, ya);
+                        let single = (ya..=yb)
+                            .all(|y| (xa..=xb).all(|x| sample(x, y) == first))
                             .then_some(first);
-                        last = Some(((x0, x1), single));
+                        last = Some(((xa, xb), single));
                         single
                     }
                 };
                 let t = single
                     .unwrap_or_else(|| {
                         let [x, y] = noise.cell(gx);
-                        ground.get(x.clamp(0, w - 1) as usize, y.clamp(0, h - 1) as usize)
+                        let x = x.clamp(x0 as i32, x1 as i32) as usize;
+                        sample(x, y.clamp(y0 as i32, y1 as i32) as usize)
                     })
                     .min(last_type);
                 push_run(&mut runs, t);
@@ -375,6 +408,7 @@ impl NodeTypes {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use worldgen::Grid;
 
     /// A ground layer of stripes and noise-free blocks with types 0 - 3.
     fn ground(n: usize) -> Grid<u8> {
@@ -387,37 +421,67 @@ mod tests {
         g
     }
 
-    /// Every texel reads the perturbed sample of its centre, computed texel by texel: from
-    /// its own type on a coarse node (the shortcut for uniform spans changes nothing), from the
-    /// node's reached cells on finer ones (the cells cover every reachable one).
+    /// Every texel reads the perturbed sample of its centre, computed texel by texel: on a
+    /// coarse node from its own type, on the level of stride `2^k` for texels of `2^k` to
+    /// `2^(k+1)` cells (sample `m` of the level is the layer's `min(m 2^k, n - 1)`), or on the
+    /// layer itself where there are no levels (the shortcut for uniform spans changes nothing);
+    /// from the node's reached cells on finer ones (the cells cover every reachable one).
     #[test]
     fn every_texel_reads_its_perturbed_cell() {
-        let g = ground(513);
-        let tree = QuadTree::new([0.0, 0.0], [512.0, 512.0]);
+        let n = 1025;
+        let g = ground(n);
+        let layer = GroundTypes::Grid(g.clone());
+        // The tree's corner off the layer's origin: the texels' anchor is not zero.
+        let tree = QuadTree::new([-3.0, -5.0], [1024.0, 1024.0]);
         let key = |level, ix, iy| NodeKey { level, ix, iy };
-        for (key, texels) in [
-            (key(0, 0, 0), true),
-            (key(1, 1, 0), true),
-            (key(2, 3, 1), false),
-            (key(3, 2, 5), false),
-            (key(tree.max_level, 7, 3), false),
+        let mut levels_read = Vec::new();
+        for (levels, with_levels) in [
+            (StrideLevels::compute(&g), true),
+            (StrideLevels::default(), false),
         ] {
-            let cells = TexelCells::new(&tree, key, [0.0, 0.0], 1.0);
-            let types = NodeTypes::resolve(&g, &cells, 3);
-            assert_eq!(types.form == TypeForm::Texels, texels, "{key:?}");
-            for j in 0..SIDE {
-                for i in 0..SIDE {
-                    let [x, y] = perturbed_ground_cell(cells.centre(i, j));
-                    let want = g.get(x.clamp(0, 512) as usize, y.clamp(0, 512) as usize);
-                    assert_eq!(types.texel(&cells, i, j), want, "{key:?} texel {i}, {j}");
+            assert_eq!(levels.count(), if with_levels { 3 } else { 0 });
+            for (key, texels) in [
+                (key(0, 0, 0), true),
+                (key(1, 0, 0), true),
+                (key(2, 1, 0), true),
+                (key(3, 3, 1), false),
+                (key(4, 2, 5), false),
+                (key(tree.max_level, 7, 3), false),
+            ] {
+                let cells = TexelCells::new(&tree, key, [0.0, 0.0], 1.0);
+                let types = NodeTypes::resolve(&layer, &levels, &cells, 3);
+                assert_eq!(types.form == TypeForm::Texels, texels, "{key:?}");
+                let k = if texels && with_levels {
+                    (cells.step.log2().floor() as usize).min(3)
+                } else {
+                    0
+                };
+                levels_read.push(k);
+                let stride = 1i32 << k;
+                let last = (n - 1).div_ceil(1 << k) as i32;
+                for j in 0..SIDE {
+                    for i in 0..SIDE {
+                        let [x, y] = if texels {
+                            let c = cells.centre(i, j).map(|v| v / stride as f32);
+                            perturbed_ground_cell(c)
+                        } else {
+                            perturbed_ground_cell(cells.centre(i, j))
+                        };
+                        let on_layer = |m: i32| (m.clamp(0, last) * stride).min(n as i32 - 1);
+                        let want = g.get(on_layer(x) as usize, on_layer(y) as usize);
+                        assert_eq!(types.texel(&cells, i, j), want, "{key:?} texel {i}, {j}");
+                    }
                 }
+                let mut words = vec![7];
+                types.append_words(&mut words);
+                assert_eq!(words.len(), 1 + types.words());
+                let k = types.count() - 1;
+                assert_eq!((words[1 + k / 4] >> (8 * (k % 4))) as u8, types.at(k));
             }
-            let mut words = vec![7];
-            types.append_words(&mut words);
-            assert_eq!(words.len(), 1 + types.words());
-            let k = types.count() - 1;
-            assert_eq!((words[1 + k / 4] >> (8 * (k % 4))) as u8, types.at(k));
         }
+        // The root's texels span 4.3 cells (level 2), its children's 2.1 (level 1), theirs
+        // 1.07 (the layer).
+        assert_eq!(levels_read[..3], [2, 1, 0]);
     }
 
     /// The perturbation moves positions by up to 0.7 cells and does move them: a position's
@@ -443,9 +507,10 @@ mod tests {
     #[test]
     fn one_type_is_one_run_and_types_clamp() {
         let g = Grid::new(33, 33, 9u8);
+        let levels = StrideLevels::compute(&g);
         let tree = QuadTree::new([0.0, 0.0], [128.0, 128.0]);
         let cells = TexelCells::new(&tree, NodeKey::ROOT, [0.0, 0.0], 4.0);
-        let types = NodeTypes::resolve(&g, &cells, 5);
+        let types = NodeTypes::resolve(&g.into(), &levels, &cells, 5);
         assert_eq!(types.texel(&cells, 3, 200), 5);
         assert_eq!(types.bytes(), 2 * types.count().div_ceil(256));
     }

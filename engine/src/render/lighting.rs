@@ -57,11 +57,17 @@ fn nearest_ancestor<T>(key: NodeKey, by_key: &FxHashMap<NodeKey, T>) -> Option<&
     key.ancestors().find_map(|a| by_key.get(&a))
 }
 
-/// The map's mean ground albedo (linear RGB): its legend colours weighted by the cells of each
-/// ground type.
+/// The map's mean ground albedo (linear RGB): its legend colours weighted by the samples of
+/// each ground type in the coarsest of the ground layer's levels (at most 256 samples a side,
+/// a regular subsample of the layer: a few pages read at the open whatever the map's size), or
+/// in the layer itself where it has none (a layer of at most 2 x 2 samples).
 pub fn mean_ground_albedo(world: &World) -> [f32; 3] {
     let legend = legend_srgb(world);
-    let counts = value_counts(world.map.ground.data());
+    let ground = world.ground_levels.coarsest().unwrap_or(&world.map.ground);
+    let mut counts = [0u64; 256];
+    for &t in ground.region(0, 0, ground.width(), ground.height()).data() {
+        counts[usize::from(t)] += 1;
+    }
     let cells = &counts[..legend.len().min(counts.len())];
     let total = cells.iter().sum::<u64>().max(1) as f64;
     let mut out = [0.0f32; 3];
@@ -71,34 +77,6 @@ pub fn mean_ground_albedo(world: &World) -> [f32; 3] {
         }
     }
     out
-}
-
-/// How many times each byte value occurs in `bytes`. Four tables of counts, one per byte of
-/// each group of four, so that runs of one value (most of a ground layer) do not wait on the
-/// previous increment of the same counter: about four times a plain loop's speed (a 32 km
-/// map's ground types: 64 Mi samples, about 0.1 s plainly).
-fn value_counts(bytes: &[u8]) -> [u64; 256] {
-    let mut total = [0u64; 256];
-    // u32 counters: a chunk adds at most a quarter of its length to each.
-    for chunk in bytes.chunks(1 << 30) {
-        let mut tables = [[0u32; 256]; 4];
-        let groups = chunk.chunks_exact(4);
-        for &b in groups.remainder() {
-            tables[0][usize::from(b)] += 1;
-        }
-        for g in groups {
-            tables[0][usize::from(g[0])] += 1;
-            tables[1][usize::from(g[1])] += 1;
-            tables[2][usize::from(g[2])] += 1;
-            tables[3][usize::from(g[3])] += 1;
-        }
-        for t in &tables {
-            for (sum, &n) in total.iter_mut().zip(t) {
-                *sum += u64::from(n);
-            }
-        }
-    }
-    total
 }
 
 #[derive(Debug, Default)]
@@ -249,33 +227,5 @@ impl NodeRenderer for LightingRenderer {
         _draws: &FrameDraws<'_>,
         _stats: &mut DrawStats,
     ) {
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::value_counts;
-
-    /// The four-table count equals one counter per value incremented byte by byte, for lengths
-    /// that leave every remainder of four, and for long runs of one value.
-    #[test]
-    fn value_counts_equal_a_plain_count() {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        for len in [0usize, 1, 2, 3, 4, 5, 1023, 65_537] {
-            let bytes: Vec<u8> = (0..len)
-                .map(|i| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    // Runs of one value for a third of the samples, as in a ground layer.
-                    if i % 3 == 0 { 7 } else { (state >> 56) as u8 }
-                })
-                .collect();
-            let mut plain = [0u64; 256];
-            for &b in &bytes {
-                plain[usize::from(b)] += 1;
-            }
-            assert_eq!(value_counts(&bytes), plain, "{len} bytes");
-        }
     }
 }

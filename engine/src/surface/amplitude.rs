@@ -10,6 +10,7 @@
 
 use crate::surface::decals::DecalField;
 use std::path::{Path, PathBuf};
+use worldgen::map::GroundTypes;
 use worldgen::pages::{PageError, SourceKey, checked_file};
 use worldgen::{Grid, Map};
 
@@ -59,7 +60,7 @@ impl NearRoads {
             for y in by..(by + BLOCK).min(height) {
                 for x in bx..(bx + BLOCK).min(width) {
                     let a = amplitude_m.get(x, y);
-                    if a.to_bits() != legend[ground.get(x, y) as usize].to_bits() {
+                    if a.to_bits() != type_amplitude_m(legend, ground.get(x, y)).to_bits() {
                         out.local.push(((y - by) * BLOCK + x - bx) as u16);
                         out.value.push(a);
                     }
@@ -185,7 +186,7 @@ impl NearRoads {
 /// The amplitude raster as the interpolators read it: a sample's type's amplitude unless it is
 /// near a road.
 pub struct Amplitude<'a> {
-    pub ground: &'a Grid<u8>,
+    pub ground: &'a GroundTypes,
     pub legend_m: &'a [f32],
     pub near_roads: &'a NearRoads,
 }
@@ -203,8 +204,16 @@ impl worldgen::sample::Samples for Amplitude<'_> {
     fn at(&self, x: usize, y: usize) -> f32 {
         self.near_roads
             .get(x, y)
-            .unwrap_or_else(|| self.legend_m[self.ground.get(x, y) as usize])
+            .unwrap_or_else(|| type_amplitude_m(self.legend_m, self.ground.get(x, y)))
     }
+}
+
+/// The legend's amplitude of ground type `t` (`legend`'s last for a type past its end: a paged
+/// ground layer is not checked against the legend at the open; 0 for an empty legend).
+#[inline]
+fn type_amplitude_m(legend: &[f32], t: u8) -> f32 {
+    let last = legend.len().saturating_sub(1);
+    legend.get(usize::from(t).min(last)).copied().unwrap_or(0.0)
 }
 
 /// The legend's detail amplitude per ground type.
@@ -221,11 +230,7 @@ pub fn legend_m(map: &Map) -> Vec<f32> {
 /// field's key (roads suppress detail) and the code's version.
 pub fn key(map: &Map, decals_key: u64) -> u64 {
     let mut k = SourceKey::new(0xA3B1_0001);
-    k.update(
-        &worldgen::pages::bake::Raster::U8(&map.ground)
-            .key()
-            .to_le_bytes(),
-    );
+    k.update(&map.ground.key().to_le_bytes());
     k.update(&decals_key.to_le_bytes());
     for t in &map.manifest.ground.legend {
         k.update(&t.detail_amplitude_m.to_le_bytes());
@@ -236,7 +241,8 @@ pub fn key(map: &Map, decals_key: u64) -> u64 {
 /// The detail amplitude (m) at each ground sample: the legend's, suppressed on roads.
 pub fn grid(map: &Map, decals: &DecalField) -> Grid<f32> {
     let legend = legend_m(map);
-    let mut amplitude_m = map.ground.map(|g| legend[g as usize]);
+    let ground = map.ground.whole_or_filled("ground types");
+    let mut amplitude_m = ground.map(|g| type_amplitude_m(&legend, g));
     suppress_detail_on_roads(&mut amplitude_m, map, decals);
     amplitude_m
 }
@@ -297,7 +303,8 @@ mod tests {
         );
         let whole = grid(&map, &decals);
         let legend = legend_m(&map);
-        let near = NearRoads::new(&whole, &map.ground, &legend);
+        let ground = map.ground.grid().expect("the tiny map is held whole");
+        let near = NearRoads::new(&whole, ground, &legend);
         assert!(!near.is_empty(), "the tiny map has roads");
         assert!(
             near.len() * 10 < whole.data().len(),

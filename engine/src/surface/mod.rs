@@ -6,7 +6,8 @@
 //!   `decal_build` makes it from the decal list, `decal_tiles` holds its data by 64 m tile,
 //!   [`decal_bake`] bakes it into a tile file.
 //! - [`spline`]: Catmull-Rom slope and curvature bounds shared by both.
-//! - [`height_levels`]: the heights at every `2^k`-th sample, baked, for coarse nodes' lattices.
+//! - [`stride_levels`]: a raster at every `2^k`-th sample, baked: the heights' for coarse nodes'
+//!   lattices, the ground types' for the coarsest nodes' texture texels.
 //! - [`height_max`]: a max-pyramid of the map's height samples (upper bounds over regions);
 //!   `max_pyramid` the per-cell max-pyramids of the slope, curvature and amplitude bounds.
 //! - [`levels`]: the pyramids' levels in memory or paged (a baked map), and the page faults.
@@ -18,7 +19,6 @@ pub mod decal_bake;
 mod decal_build;
 mod decal_tiles;
 pub mod decals;
-pub mod height_levels;
 pub mod height_max;
 pub mod levels;
 pub mod map_error;
@@ -27,6 +27,7 @@ pub mod map_error_pages;
 mod max_pyramid;
 mod pyramids;
 pub mod spline;
+pub mod stride_levels;
 pub mod world;
 
 pub use world::{Rect, RegionBounds, World};

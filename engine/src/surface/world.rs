@@ -9,10 +9,10 @@
 //! the same surface.
 
 use super::amplitude::{self, Amplitude, NearRoads};
-use super::height_levels::HeightLevels;
 use super::levels::PageFaults;
 use super::max_pyramid::MaxPyramid;
 use super::pyramids::Pyramids;
+use super::stride_levels::{self, HeightLevels, StrideLevels};
 use crate::surface::decals::{DecalBounds, DecalField};
 use std::borrow::Cow;
 use std::path::Path;
@@ -61,6 +61,9 @@ pub struct World {
     pub heights_max: super::height_max::HeightMax,
     /// Paged heights' coarse levels (a baked map's), for coarse lattices; empty otherwise.
     height_levels: HeightLevels,
+    /// The ground types at every `2^k`-th sample, for the coarsest nodes' texture texels and
+    /// the map's mean ground albedo: a baked map's paged, computed otherwise.
+    pub ground_levels: StrideLevels<u8>,
     /// The parts of a baked map's derived data that its open did not read from the bake (their
     /// files missing, damaged, or baked for another map or engine; each logged): computed
     /// instead, or, for the coarse height levels, done without.
@@ -145,7 +148,8 @@ impl World {
             .grid()
             .map_or(0, |g| grid(g.width(), g.height(), 4));
         let layers = heights
-            + grid(m.ground.width(), m.ground.height(), 1)
+            + m.ground.held_bytes()
+            + self.ground_levels.held_bytes()
             + m.densities
                 .iter()
                 .map(|d| grid(d.density.width(), d.density.height(), 1))
@@ -157,7 +161,7 @@ impl World {
             .map_or(0, |c| c.stats().resident_bytes);
         vec![
             (
-                "map layers held whole (ground types, densities, and the heights unless paged)",
+                "map layers held whole (densities, and the heights and ground types with their levels unless paged)",
                 layers,
             ),
             (
@@ -169,7 +173,7 @@ impl World {
                 pyramids,
             ),
             (
-                "height, max-pyramid and surface error grid pages resident",
+                "height, ground type, max-pyramid and surface error grid pages resident",
                 resident_pages,
             ),
             (
@@ -232,7 +236,20 @@ impl World {
         self.pyramids
             .write(&self.heights_max, pages_dir, page_side, self.keys.pyramids)?;
         let heights = whole_heights(&self.map.heights);
-        super::height_levels::write(&heights, self.keys.heights, pages_dir, page_side)?;
+        stride_levels::write(
+            &heights,
+            self.keys.heights,
+            stride_levels::HEIGHTS,
+            pages_dir,
+            page_side,
+        )?;
+        stride_levels::write(
+            &self.map.ground.whole_or_filled("ground types"),
+            self.map.ground.key(),
+            stride_levels::GROUND_TYPES,
+            pages_dir,
+            page_side,
+        )?;
         self.near_roads
             .write(&amplitude::near_roads_path(pages_dir), self.keys.amplitude)?;
         // An older bake's whole amplitude grid, no longer read.
@@ -293,7 +310,8 @@ impl World {
         });
         let near_roads = baked_near.unwrap_or_else(|| {
             let grid = amplitude::grid(&map, &decals);
-            let near = NearRoads::new(&grid, &map.ground, &legend_amplitude_m);
+            let ground = map.ground.whole_or_filled("ground types");
+            let near = NearRoads::new(&grid, &ground, &legend_amplitude_m);
             whole_amplitude = Some(grid);
             near
         });
@@ -333,7 +351,13 @@ impl World {
             p.set_fill(fill);
             if let Some((dir, _)) = pages {
                 let samples = [p.width(), p.height()];
-                match HeightLevels::open(dir, samples, heights_key, p.paging()) {
+                match HeightLevels::open(
+                    dir,
+                    stride_levels::HEIGHTS,
+                    samples,
+                    heights_key,
+                    p.paging(),
+                ) {
                     Ok(levels) => {
                         levels.set_fill(fill);
                         height_levels = levels;
@@ -345,6 +369,7 @@ impl World {
                 }
             }
         }
+        let ground_levels = ground_levels(&map, pages.map(|(dir, _)| dir), &mut computed_at_open);
         log::info!(
             "world opened: decal field {:.2} s, ground amplitude {:.2} s, max-pyramids {:.2} s",
             (t1 - t0).as_secs_f64(),
@@ -366,6 +391,7 @@ impl World {
             map_error: super::map_error::MapErrorPyramid::default(),
             heights_max,
             height_levels,
+            ground_levels,
             computed_at_open,
         }
     }
@@ -429,7 +455,7 @@ impl World {
 
     /// The heights part `G` on the lattice `xs` x `ys` read from the coarsest baked level of
     /// the paged heights that holds it (every point on a height sample: `G` is the sample,
-    /// [`super::height_levels`]); `None` where the heights are not paged or the lattice is not
+    /// [`super::stride_levels`]); `None` where the heights are not paged or the lattice is not
     /// on such samples.
     fn level_samples(&self, xs: &[f64], ys: &[f64]) -> Option<Vec<f64>> {
         if self.height_levels.is_empty() {
@@ -437,8 +463,8 @@ impl World {
         }
         let (o, hs) = (self.origin_m(), self.map.manifest.heights.spacing_m);
         let (w, h) = (self.map.heights.width(), self.map.heights.height());
-        let gx = super::height_levels::on_samples(xs, o[0], hs, w)?;
-        let gy = super::height_levels::on_samples(ys, o[1], hs, h)?;
+        let gx = stride_levels::on_samples(xs, o[0], hs, w)?;
+        let gy = stride_levels::on_samples(ys, o[1], hs, h)?;
         self.height_levels.samples(&gx, &gy)
     }
 
@@ -588,22 +614,27 @@ impl World {
     }
 }
 
-/// Every height sample, for work on the whole map: the grid itself, or the pages read whole
-/// (logged), or, where a page cannot be read, sample by sample (the faults recorded and the
-/// raster's fill value served for them).
+/// Every height sample, for work on the whole map ([`worldgen::map::MapRaster::whole_or_filled`]).
 pub(crate) fn whole_heights(h: &Heights) -> Cow<'_, Grid<f32>> {
-    match h {
-        Heights::Grid(g) => Cow::Borrowed(g),
-        Heights::Paged(p) => {
-            log::info!("heights read whole from their pages, to compute what was not baked");
-            Cow::Owned(p.read_whole().unwrap_or_else(|e| {
-                log::error!("{e}; the heights are read sample by sample instead");
-                let (w, h) = (p.width(), p.height());
-                let samples = (0..h).flat_map(|y| (0..w).map(move |x| p.get(x, y)));
-                Grid::from_vec(w, h, samples.collect()).expect("sized above")
-            }))
-        }
-    }
+    h.whole_or_filled("heights")
+}
+
+/// The ground types' levels: a paged map's read through its pages from the bake under
+/// `pages_dir` (computed from the whole layer where they cannot be, and noted in `computed`),
+/// a map in memory's computed.
+fn ground_levels(
+    map: &Map,
+    pages_dir: Option<&Path>,
+    computed: &mut Vec<&'static str>,
+) -> StrideLevels<u8> {
+    let ground = &map.ground;
+    let opened = ground.paged().zip(pages_dir).and_then(|(p, dir)| {
+        let samples = [p.width(), p.height()];
+        let name = stride_levels::GROUND_TYPES;
+        let opened = StrideLevels::open(dir, name, samples, p.key(), p.paging());
+        from_bake(computed, "ground type levels", opened)
+    });
+    opened.unwrap_or_else(|| StrideLevels::compute(&ground.whole_or_filled("ground types")))
 }
 
 /// What a bake gave: `Some` if it could be used, else `None` with the reason logged and `what`

@@ -111,7 +111,10 @@ pub(crate) fn bare_world(height: impl Fn(usize, usize) -> f32) -> World {
     let (gw, gh) = (map.ground.width(), map.ground.height());
     for y in 0..gh {
         for x in 0..gw {
-            map.ground.set(x, y, worldgen::classify::WATER);
+            map.ground
+                .grid_mut()
+                .expect("ground in memory")
+                .set(x, y, worldgen::classify::WATER);
         }
     }
     for d in &mut map.densities {

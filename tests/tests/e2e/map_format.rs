@@ -450,7 +450,10 @@ fn malformed_misspelled_manifest_field() {
 fn malformed_ground_type_outside_legend() {
     let (_t, dir) = broken_copy();
     let mut map = Map::load(&dir).unwrap();
-    map.ground.set(3, 4, 42);
+    map.ground
+        .grid_mut()
+        .expect("ground in memory")
+        .set(3, 4, 42);
     map.write(&dir).unwrap();
     let e = expect_error(&dir, "ground.png", &["column 3", "row 4", "type 42"]);
     assert!(

@@ -1,10 +1,14 @@
-//! A baked map's heights and derived data (heights and max-pyramids read page by page, the
-//! decal field tile by tile, the ground amplitude near roads): the same surface, region bounds,
-//! height maxima, decal offsets and node meshes as the map held whole, bit for bit, under
+//! A baked map's layers and derived data (heights, ground types, their levels and max-pyramids
+//! read page by page, the decal field tile by tile, the ground amplitude near roads): the same
+//! surface, region bounds, height maxima, decal offsets, node meshes and node ground types as
+//! the map held whole, bit for bit, under
 //! budgets far below their size; a damaged page loosens only the bounds that read it (or
 //! stands its heights at the fill value), is reported with its file and page, and never
 //! panics; pages of another map are refused and computed instead.
 
+use engine::ground::content::NodeGround;
+use engine::ground::type_window::TypeWindow;
+use engine::ground::types::TypeForm;
 use engine::surface::{Rect, World};
 use engine::terrain::bounds::BoundsCache;
 use engine::terrain::quadtree::NodeKey;
@@ -41,7 +45,7 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
     // this 2 km map, shared by both.
     let budget = 8 * 64 * 64 * 4;
     let paging = worldgen::pages::Paging::new(budget);
-    let map = tests::with_paged_heights(map, tmp.path(), 64, &paging);
+    let map = tests::with_paged_layers(map, tmp.path(), 64, &paging);
     let paged = World::paged_without_error_grids(map, &pages, budget);
     let cache = paged.page_cache.clone().expect("the pyramids were paged");
     assert!(
@@ -148,6 +152,7 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
             assert!(a == b, "{key:?}: the paged world's mesh differs");
         }
     }
+    assert_same_ground_types(&whole, &paged, &tree, &mut rng);
     let s = cache.stats();
     assert!(s.evictions > 0 && s.peak_resident_bytes <= budget, "{s:?}");
     let d = paged.decals.tile_stats().expect("a baked decal field");
@@ -224,6 +229,59 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     assert_eq!(fresh.cell_region_bounds(r), reopened.cell_region_bounds(r));
 }
 
+/// The ground types read through their pages and their baked levels give every node's texture
+/// types (levels' texels on the coarsest nodes, reached cells on the others), the camera
+/// window's cells and the mean albedo of the layer held whole.
+fn assert_same_ground_types(
+    whole: &World,
+    paged: &World,
+    tree: &engine::terrain::quadtree::QuadTree,
+    rng: &mut SmallRng,
+) {
+    assert!(paged.map.ground.paged().is_some());
+    let coarsest = paged
+        .ground_levels
+        .coarsest()
+        .expect("levels on a 2 km map");
+    assert!(
+        coarsest.paged().is_some(),
+        "the levels were read from the bake"
+    );
+    assert!(
+        paged.computed_at_open.is_empty(),
+        "{:?}",
+        paged.computed_at_open
+    );
+    let index = engine::ground::content::GroundContent::new(whole).index;
+    let mut forms = [0; 2];
+    for level in 0..=tree.max_level {
+        let n = 1u32 << level;
+        for _ in 0..3.min(n * n) {
+            let key = NodeKey {
+                level,
+                ix: rng.random_range(0..n),
+                iy: rng.random_range(0..n),
+            };
+            let a = NodeGround::new(whole, &index, tree, key);
+            let b = NodeGround::new(paged, &index, tree, key);
+            assert!(a == b, "{key:?}: the paged world's ground types differ");
+            forms[usize::from(a.types.form == TypeForm::Texels)] += 1;
+        }
+    }
+    assert!(
+        forms[0] > 0 && forms[1] > 0,
+        "{forms:?} nodes of either form"
+    );
+    let spacing_m = whole.map.manifest.ground.spacing_m;
+    let cells = [whole.map.ground.width(), whole.map.ground.height()];
+    for camera in [[10.0, 20.0], [300.0, 140.0], [511.0, 511.0]] {
+        let window = TypeWindow::around(cells, spacing_m, camera);
+        assert!(window.cells(&whole.map.ground) == window.cells(&paged.map.ground));
+    }
+    let albedo = engine::render::lighting::mean_ground_albedo;
+    assert_eq!(albedo(whole), albedo(paged));
+}
+
 /// A camera `above` metres over the ground of `w` at (x, y), looking along `yaw` and down.
 fn camera(w: &World, x: f64, y: f64, above: f64, yaw: f64) -> engine::camera::Camera {
     let p = glam::DVec3::new(x, y, w.height_m(x, y) + above);
@@ -244,7 +302,7 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     // A budget of four 16 x 16 pages: the flight reads pages again all the time.
     let budget = 4 * 16 * 16 * 4;
     let paging = worldgen::pages::Paging::new(budget);
-    let map = tests::with_paged_heights(map, tmp.path(), 16, &paging);
+    let map = tests::with_paged_layers(map, tmp.path(), 16, &paging);
     let paged = World::paged_without_error_grids(map, &pages, budget);
     let world = engine::terrain::precomputed::open_world(paged, None, &worldgen::progress::Silent);
     let (cache, faults) = (world.page_cache.clone().unwrap(), world.page_faults.clone());
@@ -273,12 +331,14 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     let mut bytes = std::fs::read(&hmax).unwrap();
     bytes[64 + 8] ^= 0x20;
     std::fs::write(&hmax, &bytes).unwrap();
-    // And a byte of the heights' page under the middle of the flight (samples 48..64 along
-    // x and y: page (3, 3) of 9 x 9).
+    // And a byte of the heights' page under the flight's last camera (samples 96..112 along x
+    // and y: page (6, 6) of 9 x 9): the last settle must build the finest nodes there, which
+    // nothing wanted before the damage (a page under the middle of the flight is read only if
+    // the workers reach its nodes while the camera passes, which depends on their speed).
     let heights = tmp.path().join("heights.pages");
     let layout = worldgen::pages::PageFile::open(&heights).unwrap().layout();
     let offset = worldgen::pages::file::HEADER_BYTES
-        + u64::from(layout.index(3, 3)) * layout.page_stride_bytes();
+        + u64::from(layout.index(6, 6)) * layout.page_stride_bytes();
     let mut bytes = std::fs::read(&heights).unwrap();
     bytes[offset as usize + 40] ^= 0x01;
     std::fs::write(&heights, &bytes).unwrap();
@@ -314,7 +374,7 @@ fn pages_damaged_mid_flight_are_reported_and_the_world_keeps_streaming() {
     );
     assert!(
         seen.iter()
-            .any(|f| f.contains("heights.pages") && f.contains("page (3, 3)")),
+            .any(|f| f.contains("heights.pages") && f.contains("page (6, 6)")),
         "the damaged heights page was not reported: {seen:?}"
     );
     assert!(

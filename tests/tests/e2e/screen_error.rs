@@ -149,7 +149,10 @@ fn ridge_world() -> World {
             let z = (crest - 4.0 * (xm - CREST_X_M).abs()).max(30.0);
             let hg = map.heights.grid_mut().expect("heights in memory");
             hg.set(x, y, z as f32);
-            map.ground.set(x, y, worldgen::classify::WATER);
+            map.ground
+                .grid_mut()
+                .expect("ground in memory")
+                .set(x, y, worldgen::classify::WATER);
         }
     }
     map.decals.clear();

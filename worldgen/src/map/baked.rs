@@ -35,16 +35,16 @@ impl Baked {
         self.used(&spec.file, read)
     }
 
-    /// The heights of `spec` served from their page file through `paging`, when baked from
-    /// the heights file as it is now.
-    pub fn paged_heights(
+    /// The layer of `spec` served from its page file through `paging`, when baked from the
+    /// layer file as it is now.
+    pub fn paged<T: crate::pages::CacheSample + std::fmt::Debug>(
         &mut self,
         spec: &GridSpec,
         paging: &crate::pages::Paging,
-    ) -> Option<crate::pages::PagedRaster<f32>> {
+    ) -> Option<crate::pages::PagedRaster<T>> {
         let opened = self
-            .page_file::<f32>(spec)?
-            .and_then(|file| crate::pages::PagedRaster::new(paging, file, 0.0));
+            .page_file::<T>(spec)?
+            .and_then(|file| crate::pages::PagedRaster::new(paging, file, T::zero()));
         self.used(&spec.file, opened)
     }
 

@@ -23,13 +23,12 @@
 
 mod baked;
 pub mod building_models;
-pub mod heights;
 pub mod layers;
 pub mod lists;
 pub mod manifest;
 pub mod material_image;
+pub mod raster;
 
-pub use heights::Heights;
 pub use lists::{Building, Decal, DecalKind, Tree};
 pub use manifest::validate as validate_manifest;
 pub use manifest::{
@@ -37,6 +36,7 @@ pub use manifest::{
     SpeciesSpec,
 };
 pub use material_image::MaterialImage;
+pub use raster::{GroundTypes, Heights, MapRaster};
 
 use crate::Grid;
 use crate::sample::{self, GridPlacement};
@@ -213,8 +213,10 @@ pub struct Map {
     /// Heights in metres, `manifest.heights.width` x `manifest.heights.height`: in memory, or
     /// served from the bake's pages ([`Self::load_paged`]).
     pub heights: Heights,
-    /// Ground type index per sample, always < `manifest.ground.legend.len()`.
-    pub ground: Grid<u8>,
+    /// Ground type index per sample, < `manifest.ground.legend.len()` when held in memory;
+    /// served from the bake's pages ([`Self::load_paged`]) it is not read at the open, and its
+    /// readers clamp to the legend's last type.
+    pub ground: GroundTypes,
     /// One layer per `manifest.vegetation` entry, in the same order.
     pub densities: Vec<DensityLayer>,
     pub trees: Vec<Tree>,
@@ -290,7 +292,7 @@ impl Map {
         let manifest = manifest::read(&manifest_path)?;
         let mut clock = PartClock::default();
         let mut baked = baked::Baked::open(dir);
-        let paged = paging.and_then(|p| baked.paged_heights(&manifest.heights, p));
+        let paged = paging.and_then(|p| baked.paged(&manifest.heights, p));
         let heights = match paged {
             Some(p) => Heights::Paged(p),
             None => match baked.raster::<f32>(&manifest.heights) {
@@ -303,12 +305,16 @@ impl Map {
         };
         clock.part("heights");
         let ground_spec = manifest.ground.grid();
-        let ground = match baked.raster::<u8>(&ground_spec) {
-            Some(g) => {
-                layers::check_ground(&dir.join(&ground_spec.file), &g, &manifest)?;
-                g
-            }
-            None => layers::read_ground(dir, &manifest)?,
+        let paged = paging.and_then(|p| baked.paged(&ground_spec, p));
+        let ground = match paged {
+            Some(p) => GroundTypes::Paged(p),
+            None => GroundTypes::Grid(match baked.raster::<u8>(&ground_spec) {
+                Some(g) => {
+                    layers::check_ground(&dir.join(&ground_spec.file), &g, &manifest)?;
+                    g
+                }
+                None => layers::read_ground(dir, &manifest)?,
+            }),
         };
         clock.part("ground types");
         let mut densities = Vec::with_capacity(manifest.vegetation.len());
@@ -416,11 +422,15 @@ impl Map {
             )
         })?;
         layers::write_heights(&heights_path, &heights)?;
-        layers::write_ground(
-            &staging.join(&self.manifest.ground.file),
-            &self.ground,
-            &self.manifest.ground,
-        )?;
+        let ground_path = staging.join(&self.manifest.ground.file);
+        let ground = self.ground.whole().map_err(|e| {
+            MapError::io(
+                &ground_path,
+                "read the ground type pages",
+                std::io::Error::other(e),
+            )
+        })?;
+        layers::write_ground(&ground_path, &ground, &self.manifest.ground)?;
         for layer in &self.densities {
             layers::write_gray8(&staging.join(&layer.spec.file), &layer.density)?;
         }
@@ -604,8 +614,12 @@ impl Map {
             .whole()
             .map_or((f32::NAN, f32::NAN), |g| g.min_max());
         let mut counts = vec![0usize; self.manifest.ground.legend.len()];
-        for &g in self.ground.data() {
-            counts[g as usize] += 1;
+        if let Ok(ground) = self.ground.whole() {
+            for &g in ground.data() {
+                if let Some(c) = counts.get_mut(g as usize) {
+                    *c += 1;
+                }
+            }
         }
         let cell_m2 = self.manifest.size_m[0] * self.manifest.size_m[1];
         let species = self

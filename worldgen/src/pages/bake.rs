@@ -78,16 +78,18 @@ impl Raster<'_> {
 
 /// The map's raster layers, named by their files in the map (unique, checked names), in the
 /// manifest's order: heights, ground types, then the species' densities. The map must hold
-/// its heights in memory (a bake reads a map loaded by [`Map::load`], not served from pages).
+/// its layers in memory (a bake reads a map loaded by [`Map::load`], not served from pages).
 pub fn rasters(map: &Map) -> Result<Vec<(String, Raster<'_>)>, PageError> {
     let m = &map.manifest;
-    let heights = map.heights.grid().ok_or_else(|| PageError::Request {
-        path: PathBuf::from(&m.heights.file),
-        problem: "the heights are served from pages; a bake reads a map loaded whole".into(),
-    })?;
+    let whole = |file: &str| PageError::Request {
+        path: PathBuf::from(file),
+        problem: "the layer is served from pages; a bake reads a map loaded whole".into(),
+    };
+    let heights = map.heights.grid().ok_or_else(|| whole(&m.heights.file))?;
+    let ground = map.ground.grid().ok_or_else(|| whole(&m.ground.file))?;
     let mut out = vec![
         (m.heights.file.clone(), Raster::F32(heights)),
-        (m.ground.file.clone(), Raster::U8(&map.ground)),
+        (m.ground.file.clone(), Raster::U8(ground)),
     ];
     for d in &map.densities {
         out.push((d.spec.file.clone(), Raster::U8(&d.density)));

@@ -41,6 +41,8 @@ pub trait CacheSample: Sample {
     /// The sample as 32 bits and back (for values kept in an atomic).
     fn to_bits(self) -> u32;
     fn from_bits(bits: u32) -> Self;
+    /// A whole grid of these samples as the bake sees it (for its key).
+    fn raster(grid: &crate::Grid<Self>) -> super::bake::Raster<'_>;
 }
 
 impl CacheSample for f32 {
@@ -62,6 +64,9 @@ impl CacheSample for f32 {
     fn wrap(samples: Vec<f32>) -> PageData {
         PageData::F32(samples)
     }
+    fn raster(grid: &crate::Grid<f32>) -> super::bake::Raster<'_> {
+        super::bake::Raster::F32(grid)
+    }
 }
 
 impl CacheSample for u8 {
@@ -82,6 +87,9 @@ impl CacheSample for u8 {
     }
     fn wrap(samples: Vec<u8>) -> PageData {
         PageData::U8(samples)
+    }
+    fn raster(grid: &crate::Grid<u8>) -> super::bake::Raster<'_> {
+        super::bake::Raster::U8(grid)
     }
 }
 
@@ -123,6 +131,9 @@ pub struct PageCache {
     budget_bytes: usize,
     files: Mutex<Vec<Arc<PageFile>>>,
     state: Mutex<State>,
+    /// Incremented by [`Self::clear`]: pages that readers keep at hand from an older
+    /// generation are read again.
+    generation: std::sync::atomic::AtomicU64,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -139,7 +150,14 @@ impl PageCache {
             budget_bytes,
             files: Mutex::new(Vec::new()),
             state: Mutex::new(State::default()),
+            generation: std::sync::atomic::AtomicU64::new(0),
         }
+    }
+
+    /// How many times the cache was cleared ([`Self::clear`]).
+    #[inline]
+    pub fn generation(&self) -> u64 {
+        self.generation.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     pub fn budget_bytes(&self) -> usize {
@@ -181,9 +199,12 @@ impl PageCache {
         lock(&self.state).stats
     }
 
-    /// Drops every resident page (the next requests read them again).
+    /// Drops every resident page (the next requests read them again, also those of pages a
+    /// reader keeps at hand, [`super::PagedRaster`]).
     pub fn clear(&self) {
         let mut s = lock(&self.state);
+        self.generation
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         s.stats.evictions += s.entries.len() as u64;
         s.entries.clear();
         s.by_use.clear();

@@ -3,8 +3,8 @@
 //! ask for, not the layer's area.
 //!
 //! Each thread keeps the pages it read from lately in a small table indexed by raster and page
-//! (an `Arc` of each: eviction from the cache never invalidates them; a page read later into
-//! the same slot replaces it), so a lattice or a stencil that stays inside a page costs a
+//! (an `Arc` of each: eviction from the cache never invalidates them, clearing the cache does;
+//! a page read later into the same slot replaces it), so a lattice or a stencil that stays inside a page costs a
 //! thread-local lookup per sample (or per stencil, [`PagedRaster::block`]) and one cache
 //! request per page it enters.
 //!
@@ -47,7 +47,9 @@ static NEXT_SERIAL: AtomicU64 = AtomicU64::new(1);
 /// reads of several rasters (heights, their coarse levels, max-pyramids), each in a few pages.
 const RECENT_SLOTS_LOG2: u32 = 5;
 
-type Slot = Option<(u64, u32, Arc<PageData>)>;
+/// A page at hand: the raster's serial, the page's index, the cache's generation it was read
+/// in ([`PageCache::generation`]) and its samples.
+type Slot = Option<(u64, u32, u64, Arc<PageData>)>;
 
 thread_local! {
     static RECENT: RefCell<[Slot; 1 << RECENT_SLOTS_LOG2]> =
@@ -183,8 +185,9 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
     fn with_page<R>(&self, index: u32, f: impl Fn(&[T]) -> R) -> Option<R> {
         let hit = RECENT.with(|r| {
             let r = r.borrow();
-            let (serial, i, data) = r[slot(self.serial, index)].as_ref()?;
-            (*serial == self.serial && *i == index).then(|| T::slice(data).map(&f))
+            let (serial, i, generation, data) = r[slot(self.serial, index)].as_ref()?;
+            let current = *generation == self.paging.cache.generation();
+            (*serial == self.serial && *i == index && current).then(|| T::slice(data).map(&f))
         });
         match hit {
             Some(value) => value,
@@ -204,11 +207,12 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
         if failed_before {
             return None;
         }
+        let generation = self.paging.cache.generation();
         match self.paging.cache.page::<T>(self.layer, index) {
             Ok(data) => {
                 RECENT.with(|r| {
                     r.borrow_mut()[slot(self.serial, index)] =
-                        Some((self.serial, index, Arc::clone(&data)));
+                        Some((self.serial, index, generation, Arc::clone(&data)));
                 });
                 Some(data)
             }
@@ -225,6 +229,24 @@ impl<T: CacheSample + std::fmt::Debug> PagedRaster<T> {
                 None
             }
         }
+    }
+
+    /// The samples in columns `x0..x0 + width` and rows `y0..y0 + height` (inside the
+    /// raster, not empty), in one request of the cache; where a page cannot be read, sample by
+    /// sample (its fault recorded once and the fill value served).
+    pub fn region(&self, x0: usize, y0: usize, width: usize, height: usize) -> crate::Grid<T> {
+        let read = self.paging.cache.region::<T>(
+            self.layer,
+            x0 as u32,
+            y0 as u32,
+            width as u32,
+            height as u32,
+        );
+        read.unwrap_or_else(|_| {
+            let samples = (y0..y0 + height).flat_map(|y| (x0..x0 + width).map(move |x| (x, y)));
+            let samples = samples.map(|(x, y)| self.get(x, y)).collect();
+            crate::Grid::from_vec(width, height, samples).expect("sized above")
+        })
     }
 
     /// Every sample, read page by page (for work that needs the whole layer).

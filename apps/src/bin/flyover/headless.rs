@@ -247,7 +247,7 @@ fn page_report(
     let mib = |b: usize| b as f64 / f64::from(1 << 20);
     let s = c.stats();
     println!(
-        "pages of the heights, max-pyramids and surface error grids: {} page-ins ({:.1} per second), {} hits, {} evictions, {:.0} MiB \
+        "pages of the heights, ground types, max-pyramids and surface error grids: {} page-ins ({:.1} per second), {} hits, {} evictions, {:.0} MiB \
          resident at the peak of a {:.0} MiB budget, {} page faults",
         s.page_ins,
         s.page_ins as f64 / secs,

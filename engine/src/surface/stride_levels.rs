@@ -1,6 +1,7 @@
-//! The map's heights at every `2^k`-th sample, baked as page files, so that a coarse node
-//! reads its lattice from a few pages of its own level instead of every page of the map
-//! under it.
+//! A map raster at every `2^k`-th sample, baked as page files, so that coarse work reads a few
+//! pages of its own level instead of every page of the map under it: the heights' levels for
+//! coarse nodes' lattices ([`HeightLevels`]), the ground types' for the coarsest nodes' texture
+//! texels ([`crate::ground::types`]).
 //!
 //! A coarse node's vertices stand on height samples (its spacing is a multiple of the height
 //! spacing and its corners are on the grid), and the bicubic interpolation on a sample is the
@@ -10,27 +11,46 @@
 //!
 //! Level `k` (stride `2^k`, `k >= 1`) of a raster of `n` samples along an axis holds
 //! `ceil((n - 1) / 2^k) + 1` samples: sample `m` is the raster's `min(m 2^k, n - 1)`. It is
-//! stored as `pages/derived/heights_stride_<2^k>.pages`; levels stop at the first of at most
+//! stored as `pages/derived/<name>_stride_<2^k>.pages`; levels stop at the first of at most
 //! [`LAST_LEVEL_SAMPLES`] samples along each axis.
 
 use std::path::{Path, PathBuf};
 use worldgen::Grid;
-use worldgen::pages::{PageError, PagedRaster, Paging, SourceKey, bake};
+use worldgen::map::MapRaster;
+use worldgen::pages::{CacheSample, PageError, PagedRaster, Paging, SourceKey, bake};
 
-/// The levels of a world's heights (stride 2, 4, 8, ... samples).
-#[derive(Debug, Clone, Default)]
-pub struct HeightLevels {
+/// The levels of one raster (stride 2, 4, 8, ... samples), in memory or paged.
+#[derive(Debug, Clone)]
+pub struct StrideLevels<T> {
     /// Level `k` at index `k - 1`.
-    levels: Vec<PagedRaster<f32>>,
-    /// Samples of the heights along x and y.
+    levels: Vec<MapRaster<T>>,
+    /// Samples of the raster along x and y.
     samples: [usize; 2],
 }
 
-/// The page file of the level of `stride` samples.
-pub fn level_path(pages_dir: &Path, stride: usize) -> PathBuf {
+impl<T> Default for StrideLevels<T> {
+    fn default() -> Self {
+        Self {
+            levels: Vec::new(),
+            samples: [0, 0],
+        }
+    }
+}
+
+/// The heights' levels (read only where the heights are paged).
+pub type HeightLevels = StrideLevels<f32>;
+
+/// The file stem of the heights' levels.
+pub const HEIGHTS: &str = "heights";
+
+/// The file stem of the ground types' levels.
+pub const GROUND_TYPES: &str = "ground_types";
+
+/// The page file of the level of `stride` samples of the raster `name`.
+pub fn level_path(pages_dir: &Path, name: &str, stride: usize) -> PathBuf {
     pages_dir
         .join("derived")
-        .join(format!("heights_stride_{stride}.pages"))
+        .join(format!("{name}_stride_{stride}.pages"))
 }
 
 /// Samples along an axis of `n` samples at `stride`.
@@ -41,7 +61,7 @@ fn level_len(n: usize, stride: usize) -> usize {
 /// Samples along each axis of the coarsest level.
 pub const LAST_LEVEL_SAMPLES: usize = 256;
 
-/// The strides baked for heights of `samples`: 2, 4, ... up to the first level of at most
+/// The strides baked for a raster of `samples`: 2, 4, ... up to the first level of at most
 /// [`LAST_LEVEL_SAMPLES`] samples along each axis.
 fn strides(samples: [usize; 2]) -> Vec<usize> {
     let mut out = Vec::new();
@@ -59,67 +79,76 @@ fn strides(samples: [usize; 2]) -> Vec<usize> {
     }
 }
 
-/// The key of the level of `stride` of the heights of `heights_key`.
-fn key(heights_key: u64, stride: usize) -> u64 {
+/// The key of the level of `stride` of the raster of `raster_key`.
+fn key(raster_key: u64, stride: usize) -> u64 {
     let mut k = SourceKey::new(0x4E16_0000);
-    k.update(&heights_key.to_le_bytes());
+    k.update(&raster_key.to_le_bytes());
     k.update(&(stride as u64).to_le_bytes());
     k.finish()
 }
 
-/// Level of `stride` of `heights`.
-fn level(heights: &Grid<f32>, stride: usize) -> Grid<f32> {
-    let (w, h) = (heights.width(), heights.height());
+/// Level of `stride` of `raster`.
+fn level<T: Copy>(raster: &Grid<T>, stride: usize) -> Grid<T> {
+    let (w, h) = (raster.width(), raster.height());
     let (lw, lh) = (level_len(w, stride), level_len(h, stride));
     let samples = (0..lh).flat_map(|m| {
         let y = (m * stride).min(h - 1);
-        (0..lw).map(move |l| heights.get((l * stride).min(w - 1), y))
+        (0..lw).map(move |l| raster.get((l * stride).min(w - 1), y))
     });
     Grid::from_vec(lw, lh, samples.collect()).expect("sized above")
 }
 
-/// Writes every level of `heights` (of key `heights_key`) under `pages_dir/derived`.
-pub fn write(
-    heights: &Grid<f32>,
-    heights_key: u64,
+/// Writes every level of `raster` (of key `raster_key`) named `name` under
+/// `pages_dir/derived`.
+pub fn write<T: CacheSample>(
+    raster: &Grid<T>,
+    raster_key: u64,
+    name: &str,
     pages_dir: &Path,
     page_side: u32,
 ) -> Result<(), PageError> {
-    let samples = [heights.width(), heights.height()];
+    let samples = [raster.width(), raster.height()];
     for stride in strides(samples) {
-        let path = level_path(pages_dir, stride);
+        let path = level_path(pages_dir, name, stride);
         bake::write_grid(
             &path,
-            &level(heights, stride),
+            &level(raster, stride),
             page_side,
-            key(heights_key, stride),
+            key(raster_key, stride),
         )?;
     }
     Ok(())
 }
 
-impl HeightLevels {
-    /// Opens the levels baked under `pages_dir` for heights of `samples` and `heights_key`,
-    /// served through `paging`. The levels are all there or none is used (the error names the
-    /// first file missing or not of these heights).
+impl<T: CacheSample + std::fmt::Debug> StrideLevels<T> {
+    /// Every level of `raster`, in memory.
+    pub fn compute(raster: &Grid<T>) -> Self {
+        let samples = [raster.width(), raster.height()];
+        Self {
+            levels: strides(samples)
+                .into_iter()
+                .map(|stride| MapRaster::Grid(level(raster, stride)))
+                .collect(),
+            samples,
+        }
+    }
+
+    /// Opens the levels of the raster `name` baked under `pages_dir` for a raster of `samples`
+    /// and `raster_key`, served through `paging`. The levels are all there or none is used
+    /// (the error names the first file missing or not of this raster).
     pub fn open(
         pages_dir: &Path,
+        name: &str,
         samples: [usize; 2],
-        heights_key: u64,
+        raster_key: u64,
         paging: &Paging,
     ) -> Result<Self, PageError> {
         let mut levels = Vec::new();
         for stride in strides(samples) {
             let (w, h) = (level_len(samples[0], stride), level_len(samples[1], stride));
-            let path = level_path(pages_dir, stride);
-            let file = bake::open_derived(
-                &path,
-                worldgen::pages::SampleKind::F32,
-                w,
-                h,
-                key(heights_key, stride),
-            )?;
-            levels.push(PagedRaster::new(paging, file, 0.0)?);
+            let path = level_path(pages_dir, name, stride);
+            let file = bake::open_derived(&path, T::KIND, w, h, key(raster_key, stride))?;
+            levels.push(MapRaster::Paged(PagedRaster::new(paging, file, T::zero())?));
         }
         Ok(Self { levels, samples })
     }
@@ -128,9 +157,31 @@ impl HeightLevels {
         self.levels.is_empty()
     }
 
+    /// Level `k` (`k >= 1`, stride `2^k`), where there is one.
+    pub fn level(&self, k: usize) -> Option<&MapRaster<T>> {
+        self.levels.get(k.checked_sub(1)?)
+    }
+
+    /// The coarsest level, where there is one.
+    pub fn coarsest(&self) -> Option<&MapRaster<T>> {
+        self.levels.last()
+    }
+
+    /// Levels held: the last is the coarsest.
+    pub fn count(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Bytes the levels hold in memory (paged levels' pages are the cache's).
+    pub fn held_bytes(&self) -> usize {
+        self.levels.iter().map(MapRaster::held_bytes).sum()
+    }
+}
+
+impl HeightLevels {
     /// Sets the value served for samples of pages that cannot be read.
     pub fn set_fill(&self, fill: f32) {
-        for l in &self.levels {
+        for l in self.levels.iter().filter_map(MapRaster::paged) {
             l.set_fill(fill);
         }
     }
