@@ -139,18 +139,10 @@ fn paged_pyramids_give_the_same_bounds_and_node_meshes_bit_for_bit() {
     let tree = tree_of(&whole);
     let (mut ca, mut cb) = (BoundsCache::new(), BoundsCache::new());
     let (mut ta, mut tb) = (TileCache::new(), TileCache::new());
-    for level in 0..=tree.max_level {
-        let n = 1u32 << level;
-        for _ in 0..4.min(n * n) {
-            let key = NodeKey {
-                level,
-                ix: rng.random_range(0..n),
-                iy: rng.random_range(0..n),
-            };
-            let a = build_mesh(&whole, &tree, &mut ca, &mut ta, key);
-            let b = build_mesh(&paged, &tree, &mut cb, &mut tb, key);
-            assert!(a == b, "{key:?}: the paged world's mesh differs");
-        }
+    for key in random_keys(&tree, 4, &mut rng) {
+        let a = build_mesh(&whole, &tree, &mut ca, &mut ta, key);
+        let b = build_mesh(&paged, &tree, &mut cb, &mut tb, key);
+        assert!(a == b, "{key:?}: the paged world's mesh differs");
     }
     assert_same_ground_types(&whole, &paged, &tree, &mut rng);
     let s = cache.stats();
@@ -229,6 +221,24 @@ fn a_damaged_pyramid_page_loosens_only_its_bounds_and_is_reported() {
     assert_eq!(fresh.cell_region_bounds(r), reopened.cell_region_bounds(r));
 }
 
+/// `per_level` random nodes of every level of `tree` (as many as a level has where it has fewer,
+/// each drawn at random), coarsest level first.
+fn random_keys(
+    tree: &engine::terrain::quadtree::QuadTree,
+    per_level: u32,
+    rng: &mut SmallRng,
+) -> Vec<NodeKey> {
+    let mut keys = Vec::new();
+    for level in 0..=tree.max_level {
+        let n = 1u32 << level;
+        for _ in 0..per_level.min(n * n) {
+            let (ix, iy) = (rng.random_range(0..n), rng.random_range(0..n));
+            keys.push(NodeKey { level, ix, iy });
+        }
+    }
+    keys
+}
+
 /// The ground types read through their pages and their baked levels give every node's texture
 /// types (levels' texels on the coarsest nodes, reached cells on the others), the camera
 /// window's cells and the mean albedo of the layer held whole.
@@ -254,19 +264,11 @@ fn assert_same_ground_types(
     );
     let index = engine::ground::content::GroundContent::new(whole).index;
     let mut forms = [0; 2];
-    for level in 0..=tree.max_level {
-        let n = 1u32 << level;
-        for _ in 0..3.min(n * n) {
-            let key = NodeKey {
-                level,
-                ix: rng.random_range(0..n),
-                iy: rng.random_range(0..n),
-            };
-            let a = NodeGround::new(whole, &index, tree, key);
-            let b = NodeGround::new(paged, &index, tree, key);
-            assert!(a == b, "{key:?}: the paged world's ground types differ");
-            forms[usize::from(a.types.form == TypeForm::Texels)] += 1;
-        }
+    for key in random_keys(tree, 3, rng) {
+        let a = NodeGround::new(whole, &index, tree, key);
+        let b = NodeGround::new(paged, &index, tree, key);
+        assert!(a == b, "{key:?}: the paged world's ground types differ");
+        forms[usize::from(a.types.form == TypeForm::Texels)] += 1;
     }
     assert!(
         forms[0] > 0 && forms[1] > 0,
